@@ -1,0 +1,390 @@
+"""Parameters and settings: vehicle (SPEC §2), rates (§1), tyres (§3), scheduling boxes (§4, §5),
+controller, estimator, planner and noise settings; TOML loading and validation.
+
+Every object here is a frozen pydantic model that rejects unknown fields, so a typo in a TOML
+file is an error naming the field, never a silently ignored value. Variants are made with
+``model_copy(update=...)`` or :func:`replace`.
+
+Units are SI throughout (m, s, kg, N, rad) unless a field name says otherwise (``*_deg``).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from tsmpc.errors import ConfigError
+
+__all__ = [
+    "Config",
+    "DynamicBox",
+    "DynamicLMISettings",
+    "KinematicBox",
+    "KinematicLMISettings",
+    "LQRSettings",
+    "MHESettings",
+    "MPCSettings",
+    "NoiseSettings",
+    "PlannerSettings",
+    "Rates",
+    "SchedulingMode",
+    "TyreModel",
+    "TyreParams",
+    "VehicleParams",
+    "format_validation_error",
+    "load_config",
+    "replace",
+]
+
+PositiveFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+NonNegFloat = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _Frozen(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid", validate_default=True)
+
+
+def _interval(lo: float, hi: float, name: str) -> None:
+    if not lo < hi:
+        raise ValueError(f"{name}: lower bound {lo} must be < upper bound {hi}")
+
+
+def _diag(values: tuple[float, ...], name: str, n: int, *, strict: bool = True) -> None:
+    if len(values) != n:
+        raise ValueError(f"{name}: expected {n} diagonal entries, got {len(values)}")
+    bad = [v for v in values if (v <= 0 if strict else v < 0)]
+    if bad:
+        kind = "positive" if strict else "non-negative"
+        raise ValueError(f"{name}: entries must be {kind}, got {values}")
+
+
+class TyreModel(StrEnum):
+    """Lateral tyre model of the plant (SPEC §3)."""
+
+    LINEAR = "linear"  #: F_y = C_x · slip (small-angle slips): the plant equals the control model
+    PACEJKA = "pacejka"  #: magic formula with small-slip stiffness C_x and peak μ_tyre F_z
+
+
+class SchedulingMode(StrEnum):
+    """How the TS-MPC schedules its models along the horizon (SPEC §7)."""
+
+    FZN = "fzn"  #: frozen: current scheduling values for the whole horizon
+    REF = "ref"  #: planner references along the horizon (the paper's choice)
+    ITER = "iter"  #: previous optimal prediction, re-solved until the schedule converges
+
+
+class VehicleParams(_Frozen):
+    """Vehicle parameters, paper Table 1."""
+
+    a: PositiveFloat = Field(0.758, description="CoG to front axle [m]")
+    b: PositiveFloat = Field(1.036, description="CoG to rear axle [m]")
+    mass: PositiveFloat = Field(683.0, description="vehicle mass M [kg]")
+    inertia: PositiveFloat = Field(560.94, description="yaw inertia I [kg m^2]")
+    cornering_stiffness: PositiveFloat = Field(
+        25000.0, description="cornering stiffness C_x of each axle [N/rad]"
+    )
+    frontal_area: PositiveFloat = Field(1.91, description="frontal area A_r [m^2]")
+    air_density: PositiveFloat = Field(1.184, description="air density rho [kg/m^3]")
+    drag_coefficient: NonNegFloat = Field(0.36, description="drag coefficient C_d [-]")
+    mu_nominal: NonNegFloat = Field(0.5, description="nominal friction mu_o of the models [-]")
+    g: PositiveFloat = Field(9.81, description="gravity [m/s^2]")
+
+    @property
+    def wheelbase(self) -> float:
+        """a + b [m]."""
+        return self.a + self.b
+
+    @property
+    def drag_factor(self) -> float:
+        """½ ρ C_d A_r [kg/m]: aerodynamic drag is drag_factor · v²."""
+        return 0.5 * self.air_density * self.drag_coefficient * self.frontal_area
+
+    @property
+    def static_loads(self) -> tuple[float, float]:
+        """(F_zF, F_zR) static axle loads [N]."""
+        w = self.mass * self.g / self.wheelbase
+        return w * self.b, w * self.a
+
+
+class TyreParams(_Frozen):
+    """Plant tyre model (SPEC §3). Pacejka: f = D sin(C atan(Bα − E(Bα − atan Bα))),
+    D = μ_tyre F_z and B = C_x / (C D) so that the small-slip stiffness equals C_x."""
+
+    model: TyreModel = Field(TyreModel.PACEJKA, description="lateral tyre model of the plant")
+    mu_tyre: PositiveFloat = Field(0.9, description="peak lateral grip coefficient [-]")
+    shape_c: float = Field(1.3, gt=1.0, lt=2.0, description="Pacejka shape factor C [-]")
+    curvature_e: float = Field(
+        -0.5, ge=-5.0, lt=1.0, description="Pacejka curvature factor E [-] (E < 1)"
+    )
+    scale_grip_with_road: bool = Field(
+        False, description="beyond the paper: mu_tyre scales with mu(road)/mu_dry"
+    )
+    mu_dry: PositiveFloat = Field(0.9, description="road mu at which the tyre has mu_tyre [-]")
+
+
+class Rates(_Frozen):
+    """Sample times (SPEC §1). T_c / T_d and T_d / h must be integers."""
+
+    Tc: PositiveFloat = Field(0.1, description="outer loop (MPC) sample time [s]")
+    Td: PositiveFloat = Field(0.01, description="inner loop (LQR, MHE) sample time [s]")
+    h: PositiveFloat = Field(0.001, description="plant RK4 integration step [s]")
+
+    @model_validator(mode="after")
+    def _integer_ratios(self) -> Rates:
+        for num, den, name in ((self.Tc, self.Td, "Tc/Td"), (self.Td, self.h, "Td/h")):
+            ratio = num / den
+            if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
+                raise ValueError(f"{name} = {ratio:.6g} must be a positive integer")
+        return self
+
+    @property
+    def inner_per_outer(self) -> int:
+        """Number of inner steps per outer step."""
+        return round(self.Tc / self.Td)
+
+    @property
+    def plant_per_inner(self) -> int:
+        """Number of plant RK4 steps per inner step."""
+        return round(self.Td / self.h)
+
+
+class KinematicBox(_Frozen):
+    """Scheduling box of the kinematic TS model (SPEC §4): ω, v_d, e_θ.
+
+    The default is the box that reproduces the paper's published terminal set S; the paper's
+    text box is :meth:`paper_text`.
+    """
+
+    omega: tuple[FiniteFloat, FiniteFloat] = Field((-1.42, 1.42), description="ω range [rad/s]")
+    v_d: tuple[PositiveFloat, PositiveFloat] = Field((1.0, 18.0), description="v_d range [m/s]")
+    e_theta: tuple[FiniteFloat, FiniteFloat] = Field(
+        (-math.radians(5.0), math.radians(5.0)), description="e_θ range [rad], |e_θ| < π"
+    )
+
+    @model_validator(mode="after")
+    def _check(self) -> KinematicBox:
+        _interval(*self.omega, "omega")
+        _interval(*self.v_d, "v_d")
+        _interval(*self.e_theta, "e_theta")
+        if max(abs(self.e_theta[0]), abs(self.e_theta[1])) >= math.pi:
+            raise ValueError("e_theta: bounds must lie inside (-pi, pi)")
+        return self
+
+    @classmethod
+    def paper_text(cls) -> KinematicBox:
+        """The box stated in the paper's text: v_d ∈ [0.1, 20], e_θ ∈ [−0.05, 0.05]."""
+        return cls(v_d=(0.1, 20.0), e_theta=(-0.05, 0.05))
+
+
+class DynamicBox(_Frozen):
+    """Scheduling box of the dynamic TS model (SPEC §5): δ, v, α."""
+
+    delta: tuple[FiniteFloat, FiniteFloat] = Field(
+        (-math.radians(25.0), math.radians(25.0)), description="steering δ range [rad]"
+    )
+    v: tuple[PositiveFloat, PositiveFloat] = Field((2.0, 20.0), description="speed range [m/s]")
+    alpha: tuple[FiniteFloat, FiniteFloat] = Field((-0.1, 0.1), description="slip α range [rad]")
+
+    @model_validator(mode="after")
+    def _check(self) -> DynamicBox:
+        _interval(*self.delta, "delta")
+        _interval(*self.v, "v")
+        _interval(*self.alpha, "alpha")
+        return self
+
+
+class KinematicLMISettings(_Frozen):
+    """Kinematic LQR-LMI and terminal set (SPEC §6)."""
+
+    Q: tuple[float, ...] = Field((1.0, 1.5, 3.0), description="diag Q_TS")
+    R: tuple[float, ...] = Field((1.0, 3.0), description="diag R_TS")
+    u_bar: tuple[PositiveFloat, PositiveFloat] = Field(
+        (18.0, 1.4), description="input bound of the terminal-set LMI [m/s, rad/s]"
+    )
+
+    @model_validator(mode="after")
+    def _check(self) -> KinematicLMISettings:
+        _diag(self.Q, "Q", 3)
+        _diag(self.R, "R", 2)
+        return self
+
+
+class DynamicLMISettings(_Frozen):
+    """Dynamic TS-LMI-LQR on the Apkarian-augmented model (SPEC §6)."""
+
+    Q: tuple[float, ...] = Field(
+        (2500.0, 0.1, 0.1, 0.1, 1e5, 9e4), description="diag Q on [v, α, ω, F_f, δ_f, ζ]"
+    )
+    R: tuple[float, ...] = Field((0.001, 9.0), description="diag R on [F_xR, δ]")
+    filter_bandwidth: PositiveFloat = Field(10.0, description="Apkarian filter λ [rad/s]")
+    grid_points: int = Field(15, ge=3, le=101, description="certificate grid points per axis")
+
+    @model_validator(mode="after")
+    def _check(self) -> DynamicLMISettings:
+        _diag(self.Q, "Q", 6)
+        _diag(self.R, "R", 2)
+        return self
+
+
+class MPCSettings(_Frozen):
+    """Kinematic TS-MPC and NL-MPC (SPEC §7, paper Table 2)."""
+
+    N: int = Field(40, ge=2, le=400, description="prediction horizon [steps]")
+    Q: tuple[float, ...] = Field((1.133, 0.067, 13.333), description="diag state weight")
+    R: tuple[float, ...] = Field((0.000005, 5.5), description="diag input-rate weight")
+    u_min: tuple[FiniteFloat, FiniteFloat] = Field((0.0, -1.4), description="[v, ω] lower")
+    u_max: tuple[FiniteFloat, FiniteFloat] = Field((18.0, 1.4), description="[v, ω] upper")
+    du_max: tuple[PositiveFloat, PositiveFloat] = Field(
+        (5.0, 0.3), description="|Δv|, |Δω| per step"
+    )
+    mode: SchedulingMode = Field(SchedulingMode.REF, description="scheduling mode")
+    iter_tol: PositiveFloat = Field(1e-3, description="ITER: schedule change tolerance")
+    iter_max: int = Field(5, ge=1, le=50, description="ITER: maximum QPs per step")
+    soft_penalty: PositiveFloat = Field(1e4, description="exact penalty of soft constraints")
+    terminal_constraint: bool = Field(True, description="impose x_N' S x_N <= 1")
+
+    @model_validator(mode="after")
+    def _check(self) -> MPCSettings:
+        _diag(self.Q, "Q", 3, strict=False)
+        _diag(self.R, "R", 2)
+        for i in range(2):
+            _interval(self.u_min[i], self.u_max[i], f"u_min/u_max[{i}]")
+        return self
+
+
+class LQRSettings(_Frozen):
+    """Inner-loop TS-LQR (SPEC §8)."""
+
+    force_min: FiniteFloat = Field(-2000.0, description="F_xR lower saturation [N]")
+    force_max: FiniteFloat = Field(10000.0, description="F_xR upper saturation [N]")
+    delta_max: PositiveFloat = Field(math.radians(25.0), description="|δ| saturation [rad]")
+    friction_compensation: bool = Field(True, description="add F̂_fr to the force command")
+    oracle: bool = Field(False, description="ablation: true state, no compensation")
+
+    @model_validator(mode="after")
+    def _check(self) -> LQRSettings:
+        _interval(self.force_min, self.force_max, "force_min/force_max")
+        return self
+
+
+class MHESettings(_Frozen):
+    """TS-MHE-UIO (SPEC §9)."""
+
+    N: int = Field(30, ge=2, le=300, description="estimation horizon [inner steps]")
+    Q: tuple[float, ...] = Field((10.0, 10.0, 2.0), description="diag process weight")
+    R: tuple[float, ...] = Field((0.033, 0.033), description="diag measurement weight")
+    P: tuple[float, ...] = Field((2.0, 2.0, 2.0), description="diag arrival-cost weight")
+    x_min: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field((0.0, -0.1, -1.4))
+    x_max: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field((18.0, 0.1, 1.4))
+
+    @model_validator(mode="after")
+    def _check(self) -> MHESettings:
+        _diag(self.Q, "Q", 3)
+        _diag(self.R, "R", 2)
+        _diag(self.P, "P", 3)
+        for i in range(3):
+            _interval(self.x_min[i], self.x_max[i], f"x_min/x_max[{i}]")
+        return self
+
+
+class NoiseSettings(_Frozen):
+    """Zero-mean Gaussian sensor noise (SPEC §10), standard deviations before ``scale``."""
+
+    v: NonNegFloat = Field(0.005, description="σ of v [m/s]")
+    omega: NonNegFloat = Field(1e-4, description="σ of ω [rad/s]")
+    position: NonNegFloat = Field(0.001, description="σ of X and Y [m]")
+    theta: NonNegFloat = Field(1e-4, description="σ of θ [rad]")
+    scale: NonNegFloat = Field(1.0, description="multiplies every σ")
+
+
+class PlannerSettings(_Frozen):
+    """Speed-profile limits of the planner (SPEC §10)."""
+
+    v_max: PositiveFloat = Field(14.7, description="maximum speed [m/s]")
+    a_lat_max: PositiveFloat = Field(3.0, description="lateral acceleration limit [m/s^2]")
+    a_lon_max: PositiveFloat = Field(2.6, description="longitudinal acceleration limit [m/s^2]")
+    a_brake_max: PositiveFloat = Field(3.0, description="braking deceleration limit [m/s^2]")
+    v_start: NonNegFloat = Field(1.0, description="speed at the start of an open path [m/s]")
+
+
+class Config(_Frozen):
+    """Everything a run needs. ``Config()`` is the paper's setting."""
+
+    vehicle: VehicleParams = VehicleParams()
+    tyre: TyreParams = TyreParams()
+    rates: Rates = Rates()
+    kinematic_box: KinematicBox = KinematicBox()
+    dynamic_box: DynamicBox = DynamicBox()
+    kinematic_lmi: KinematicLMISettings = KinematicLMISettings()
+    dynamic_lmi: DynamicLMISettings = DynamicLMISettings()
+    mpc: MPCSettings = MPCSettings()
+    lqr: LQRSettings = LQRSettings()
+    mhe: MHESettings = MHESettings()
+    noise: NoiseSettings = NoiseSettings()
+    planner: PlannerSettings = PlannerSettings()
+    seed: int = Field(0, ge=0, description="seed of every random draw of a run")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON/TOML-ready nested dict (enums as strings)."""
+        return self.model_dump(mode="json")
+
+    def to_toml(self) -> str:
+        """Serialise to TOML; :func:`load_config` reads it back to an equal object."""
+        import tomli_w
+
+        return tomli_w.dumps(self.to_dict())
+
+
+T = TypeVar("T", bound=BaseModel)
+
+
+def format_validation_error(err: ValidationError, source: str = "config") -> str:
+    """One line per problem: ``source: field.path: reason (got value)``."""
+    lines = []
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"]) or "<root>"
+        msg = e["msg"]
+        if e["type"] == "extra_forbidden":
+            msg = "unknown field (check the spelling; see tsmpc.config for the allowed names)"
+        got = e.get("input")
+        tail = "" if e["type"] in ("extra_forbidden", "missing") else f" (got {got!r})"
+        lines.append(f"{source}: {loc}: {msg}{tail}")
+    return "\n".join(lines)
+
+
+def validate(model: type[T], data: Any, source: str = "config") -> T:
+    """``model.model_validate(data)`` raising :class:`ConfigError` naming each bad field."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as err:
+        raise ConfigError(format_validation_error(err, source)) from None
+
+
+def replace(obj: T, **changes: Any) -> T:
+    """A validated copy of ``obj`` with ``changes`` (``model_copy`` does not validate)."""
+    data = obj.model_dump()
+    data.update(changes)
+    return validate(type(obj), data, source=type(obj).__name__)
+
+
+def load_config(path: str | Path | None = None) -> Config:
+    """Load a :class:`Config` from a TOML file (missing sections take the paper's defaults).
+
+    Raises :class:`ConfigError` for an unreadable file, invalid TOML, or any bad field.
+    """
+    if path is None:
+        return Config()
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as err:
+        raise ConfigError(f"{p}: cannot read config file: {err.strerror}") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{p}: invalid TOML: {err}") from None
+    return validate(Config, data, source=str(p))

@@ -1,0 +1,182 @@
+"""Dynamic control-oriented model, its TS form and the Apkarian augmentation (paper eq.
+"dynamic model"; SPEC §5, §6).
+
+State ``x_d = [v, α, ω]``, input ``u_d = [F_xR, δ]``, disturbance ``F_fr = (μ(road) − μ_o) M g``.
+Continuous LPV form ``ẋ = A(ϑ) x + B(ϑ) u + E F_fr`` derived from the plant of SPEC §3 with
+linear tyres and small body-slip angles (sin α ≈ α where it multiplies a force, cos α ≈ 1)::
+
+    A11 = −μ_o g / v − ½ρC_dA_r v / M    A12 = C_x sin δ / M          A13 = C_x a sin δ / (M v)
+    A21 = 0                              A22 = −C_x (1 + cos δ)/(M v) A23 = C_x (b − a cos δ)/(M v²) − 1
+    A31 = 0                              A32 = C_x (b − a cos δ) / I  A33 = −C_x (a² cos δ + b²)/(I v)
+    B11 = 1/M   B12 = −C_x sin δ / M     B21 = 0   B22 = C_x cos δ /(M v)   B31 = 0   B32 = C_x a cos δ / I
+    E = [−1/M, 0, 0]ᵀ
+
+``A11 v`` carries the nominal rolling resistance −μ_o g and the drag, so the model has no affine
+term. The signs of A13 and B12 are those that follow from the plant (tested against it). The
+paper's discrete model is Euler at ``T_d``: ``A_d = I + T_d A``, ``B_d = T_d B``, ``E_d = T_d E``.
+:func:`discretize` also offers the exact zero-order-hold discretisation, which stays stable at low
+speed where Euler does not (|1 + T_d A22| > 1 below v ≈ 0.37 m/s at T_d = 10 ms).
+
+Scheduling ϑ = (δ, v, α) in the box of SPEC §5; the matrices do not depend on α (it is a premise
+of the paper's 8-vertex polytope all the same). Speeds below the box are clipped before the
+matrices are evaluated (:meth:`DynamicTS.clip`), which is the documented low-speed behaviour.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import ArrayLike, NDArray
+
+from tsmpc.config import DynamicBox, VehicleParams
+from tsmpc.models.polytope import SchedulingBox
+
+__all__ = [
+    "Discretization",
+    "DynamicTS",
+    "augment_apkarian",
+    "continuous_matrices",
+    "discretize",
+    "disturbance_matrix",
+]
+
+
+class Discretization(StrEnum):
+    """Discretisation of a continuous LTI/LPV model at a sample time."""
+
+    EULER = "euler"  #: the paper's: A_d = I + T A, B_d = T B
+    ZOH = "zoh"  #: exact with inputs held: A_d = e^{AT}, B_d = ∫ e^{As} ds B
+
+
+def continuous_matrices(
+    v: ArrayLike, delta: ArrayLike, p: VehicleParams
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Continuous A (..., 3, 3) and B (..., 3, 2) at speed v > 0 and steering δ."""
+    v, delta = np.broadcast_arrays(np.asarray(v, float), np.asarray(delta, float))
+    sd, cd = np.sin(delta), np.cos(delta)
+    M, I, C, a, b = p.mass, p.inertia, p.cornering_stiffness, p.a, p.b
+    A = np.zeros((*v.shape, 3, 3))
+    B = np.zeros((*v.shape, 3, 2))
+    A[..., 0, 0] = -p.mu_nominal * p.g / v - p.drag_factor * v / M
+    A[..., 0, 1] = C * sd / M
+    A[..., 0, 2] = C * a * sd / (M * v)
+    A[..., 1, 1] = -C * (1.0 + cd) / (M * v)
+    A[..., 1, 2] = C * (b - a * cd) / (M * v**2) - 1.0
+    A[..., 2, 1] = C * (b - a * cd) / I
+    A[..., 2, 2] = -C * (a**2 * cd + b**2) / (I * v)
+    B[..., 0, 0] = 1.0 / M
+    B[..., 0, 1] = -C * sd / M
+    B[..., 1, 1] = C * cd / (M * v)
+    B[..., 2, 1] = C * a * cd / I
+    return A, B
+
+
+def disturbance_matrix(p: VehicleParams) -> NDArray[np.float64]:
+    """Continuous E (3, 1) = [−1/M, 0, 0]ᵀ of the friction force F_fr."""
+    return np.array([[-1.0 / p.mass], [0.0], [0.0]])
+
+
+def discretize(
+    A: ArrayLike, B: ArrayLike, T: float, method: Discretization = Discretization.EULER
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Discretise (A (..., n, n), B (..., n, m)) at sample time T; batched."""
+    A = np.asarray(A, float)
+    B = np.asarray(B, float)
+    n, m = A.shape[-1], B.shape[-1]
+    if method == Discretization.EULER:
+        return np.eye(n) + T * A, T * B
+    if method != Discretization.ZOH:
+        raise ValueError(f"unknown discretisation {method!r}; allowed: euler, zoh")
+    big = np.zeros((*A.shape[:-2], n + m, n + m))
+    big[..., :n, :n] = A * T
+    big[..., :n, n:] = B * T
+    E = scipy.linalg.expm(big)
+    return E[..., :n, :n], E[..., :n, n:]
+
+
+def augment_apkarian(
+    A: ArrayLike, B: ArrayLike, bandwidth: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Apkarian augmentation with a yaw-rate integrator (SPEC §6), continuous time.
+
+    Augmented state ``[v, α, ω, F_f, δ_f, ζ]``: the plant inputs become first-order filter
+    states ``ḟ = λ(u − f)`` so the new input matrix is constant, and ``ζ̇ = ω_ref − ω`` (the
+    reference enters as an exogenous signal, not through the returned matrices).
+
+    Returns (A_a (..., 6, 6), B_a (6, 2)).
+    """
+    A = np.asarray(A, float)
+    B = np.asarray(B, float)
+    lam = float(bandwidth)
+    Aa = np.zeros((*A.shape[:-2], 6, 6))
+    Aa[..., :3, :3] = A
+    Aa[..., :3, 3:5] = B
+    Aa[..., 3, 3] = Aa[..., 4, 4] = -lam
+    Aa[..., 5, 2] = -1.0
+    Ba = np.zeros((6, 2))
+    Ba[3, 0] = Ba[4, 1] = lam
+    return Aa, Ba
+
+
+class DynamicTS:
+    """TS form of the dynamic model over ϑ = (δ, v, α): 8 vertex models at sample time Td.
+
+    Args:
+        box: scheduling box.
+        params: vehicle parameters.
+        Td: sample time [s].
+        method: discretisation of the vertex and online models.
+    """
+
+    def __init__(
+        self,
+        box: DynamicBox,
+        params: VehicleParams,
+        Td: float,
+        method: Discretization = Discretization.EULER,
+    ) -> None:
+        self.box = box
+        self.params = params
+        self.Td = float(Td)
+        self.method = Discretization(method)
+        self.premise_box = SchedulingBox(
+            ("delta", "v", "alpha"),
+            (box.delta[0], box.v[0], box.alpha[0]),
+            (box.delta[1], box.v[1], box.alpha[1]),
+        )
+        z = self.premise_box.vertices()
+        self.A_vertices, self.B_vertices = self.matrices(z)  # (8, 3, 3), (8, 3, 2)
+        #: Euler E_d (3, 1) = [−T_d/M, 0, 0]ᵀ; see :meth:`disturbance` for ZOH.
+        self.E = self.Td * disturbance_matrix(params)
+
+    @property
+    def n_vertices(self) -> int:
+        """8."""
+        return self.premise_box.n_vertices
+
+    def clip(self, z: ArrayLike) -> tuple[NDArray[np.float64], int]:
+        """Clip premises (..., 3) = (δ, v, α) into the box; returns (clipped, number out)."""
+        return self.premise_box.clip(z)
+
+    def memberships(self, z: ArrayLike) -> NDArray[np.float64]:
+        """μ (..., 8) of premises z (..., 3) (clipped into the box)."""
+        return self.premise_box.memberships(z)
+
+    def matrices(self, z: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Discrete (A_d, B_d) evaluated directly at premises z (..., 3) clipped into the box."""
+        zc = np.clip(np.asarray(z, float), self.premise_box.lower, self.premise_box.upper)
+        Ac, Bc = continuous_matrices(zc[..., 1], zc[..., 0], self.params)
+        return discretize(Ac, Bc, self.Td, self.method)
+
+    def disturbance(self, z: ArrayLike) -> NDArray[np.float64]:
+        """Discrete E_d (..., 3, 1) at premises z. The continuous E equals −B[:, :1] exactly
+        (F_fr enters like a negative drive force), so E_d = −B_d[:, :1] for both methods."""
+        return -self.matrices(z)[1][..., :, :1]
+
+    def ts_matrices(self, z: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """TS interpolation (Σ μ_i A_i, Σ μ_i B_i) at premises z (..., 3)."""
+        mu = self.memberships(z)
+        pb = self.premise_box
+        return pb.blend(mu, self.A_vertices), pb.blend(mu, self.B_vertices)

@@ -1,0 +1,172 @@
+"""Nonlinear single-track vehicle plant with linear or Pacejka tyres, RK4 (SPEC §3).
+
+State ``x = [X, Y, θ, v, α, ω]`` (global position [m], heading [rad, unwrapped], CoG speed [m/s],
+body slip angle [rad], yaw rate [rad/s]); input ``u = [F_xR, δ]`` (rear drive force [N], front
+steering [rad]); exogenous ``μ(road)`` (longitudinal resistance coefficient, SPEC §3)::
+
+    Ẋ = v cos(θ+α),  Ẏ = v sin(θ+α),  θ̇ = ω
+    v̇ = [F_xR cos α − F_yF sin(δ−α) + F_yR sin α − ½ρC_dA_r v² − F_res] / M
+    α̇ = [−F_xR sin α + F_yF cos(δ−α) + F_yR cos α] / (M v) − ω
+    ω̇ = [a F_yF cos δ − b F_yR] / I
+
+Low-speed regularisation (documented choice): the 1/v of the α equation and of the linear tyre
+slips uses ``max(v, v_floor)`` (default 0.5 m/s), Pacejka slips use ``atan2`` with the same floor,
+and the rolling resistance is ``F_res = μ M g tanh(v / v_eps)`` (v_eps = 0.05 m/s) so it does not
+push a stopped car backwards. Above 2 m/s both are exact to machine precision, so the plant equals
+the paper's model there. The implementation works on Python floats (no numpy per call) because a
+1 ms RK4 step sits in the innermost loop of every simulation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tsmpc.config import TyreModel, TyreParams, VehicleParams
+from tsmpc.errors import NonFiniteError
+
+__all__ = ["INPUT_NAMES", "STATE_NAMES", "Plant", "PlantConstants"]
+
+STATE_NAMES = ("X", "Y", "theta", "v", "alpha", "omega")
+INPUT_NAMES = ("F_xR", "delta")
+
+_isfinite = math.isfinite
+
+
+@dataclass(frozen=True)
+class PlantConstants:
+    """Regularisation constants of the plant."""
+
+    v_floor: float = 0.5  #: speed floor of every 1/v [m/s]
+    v_eps: float = 0.05  #: speed scale of the resistance tanh [m/s]
+
+
+class Plant:
+    """Nonlinear single-track plant integrated with fixed-step RK4, inputs held over the step.
+
+    Args:
+        vehicle: vehicle parameters (paper Table 1).
+        tyre: tyre model of the plant.
+        h: RK4 step [s].
+        constants: low-speed regularisation.
+    """
+
+    n_x = 6
+    n_u = 2
+
+    def __init__(
+        self,
+        vehicle: VehicleParams,
+        tyre: TyreParams,
+        h: float = 0.001,
+        constants: PlantConstants = PlantConstants(),
+    ) -> None:
+        if not (h > 0 and math.isfinite(h)):
+            raise ValueError(f"h must be a positive finite step, got {h}")
+        self.vehicle = vehicle
+        self.tyre = tyre
+        self.h = float(h)
+        self.constants = constants
+        fzf, fzr = vehicle.static_loads
+        self._fz = (fzf, fzr)
+        self._linear = tyre.model == TyreModel.LINEAR
+        self._rhs = self._make_rhs()
+
+    # ------------------------------------------------------------------ model
+    def _make_rhs(self):
+        """Build ẋ = f(x, u, μ) as a closure over local float constants (no attribute look-ups:
+        this function is evaluated 4 times per 1 ms step)."""
+        p, t, k = self.vehicle, self.tyre, self.constants
+        M, I, g, a, b = p.mass, p.inertia, p.g, p.a, p.b
+        C, kd = p.cornering_stiffness, p.drag_factor
+        v_floor, v_eps = k.v_floor, k.v_eps
+        Mg = M * g
+        fzf, fzr = self._fz
+        cc, ee = t.shape_c, t.curvature_e
+        mu_t0 = t.mu_tyre
+        scale = mu_t0 / t.mu_dry if t.scale_grip_with_road else 0.0
+        linear = self._linear
+        sin, cos, atan, atan2, tanh = math.sin, math.cos, math.atan, math.atan2, math.tanh
+
+        def rhs(th, v, al, om, F, d, mu):
+            ve = v if v > v_floor else v_floor
+            sa, ca = sin(al), cos(al)
+            if linear:
+                fyf = C * (d - al - a * om / ve)
+                fyr = C * (b * om / ve - al)
+            else:
+                vx, vy = ve * ca, ve * sa
+                mu_t = mu * scale if scale else mu_t0
+                Df, Dr = mu_t * fzf, mu_t * fzr
+                if Df > 0.0:
+                    bs = C / (cc * Df) * (atan2(vy + a * om, vx) - d)
+                    fyf = -Df * sin(cc * atan(bs - ee * (bs - atan(bs))))
+                    bs = C / (cc * Dr) * atan2(vy - b * om, vx)
+                    fyr = -Dr * sin(cc * atan(bs - ee * (bs - atan(bs))))
+                else:
+                    fyf = fyr = 0.0
+            sda, cda = sin(d - al), cos(d - al)
+            vdot = (F * ca - fyf * sda + fyr * sa - kd * v * v - mu * Mg * tanh(v / v_eps)) / M
+            adot = (-F * sa + fyf * cda + fyr * ca) / (M * ve) - om
+            wdot = (a * fyf * cos(d) - b * fyr) / I
+            return v * cos(th + al), v * sin(th + al), om, vdot, adot, wdot
+
+        return rhs
+
+    def derivatives(self, x: ArrayLike, u: ArrayLike, mu_road: float) -> NDArray[np.float64]:
+        """ẋ (6,) at state x (6,), input u = [F_xR, δ] and road friction μ(road)."""
+        xs, (F, d), mu = self._checked(x, u, mu_road)
+        return np.array(self._rhs(xs[2], xs[3], xs[4], xs[5], F, d, mu))
+
+    # ------------------------------------------------------------ integration
+    def _checked(
+        self, x: ArrayLike, u: ArrayLike, mu_road: float
+    ) -> tuple[tuple[float, ...], tuple[float, float], float]:
+        xs = tuple(np.asarray(x, dtype=float).reshape(-1).tolist())
+        us = tuple(np.asarray(u, dtype=float).reshape(-1).tolist())
+        if len(xs) != 6 or len(us) != 2:
+            raise ValueError(f"plant: state must have 6 entries and input 2, got {len(xs)}, {len(us)}")
+        mu = float(mu_road)
+        if not all(map(_isfinite, xs)):
+            raise NonFiniteError(f"plant: non-finite state {xs}")
+        if not all(map(_isfinite, us)) or not _isfinite(mu):
+            raise NonFiniteError(f"plant: non-finite input u={us} or mu_road={mu}")
+        return xs, (us[0], us[1]), mu
+
+    def step(
+        self, x: ArrayLike, u: ArrayLike, mu_road: float, n_steps: int = 1
+    ) -> NDArray[np.float64]:
+        """Advance ``n_steps`` RK4 steps of length h with u and μ(road) held; returns x (6,).
+
+        Raises :class:`NonFiniteError` on NaN/inf state or input, or if the integration itself
+        produces a non-finite state.
+        """
+        (X, Y, th, v, al, om), (F, d), mu = self._checked(x, u, mu_road)
+        h = self.h
+        h2 = 0.5 * h
+        h6 = h / 6.0
+        f = self._rhs
+        for _ in range(n_steps):
+            # Classical RK4, unrolled on floats (the position does not feed back into f).
+            a1, b1, c1, d1, e1, g1 = f(th, v, al, om, F, d, mu)
+            a2, b2, c2, d2, e2, g2 = f(th + h2 * c1, v + h2 * d1, al + h2 * e1, om + h2 * g1, F, d, mu)
+            a3, b3, c3, d3, e3, g3 = f(th + h2 * c2, v + h2 * d2, al + h2 * e2, om + h2 * g2, F, d, mu)
+            a4, b4, c4, d4, e4, g4 = f(th + h * c3, v + h * d3, al + h * e3, om + h * g3, F, d, mu)
+            X += h6 * (a1 + 2.0 * (a2 + a3) + a4)
+            Y += h6 * (b1 + 2.0 * (b2 + b3) + b4)
+            th += h6 * (c1 + 2.0 * (c2 + c3) + c4)
+            v += h6 * (d1 + 2.0 * (d2 + d3) + d4)
+            al += h6 * (e1 + 2.0 * (e2 + e3) + e4)
+            om += h6 * (g1 + 2.0 * (g2 + g3) + g4)
+        xs = (X, Y, th, v, al, om)
+        if not all(map(_isfinite, xs)):
+            raise NonFiniteError(f"plant: integration diverged to {xs}")
+        return np.array(xs)
+
+    def friction_force(self, mu_road: float) -> float:
+        """Unknown friction disturbance F_fr = (μ(road) − μ_o) M g seen by the models [N]."""
+        p = self.vehicle
+        return (float(mu_road) - p.mu_nominal) * p.mass * p.g
