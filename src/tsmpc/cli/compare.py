@@ -1,3 +1,141 @@
-"""CLI commands of this module are added by the corresponding library layer (placeholder)."""
+"""``tsmpc compare`` (the paper's comparison) and ``tsmpc run`` (one method, one scenario)."""
 
 from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from tsmpc.cli import app
+from tsmpc.cli._common import fail, load_config_or_exit
+
+
+def _parse_window(text: str | None) -> tuple[int, int] | None:
+    if text is None:
+        return None
+    try:
+        a, b = (int(v) for v in text.split(","))
+    except ValueError:
+        fail(ValueError(f"--window must be 'FIRST,LAST' (1-based columns), got {text!r}"))
+    return a, b
+
+
+def _execute(
+    methods_text: str, reference: Path | None, window: str | None, out: Path, seed: int | None,
+    config: Path | None, no_plots: bool, oracle: bool, duration: float | None,
+) -> None:
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from tsmpc.config import replace
+    from tsmpc.errors import TsmpcError
+    from tsmpc.sim.compare import compare, load_scenario
+    from tsmpc.sim.simulator import Method
+
+    console = Console()
+    cfg = load_config_or_exit(config)
+    if seed is not None:
+        cfg = replace(cfg, seed=seed)
+    try:
+        methods = [Method.parse(m) for m in methods_text.split(",") if m.strip()]
+    except ValueError as err:
+        fail(err)
+    if not methods:
+        fail(ValueError("--methods is empty"))
+    try:
+        scenario = load_scenario(cfg, reference, _parse_window(window))
+    except (TsmpcError, OSError) as err:
+        fail(err)
+    max_steps = None if duration is None else max(1, round(duration / cfg.rates.Tc))
+    with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
+                  TextColumn("{task.completed}/{task.total} MPC steps"),
+                  TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
+
+        def factory(name: str, total: int) -> Any:
+            task = progress.add_task(name, total=total)
+            return lambda k, _k_total: progress.update(task, completed=k)
+
+        try:
+            result = compare(cfg, scenario, methods, out, plots=not no_plots, oracle=oracle,
+                             max_steps=max_steps, progress_factory=factory)
+        except TsmpcError as err:
+            fail(err)
+    _print_tables(console, result.metrics)
+    console.print(f"wrote {len(result.files)} files to [bold]{out}[/bold]")
+
+
+def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
+    from rich.table import Table
+
+    from tsmpc.report.tables import rmse_rows
+
+    paper = bool(metrics["scenario"].get("paper_reference"))
+    t = Table(title=f"RMSE — {metrics['scenario']['name']}"
+              + (" (paper rows from Table 5)" if paper else ""))
+    for col in ("approach", "x [m]", "y [m]", "θ [rad]", "v [m/s]", "ω [rad/s]"):
+        t.add_column(col, justify="right" if col != "approach" else "left")
+    for label, vals in rmse_rows(metrics, paper):
+        style = "dim" if label.endswith("(paper)") else None
+        t.add_row(label, *(f"{v:.3f}" for v in vals), style=style)
+    console.print(t)
+    tt = Table(title="Per-step solve times [ms] and real-time factor")
+    for col in ("method", "MPC median", "MPC p95", "MPC p99", "MPC max", "× REF",
+                "MHE median", "MHE p99", "max |e_y| [m]", "F̂ RMSE [N]", "RT factor", "events"):
+        tt.add_column(col, justify="right")
+    for name, m in metrics["methods"].items():
+        ev = ", ".join(f"{k}={v}" for k, v in m["events"].items() if v) or "-"
+        ratio = m.get("mpc_ms_ratio_to_REF")
+        tt.add_row(name, f"{m['mpc_ms']['median']:.3f}", f"{m['mpc_ms']['p95']:.3f}",
+                   f"{m['mpc_ms']['p99']:.3f}", f"{m['mpc_ms']['max']:.2f}",
+                   "-" if ratio is None else f"{ratio:.1f}",
+                   f"{m['mhe_ms']['median']:.3f}", f"{m['mhe_ms']['p99']:.3f}",
+                   f"{m['max_abs_lateral_m']:.3f}", f"{m['friction_rmse_N']:.0f}",
+                   f"{m['realtime_factor']:.1f}", ev)
+    console.print(tt)
+    for name, m in metrics["methods"].items():
+        if m["termination"] != "completed":
+            console.print(f"[red]{name}: {m['termination']}[/red]")
+
+
+_REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..1316 is used unless "
+             "--window says otherwise) or a planned CSV (t,x,y,theta,v,omega,kappa). "
+             "Default: the built-in paper-like circuit.")
+
+
+@app.command("compare")
+def compare_cmd(
+    reference: Path | None = typer.Option(None, "--reference", help=_REF_HELP),
+    window: str | None = typer.Option(None, "--window", help="1-based columns FIRST,LAST of a paper file."),
+    methods: str = typer.Option("fzn,ref,iter,nl", "--methods", help="Comma-separated: fzn,ref,iter,nl."),
+    out: Path = typer.Option(Path("results/compare"), "--out", help="Output folder."),
+    seed: int | None = typer.Option(None, "--seed", help="Seed of the sensor noise (default: config)."),
+    config: Path | None = typer.Option(None, "--config", help="TOML config file."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Skip the figures."),
+    oracle: bool = typer.Option(
+        False, "--oracle", help="Ablation: true state, no friction compensation."
+    ),
+    duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
+) -> None:
+    """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
+    _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration)
+
+
+@app.command("run")
+def run_cmd(
+    method: str = typer.Option("ref", "--method", help="One of fzn, ref, iter, nl."),
+    reference: Path | None = typer.Option(None, "--reference", help=_REF_HELP),
+    window: str | None = typer.Option(None, "--window", help="1-based columns FIRST,LAST of a paper file."),
+    out: Path = typer.Option(Path("results/run"), "--out", help="Output folder."),
+    seed: int | None = typer.Option(None, "--seed", help="Seed of the sensor noise (default: config)."),
+    config: Path | None = typer.Option(None, "--config", help="TOML config file."),
+    no_plots: bool = typer.Option(False, "--no-plots", help="Skip the figures."),
+    oracle: bool = typer.Option(
+        False, "--oracle", help="Ablation: true state, no friction compensation."
+    ),
+    duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
+) -> None:
+    """Run one method on one scenario (same outputs as compare, for one method)."""
+    if "," in method:
+        fail(ValueError("--method takes one method; use `tsmpc compare --methods` for several"))
+    _execute(method, reference, window, out, seed, config, no_plots, oracle, duration)

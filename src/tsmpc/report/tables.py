@@ -1,0 +1,56 @@
+"""RMSE and timing tables in the paper's Table 5 layout: CSV, Markdown and LaTeX (SPEC §11)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from tsmpc.sim.metrics import PAPER_TABLE5, RMSE_KEYS
+
+__all__ = ["rmse_csv", "rmse_latex", "rmse_markdown", "rmse_rows", "timing_rows"]
+
+_HEAD = ("approach", "x [m]", "y [m]", "theta [rad]", "v [m/s]", "omega [rad/s]")
+
+
+def rmse_rows(metrics: dict[str, Any], with_paper: bool) -> list[tuple[str, list[float]]]:
+    """Rows (label, [x, y, θ, v, ω]): ours, and the paper's beside each when requested."""
+    rows: list[tuple[str, list[float]]] = []
+    for name, m in metrics["methods"].items():
+        rows.append((name, [m["rmse"][k] for k in RMSE_KEYS]))
+        if with_paper and name in PAPER_TABLE5:
+            rows.append((f"{name} (paper)", [PAPER_TABLE5[name][k] for k in RMSE_KEYS]))
+    return rows
+
+
+def rmse_csv(metrics: dict[str, Any], with_paper: bool) -> str:
+    """CSV with header ``approach,x,y,theta,v,omega``."""
+    lines = ["approach,x,y,theta,v,omega"]
+    lines += [f"{lab}," + ",".join(f"{v:.6g}" for v in vals)
+              for lab, vals in rmse_rows(metrics, with_paper)]
+    return "\n".join(lines) + "\n"
+
+
+def rmse_markdown(metrics: dict[str, Any], with_paper: bool) -> str:
+    """Markdown table, 3 decimals like the paper."""
+    out = ["| " + " | ".join(_HEAD) + " |", "|" + "---|" * len(_HEAD)]
+    out += [f"| {lab} | " + " | ".join(f"{v:.3f}" for v in vals) + " |"
+            for lab, vals in rmse_rows(metrics, with_paper)]
+    return "\n".join(out) + "\n"
+
+
+def rmse_latex(metrics: dict[str, Any], with_paper: bool) -> str:
+    """LaTeX tabular (booktabs), 3 decimals."""
+    out = [
+        r"\begin{tabular}{lrrrrr}", r"\toprule",
+        r"approach & $x$ [m] & $y$ [m] & $\theta$ [rad] & $v$ [m/s] & $\omega$ [rad/s] \\",
+        r"\midrule",
+    ]
+    out += [f"{lab} & " + " & ".join(f"{v:.3f}" for v in vals) + r" \\"
+            for lab, vals in rmse_rows(metrics, with_paper)]
+    out += [r"\bottomrule", r"\end{tabular}"]
+    return "\n".join(out) + "\n"
+
+
+def timing_rows(metrics: dict[str, Any]) -> list[tuple[str, dict[str, float], dict[str, float], float]]:
+    """(method, mpc_ms stats, mhe_ms stats, realtime factor) per method."""
+    return [(name, m["mpc_ms"], m["mhe_ms"], m["realtime_factor"])
+            for name, m in metrics["methods"].items()]
