@@ -14,11 +14,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
-from tsmpc.config import Config, SchedulingMode, replace
+from tsmpc.config import Config, SchedulingMode, TyreParams, VehicleParams, replace
 from tsmpc.errors import NonFiniteError
 from tsmpc.models.dynamic import DynamicTS
 from tsmpc.models.kinematic import KinematicTS, pose_to_errors
@@ -27,9 +28,16 @@ from tsmpc.scenarios import FrictionProfile, SensorNoise, paper_friction_profile
 from tsmpc.sim.log import RunLog
 from tsmpc.vehicle.plant import Plant
 
-__all__ = ["Method", "Scenario", "build_outer_controller", "simulate"]
+__all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "simulate"]
 
 ProgressFn = Callable[[int, int], None]
+
+
+class SensorFault(Protocol):
+    """Corrupts measurements: called every T_d with the time and the noisy measurement
+    ``[X, Y, θ, v, ω]``; returns what the sensors deliver (may hold values or return NaN)."""
+
+    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]: ...
 
 
 class Method(StrEnum):
@@ -59,6 +67,9 @@ class Scenario:
         reference: reference sampled at T_c, including the N-step look-ahead at its end.
         friction: μ(road) as a function of time and travelled distance.
         initial_error: (lateral offset [m], heading offset [rad]) of the start pose.
+        plant_vehicle, plant_tyre: plant-only parameters (model mismatch); None = the config's.
+        sensor_fault: measurement corruption (dropouts, NaN bursts); None = healthy sensors.
+        divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track width).
         meta: free-form facts written to metrics.json (source file, window, ...).
     """
 
@@ -66,6 +77,10 @@ class Scenario:
     reference: Reference
     friction: FrictionProfile = field(default_factory=paper_friction_profile)
     initial_error: tuple[float, float] = (0.0, 0.0)
+    plant_vehicle: VehicleParams | None = None
+    plant_tyre: TyreParams | None = None
+    sensor_fault: SensorFault | None = None
+    divergence_bound_m: float | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
 
@@ -138,11 +153,14 @@ def simulate(
     dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, Td)
     mhe_model = dyn
     lqr = TSLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, Td, bandwidth=cfg.dynamic_lmi.filter_bandwidth)
-    plant = Plant(cfg.vehicle, cfg.tyre, rates.h)
+    plant = Plant(scenario.plant_vehicle or cfg.vehicle, scenario.plant_tyre or cfg.tyre, rates.h)
+    fault = scenario.sensor_fault
+    bound = scenario.divergence_bound_m
     noise = SensorNoise(cfg.noise, cfg.seed)
     friction = scenario.friction
     p = cfg.vehicle
-    mg = p.mass * p.g
+    # The disturbance the UIO should see: the plant's resistance minus the model's nominal one.
+    mg = plant.vehicle.mass * plant.vehicle.g
 
     # Start pose on the reference, optionally offset laterally and in heading.
     th0 = float(ref.theta[0])
@@ -182,17 +200,32 @@ def simulate(
     u_prev = np.array([x[3], x[5]])
     u_applied = np.zeros(2)
     s_travel = 0.0
+    pose_meas = x[:3].copy()
+    n_pose_rejected = 0
     termination = "completed"
     done = K
     t_start = clock()
     m = 0
+    def measure(t: float) -> NDArray[np.float64]:
+        y5 = np.array([x[0], x[1], x[2], x[3], x[5]]) + noise.sample()
+        return fault(t, y5) if fault is not None else y5
+
     for k in range(K):
-        n0 = noise.sample()  # [X, Y, θ, v, ω] noise; the pose part feeds the MPC this step
+        y0 = measure(k * Tc)  # the pose part feeds the MPC this step
         state_outer[k] = x
         errors[k] = pose_to_errors(x[0], x[1], x[2], refs[k, 0], refs[k, 1], refs[k, 2])
-        e_meas = pose_to_errors(x[0] + n0[0], x[1] + n0[1], x[2] + n0[2],
+        if np.all(np.isfinite(y0[:3])):
+            pose_meas = y0[:3]
+        else:  # keep the last good pose; the MPC never sees NaN
+            n_pose_rejected += 1
+        e_meas = pose_to_errors(pose_meas[0], pose_meas[1], pose_meas[2],
                                 refs[k, 0], refs[k, 1], refs[k, 2])
         errors_meas[k] = e_meas
+        if bound is not None and abs(errors[k, 1]) > bound:
+            termination = (f"diverged: |e_y| = {abs(errors[k, 1]):.2f} m > {bound:g} m "
+                           f"at t = {k * Tc:.1f} s")
+            done = k + 1
+            break
         t0 = clock()
         res = mpc.step(e_meas, u_prev, ref.window(k, N + 1))
         mpc_time[k] = clock() - t0
@@ -207,10 +240,10 @@ def simulate(
         v_ref, w_ref = float(u_prev[0]), float(u_prev[1])
         try:
             for j in range(n_in):
-                nj = n0 if j == 0 else noise.sample()
                 t = (k * n_in + j) * Td
+                yj = y0 if j == 0 else measure(t)
                 mu = float(friction.mu(t, s_travel))
-                y = np.array([x[3] + nj[3], x[5] + nj[4]])
+                y = yj[3:5]
                 t1 = clock()
                 e = mhe.step(y, u_applied)
                 t2 = clock()
@@ -240,6 +273,7 @@ def simulate(
         "mhe_rejected": int(np.count_nonzero(mhe_status[:m] == "rejected")),
         "mhe_failed": int(np.count_nonzero(mhe_status[:m] == "failed")),
         "inner_saturated": int(np.count_nonzero(sat[:m])),
+        "pose_rejected": n_pose_rejected,
     }
     return RunLog(
         method=method.value, scenario=scenario.name, Tc=Tc, Td=Td,
