@@ -1,0 +1,84 @@
+"""End-to-end: the cascade and `tsmpc compare` on a shortened circuit (SPEC §10-11, issue 7)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+from typer.testing import CliRunner
+
+from tsmpc.cli import app
+from tsmpc.config import Config, replace
+from tsmpc.sim.compare import compare, load_scenario
+from tsmpc.sim.metrics import RMSE_KEYS
+from tsmpc.sim.simulator import Method, simulate
+
+pytestmark = pytest.mark.slow
+
+SCHEMA_KEYS = {"rmse", "max_abs_lateral_m", "mpc_ms", "mhe_ms", "friction_rmse_N", "slip_rmse_rad",
+               "wall_s", "realtime_factor", "events"}
+
+
+@pytest.fixture(scope="module")
+def cli_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("compare")
+    res = CliRunner().invoke(app, ["compare", "--duration", "20", "--out", str(out), "--seed", "3"])
+    assert res.exit_code == 0, res.output
+    return out
+
+
+def test_compare_writes_every_file_with_the_schema(cli_out: Path) -> None:
+    for name in ("metrics.json", "rmse.csv", "rmse.md", "rmse.tex", "timeseries.npz",
+                 "timeseries.mat", "config.toml", "versions.json"):
+        assert (cli_out / name).stat().st_size > 0, name
+    for fig in ("circuit", "velocities", "errors", "control", "friction", "solve_time"):
+        for ext in ("png", "pdf"):
+            assert (cli_out / f"{fig}.{ext}").stat().st_size > 1000
+    metrics = json.loads((cli_out / "metrics.json").read_text())
+    assert set(metrics["methods"]) == {"FZN", "REF", "ITER", "NL"}
+    assert {"scenario", "versions"} <= set(metrics)
+    for m in metrics["methods"].values():
+        assert SCHEMA_KEYS <= set(m)
+        assert set(m["rmse"]) == set(RMSE_KEYS)
+        assert {"median", "p95", "p99", "max"} <= set(m["mpc_ms"])
+        assert m["termination"] == "completed"
+        assert m["outer_steps"] == 200 and m["inner_steps"] == 2000
+        # 20 s of the circuit from rest: the cascade tracks (loose bounds, a broken loop is metres off)
+        assert m["max_abs_lateral_m"] < 1.0 and m["rmse"]["v"] < 1.0
+    assert len((cli_out / "rmse.csv").read_text().strip().splitlines()) == 5
+    mat = scipy.io.loadmat(cli_out / "timeseries.mat")
+    assert "REF" in mat
+    npz = np.load(cli_out / "timeseries.npz")
+    assert npz["REF_state"].shape == (2000, 6)
+
+
+def test_runs_are_reproducible_from_the_seed() -> None:
+    cfg = replace(Config(), seed=11)
+    sc = load_scenario(cfg)
+    a = simulate(cfg, Method.REF, sc, max_steps=30)
+    b = simulate(cfg, Method.REF, sc, max_steps=30)
+    np.testing.assert_array_equal(a.state, b.state)
+    c = simulate(replace(cfg, seed=12), Method.REF, sc, max_steps=30)
+    assert not np.array_equal(a.state, c.state)
+
+
+def test_multirate_counts_do_not_drift() -> None:
+    cfg = Config()
+    log = simulate(cfg, Method.FZN, load_scenario(cfg), max_steps=37)
+    assert log.n_outer == 37 and log.t_inner.size == 370
+    np.testing.assert_allclose(log.t_inner[::10], log.t_outer, atol=1e-12)
+
+
+def test_oracle_flag_disables_compensation(tmp_path: Path) -> None:
+    cfg = Config()
+    res = compare(cfg, load_scenario(cfg), [Method.REF], None, oracle=True, max_steps=50)
+    assert res.metrics["oracle"] is True
+    assert res.metrics["methods"]["REF"]["termination"] == "completed"
+
+
+def test_bad_method_is_rejected() -> None:
+    res = CliRunner().invoke(app, ["compare", "--methods", "ref,mpc", "--duration", "1"])
+    assert res.exit_code == 2 and "allowed: fzn, ref, iter, nl" in res.output
