@@ -1,0 +1,151 @@
+"""Reference trajectories: one typed object for the planner's output (SPEC §10).
+
+A :class:`Reference` is uniformly sampled. θ is unwrapped (continuous). Integration convention
+(the paper planner's): θ(k) = θ(k−1) + ω(k)T, x(k) = x(k−1) + v(k) cos θ(k) T.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tsmpc.errors import DataFormatError
+
+__all__ = ["CSV_HEADER", "Reference"]
+
+CSV_HEADER = "t,x,y,theta,v,omega,kappa"
+_SIGNALS = ("t", "x", "y", "theta", "v", "omega", "kappa")
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Uniformly sampled reference trajectory.
+
+    Attributes:
+        t: (n,) time [s], uniform step.
+        x, y: (n,) position [m].
+        theta: (n,) heading [rad], unwrapped.
+        v: (n,) speed [m/s].
+        omega: (n,) yaw rate [rad/s].
+        kappa: (n,) curvature [1/m].
+        closed: True for a closed lap (windows past the end wrap around).
+    """
+
+    t: NDArray[np.float64]
+    x: NDArray[np.float64]
+    y: NDArray[np.float64]
+    theta: NDArray[np.float64]
+    v: NDArray[np.float64]
+    omega: NDArray[np.float64]
+    kappa: NDArray[np.float64]
+    closed: bool = False
+
+    def __post_init__(self) -> None:
+        n = None
+        for name in _SIGNALS:
+            a = np.ascontiguousarray(getattr(self, name), dtype=float).reshape(-1)
+            if n is None:
+                n = a.size
+            if a.size != n:
+                raise DataFormatError(f"reference: {name} has {a.size} samples, t has {n}")
+            if not np.all(np.isfinite(a)):
+                raise DataFormatError(f"reference: {name} contains NaN or inf")
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+        if n is None or n < 2:
+            raise DataFormatError("reference: needs at least 2 samples")
+        d = np.diff(self.t)
+        if np.any(d <= 0):
+            raise DataFormatError("reference: time must be strictly increasing")
+        if np.max(np.abs(d - d.mean())) > 1e-6 * max(1.0, d.mean()):
+            raise DataFormatError("reference: time must be uniformly sampled")
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def dt(self) -> float:
+        """Sample time [s]."""
+        return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
+
+    @property
+    def duration(self) -> float:
+        """t[-1] − t[0] [s]."""
+        return float(self.t[-1] - self.t[0])
+
+    def _replace(self, **arrays: NDArray[np.float64]) -> Reference:
+        data = {f.name: getattr(self, f.name) for f in fields(self)}
+        data.update(arrays)
+        return Reference(**data)
+
+    def slice(self, start: int, stop: int) -> Reference:
+        """Samples start..stop−1 (an open piece: ``closed`` is False)."""
+        idx = np.arange(len(self))[start:stop]
+        out = {n: getattr(self, n)[idx] for n in _SIGNALS}
+        return Reference(**out, closed=False)
+
+    def window(self, k: int, n: int) -> Reference:
+        """n samples from k. Past the end a closed lap wraps around (θ continued by whole turns,
+        time continued); an open reference holds v, ω, κ and continues the pose along them."""
+        L = len(self)
+        idx = np.arange(k, k + n)
+        if idx[-1] < L:
+            return Reference(*(getattr(self, s)[idx] for s in _SIGNALS), closed=False)
+        dt = self.dt
+        t = self.t[0] + idx * dt
+        if self.closed:
+            lap, j = np.divmod(idx, L)
+            turn = self.theta[-1] - self.theta[0] + self.omega[0] * dt
+            turn = 2 * np.pi * np.round(turn / (2 * np.pi))
+            return Reference(t, self.x[j], self.y[j], self.theta[j] + lap * turn, self.v[j],
+                             self.omega[j], self.kappa[j], closed=False)
+        inside = idx < L
+        ji = np.minimum(idx, L - 1)
+        x, y, th = self.x[ji].copy(), self.y[ji].copy(), self.theta[ji].copy()
+        v, w = self.v[-1], self.omega[-1]
+        for i in np.flatnonzero(~inside):  # at most n steps, only at the very end of a run
+            th[i] = th[i - 1] + w * dt if i > 0 else self.theta[-1] + w * dt
+            px, py = (x[i - 1], y[i - 1]) if i > 0 else (self.x[-1], self.y[-1])
+            x[i] = px + v * np.cos(th[i]) * dt
+            y[i] = py + v * np.sin(th[i]) * dt
+        return Reference(t, x, y, th, self.v[ji], self.omega[ji], self.kappa[ji], closed=False)
+
+    def resample(self, dt: float) -> Reference:
+        """Resample to step ``dt`` (linear interpolation of every signal; θ is unwrapped so this
+        is continuous)."""
+        if not dt > 0:
+            raise ValueError(f"dt must be positive, got {dt}")
+        n = int(np.floor(self.duration / dt + 1e-9)) + 1
+        t = self.t[0] + np.arange(n) * dt
+        return Reference(t, *(np.interp(t, self.t, getattr(self, s)) for s in _SIGNALS[1:]),
+                         closed=self.closed)
+
+    def to_csv(self, path: str | Path) -> None:
+        """Write ``t,x,y,theta,v,omega,kappa`` rows (atomically)."""
+        from tsmpc.sim.log import atomic_write_text
+
+        data = np.stack([getattr(self, s) for s in _SIGNALS], axis=1)
+        lines = [CSV_HEADER] + [",".join(f"{v:.10g}" for v in row) for row in data]
+        atomic_write_text(path, "\n".join(lines) + "\n")
+
+    @classmethod
+    def from_csv(cls, path: str | Path, closed: bool = False) -> Reference:
+        """Read a CSV written by :meth:`to_csv` (header ``t,x,y,theta,v,omega,kappa``)."""
+        p = Path(path)
+        try:
+            text = p.read_text(encoding="utf-8")
+        except OSError as err:
+            raise DataFormatError(f"{p}: cannot read reference: {err.strerror}") from None
+        lines = [ln for ln in text.splitlines() if ln.strip()]
+        if not lines or lines[0].replace(" ", "") != CSV_HEADER:
+            raise DataFormatError(f"{p}: expected the header '{CSV_HEADER}'")
+        try:
+            data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+        except ValueError as err:
+            raise DataFormatError(f"{p}: non-numeric value ({err})") from None
+        if data.ndim != 2 or data.shape[1] != 7:
+            raise DataFormatError(f"{p}: expected 7 columns per row")
+        return cls(*data.T, closed=closed)
