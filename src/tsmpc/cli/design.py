@@ -1,3 +1,65 @@
-"""CLI commands of this module are added by the corresponding library layer (placeholder)."""
+"""``tsmpc design``: solve (or load from the cache) the LMI designs and print them (SPEC §6)."""
 
 from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from tsmpc.cli import app
+from tsmpc.cli._common import fail, load_config_or_exit
+
+
+@app.command("design")
+def design(
+    config: Path | None = typer.Option(None, "--config", help="TOML config file."),
+    as_json: bool = typer.Option(False, "--json", help="Print the designs as JSON."),
+    no_cache: bool = typer.Option(False, "--no-cache", help="Re-solve even if a cached design exists."),
+) -> None:
+    """Kinematic LQR-LMI + terminal set and dynamic TS-LMI-LQR: S, P, gains, certificates, times."""
+    import json
+    import time
+
+    import numpy as np
+
+    from tsmpc.errors import TsmpcError
+    from tsmpc.synthesis.cache import design_to_dict, load_or_design_dynamic, load_or_design_kinematic
+
+    cfg = load_config_or_exit(config)
+    try:
+        t0 = time.perf_counter()
+        kd = load_or_design_kinematic(cfg, use_cache=not no_cache)
+        t1 = time.perf_counter()
+        dd = load_or_design_dynamic(cfg, use_cache=not no_cache)
+        t2 = time.perf_counter()
+    except TsmpcError as err:
+        fail(err, code=1)
+        return
+    if as_json:
+        out = {"kinematic": design_to_dict(kd), "dynamic": design_to_dict(dd),
+               "wall_s": {"kinematic": t1 - t0, "dynamic": t2 - t1}}
+        typer.echo(json.dumps(out, indent=1))
+        return
+
+    from rich.console import Console
+    from rich.table import Table
+
+    con = Console()
+    np.set_printoptions(precision=4, suppress=False, linewidth=120)
+    con.print(f"[bold]Kinematic design[/] (solve {kd.solve_time_s:.2f} s, status {kd.status}, "
+              f"wall {t1 - t0:.2f} s)")
+    con.print(f"terminal set S =\n{kd.S}\nterminal cost P =\n{kd.P}")
+    con.print(f"[bold]Dynamic design[/] (solve {dd.solve_time_s:.2f} s, status {dd.status}, "
+              f"wall {t2 - t1:.2f} s; {dd.formulation})")
+    con.print(f"grid: max spectral radius {dd.grid_max_rho:.5f}, "
+              f"max Lyapunov ratio {dd.grid_max_decrease:.6f}")
+    con.print(f"K (vertex 0, physical units) =\n{dd.K[0]}")
+    table = Table(title="Certificates (λmax of a matrix that must be ≺ 0)")
+    table.add_column("design")
+    table.add_column("worst certificate")
+    table.add_column("margin", justify="right")
+    table.add_column("all hold")
+    for name, d in (("kinematic", kd), ("dynamic", dd)):
+        worst = max(d.certificates, key=lambda c: c.margin)
+        table.add_row(name, worst.name, f"{worst.margin:.3e}", str(all(c.holds for c in d.certificates)))
+    con.print(table)

@@ -1,0 +1,145 @@
+"""On-disk cache of the LMI designs (SPEC §6): a run never re-solves an unchanged design.
+
+A design is stored as one JSON file named by the SHA-256 of every input it depends on (the
+settings, the box, the vehicle, the sample time, the formulation version). Floats are written with
+``repr`` precision, so a cached design is bit-identical to a fresh one. The certificates are
+recomputed on load (cheap, numpy only) — a corrupted or tampered file is re-solved, never trusted.
+
+Location: ``$TSMPC_CACHE_DIR`` or ``~/.cache/tsmpc``. Writes are atomic (temp file + rename).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import asdict, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tsmpc.config import Config
+from tsmpc.errors import TsmpcError
+from tsmpc.sim.log import atomic_write_text
+from tsmpc.synthesis.certificates import Certificate, check
+from tsmpc.synthesis.dynamic import DynamicDesign, certify_grid, design_dynamic
+from tsmpc.synthesis.kinematic import KinematicDesign, certify_kinematic, design_kinematic
+
+__all__ = [
+    "cache_dir",
+    "design_from_dict",
+    "design_to_dict",
+    "dynamic_key",
+    "kinematic_key",
+    "load_or_design_dynamic",
+    "load_or_design_kinematic",
+]
+
+#: Bump when a formulation changes, so old cache entries are not reused.
+FORMAT_VERSION = 2
+
+
+def cache_dir() -> Path:
+    """``$TSMPC_CACHE_DIR`` or ``~/.cache/tsmpc``."""
+    env = os.environ.get("TSMPC_CACHE_DIR")
+    return Path(env) if env else Path.home() / ".cache" / "tsmpc"
+
+
+def _hash(kind: str, payload: dict[str, Any]) -> str:
+    text = json.dumps({"kind": kind, "format": FORMAT_VERSION, **payload}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def kinematic_key(cfg: Config) -> str:
+    """Hash of every input of the kinematic design."""
+    return _hash("kinematic", {"box": cfg.kinematic_box.model_dump(mode="json"),
+                               "lmi": cfg.kinematic_lmi.model_dump(mode="json"), "Tc": cfg.rates.Tc})
+
+
+def dynamic_key(cfg: Config) -> str:
+    """Hash of every input of the dynamic design."""
+    return _hash("dynamic", {"box": cfg.dynamic_box.model_dump(mode="json"),
+                             "lmi": cfg.dynamic_lmi.model_dump(mode="json"),
+                             "vehicle": cfg.vehicle.model_dump(mode="json"), "Td": cfg.rates.Td})
+
+
+def design_to_dict(design: KinematicDesign | DynamicDesign) -> dict[str, Any]:
+    """JSON-ready dict: arrays as nested lists, certificates as {name, margin, holds}."""
+    out: dict[str, Any] = {"type": type(design).__name__}
+    for f in fields(design):
+        value = getattr(design, f.name)
+        if isinstance(value, np.ndarray):
+            out[f.name] = value.tolist()
+        elif f.name == "certificates":
+            out[f.name] = [{**asdict(c), "holds": c.holds} for c in value]
+        else:
+            out[f.name] = value
+    return out
+
+
+def design_from_dict(data: dict[str, Any]) -> KinematicDesign | DynamicDesign:
+    """Inverse of :func:`design_to_dict`."""
+    cls = {"KinematicDesign": KinematicDesign, "DynamicDesign": DynamicDesign}[data["type"]]
+    kwargs: dict[str, Any] = {}
+    for f in fields(cls):
+        value = data[f.name]
+        if f.name == "certificates":
+            value = tuple(Certificate(c["name"], float(c["margin"])) for c in value)
+        elif isinstance(value, list):
+            value = np.asarray(value, dtype=float)
+        kwargs[f.name] = value
+    return cls(**kwargs)
+
+
+def _recheck(design: KinematicDesign | DynamicDesign, cfg: Config) -> None:
+    """Recompute the certificates of a loaded design (raises on failure)."""
+    if isinstance(design, KinematicDesign):
+        from tsmpc.models.kinematic import KinematicTS
+
+        ts = KinematicTS(cfg.kinematic_box, cfg.rates.Tc)
+        certs = certify_kinematic(ts.A_vertices, ts.B, np.diag(cfg.kinematic_lmi.Q),
+                                  np.diag(cfg.kinematic_lmi.R), design.Y, design.K, design.Z,
+                                  np.diag(np.square(cfg.kinematic_lmi.u_bar)))
+    else:
+        _, _, certs = certify_grid(design.K, design.P, cfg.dynamic_box, cfg.vehicle, design.Td,
+                                   design.bandwidth, cfg.dynamic_lmi.grid_points)
+    check(certs, "cached design")
+
+
+def _load_or_design(cfg: Config, kind: str, directory: Path | None, use_cache: bool) -> Any:
+    key = kinematic_key(cfg) if kind == "kinematic" else dynamic_key(cfg)
+    path = (directory or cache_dir()) / f"{kind}-{key[:32]}.json"
+    if use_cache and path.exists():
+        try:
+            design = design_from_dict(json.loads(path.read_text()))
+            if design.inputs_hash == key:
+                _recheck(design, cfg)
+                return design
+        except (TsmpcError, KeyError, ValueError, TypeError, json.JSONDecodeError):
+            pass  # unreadable or stale entry: re-solve and overwrite it
+    if kind == "kinematic":
+        design = design_kinematic(cfg.kinematic_box, cfg.kinematic_lmi, cfg.rates.Tc, inputs_hash=key)
+    else:
+        design = design_dynamic(cfg.dynamic_box, cfg.vehicle, cfg.dynamic_lmi, cfg.rates.Td,
+                                inputs_hash=key)
+    if use_cache:
+        try:
+            atomic_write_text(path, json.dumps(design_to_dict(design)))
+        except OSError:
+            pass  # a read-only home must not stop a run; the design is still returned
+    return design
+
+
+def load_or_design_kinematic(
+    cfg: Config, directory: Path | None = None, *, use_cache: bool = True
+) -> KinematicDesign:
+    """The kinematic design of ``cfg``, from the cache when its inputs are unchanged."""
+    return _load_or_design(cfg, "kinematic", directory, use_cache)
+
+
+def load_or_design_dynamic(
+    cfg: Config, directory: Path | None = None, *, use_cache: bool = True
+) -> DynamicDesign:
+    """The dynamic design of ``cfg``, from the cache when its inputs are unchanged."""
+    return _load_or_design(cfg, "dynamic", directory, use_cache)
