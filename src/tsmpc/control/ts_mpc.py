@@ -1,0 +1,402 @@
+"""Kinematic TS-MPC (paper eq. "MPC"; SPEC §7): FZN, REF and ITER scheduling, one dense QP per step.
+
+Problem, for a given scheduling sequence ρ_0 … ρ_{N−1}::
+
+    min_ΔU  Σ_{i=0}^{N−1} x_iᵀ Q x_i + Δu_iᵀ R Δu_i + x_Nᵀ P x_N
+    s.t.    x_{i+1} = A_c(ρ_i) x_i + B_c (u_i − r_i),  u_i = u_{i−1} + Δu_i,
+            u ∈ Π,  Δu ∈ ΔΠ,  x_Nᵀ S x_N ≤ 1.
+
+Condensing in closed form. ``A_c(ρ)`` is ``[[M, b], [0, 1]]`` with ``M = I + ωT_c J`` — in complex
+notation ``p = e_x + i e_y`` the map ``p ↦ M p`` is the multiplication by ``z = 1 − iωT_c``. Products
+along the horizon are then cumulative products ``C_n = Π_{l<n} z_l`` and every block of the
+prediction matrix is a ratio ``C_n / C_{j+1}`` or a difference of prefix sums: the whole
+(3N × 2N) matrix is built with a few vectorised outer operations, no loop over the horizon.
+
+Solving. (1) The unconstrained minimiser (Cholesky) is accepted when it satisfies every
+constraint — on closed-loop data the usual case. (2) Otherwise DAQP solves the QP with the input
+and rate constraints; the ellipsoid is handled by supporting-hyperplane (tangent) cuts at the
+radial projection of the current terminal state, re-solved until ``x_NᵀSx_N ≤ 1 + 1e-9``.
+(3) If the cuts do not converge, Clarabel solves the exact SOCP. (4) If the hard problem is
+infeasible, the exactly penalised soft problem (slack σ on ``‖S^½ x_N‖ ≤ 1 + σ``, L1 weight
+``soft_penalty``) is solved by Clarabel: status SOFT. (5) If everything fails, the shifted
+previous plan is returned: status FALLBACK. Nothing raises inside :meth:`TSMPC.step`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.linalg.lapack import dpotrf as _potrf
+from scipy.linalg.lapack import dpotrs as _potrs
+
+from tsmpc.config import MPCSettings, SchedulingMode
+from tsmpc.control.qp import QPStatus, solve_daqp, solve_qcqp_clarabel
+from tsmpc.models.kinematic import KinematicTS, sinc
+
+__all__ = ["TSMPC", "CondensedQP", "MPCResult", "MPCStatus", "condense"]
+
+
+#: Terminal-ellipsoid tolerance of the cutting-plane loop (relative to the level 1).
+TERMINAL_TOL = 1e-9
+#: Cuts before switching to the exact SOCP.
+MAX_CUTS = 30
+
+
+class MPCStatus(StrEnum):
+    """Outcome of an MPC step."""
+
+    OPTIMAL = "optimal"  #: the hard problem was solved
+    SOFT = "soft"  #: the hard problem is infeasible; the exactly penalised soft one was solved
+    FALLBACK = "fallback"  #: the solver failed; the shifted previous plan was returned
+
+
+@dataclass(frozen=True)
+class MPCResult:
+    """One MPC step.
+
+    Attributes:
+        u: first move [v_ref, ω_ref] for the inner loop.
+        x_pred: (N+1, 3) predicted errors, x_pred[0] = current errors.
+        u_pred: (N, 2) planned inputs; du: (N, 2) their increments.
+        cost: optimal cost (paper eq. "MPC", including x_0ᵀQx_0).
+        status: OPTIMAL, SOFT or FALLBACK.
+        iterations: QPs solved this step (scheduling iterations × cuts).
+        qp_iterations: active-set iterations summed over the solves.
+        solve_time_s: scheduling + build + solve.
+        n_clipped: scheduling values clipped into the box this step.
+    """
+
+    u: NDArray[np.float64]
+    x_pred: NDArray[np.float64]
+    u_pred: NDArray[np.float64]
+    du: NDArray[np.float64]
+    cost: float
+    status: MPCStatus
+    iterations: int
+    qp_iterations: int
+    solve_time_s: float
+    n_clipped: int
+
+    @property
+    def success(self) -> bool:
+        """False only for a fallback step."""
+        return self.status != MPCStatus.FALLBACK
+
+
+@dataclass(frozen=True)
+class CondensedQP:
+    """``J(ΔU) = ΔUᵀHΔU + 2fᵀΔU + c0`` and the prediction ``X = x_aff + G ΔU``.
+
+    Layout (blocked, so every block is a contiguous outer product): ΔU = [Δv_0…Δv_{N−1},
+    Δω_0…Δω_{N−1}], X = [e_x,1…e_x,N, e_y,1…e_y,N, e_θ,1…e_θ,N].
+    """
+
+    H: NDArray[np.float64]
+    f: NDArray[np.float64]
+    c0: float
+    G: NDArray[np.float64]
+    x_aff: NDArray[np.float64]
+
+
+def condense(
+    x0: NDArray[np.float64], u_prev: NDArray[np.float64], r: NDArray[np.float64],
+    c: NDArray[np.float64], s: NDArray[np.float64], Tc: float,
+    q: NDArray[np.float64], P: NDArray[np.float64], rdiag: NDArray[np.float64],
+) -> CondensedQP:
+    """Condensed QP in ΔU for the scheduling ``c_i = ω_i T_c``, ``s_i = v_d,i sinc(e_θ,i) T_c`` and
+    the reference inputs r (N, 2); weights diag q on x_1…x_{N−1}, P on x_N, diag R on Δu.
+
+    With ``C_n = Π_{l<n}(1 − i c_l)`` and ``w_j = u_j − r_j``::
+
+        p_n = C_n p_0 + Σ_{j<n} (C_n / C_{j+1}) (i s_j e_θ,j − T_c w_v,j),
+        e_θ,n = e_θ,0 − T_c Σ_{l<n} w_ω,l,
+
+    so every entry is a ratio of cumulative products or a difference of prefix sums.
+    """
+    N = c.size
+    C = np.cumprod(1.0 - 1j * c)  # C_n, n = 1…N
+    invC = 1.0 / C  # 1 / C_{j+1}
+    Sd = np.cumsum(s * invC)  # Sd_n = Σ_{j<n} s_j / C_{j+1}
+    Qs = np.cumsum(invC)  # Σ_{j<n} 1 / C_{j+1}
+    SS = np.cumsum(Sd)  # Σ_{l<n} Sd_{l+1}
+    Q0 = np.concatenate(([0.0], Qs[:-1]))
+    SS0 = np.concatenate(([0.0], SS[:-1]))
+    lag = _lag(N)  # n − j on and below the diagonal, 0 above
+    mask = lag > 0
+    # Response to ΔU_j (it acts on every w_l, l ≥ j).
+    Gv = np.where(mask, (-Tc * C)[:, None] * (Qs[:, None] - Q0[None, :]), 0.0)
+    Gw = np.where(mask, (-1j * Tc * C)[:, None] * (lag * Sd[:, None] - (SS[:, None] - SS0[None, :])), 0.0)
+    G = np.zeros((3 * N, 2 * N))
+    G[:N, :N], G[N:2 * N, :N] = Gv.real, Gv.imag
+    G[:N, N:], G[N:2 * N, N:] = Gw.real, Gw.imag
+    G[2 * N:, N:] = -Tc * lag
+    # Affine part: ΔU = 0, i.e. u_j = u_prev for all j.
+    wv, ww = u_prev[0] - r[:, 0], u_prev[1] - r[:, 1]
+    cw = np.cumsum(ww)
+    p = C * (x0[0] + 1j * x0[1] + 1j * x0[2] * Sd - Tc * np.cumsum(wv * invC)
+             - 1j * Tc * (Sd * cw - np.cumsum(Sd * ww)))
+    x_aff = np.concatenate([p.real, p.imag, x0[2] - Tc * cw])
+    qbar = np.repeat(q, N)
+    # Hessian: the (e_x, e_y) rows by one product of √q-weighted rows; the e_θ rows only touch the
+    # Δω block and do not depend on the scheduling (cached).
+    sq = np.sqrt(qbar[: 2 * N])[:, None]
+    Gs = G[: 2 * N] * sq
+    H = Gs.T @ Gs
+    H[N:, N:] += _theta_hessian(N, Tc, float(q[2]))
+    term = np.array([N - 1, 2 * N - 1, 3 * N - 1])
+    GN, xN = G[term], x_aff[term]
+    Pd = P - np.diag(q)  # the terminal rows carry P instead of Q
+    PG = Pd @ GN
+    H += GN.T @ PG
+    H[np.diag_indices_from(H)] += np.repeat(rdiag, N)
+    f = G.T @ (qbar * x_aff) + PG.T @ xN
+    c0 = float(x_aff @ (qbar * x_aff) + xN @ Pd @ xN + x0 @ (q * x0))
+    return CondensedQP(H=H, f=f, c0=c0, G=G, x_aff=x_aff)
+
+
+_LAG: dict[int, NDArray[np.float64]] = {}
+_THETA_H: dict[tuple[int, float, float], NDArray[np.float64]] = {}
+
+
+def _theta_hessian(N: int, Tc: float, q_theta: float) -> NDArray[np.float64]:
+    """q_θ T_c² ΛᵀΛ, the e_θ rows' share of the Δω Hessian block (cached)."""
+    key = (N, Tc, q_theta)
+    m = _THETA_H.get(key)
+    if m is None:
+        lag = _lag(N)
+        m = q_theta * Tc * Tc * (lag.T @ lag)
+        m.setflags(write=False)
+        _THETA_H[key] = m
+    return m
+
+
+def _lag(N: int) -> NDArray[np.float64]:
+    """(N, N) matrix of n − j for row n−1, column j, j < n (0 elsewhere); cached per N."""
+    m = _LAG.get(N)
+    if m is None:
+        n = np.arange(1, N + 1)[:, None] - np.arange(N)[None, :]
+        m = np.where(n > 0, n, 0).astype(float)
+        m.setflags(write=False)
+        _LAG[N] = m
+    return m
+
+
+class TSMPC:
+    """Kinematic TS-MPC with the terminal ingredients (P, S) of the LMI design (SPEC §6, §7).
+
+    Args:
+        settings: horizon, weights, bounds, scheduling mode, soft penalty.
+        model: kinematic TS model (box, T_c).
+        P: terminal cost (3, 3).
+        S: terminal set matrix (3, 3), χ = {x : xᵀSx ≤ 1}.
+        mode: scheduling mode; defaults to ``settings.mode``.
+    """
+
+    def __init__(
+        self, settings: MPCSettings, model: KinematicTS, P: NDArray[np.float64], S: NDArray[np.float64],
+        mode: SchedulingMode | None = None,
+    ) -> None:
+        self.settings = settings
+        self.model = model
+        self.mode = SchedulingMode(mode or settings.mode)
+        self.P = np.asarray(P, dtype=float)
+        self.S = np.asarray(S, dtype=float)
+        N = self.N = settings.N
+        self._q = np.asarray(settings.Q, dtype=float)
+        self._r = np.asarray(settings.R, dtype=float)
+        self._umin = np.asarray(settings.u_min, dtype=float)
+        self._umax = np.asarray(settings.u_max, dtype=float)
+        du = np.asarray(settings.du_max, dtype=float)
+        # Blocked layout (see CondensedQP): [v_0…v_{N−1}, ω_0…ω_{N−1}].
+        self._dlb, self._dub = np.repeat(-du, N), np.repeat(du, N)
+        self._L = np.kron(np.eye(2), np.tri(N))  # U = u_prev + L ΔU
+        self._term = np.array([N - 1, 2 * N - 1, 3 * N - 1])
+        self._lo = np.asarray(model.premise_box.lower)
+        self._hi = np.asarray(model.premise_box.upper)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the previous plan (start-up)."""
+        self._prev: MPCResult | None = None
+
+    # -- scheduling -----------------------------------------------------------------------
+    def _schedule(
+        self, errors: NDArray[np.float64], u_prev: NDArray[np.float64], v_d: NDArray[np.float64],
+        w_d: NDArray[np.float64], omega: NDArray[np.float64] | None, e_th: NDArray[np.float64] | None,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], int]:
+        """(c, s, r, n_clipped) for premises (ω_i, v_d,i, e_θ,i) along the horizon."""
+        N = self.N
+        if self.mode == SchedulingMode.FZN:
+            om = np.full(N, u_prev[1])
+            vd = np.full(N, v_d[0])
+            eth = np.full(N, errors[2])
+        else:
+            vd = v_d
+            om = w_d if omega is None else omega
+            if e_th is None:
+                eth = np.zeros(N)
+                eth[0] = errors[2]
+            else:
+                eth = e_th
+        z = np.stack([om, vd, sinc(eth)], axis=-1)
+        zc = np.clip(z, self._lo, self._hi)
+        n_clip = int(np.count_nonzero(np.any(zc != z, axis=-1)))
+        Tc = self.model.Tc
+        c = zc[:, 0] * Tc
+        s = zc[:, 1] * zc[:, 2] * Tc
+        r = np.stack([v_d * np.cos(eth), w_d], axis=-1)
+        return c, s, r, n_clip
+
+    # -- one QP ---------------------------------------------------------------------------
+    def _solve(
+        self, qp: CondensedQP, u_prev: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64] | None, MPCStatus, int, int]:
+        """(ΔU, status, QPs solved, active-set iterations); ΔU None on failure."""
+        N, S = self.N, self.S
+        GN, cN = qp.G[self._term], qp.x_aff[self._term]
+        bl, bu = np.repeat(self._umin - u_prev, N), np.repeat(self._umax - u_prev, N)
+        use_term = self.settings.terminal_constraint
+
+        def feasible(z: NDArray[np.float64], tol: float = 1e-9) -> bool:
+            U = self._L @ z
+            if np.any(z < self._dlb - tol) or np.any(z > self._dub + tol):
+                return False
+            if np.any(U < bl - tol) or np.any(U > bu + tol):
+                return False
+            xN = cN + GN @ z
+            return not use_term or float(xN @ S @ xN) <= 1.0 + TERMINAL_TOL
+
+        # (1) Unconstrained minimiser.
+        c_fac, info = _potrf(qp.H, lower=False, clean=False, overwrite_a=False)
+        if info == 0:
+            z, info = _potrs(c_fac, -qp.f, lower=False)
+            if info == 0 and feasible(z):
+                return z, MPCStatus.OPTIMAL, 0, 0
+        # (2) DAQP with tangent cuts.
+        A, lo, hi = self._L, bl, bu
+        n_qp = n_it = 0
+        sense = None
+        for _ in range(MAX_CUTS + 1):
+            res = solve_daqp(qp.H, qp.f, self._dlb, self._dub, A, lo, hi, sense)
+            n_qp += 1
+            n_it += res.iterations
+            if res.status == QPStatus.INFEASIBLE:
+                break
+            if res.status != QPStatus.OPTIMAL:
+                break
+            z = res.z
+            xN = cN + GN @ z
+            lvl = float(xN @ S @ xN)
+            if not use_term or lvl <= 1.0 + TERMINAL_TOL:
+                return z, MPCStatus.OPTIMAL, n_qp, n_it
+            # Supporting hyperplane of the ellipsoid at the radial projection x̂ of x_N.
+            a = (S @ xN) / np.sqrt(lvl)
+            A = np.vstack([A, a @ GN])
+            lo = np.append(lo, -1e30)
+            hi = np.append(hi, 1.0 - a @ cN)
+            sense = np.append(res.active, 0).astype(np.int32) if res.active is not None else None
+        # (3)/(4) Exact SOCP; soft version when the hard one is infeasible.
+        if not use_term:
+            return None, MPCStatus.FALLBACK, n_qp, n_it
+        H2, f2 = 2.0 * qp.H, 2.0 * qp.f  # Clarabel minimises ½zᵀPz + qᵀz; J = zᵀHz + 2fᵀz
+        res = solve_qcqp_clarabel(H2, f2, self._dlb, self._dub, self._L, bl, bu, S, cN, GN)
+        n_qp += 1
+        n_it += res.iterations
+        if res.status == QPStatus.OPTIMAL:
+            return res.z, MPCStatus.OPTIMAL, n_qp, n_it
+        res = solve_qcqp_clarabel(H2, f2, self._dlb, self._dub, self._L, bl, bu, S, cN, GN,
+                                  soft_penalty=self.settings.soft_penalty)
+        n_qp += 1
+        n_it += res.iterations
+        if res.status == QPStatus.OPTIMAL:
+            return res.z, MPCStatus.SOFT, n_qp, n_it
+        return None, MPCStatus.FALLBACK, n_qp, n_it
+
+    # -- online step ----------------------------------------------------------------------
+    def step(self, errors: Any, u_prev: Any, reference: Any) -> MPCResult:
+        """One receding-horizon step.
+
+        Args:
+            errors: current [e_x, e_y, e_θ] (vehicle frame).
+            u_prev: input applied at the previous step [v, ω] (u_{k−1}).
+            reference: object with arrays ``.v`` and ``.omega`` of at least N samples
+                (v_d, ω_d at k … k+N−1), e.g. ``Reference.window(k, N + 1)``.
+        """
+        t0 = time.perf_counter()
+        N = self.N
+        x0 = np.asarray(errors, dtype=float).reshape(3)
+        up = np.clip(np.asarray(u_prev, dtype=float).reshape(2), self._umin, self._umax)
+        v_d = np.asarray(reference.v, dtype=float)[:N]
+        w_d = np.asarray(reference.omega, dtype=float)[:N]
+        if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(up)) and v_d.size == N
+                and w_d.size == N and np.all(np.isfinite(v_d)) and np.all(np.isfinite(w_d))):
+            return self._fallback(x0, up, t0, 0, 0, 0)
+
+        omega = e_th = None
+        prev = self._prev
+        if prev is not None and self.mode != SchedulingMode.FZN:
+            e_th = np.empty(N)
+            e_th[0] = x0[2]
+            e_th[1:] = prev.x_pred[2:N + 1, 2]
+            if self.mode == SchedulingMode.ITER:
+                omega = np.empty(N)
+                omega[:-1] = prev.u_pred[1:, 1]
+                omega[-1] = prev.u_pred[-1, 1]
+        n_iter = self.settings.iter_max if self.mode == SchedulingMode.ITER else 1
+        n_qp = n_it = n_clip = 0
+        z = None
+        for _ in range(n_iter):
+            c, s, r, n_clip = self._schedule(x0, up, v_d, w_d, omega, e_th)
+            qp = condense(x0, up, r, c, s, self.model.Tc, self._q, self.P, self._r)
+            z, status, a, b = self._solve(qp, up)
+            n_qp += a
+            n_it += b
+            if z is None:
+                return self._fallback(x0, up, t0, n_qp, n_it, n_clip)
+            if self.mode != SchedulingMode.ITER:
+                break
+            U = up + (self._L @ z).reshape(2, N).T
+            X = (qp.x_aff + qp.G @ z).reshape(3, N).T
+            new_om = U[:, 1]
+            new_eth = np.concatenate([[x0[2]], X[:-1, 2]])
+            change = 0.0 if omega is None else float(max(np.max(np.abs(new_om - omega)),
+                                                           np.max(np.abs(new_eth - e_th))))
+            converged = omega is not None and change < self.settings.iter_tol
+            omega, e_th = new_om, new_eth
+            if converged:
+                break
+
+        du = z.reshape(2, N).T
+        U = up + np.cumsum(du, axis=0)
+        X = np.vstack([x0, (qp.x_aff + qp.G @ z).reshape(3, N).T])
+        cost = float(z @ qp.H @ z + 2.0 * qp.f @ z + qp.c0)
+        res = MPCResult(u=U[0].copy(), x_pred=X, u_pred=U, du=du, cost=cost, status=status,
+                        iterations=n_qp, qp_iterations=n_it,
+                        solve_time_s=time.perf_counter() - t0, n_clipped=n_clip)
+        self._prev = res
+        return res
+
+    def _fallback(
+        self, x0: NDArray[np.float64], up: NDArray[np.float64], t0: float, n_qp: int, n_it: int,
+        n_clip: int,
+    ) -> MPCResult:
+        """The previous plan shifted by one step (or hold u_prev when there is none)."""
+        N = self.N
+        prev = self._prev
+        if prev is not None:
+            U = np.vstack([prev.u_pred[1:], prev.u_pred[-1:]])
+            X = np.vstack([prev.x_pred[1:], prev.x_pred[-1:]])
+        else:
+            U = np.tile(up, (N, 1))
+            X = np.tile(np.nan_to_num(x0), (N + 1, 1))
+        du = np.diff(np.vstack([up, U]), axis=0)
+        res = MPCResult(u=U[0].copy(), x_pred=X, u_pred=U, du=du, cost=float("nan"),
+                        status=MPCStatus.FALLBACK, iterations=n_qp, qp_iterations=n_it,
+                        solve_time_s=time.perf_counter() - t0, n_clipped=n_clip)
+        self._prev = res
+        return res
