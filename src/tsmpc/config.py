@@ -266,6 +266,9 @@ class LQRSettings(_Frozen):
     delta_max: PositiveFloat = Field(math.radians(25.0), description="|δ| saturation [rad]")
     friction_compensation: bool = Field(True, description="add F̂_fr to the force command")
     oracle: bool = Field(False, description="ablation: true state, no compensation")
+    speed_time_constant: PositiveFloat = Field(
+        0.3, description="speed feed-forward M (v_ref − v̂)/τ: time constant τ [s] (SPEC §8)"
+    )
 
     @model_validator(mode="after")
     def _check(self) -> LQRSettings:

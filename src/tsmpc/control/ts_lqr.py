@@ -4,12 +4,12 @@
 Law, every T_d, with ϑ = (δ_f, v̂, α̂) clipped into the box::
 
     (α_eq, F_eq, δ_eq) = equilibrium of the nominal model at (v_ref, ω_ref)      (feed-forward)
-    F_eq += M a_ref                               (planned acceleration of the outer loop)
+    F_ff = M (a_ref + (v_ref − v̂)/τ)             (planned acceleration + speed feed-forward)
     x̃ = [v̂ − v_ref, α̂ − α_eq, ω̂ − ω_ref, F_f − F_eq, δ_f − δ_eq, ζ]
     u_f = [F_eq, δ_eq] + K(ϑ) x̃,     K(ϑ) = Σ μ_i(ϑ) K_i
     f⁺ = e^{−λT_d} f + (1 − e^{−λT_d}) u_f     (the Apkarian input filter, the plant input)
     ζ⁺ = ζ + T_d (ω_ref − ω̂)                   (yaw-rate integral; frozen while saturated)
-    F_xR = F_f + F̂_fr,   δ = δ_f                (friction compensation, saturations)
+    F_xR = F_f + F_ff + F̂_fr,   δ = δ_f         (feed-forward, friction compensation, saturations)
 
 At a constant reference on the nominal model the equilibrium makes x̃ = 0 a fixed point, so v and
 ω are tracked without steady-state error; the integrator removes what the model misses (tyre
@@ -122,7 +122,12 @@ class TSLQR:
             self._eq = equilibrium(v_ref, omega_ref, self.vehicle)
             self._eq_key = key
         a_eq, F_eq, d_eq = self._eq
-        F_eq += self.vehicle.mass * (a_ref if math.isfinite(a_ref) else 0.0)
+        # Speed feed-forward: the outer loop's model assumes v follows v_ref within T_c, but the
+        # paper's weights (filter-state deviations cost 0.1/N²) make the LQR's own speed loop slow
+        # (≈ 9 s); the planned acceleration plus a first-order approach to v_ref (time constant
+        # τ, well below the 0.1 s filter) supplies the force the cascade expects.
+        a_ff = (a_ref if math.isfinite(a_ref) else 0.0) + (v_ref - x[0]) / self.settings.speed_time_constant
+        F_ff = self.vehicle.mass * a_ff  # applied directly: the filter is the LQR's, not the feed-forward's
         if not self._started:  # bumpless start: the filter begins at the equilibrium input
             self._f = np.clip(np.array([F_eq, d_eq]), self._lo, self._hi)
             self._started = True
@@ -138,7 +143,7 @@ class TSLQR:
         if self.settings.friction_compensation and not self.settings.oracle:
             F_hat = float(estimate.F_fr)
             comp = F_hat if math.isfinite(F_hat) else 0.0
-        out = np.array([f[0] + comp, f[1]])
+        out = np.array([f[0] + F_ff + comp, f[1]])
         out_c = np.clip(out, self._lo, self._hi)
         saturated = bool(np.any(out_c != out))
         self._f = np.clip(self._a * f + (1.0 - self._a) * u_f, self._lo, self._hi)

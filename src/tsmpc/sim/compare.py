@@ -57,7 +57,7 @@ def load_scenario(
     from tsmpc.scenarios import paper_friction_profile
 
     if reference is None:
-        ref = builtin_circuit(cfg.planner, dt=cfg.rates.Tc)
+        ref = builtin_circuit(dt=cfg.rates.Tc)
         return Scenario("builtin-circuit", ref, paper_friction_profile(),
                         meta={"reference": "builtin-circuit", "paper_reference": False})
     paper = _is_paper_format(Path(reference))
