@@ -3,42 +3,113 @@
 From waypoints (or a track centre line) to a :class:`~tsmpc.planning.reference.Reference`:
 
 1. *Path*: a C² cubic spline through the waypoints (periodic for closed laps, natural otherwise),
-   parametrised by chord length and resampled at uniform arc length; curvature κ(s) from its
-   derivatives (continuous, so ω_d = v_d κ is continuous).
-2. *Speed profile* on s: ``v ≤ v_max``, ``v ≤ √(a_lat/|κ|)``, a forward pass with ``a_lon`` and a
-   backward pass with ``a_brake`` (run on a margin of the limits), then Gaussian smoothing in s so
-   v_d and its derivative are continuous, then the pointwise limit again.
-3. *Timing*: t(s) = ∫ ds / v, sampled at ``dt``. The pose is then *integrated* from (v_d, ω_d) with
-   the paper's convention θ(k) = θ(k−1) + ω(k)T, x(k) = x(k−1) + v(k) cos θ(k) T, so every planner
-   output is exactly consistent with its own speeds and yaw rates (it stays within centimetres of
-   the geometric path on tracks of a few kilometres).
+   parametrised by chord length and resampled at uniform arc length; heading and curvature κ(s)
+   from its derivatives (both continuous).
+2. *Speed profile* on s, as a linear programme in b = v² (so that dv/dt = ½ db/ds is linear):
+   maximise Σ b subject to ``v ≤ v_max``, ``v²|κ| ≤ a_lat``, ``v|κ| ≤ ω_max`` (optional),
+   ``−a_brake ≤ ½ db/ds ≤ a_lon`` and a jerk bound on the second difference of b. Without the jerk
+   bound the answer is the classic forward/backward-pass profile (used here as the upper bound
+   that scales the jerk rows); with it the acceleration is continuous, so v_d is continuous *and*
+   differentiable while every limit holds by construction (not by smoothing and re-clipping).
+3. *Timing*: between grid nodes b is linear in s, i.e. the acceleration is constant, so t(s) and
+   s(t) are exact. The output is sampled at ``dt`` and the pose is *integrated* with the paper's
+   convention θ(k) = θ(k−1) + ω(k)T, x(k) = x(k−1) + v(k) cos θ(k) T: the arc length advances by
+   v(k)T, θ(k) is the path heading at the middle of that step (second-order accurate, so the pose
+   stays within centimetres of the geometric path) and ω(k) = (θ(k) − θ(k−1))/T, κ(k) = ω(k)/v(k).
+   Thus every planner output reproduces itself exactly under the paper's integration.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
-from scipy.ndimage import gaussian_filter1d
 
 from tsmpc.config import PlannerSettings
-from tsmpc.errors import DataFormatError
+from tsmpc.errors import DataFormatError, SolverError
 from tsmpc.planning.reference import Reference
 
-__all__ = ["integrate_pose", "plan_path", "speed_profile"]
+__all__ = [
+    "JERK_MAX", "PathGeometry", "SpeedProfile", "integrate_pose", "path_geometry", "plan_path",
+    "speed_profile",
+]
 
-#: Arc-length resolution of the profile [m].
+#: Arc-length resolution of the geometry [m].
 DS = 0.25
-#: The passes use this fraction of the limits; smoothing then stays inside the true limits.
-MARGIN = 0.9
-#: Gaussian smoothing of the speed profile along s [m].
-SMOOTH_M = 6.0
+#: Arc-length resolution of the speed profile (LP variables) [m].
+DS_SPEED = 1.0
+#: Default longitudinal jerk bound [m/s³] (comfort level); makes dv_d/dt continuous.
+JERK_MAX = 2.0
+
+
+@dataclass(frozen=True)
+class PathGeometry:
+    """A path on a uniform arc-length grid (SPEC §10).
+
+    Attributes:
+        s: (m,) arc length [m], from 0 to ``length``.
+        x, y: (m,) position [m].
+        heading: (m,) tangent direction [rad], unwrapped.
+        kappa: (m,) curvature [1/m] (positive turning left).
+        closed: the path is a closed loop (s = length is s = 0).
+    """
+
+    s: NDArray[np.float64]
+    x: NDArray[np.float64]
+    y: NDArray[np.float64]
+    heading: NDArray[np.float64]
+    kappa: NDArray[np.float64]
+    closed: bool
+
+    @property
+    def length(self) -> float:
+        """Path length [m]."""
+        return float(self.s[-1])
+
+    @property
+    def turn(self) -> float:
+        """Heading gain over one closed lap [rad] (a whole number of turns; 0 when open)."""
+        if not self.closed:
+            return 0.0
+        return 2 * np.pi * np.round((self.heading[-1] - self.heading[0]) / (2 * np.pi))
+
+    def heading_at(self, s: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Heading at arc lengths s; closed paths wrap (adding whole turns), open paths hold the
+        end headings (straight continuation)."""
+        if self.closed:
+            lap = np.floor(s / self.length)
+            return np.interp(s - lap * self.length, self.s, self.heading) + lap * self.turn
+        return np.interp(s, self.s, self.heading)
+
+    def kappa_at(self, s: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Curvature at arc lengths s (wrapped for closed paths, 0 past the ends of open ones)."""
+        if self.closed:
+            return np.interp(np.mod(s, self.length), self.s, self.kappa)
+        return np.interp(s, self.s, self.kappa, left=0.0, right=0.0)
+
+    def point_at(self, s: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(k, 2) positions at arc lengths s (wrapped when closed; extrapolated straight when open)."""
+        if self.closed:
+            ss = np.mod(s, self.length)
+            return np.stack([np.interp(ss, self.s, self.x), np.interp(ss, self.s, self.y)], axis=1)
+        p = np.stack([np.interp(s, self.s, self.x), np.interp(s, self.s, self.y)], axis=1)
+        for mask, i in ((s < 0, 0), (s > self.length, -1)):
+            if np.any(mask):
+                d = s[mask] - self.s[i]
+                h = self.heading[i]
+                p[mask] = np.stack([self.x[i] + d * np.cos(h), self.y[i] + d * np.sin(h)], axis=1)
+        return p
 
 
 def _spline(waypoints: NDArray[np.float64], closed: bool) -> tuple[CubicSpline, float]:
     pts = waypoints
     if closed and np.hypot(*(pts[0] - pts[-1])) > 1e-9:
         pts = np.vstack([pts, pts[:1]])
+    elif closed:
+        pts = pts.copy()
+        pts[-1] = pts[0]  # exact closure for the periodic spline
     seg = np.hypot(*np.diff(pts, axis=0).T)
     keep = np.concatenate([[True], seg > 1e-9])
     pts = pts[keep]
@@ -48,54 +119,145 @@ def _spline(waypoints: NDArray[np.float64], closed: bool) -> tuple[CubicSpline, 
     return CubicSpline(u, pts, bc_type="periodic" if closed else "natural"), float(u[-1])
 
 
-def _geometry(waypoints: NDArray[np.float64], closed: bool) -> tuple[NDArray[np.float64], ...]:
-    """(s, x, y, heading, κ) on a uniform arc-length grid."""
-    sp, L = _spline(waypoints, closed)
-    u = np.linspace(0.0, L, max(int(L / (DS / 4)), 50))
+def path_geometry(waypoints: ArrayLike, *, closed: bool = False, ds: float = DS) -> PathGeometry:
+    """Cubic spline through ``waypoints`` (n, 2) [m] on a uniform arc-length grid of step ≈ ds."""
+    wp = np.asarray(waypoints, dtype=float)
+    if wp.ndim != 2 or wp.shape[1] != 2 or not np.all(np.isfinite(wp)):
+        raise DataFormatError("planner: waypoints must be a finite (n, 2) array of x, y [m]")
+    sp, L = _spline(wp, closed)
+    u = np.linspace(0.0, L, max(int(L / (ds / 4)), 50))
     d1 = sp(u, 1)
-    ds = np.hypot(d1[:, 0], d1[:, 1])
-    s_u = np.concatenate([[0.0], np.cumsum(0.5 * (ds[1:] + ds[:-1]) * np.diff(u))])
-    n = max(int(s_u[-1] / DS), 8)
+    speed = np.hypot(d1[:, 0], d1[:, 1])
+    s_u = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(u))])
+    n = max(int(np.ceil(s_u[-1] / ds)), 8)
     s = np.linspace(0.0, s_u[-1], n + 1)
     uu = np.interp(s, s_u, u)
     p, d1, d2 = sp(uu), sp(uu, 1), sp(uu, 2)
-    kappa = (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) / np.maximum(np.hypot(d1[:, 0], d1[:, 1]) ** 3, 1e-12)
+    norm = np.maximum(np.hypot(d1[:, 0], d1[:, 1]), 1e-12)
+    kappa = (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) / norm**3
     heading = np.unwrap(np.arctan2(d1[:, 1], d1[:, 0]))
-    return s, p[:, 0], p[:, 1], heading, kappa
+    return PathGeometry(s=s, x=p[:, 0], y=p[:, 1], heading=heading, kappa=kappa, closed=closed)
+
+
+@dataclass(frozen=True)
+class SpeedProfile:
+    """Speed along the path (SPEC §10).
+
+    Attributes:
+        s: (m,) arc length [m], uniform, from 0 to the path length.
+        v: (m,) speed [m/s]; v² is linear between samples (constant acceleration per interval).
+    """
+
+    s: NDArray[np.float64]
+    v: NDArray[np.float64]
+
+
+def _passes(ub: NDArray[np.float64], h: float, a_lon: float, a_brk: float, closed: bool,
+            b0: float | None) -> NDArray[np.float64]:
+    """Forward/backward passes: the pointwise-largest sequence with bounded differences."""
+    b = ub.copy()
+    n = b.size
+    for _ in range(3 if closed else 1):  # closed: a few sweeps settle the wrap-around
+        if b0 is not None:
+            b[0] = min(b[0], b0)
+        elif closed:
+            b[0] = min(b[0], b[-1] + 2 * a_lon * h)
+        for i in range(n - 1):
+            b[i + 1] = min(b[i + 1], b[i] + 2 * a_lon * h)
+        if closed:
+            b[-1] = min(b[-1], b[0] + 2 * a_brk * h)
+        for i in range(n - 2, -1, -1):
+            b[i] = min(b[i], b[i + 1] + 2 * a_brk * h)
+    return b
+
+
+def _window_max(s: NDArray[np.float64], f: NDArray[np.float64], centres: NDArray[np.float64],
+                half: float, closed: bool) -> NDArray[np.float64]:
+    """max f over [c − half, c + half] for each centre (wrapped when closed)."""
+    L = float(s[-1])
+    ds = float(s[1] - s[0])
+    w = int(np.ceil(half / ds)) + 1
+    i = np.rint(centres / ds).astype(int)
+    offs = np.arange(-w, w + 1)
+    j = i[:, None] + offs[None, :]
+    j = np.mod(j, s.size - 1) if closed else np.clip(j, 0, s.size - 1)
+    del L
+    return f[j].max(axis=1)
 
 
 def speed_profile(
-    s: NDArray[np.float64], kappa: NDArray[np.float64], settings: PlannerSettings, *, closed: bool,
-    v_start: float | None = None,
-) -> NDArray[np.float64]:
-    """Speed on the arc-length grid s within every limit of ``settings`` (SPEC §10)."""
-    ds = np.diff(s)
-    v_lim = np.minimum(settings.v_max, np.sqrt(settings.a_lat_max / np.maximum(np.abs(kappa), 1e-9)))
-    vm = np.minimum(settings.v_max, np.sqrt(MARGIN * settings.a_lat_max / np.maximum(np.abs(kappa), 1e-9)))
-    a_lon, a_brk = MARGIN * settings.a_lon_max, MARGIN * settings.a_brake_max
-    v = vm.copy()
-    n = v.size
-    passes = 3 if closed else 1
-    v0 = settings.v_start if v_start is None else v_start
-    for p in range(passes):
-        if not closed:
-            v[0] = min(v[0], v0)
-        elif p > 0:
-            v[0] = min(v[0], v[-1])
-        for i in range(n - 1):  # forward: acceleration
-            v[i + 1] = min(v[i + 1], np.sqrt(v[i] ** 2 + 2.0 * a_lon * ds[i]))
-        if closed:
-            v[-1] = min(v[-1], v[0])
-        for i in range(n - 2, -1, -1):  # backward: braking
-            v[i] = min(v[i], np.sqrt(v[i + 1] ** 2 + 2.0 * a_brk * ds[i]))
-    sigma = SMOOTH_M / max(float(np.mean(ds)), 1e-9)
-    vs = gaussian_filter1d(v, sigma, mode="wrap" if closed else "nearest")
-    if not closed:
-        vs[0] = v[0]
-        # Keep the start speed: blend the first smoothing length back to the raw profile.
-        w = np.clip(s / (3 * SMOOTH_M), 0, 1)
-        vs = w * vs + (1 - w) * v
-    return np.minimum(vs, v_lim)
+    geo: PathGeometry, settings: PlannerSettings, *, omega_max: float | None = None,
+    jerk_max: float = JERK_MAX, h: float = DS_SPEED, oversample: int = 8,
+) -> SpeedProfile:
+    """Speed profile within every limit of ``settings`` on the path ``geo`` (SPEC §10).
+
+    v²(s) is a uniform quadratic B-spline of knot step ≈ h whose control points c are the
+    variables of a linear programme (maximise Σc). The spline's convex-hull property makes the
+    bounds exact everywhere, not only at nodes: v² ≤ c ≤ the v_max / a_lat / ω_max limit over the
+    control point's support; ½ d(v²)/ds = a is piecewise linear in s (continuous) and is a convex
+    combination of control-point differences, which are bounded by a_lon and a_brake; da/ds is
+    their second difference, bounded by jerk_max / v (soft: a curvature spike sharper than the
+    jerk bound allows would otherwise force the speed to 0). Open paths start at
+    ``settings.v_start`` (or slower if a curve demands it) and end with zero acceleration.
+    """
+    from scipy.optimize import linprog
+    from scipy.sparse import diags, eye, hstack, vstack
+
+    L = geo.length
+    m = max(int(np.ceil(L / h)), 4)
+    h = L / m
+    closed = geo.closed
+    nc = m if closed else m + 2
+    # Control point i acts on [s_{i−2}, s_{i+1}]: centre (i − ½)h, half-width 1.5h.
+    centres = (np.arange(nc) - 0.5) * h
+    k = np.maximum(_window_max(geo.s, np.abs(geo.kappa), np.mod(centres, L) if closed
+                               else np.clip(centres, 0, L), 1.5 * h, closed), 1e-9)
+    ub = np.minimum(settings.v_max**2, settings.a_lat_max / k)
+    if omega_max is not None:
+        ub = np.minimum(ub, (omega_max / k) ** 2)
+    a_lon, a_brk = settings.a_lon_max, settings.a_brake_max
+    b0 = None if closed else min(settings.v_start**2, ub[0], ub[1])
+    upper = _passes(ub, h, a_lon, a_brk, closed, b0)
+    if closed:
+        d1 = diags([-np.ones(nc), np.ones(nc - 1), [1.0]], [0, 1, -(nc - 1)], shape=(nc, nc))
+        d2 = diags([np.ones(nc), -2 * np.ones(nc - 1), [-2.0], np.ones(nc - 2), [1.0, 1.0]],
+                   [0, 1, -(nc - 1), 2, -(nc - 2)], shape=(nc, nc))
+        vseg = np.sqrt(np.maximum.reduce([upper, np.roll(upper, -1), np.roll(upper, -2)]))
+    else:
+        d1 = diags([-np.ones(nc - 1), np.ones(nc - 1)], [0, 1], shape=(nc - 1, nc))
+        d2 = diags([np.ones(nc - 2), -2 * np.ones(nc - 2), np.ones(nc - 2)], [0, 1, 2], shape=(nc - 2, nc))
+        vseg = np.sqrt(np.maximum.reduce([upper[:-2], upper[1:-1], upper[2:]]))
+    m1, m2 = d1.shape[0], d2.shape[0]
+    # The pass profile bounds v from above, so jerk/upper is a conservative bound on da/ds.
+    jrow = 2 * h * h * jerk_max / np.maximum(vseg, 1e-3)
+    z1 = np.zeros((m1, m2))
+    A = vstack([hstack([d1, z1]), hstack([-d1, z1]),
+                hstack([d2, -eye(m2)]), hstack([-d2, -eye(m2)])]).tocsr()
+    rhs = np.concatenate([np.full(m1, 2 * a_lon * h), np.full(m1, 2 * a_brk * h), jrow, jrow])
+    # A crawl floor (0.5 m/s unless the limits demand less) keeps the lap time finite.
+    bounds = np.concatenate([np.stack([np.minimum(upper, 0.25), upper], axis=1),
+                             np.tile([0.0, np.inf], (m2, 1))])
+    A_eq = b_eq = None
+    if b0 is not None:
+        # v²(0) = (c0 + c1)/2 = v_start²; zero acceleration at the end (c_{m+1} = c_m).
+        A_eq = np.zeros((2, nc + m2))
+        A_eq[0, :2] = 0.5
+        A_eq[1, nc - 2], A_eq[1, nc - 1] = 1.0, -1.0
+        b_eq = np.array([b0, 0.0])
+    cost = np.concatenate([-np.ones(nc), np.full(m2, 100.0)])
+    res = linprog(cost, A_ub=A, b_ub=rhs, A_eq=A_eq, b_eq=b_eq, bounds=bounds, method="highs")
+    if res.status != 0:
+        raise SolverError(f"planner: speed-profile LP failed ({res.message}); "
+                          "check that the limits allow the start speed")
+    c = np.clip(res.x[:nc], 0.0, upper)
+    # Evaluate the spline: on segment j with u ∈ [0, 1), b = ½(1−u)² c_j + (½ + u − u²) c_{j+1} + ½u² c_{j+2}.
+    q = m * oversample
+    u_all = np.arange(q + 1) / oversample
+    j = np.minimum(np.floor(u_all).astype(int), m - 1)
+    u = u_all - j
+    cj = (lambda i: c[np.mod(i, nc)]) if closed else (lambda i: c[i])
+    b = 0.5 * (1 - u) ** 2 * cj(j) + (0.5 + u - u * u) * cj(j + 1) + 0.5 * u * u * cj(j + 2)
+    return SpeedProfile(s=u_all * h, v=np.sqrt(np.maximum(b, 0.0)))
 
 
 def integrate_pose(
@@ -108,49 +270,74 @@ def integrate_pose(
     return x, y, th
 
 
+def _speed_at_times(s_n: NDArray[np.float64], b_n: NDArray[np.float64],
+                    t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Exact v(t) when v² is linear in s between nodes (constant acceleration per segment)."""
+    v_n = np.sqrt(b_n)
+    dt_seg = 2 * np.diff(s_n) / np.maximum(v_n[1:] + v_n[:-1], 1e-12)
+    t_n = np.concatenate([[0.0], np.cumsum(dt_seg)])
+    i = np.clip(np.searchsorted(t_n, t, side="right") - 1, 0, s_n.size - 2)
+    a = (b_n[i + 1] - b_n[i]) / (2 * np.diff(s_n)[i])
+    tau = t - t_n[i]
+    v = v_n[i] + a * tau
+    past = t > t_n[-1]
+    v[past] = v_n[-1]
+    return np.maximum(v, 0.0)
+
+
 def plan_path(
     waypoints: ArrayLike, settings: PlannerSettings, *, closed: bool = False, dt: float = 0.1,
-    laps: int = 1, tail_s: float = 0.0,
+    laps: int = 1, tail_s: float = 0.0, omega_max: float | None = None, jerk_max: float = JERK_MAX,
 ) -> Reference:
-    """Plan a reference through ``waypoints`` (n, 2) [m].
+    """Plan a reference through ``waypoints`` (n, 2) [m] (SPEC §10).
 
     Args:
-        waypoints: points of the path, in driving order.
+        waypoints: points of the path, in driving order (a closed lap need not repeat the first).
         settings: speed and acceleration limits.
-        closed: a closed lap (periodic spline, periodic speed profile, flying start).
+        closed: a closed lap (periodic spline and speed profile, flying start); the lap time is
+            rounded up to a whole number of samples (speeds scaled down by < dt/T_lap) so that the
+            reference repeats every ``len/laps`` samples.
         dt: sample time of the output [s].
         laps: number of laps (closed paths only).
-        tail_s: extra time at the end, driving straight at the final speed (MPC look-ahead).
+        tail_s: extra time at the end [s] so an MPC has its look-ahead: closed paths continue
+            along the lap, open paths drive straight on at the final speed.
+        omega_max: optional yaw-rate limit |ω_d| ≤ omega_max [rad/s].
+        jerk_max: bound on |dv_d/dt| rate of change [m/s³] (keeps the acceleration continuous).
+
+    Returns:
+        A :class:`Reference` with ``closed`` set for a closed path without tail.
     """
-    wp = np.asarray(waypoints, dtype=float)
-    if wp.ndim != 2 or wp.shape[1] != 2 or not np.all(np.isfinite(wp)):
-        raise DataFormatError("planner: waypoints must be a finite (n, 2) array of x, y [m]")
     if laps < 1 or (laps > 1 and not closed):
         raise DataFormatError("planner: laps must be ≥ 1, and > 1 only for closed paths")
-    if dt <= 0:
-        raise DataFormatError("planner: dt must be positive")
-    s, x, y, heading, kappa = _geometry(wp, closed)
-    L = float(s[-1])
-    v = speed_profile(s, kappa, settings, closed=closed)
-    if closed and laps > 1:
-        s = np.concatenate([s[:-1] + k * L for k in range(laps)] + [[laps * L]])
-        v = np.concatenate([v[:-1]] * laps + [v[-1:]])
-        kappa = np.concatenate([kappa[:-1]] * laps + [kappa[-1:]])
-    v_floor = 0.05  # a planned speed never reaches 0 inside the path (t(s) stays finite)
-    vv = np.maximum(v, v_floor)
-    t_s = np.concatenate([[0.0], np.cumsum(2.0 * np.diff(s) / (vv[1:] + vv[:-1]))])
-    T = float(t_s[-1])
-    n = int(np.floor(T / dt)) + 1
+    if not dt > 0 or tail_s < 0:
+        raise DataFormatError("planner: dt must be positive and tail_s non-negative")
+    geo = path_geometry(waypoints, closed=closed)
+    L = geo.length
+    prof = speed_profile(geo, settings, omega_max=omega_max, jerk_max=jerk_max)
+    s_n, v_n = prof.s, prof.v
+    T_lap = float(np.sum(2 * np.diff(s_n) / np.maximum(v_n[1:] + v_n[:-1], 1e-12)))
+    b = v_n**2
+    if closed:
+        n_lap = int(np.ceil(T_lap / dt - 1e-9))
+        b = b * (T_lap / (n_lap * dt)) ** 2  # slower by < one sample per lap: limits still hold
+        n_main = laps * n_lap
+    else:
+        n_main = int(np.floor(T_lap / dt)) + 1
+    n = n_main + int(np.ceil(tail_s / dt - 1e-9))
     t = np.arange(n) * dt
-    s_t = np.interp(t, t_s, s)
-    v_t = np.interp(s_t, s, v)
-    k_t = np.interp(s_t, s, kappa)
-    n_tail = int(np.ceil(tail_s / dt))
-    if n_tail:
-        t = np.arange(n + n_tail) * dt
-        v_t = np.concatenate([v_t, np.full(n_tail, v_t[-1])])
-        k_t = np.concatenate([k_t, np.zeros(n_tail)])
-    w_t = v_t * k_t
-    px, py, th = integrate_pose(float(x[0]), float(y[0]), float(heading[0]), v_t, w_t, dt)
-    return Reference(t=t, x=px, y=py, theta=th, v=v_t, omega=w_t, kappa=k_t,
-                     closed=closed and n_tail == 0)
+    if closed:
+        reps = int(np.ceil(t[-1] / (n_lap * dt))) + 1
+        s_ext = np.concatenate([s_n[:-1] + r * L for r in range(reps)] + [[reps * L]])
+        b_ext = np.concatenate([b[:-1]] * reps + [b[:1]])
+    else:
+        s_ext, b_ext = s_n, b
+    v = _speed_at_times(s_ext, b_ext, t)
+    # The pose by the paper's own recursion; the arc length advances by v(k)·dt.
+    s_k = np.concatenate([[0.0], np.cumsum(v[1:] * dt)])
+    mid = np.concatenate([[-0.5 * v[0] * dt], 0.5 * (s_k[1:] + s_k[:-1])])
+    theta = geo.heading_at(mid)
+    omega = np.concatenate([[v[0] * float(geo.kappa_at(np.zeros(1))[0])], np.diff(theta) / dt])
+    kappa = np.where(v > 1e-6, omega / np.maximum(v, 1e-6), geo.kappa_at(s_k))
+    x, y, _ = integrate_pose(float(geo.x[0]), float(geo.y[0]), float(theta[0]), v, omega, dt)
+    return Reference(t=t, x=x, y=y, theta=theta, v=v, omega=omega, kappa=kappa,
+                     closed=closed and n == n_main)
