@@ -54,6 +54,7 @@ class PathGeometry:
         heading: (m,) tangent direction [rad], unwrapped.
         kappa: (m,) curvature [1/m] (positive turning left).
         closed: the path is a closed loop (s = length is s = 0).
+        v_cap: (m,) speed cap along the path [m/s], or None.
     """
 
     s: NDArray[np.float64]
@@ -62,6 +63,7 @@ class PathGeometry:
     heading: NDArray[np.float64]
     kappa: NDArray[np.float64]
     closed: bool
+    v_cap: NDArray[np.float64] | None = None
 
     @property
     def length(self) -> float:
@@ -119,11 +121,23 @@ def _spline(waypoints: NDArray[np.float64], closed: bool) -> tuple[CubicSpline, 
     return CubicSpline(u, pts, bc_type="periodic" if closed else "natural"), float(u[-1])
 
 
-def path_geometry(waypoints: ArrayLike, *, closed: bool = False, ds: float = DS) -> PathGeometry:
-    """Cubic spline through ``waypoints`` (n, 2) [m] on a uniform arc-length grid of step ≈ ds."""
+def path_geometry(
+    waypoints: ArrayLike, *, closed: bool = False, ds: float = DS, v_cap: ArrayLike | None = None,
+) -> PathGeometry:
+    """Cubic spline through ``waypoints`` (n, 2) [m] on a uniform arc-length grid of step ≈ ds.
+
+    ``v_cap`` (n,) [m/s], optional: a speed cap on the stretch from each waypoint to the next.
+    """
     wp = np.asarray(waypoints, dtype=float)
     if wp.ndim != 2 or wp.shape[1] != 2 or not np.all(np.isfinite(wp)):
         raise DataFormatError("planner: waypoints must be a finite (n, 2) array of x, y [m]")
+    caps = None
+    if v_cap is not None:
+        caps = np.asarray(v_cap, dtype=float).reshape(-1)
+        if caps.size != wp.shape[0] or np.any(~(caps > 0)):
+            raise DataFormatError("planner: v_cap needs one positive speed [m/s] per waypoint")
+        if np.any(np.hypot(*np.diff(wp, axis=0).T) <= 1e-9):
+            raise DataFormatError("planner: v_cap needs distinct consecutive waypoints")
     sp, L = _spline(wp, closed)
     u = np.linspace(0.0, L, max(int(L / (ds / 4)), 50))
     d1 = sp(u, 1)
@@ -136,7 +150,13 @@ def path_geometry(waypoints: ArrayLike, *, closed: bool = False, ds: float = DS)
     norm = np.maximum(np.hypot(d1[:, 0], d1[:, 1]), 1e-12)
     kappa = (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) / norm**3
     heading = np.unwrap(np.arctan2(d1[:, 1], d1[:, 0]))
-    return PathGeometry(s=s, x=p[:, 0], y=p[:, 1], heading=heading, kappa=kappa, closed=closed)
+    cap_s = None
+    if caps is not None:
+        # The spline knots are the waypoints (chord parameter u): cap i holds on [u_i, u_{i+1}).
+        knots = sp.x
+        cap_s = caps[np.clip(np.searchsorted(knots, uu, side="right") - 1, 0, caps.size - 1)]
+    return PathGeometry(s=s, x=p[:, 0], y=p[:, 1], heading=heading, kappa=kappa, closed=closed,
+                        v_cap=cap_s)
 
 
 @dataclass(frozen=True)
@@ -174,14 +194,12 @@ def _passes(ub: NDArray[np.float64], h: float, a_lon: float, a_brk: float, close
 def _window_max(s: NDArray[np.float64], f: NDArray[np.float64], centres: NDArray[np.float64],
                 half: float, closed: bool) -> NDArray[np.float64]:
     """max f over [c − half, c + half] for each centre (wrapped when closed)."""
-    L = float(s[-1])
     ds = float(s[1] - s[0])
     w = int(np.ceil(half / ds)) + 1
     i = np.rint(centres / ds).astype(int)
     offs = np.arange(-w, w + 1)
     j = i[:, None] + offs[None, :]
     j = np.mod(j, s.size - 1) if closed else np.clip(j, 0, s.size - 1)
-    del L
     return f[j].max(axis=1)
 
 
@@ -213,6 +231,10 @@ def speed_profile(
     k = np.maximum(_window_max(geo.s, np.abs(geo.kappa), np.mod(centres, L) if closed
                                else np.clip(centres, 0, L), 1.5 * h, closed), 1e-9)
     ub = np.minimum(settings.v_max**2, settings.a_lat_max / k)
+    if geo.v_cap is not None:
+        cap = -_window_max(geo.s, -geo.v_cap, np.mod(centres, L) if closed else np.clip(centres, 0, L),
+                           1.5 * h, closed)
+        ub = np.minimum(ub, cap**2)
     if omega_max is not None:
         ub = np.minimum(ub, (omega_max / k) ** 2)
     a_lon, a_brk = settings.a_lon_max, settings.a_brake_max
@@ -288,6 +310,7 @@ def _speed_at_times(s_n: NDArray[np.float64], b_n: NDArray[np.float64],
 def plan_path(
     waypoints: ArrayLike, settings: PlannerSettings, *, closed: bool = False, dt: float = 0.1,
     laps: int = 1, tail_s: float = 0.0, omega_max: float | None = None, jerk_max: float = JERK_MAX,
+    v_cap: ArrayLike | None = None,
 ) -> Reference:
     """Plan a reference through ``waypoints`` (n, 2) [m] (SPEC §10).
 
@@ -303,6 +326,7 @@ def plan_path(
             along the lap, open paths drive straight on at the final speed.
         omega_max: optional yaw-rate limit |ω_d| ≤ omega_max [rad/s].
         jerk_max: bound on |dv_d/dt| rate of change [m/s³] (keeps the acceleration continuous).
+        v_cap: optional (n,) speed cap [m/s] on the stretch from each waypoint to the next.
 
     Returns:
         A :class:`Reference` with ``closed`` set for a closed path without tail.
@@ -311,7 +335,7 @@ def plan_path(
         raise DataFormatError("planner: laps must be ≥ 1, and > 1 only for closed paths")
     if not dt > 0 or tail_s < 0:
         raise DataFormatError("planner: dt must be positive and tail_s non-negative")
-    geo = path_geometry(waypoints, closed=closed)
+    geo = path_geometry(waypoints, closed=closed, v_cap=v_cap)
     L = geo.length
     prof = speed_profile(geo, settings, omega_max=omega_max, jerk_max=jerk_max)
     s_n, v_n = prof.s, prof.v
