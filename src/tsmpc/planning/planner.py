@@ -266,7 +266,7 @@ def speed_profile(
         A_eq[0, :2] = 0.5
         A_eq[1, nc - 2], A_eq[1, nc - 1] = 1.0, -1.0
         b_eq = np.array([b0, 0.0])
-    cost = np.concatenate([-np.ones(nc), np.full(m2, 100.0)])
+    cost = np.concatenate([-np.ones(nc), np.full(m2, 1e4)])
     res = linprog(cost, A_ub=A, b_ub=rhs, A_eq=A_eq, b_eq=b_eq, bounds=bounds, method="highs")
     if res.status != 0:
         raise SolverError(f"planner: speed-profile LP failed ({res.message}); "
