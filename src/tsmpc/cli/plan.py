@@ -1,3 +1,145 @@
-"""CLI commands of this module are added by the corresponding library layer (placeholder)."""
+"""``tsmpc plan`` (planner: track or waypoints → reference CSV) and ``tsmpc show-reference``
+(SPEC §10)."""
 
 from __future__ import annotations
+
+from enum import StrEnum
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import typer
+
+from tsmpc.cli import app
+from tsmpc.cli._common import fail
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+__all__ = ["OutputFormat"]
+
+
+class OutputFormat(StrEnum):
+    """File format of ``tsmpc plan --out``."""
+
+    csv = "csv"
+    paper = "paper"
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _read_waypoints(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """(x, y) waypoints from a CSV with columns x,y (an optional header line; extra columns such
+    as a speed cap ``v`` are used when the header names them)."""
+    import numpy as np
+
+    from tsmpc.errors import DataFormatError
+
+    try:
+        lines = [ln.strip() for ln in path.read_text(encoding="utf-8").splitlines()]
+    except (OSError, UnicodeDecodeError) as err:
+        raise DataFormatError(f"{path}: cannot read waypoints: {err}") from None
+    lines = [ln for ln in lines if ln and not ln.startswith("#")]
+    header = None
+    if lines and not _is_number(lines[0].split(",")[0]):
+        header = [h.strip().lower() for h in lines[0].split(",")]
+        lines = lines[1:]
+    try:
+        data = np.array([[float(v) for v in ln.split(",")] for ln in lines], dtype=float)
+    except ValueError as err:
+        raise DataFormatError(f"{path}: waypoints must be numeric 'x,y' rows ({err})") from None
+    if data.ndim != 2 or data.shape[0] < 2 or data.shape[1] < 2:
+        raise DataFormatError(f"{path}: expected at least 2 rows of 'x,y' waypoints")
+    ix, iy = (header.index("x"), header.index("y")) if header and {"x", "y"} <= set(header) else (0, 1)
+    cap = data[:, header.index("v")] if header and "v" in header else None
+    return data[:, [ix, iy]], cap
+
+
+@app.command("plan")
+def plan(
+    source: Path = typer.Argument(..., help="TUMFTM track CSV (recognised by its header) or an x,y "
+                                  "waypoints CSV (optional column v: speed cap to the next point)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Reference file to write."),
+    v_max: float = typer.Option(14.7, help="Maximum speed [m/s]."),
+    a_lat: float = typer.Option(3.0, help="Lateral acceleration limit [m/s^2]."),
+    a_lon: float = typer.Option(2.6, help="Longitudinal acceleration limit [m/s^2]."),
+    a_brake: float = typer.Option(3.0, help="Braking deceleration limit [m/s^2]."),
+    v_start: float = typer.Option(1.0, help="Start speed of an open path [m/s]."),
+    dt: float = typer.Option(0.1, help="Sample time [s]."),
+    laps: int = typer.Option(1, min=1, help="Laps (closed paths)."),
+    tail: float = typer.Option(0.0, help="Extra look-ahead time at the end [s]."),
+    closed: bool | None = typer.Option(None, "--closed/--open",
+                                       help="Closed lap or open path [default: closed for tracks]."),
+    fmt: OutputFormat = typer.Option(OutputFormat.csv, "--format",
+                                     help="csv: t,x,y,theta,v,omega,kappa rows; paper: 6-row format."),
+) -> None:
+    """Plan a smooth reference (continuous curvature, limited speed profile) from a track or waypoints."""
+    from pydantic import ValidationError
+
+    from tsmpc.config import PlannerSettings
+    from tsmpc.errors import TsmpcError
+    from tsmpc.planning.paper_format import save_paper_format
+    from tsmpc.planning.planner import plan_path
+    from tsmpc.planning.tracks import is_tumftm, load_tumftm
+
+    try:
+        settings = PlannerSettings(v_max=v_max, a_lat_max=a_lat, a_lon_max=a_lon,
+                                   a_brake_max=a_brake, v_start=v_start)
+    except ValidationError as err:
+        fail(ValueError(f"invalid limits: {err.errors()[0]['loc'][0]}: {err.errors()[0]['msg']}"))
+    try:
+        if is_tumftm(source):
+            track = load_tumftm(source)
+            ref = plan_path(track.centre, settings, closed=True if closed is None else closed, dt=dt,
+                            laps=laps, tail_s=tail)
+        else:
+            wp, cap = _read_waypoints(source)
+            ref = plan_path(wp, settings, closed=bool(closed), dt=dt, laps=laps, tail_s=tail, v_cap=cap)
+        if fmt is OutputFormat.paper:
+            save_paper_format(ref, out)
+        else:
+            ref.to_csv(out)
+    except (TsmpcError, OSError) as err:
+        fail(err)
+    typer.echo(f"{out}: {len(ref)} samples, {ref.duration:.1f} s, max v {ref.v.max():.2f} m/s, "
+               f"max |omega| {abs(ref.omega).max():.3f} rad/s")
+
+
+@app.command("show-reference")
+def show_reference(
+    file: Path = typer.Argument(..., help="Reference (planned CSV or paper format) or TUMFTM track."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="PNG to write [default: FILE.png]."),
+    window: str | None = typer.Option(None, help="Paper-format columns 'FIRST,LAST' (1-based) "
+                                      "[default: all]."),
+) -> None:
+    """Write a PNG of the path, v_d and ω_d of a reference (a track is planned with the defaults)."""
+    from tsmpc.config import PlannerSettings
+    from tsmpc.errors import TsmpcError
+    from tsmpc.planning.paper_format import load_reference
+    from tsmpc.planning.tracks import is_tumftm, load_tumftm, plan_track
+    from tsmpc.report.reference_plot import save_reference_figure
+
+    win = None
+    if window is not None:
+        try:
+            a, b = (int(v) for v in window.split(","))
+        except ValueError:
+            fail(ValueError(f"--window must be 'FIRST,LAST' (1-based columns), got {window!r}"))
+        win = (a, b)
+    track = None
+    try:
+        if is_tumftm(file):
+            track = load_tumftm(file)
+            ref = plan_track(track, PlannerSettings())
+        else:
+            ref = load_reference(file, window=win)
+        png = save_reference_figure(ref, out or file.with_suffix(".png"), track=track, title=file.stem)
+    except (TsmpcError, OSError) as err:
+        fail(err)
+    typer.echo(f"wrote {png}")
