@@ -16,6 +16,8 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # Help texts carry units in brackets ("[m/s]"): not rich markup.
+    rich_markup_mode=None,
 )
 
 

@@ -34,6 +34,8 @@ def _execute(
     from tsmpc.sim.simulator import Method
 
     console = Console()
+    if not console.is_terminal:  # piped to a file or CI log: do not squeeze the tables to 80 columns
+        console = Console(width=140)
     cfg = load_config_or_exit(config)
     if seed is not None:
         cfg = replace(cfg, seed=seed)
@@ -66,6 +68,7 @@ def _execute(
 
 
 def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
+    from rich.markup import escape
     from rich.table import Table
 
     from tsmpc.report.tables import rmse_rows
@@ -74,15 +77,15 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
     t = Table(title=f"RMSE — {metrics['scenario']['name']}"
               + (" (paper rows from Table 5)" if paper else ""))
     for col in ("approach", "x [m]", "y [m]", "θ [rad]", "v [m/s]", "ω [rad/s]"):
-        t.add_column(col, justify="right" if col != "approach" else "left")
+        t.add_column(escape(col), justify="right" if col != "approach" else "left")
     for label, vals in rmse_rows(metrics, paper):
         style = "dim" if label.endswith("(paper)") else None
         t.add_row(label, *(f"{v:.3f}" for v in vals), style=style)
     console.print(t)
-    tt = Table(title="Per-step solve times [ms] and real-time factor")
-    for col in ("method", "MPC median", "MPC p95", "MPC p99", "MPC max", "× REF",
-                "MHE median", "MHE p99", "max |e_y| [m]", "F̂ RMSE [N]", "RT factor", "events"):
-        tt.add_column(col, justify="right")
+    tt = Table(title=escape("Per-step solve times [ms], tracking and real-time factor"))
+    for col in ("method", "MPC med", "MPC p95", "MPC p99", "MPC max", "×REF",
+                "MHE med", "MHE p99", "max|e_y| [m]", "F̂ RMSE [N]", "RT×", "events"):
+        tt.add_column(escape(col), justify="right")
     for name, m in metrics["methods"].items():
         ev = ", ".join(f"{k}={v}" for k, v in m["events"].items() if v) or "-"
         ratio = m.get("mpc_ms_ratio_to_REF")
