@@ -141,3 +141,33 @@ def test_mhe_window_matches_cvxpy(cfg: Config) -> None:
         assert np.allclose(Xo, X.value, rtol=1e-6, atol=1e-6), trial
         assert z[3] == pytest.approx(F.value, rel=1e-6, abs=1e-3)
         del ours
+
+
+def test_lqr_law_matches_vectorised_blend(cfg: Config, dd) -> None:
+    """The float fast path of TSLQR.step equals the textbook law u = u_eq + Σμ_i(ϑ)K_i x̃ with the
+    memberships of SchedulingBox (numpy), inside and outside the premise box."""
+    dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, Td)
+    rng = np.random.default_rng(3)
+    lo, hi = dyn.premise_box.lower, dyn.premise_box.upper
+    for _ in range(50):
+        z = lo + (hi - lo) * rng.uniform(-0.2, 1.2, 3)
+        ref = np.asarray(dyn.premise_box.memberships(z))
+        fast = TSLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, Td)._memberships(*z)
+        np.testing.assert_allclose(fast, ref, atol=1e-14)
+    lqr = TSLQR(dd.K, dyn, cfg.vehicle, replace(cfg.lqr, friction_compensation=False), Td)
+
+    class E:
+        x = np.array([9.7, 0.01, 0.12])
+        F_fr = 0.0
+
+    v_ref, w_ref = 10.0, 0.1
+    cmd = lqr.step(E, v_ref, w_ref)
+    a_eq, F_eq, d_eq = equilibrium(v_ref, w_ref, cfg.vehicle)
+    xt = np.array([E.x[0] - v_ref, E.x[1] - a_eq, E.x[2] - w_ref, 0.0, 0.0, 0.0])  # bumpless start
+    mu = dyn.premise_box.memberships(np.array([d_eq, E.x[0], E.x[1]]))
+    u_f = np.array([F_eq, d_eq]) + np.tensordot(mu, dd.K, axes=(0, 0)) @ xt
+    a = lqr._a
+    np.testing.assert_allclose(lqr._f, a * np.array([F_eq, d_eq]) + (1 - a) * u_f, rtol=1e-12)
+    F_ff = cfg.vehicle.mass * (v_ref - E.x[0]) / cfg.lqr.speed_time_constant
+    assert cmd.F_xR == pytest.approx(F_eq + F_ff, rel=1e-12)
+    assert cmd.delta == pytest.approx(d_eq, rel=1e-12)

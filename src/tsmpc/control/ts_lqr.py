@@ -89,6 +89,13 @@ class TSLQR:
         self._a = math.exp(-bandwidth * self.Td)
         self._lo = np.array([settings.force_min, -settings.delta_max])
         self._hi = np.array([settings.force_max, settings.delta_max])
+        # The step runs every millisecond on 2-vectors: plain floats beat numpy's per-call cost,
+        # so the premise box, vertex bits and gains are unpacked once here.
+        box = model.premise_box
+        self._zlo = tuple(float(v) for v in box.lower)
+        self._zhi = tuple(float(v) for v in box.upper)
+        self._bits = tuple(tuple(bool(b) for b in row) for row in box.vertex_bits)
+        self._K2 = self.K.reshape(-1, 6).copy()  # row 2i+j = gain row j of vertex i
         self.reset()
 
     def reset(self) -> None:
@@ -113,8 +120,8 @@ class TSLQR:
         current one over T_c): the force feed-forward ``M a_ref`` is added to the equilibrium
         force, so speed ramps do not have to be tracked by feedback alone (the paper's weights
         penalise filter-state deviations hard, which makes pure feedback slow in v)."""
-        x = np.asarray(estimate.x, dtype=float)
-        if not np.all(np.isfinite(x)):
+        v, al, om = (float(c) for c in estimate.x)
+        if not (math.isfinite(v) and math.isfinite(al) and math.isfinite(om)):
             # Never command from a corrupted estimate: hold the last input.
             return InnerCommand(float(self._applied[0]), float(self._applied[1]), True, 0.0)
         key = (round(v_ref, 9), round(omega_ref, 9))
@@ -122,32 +129,50 @@ class TSLQR:
             self._eq = equilibrium(v_ref, omega_ref, self.vehicle)
             self._eq_key = key
         a_eq, F_eq, d_eq = self._eq
+        Fmin, dmin = float(self._lo[0]), float(self._lo[1])
+        Fmax, dmax = float(self._hi[0]), float(self._hi[1])
         # Speed feed-forward: the outer loop's model assumes v follows v_ref within T_c, but the
         # paper's weights (filter-state deviations cost 0.1/N²) make the LQR's own speed loop slow
         # (≈ 9 s); the planned acceleration plus a first-order approach to v_ref (time constant
         # τ, well below the 0.1 s filter) supplies the force the cascade expects.
-        a_ff = (a_ref if math.isfinite(a_ref) else 0.0) + (v_ref - x[0]) / self.settings.speed_time_constant
+        a_ff = (a_ref if math.isfinite(a_ref) else 0.0) + (v_ref - v) / self.settings.speed_time_constant
         F_ff = self.vehicle.mass * a_ff  # applied directly: the filter is the LQR's, not the feed-forward's
         if not self._started:  # bumpless start: the filter begins at the equilibrium input
-            self._f = np.clip(np.array([F_eq, d_eq]), self._lo, self._hi)
+            self._f = np.array([min(max(F_eq, Fmin), Fmax), min(max(d_eq, dmin), dmax)])
             self._started = True
-        f = self._f
-        xt = np.array([x[0] - v_ref, x[1] - a_eq, x[2] - omega_ref, f[0] - F_eq, f[1] - d_eq, self._zeta])
-        z, _ = self.model.clip(np.array([f[1], x[0], x[1]]))
-        mu = self.model.memberships(z)
-        K = np.tensordot(mu, self.K, axes=(0, 0))
-        u_f = np.array([F_eq, d_eq]) + K @ xt
-        u_f = np.clip(u_f, self._lo, self._hi)
+        f0, f1 = float(self._f[0]), float(self._f[1])
+        xt = np.array([v - v_ref, al - a_eq, om - omega_ref, f0 - F_eq, f1 - d_eq, self._zeta])
+        # K(ϑ) x̃ = Σ μ_i(ϑ) K_i x̃: all vertex products in one (16, 6) @ (6,) product, then blended.
+        Kx = (self._K2 @ xt).tolist()
+        u0, u1 = F_eq, d_eq
+        for i, m in enumerate(self._memberships(f1, v, al)):
+            u0 += m * Kx[2 * i]
+            u1 += m * Kx[2 * i + 1]
+        u0, u1 = min(max(u0, Fmin), Fmax), min(max(u1, dmin), dmax)
         # The plant receives the filter state (held over T_d); the filter then moves toward u_f.
         comp = 0.0
         if self.settings.friction_compensation and not self.settings.oracle:
             F_hat = float(estimate.F_fr)
             comp = F_hat if math.isfinite(F_hat) else 0.0
-        out = np.array([f[0] + F_ff + comp, f[1]])
-        out_c = np.clip(out, self._lo, self._hi)
-        saturated = bool(np.any(out_c != out))
-        self._f = np.clip(self._a * f + (1.0 - self._a) * u_f, self._lo, self._hi)
+        out0 = f0 + F_ff + comp
+        o0, o1 = min(max(out0, Fmin), Fmax), min(max(f1, dmin), dmax)
+        saturated = o0 != out0 or o1 != f1
+        a = self._a
+        self._f = np.array([min(max(a * f0 + (1.0 - a) * u0, Fmin), Fmax),
+                            min(max(a * f1 + (1.0 - a) * u1, dmin), dmax)])
         if not saturated:
-            self._zeta += self.Td * (omega_ref - x[2])
-        self._applied = out_c
-        return InnerCommand(float(out_c[0]), float(out_c[1]), saturated, comp)
+            self._zeta += self.Td * (omega_ref - om)
+        self._applied = np.array([o0, o1])
+        return InnerCommand(o0, o1, saturated, comp)
+
+    def _memberships(self, *z: float) -> list[float]:
+        """μ_i(ϑ) of the dynamic box (same as ``SchedulingBox.memberships``, on floats)."""
+        eta = [min(max((zj - lo) / (hi - lo), 0.0), 1.0)
+               for zj, lo, hi in zip(z, self._zlo, self._zhi, strict=True)]
+        out = []
+        for bits in self._bits:
+            m = 1.0
+            for b, e in zip(bits, eta, strict=True):
+                m *= e if b else 1.0 - e
+            out.append(m)
+        return out
