@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from tsmpc.cli import app
 from tsmpc.config import Config, KinematicBox, replace
-from tsmpc.errors import CertificateError
+from tsmpc.errors import CertificateError, SolverError
 from tsmpc.models.kinematic import KinematicTS
 from tsmpc.synthesis import cache
 from tsmpc.synthesis.dynamic import augmented_models, design_dynamic, per_vertex_dare_gains
@@ -99,11 +99,15 @@ def test_dynamic_design_versus_per_vertex_dare(cfg: Config, dd) -> None:
 
 
 def test_dynamic_design_at_1ms_is_reported_not_returned_silently(cfg: Config) -> None:
-    """At T_d = 1 ms the SDP ends inaccurate and a certificate fails: an error, never a silent design."""
+    """At T_d = 1 ms the SDP is badly conditioned: Clarabel fails or ends inaccurate with a failing
+    certificate (which one depends on the last bits of the model matrices). Either is an error
+    naming the cause, never a silent design."""
     try:
         d = design_dynamic(cfg.dynamic_box, cfg.vehicle, cfg.dynamic_lmi, 0.001)
     except CertificateError as err:
         assert "certificate" in str(err)
+    except SolverError as err:
+        assert "Td=0.001" in str(err)
     else:
         assert all(c.holds for c in d.certificates)
 

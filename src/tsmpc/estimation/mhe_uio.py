@@ -26,7 +26,6 @@ when it satisfies the bounds, else DAQP (fresh solve); no cvxpy in the loop.
 from __future__ import annotations
 
 import time
-from collections import deque
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
@@ -88,6 +87,7 @@ class WindowQP:
 
 
 _BELOW: dict[int, NDArray[np.float64]] = {}
+_EYE3 = np.eye(3)
 
 
 def _below(n: int) -> NDArray[np.float64]:
@@ -95,8 +95,20 @@ def _below(n: int) -> NDArray[np.float64]:
     m = _BELOW.get(n)
     if m is None:
         m = np.kron((np.arange(n)[None, :] < np.arange(n + 1)[:, None]).astype(float), np.ones((3, 3)))
+        m.setflags(write=False)
         _BELOW[n] = m
     return m
+
+
+def _prefix_products(A: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``Q_k = A_k ⋯ A_0`` for every k: an inclusive scan over the first axis in ⌈log₂ n⌉ batched
+    products (Hillis–Steele)."""
+    Q = A.copy()
+    d, n = 1, A.shape[0]
+    while d < n:
+        Q[d:] = Q[d:] @ Q[:-d]
+        d *= 2
+    return Q
 
 
 class MHEUIO:
@@ -126,6 +138,8 @@ class MHEUIO:
         self._p = 1.0 / np.asarray(settings.P, dtype=float)
         self._xmin = np.asarray(settings.x_min, dtype=float)
         self._xmax = np.asarray(settings.x_max, dtype=float)
+        self._sqrt_r = np.sqrt(self._r)
+        self._tiles: dict[tuple[str, int], Any] = {}
         self.reset(x0)
 
     def reset(self, x0: NDArray[np.float64] | None = None) -> None:
@@ -133,10 +147,12 @@ class MHEUIO:
         self._x = np.zeros(3) if x0 is None else np.asarray(x0, dtype=float).copy()
         self._F = 0.0
         n = self.settings.N
-        self._y: deque[NDArray[np.float64]] = deque(maxlen=n + 1)
-        self._w: deque[float] = deque(maxlen=n + 1)  # 1 = measurement used, 0 = rejected
-        self._u: deque[NDArray[np.float64]] = deque(maxlen=n)
-        self._xs: deque[NDArray[np.float64]] = deque(maxlen=n + 1)  # estimates at the samples
+        # Window as fixed arrays (oldest first), shifted in place: no per-step list conversions.
+        self._Y = np.zeros((n + 1, 2))  # measurements
+        self._W = np.zeros(n + 1)  # 1 = measurement used, 0 = rejected
+        self._U = np.zeros((n, 2))  # inputs between samples
+        self._XS = np.zeros((n + 1, 3))  # estimates at the samples (scheduling, arrival)
+        self._ny = 0  # samples in the window
         self._arrival = self._x.copy()
         self._n_rejected = 0
         self._n_failed = 0
@@ -153,46 +169,63 @@ class MHEUIO:
 
     # -- model along the window ------------------------------------------------------------
     def build(self, ys: NDArray[np.float64], us: NDArray[np.float64], weights: NDArray[np.float64],
-              xs: NDArray[np.float64], arrival: NDArray[np.float64], F_prior: float) -> WindowQP:
+              xs: NDArray[np.float64], arrival: NDArray[np.float64], F_prior: float,
+              matrices: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> WindowQP:
         """Window QP for measurements ys (n+1, 2), inputs us (n, 2), sample weights (n+1,),
-        scheduling states xs (n+1, 3) (previous estimates; v replaced by the measurement)."""
+        scheduling states xs (n+1, 3) (previous estimates; v replaced by the measurement).
+        ``matrices`` = the model's (A (n, 3, 3), B (n, 3, 2)) at that scheduling, if already known."""
         n = us.shape[0]
         nz = 4 + 3 * n
-        # Scheduling ϑ_k = (δ_k, v_k, α̂_k), all samples at once (vectorised model evaluation).
-        z = np.stack([us[:, 1], xs[:n, 0], xs[:n, 1]], axis=-1)
-        A, B = self.model.matrices(z)  # (n, 3, 3), (n, 3, 2)
-        Bu = np.einsum("kij,kj->ki", B, us)
-        # Transitions Γ[k, j] = A_{k−1}⋯A_{j+1} = P_k P_{j+1}⁻¹ with P_k = A_{k−1}⋯A_0: one short
-        # sequential product, then everything batched (the A_k are near I, so P_k is well conditioned).
+        if matrices is None:
+            # Scheduling ϑ_k = (δ_k, v_k, α̂_k), all samples at once (vectorised model evaluation).
+            matrices = self.model.matrices(np.stack([us[:, 1], xs[:n, 0], xs[:n, 1]], axis=-1))
+        A, B = matrices  # (n, 3, 3), (n, 3, 2)
+        Bu = (B @ us[:, :, None])[:, :, 0]
+        # Transitions Γ[k, j] = A_{k−1}⋯A_{j+1} = P_k P_{j+1}⁻¹ with P_k = A_{k−1}⋯A_0 by a log-depth
+        # scan (the A_k are near I, so P_k is well conditioned and the inverse is harmless).
         Pk = np.empty((n + 1, 3, 3))
-        Pk[0] = np.eye(3)
-        for k in range(n):
-            Pk[k + 1] = A[k] @ Pk[k]
+        Pk[0] = _EYE3
+        Pk[1:] = _prefix_products(A)
+        Pinv = np.linalg.inv(Pk[1:])
         # Rows (k, a), columns (j, c): one 2-D product gives every Γ[k, j] in the w-block layout.
-        Gm = Pk.reshape(-1, 3) @ np.linalg.inv(Pk[1:]).transpose(1, 0, 2).reshape(3, -1)
-        Gm *= _below(n)
         M = np.empty((3 * (n + 1), nz))
+        Gm = M[:, 4:]
+        np.matmul(Pk.reshape(-1, 3), Pinv.transpose(1, 0, 2).reshape(3, -1), out=Gm)
+        Gm *= _below(n)
         M[:, :3] = Pk.reshape(-1, 3)
-        M[:, 3] = -(Gm @ B[:, :, 0].reshape(-1))  # the unknown input F
-        M[:, 4:] = Gm
-        c = (Gm @ Bu.reshape(-1)).reshape(n + 1, 3)
-        M = M.reshape(n + 1, 3, nz)
-        # Measurement rows: v and ω of every sample, weighted.
-        sw = np.sqrt(weights)[:, None] * np.sqrt(self._r)[None, :]  # (n+1, 2)
-        Cm = M[:, [0, 2], :] * sw[:, :, None]
-        res = (ys - c[:, [0, 2]]) * sw
-        Cm2 = Cm.reshape(-1, nz)
+        M[:, 3] = Gm @ -B[:, :, 0].reshape(-1)  # the unknown input F enters as E_d = −B_d[:, :1]
+        c = Gm @ Bu.reshape(-1)
+        M3 = M.reshape(n + 1, 3, nz)
+        c3 = c.reshape(n + 1, 3)
+        # Measurement rows: v and ω (state rows 0 and 2) of every sample, weighted.
+        sw = np.sqrt(weights)[:, None] * self._sqrt_r  # (n+1, 2)
+        Cm2 = (M3[:, 0::2, :] * sw[:, :, None]).reshape(-1, nz)
+        res = (ys - c3[:, 0::2]) * sw
         H = Cm2.T @ Cm2
-        f = -Cm2.T @ res.reshape(-1)
-        H[0:3, 0:3] += np.diag(self._p)
+        f = Cm2.T @ res.reshape(-1)
+        f *= -1.0
+        diag = H.reshape(-1)[:: nz + 1]  # a view: the regularising terms add to the diagonal
+        diag[:3] += self._p
+        diag[3] += F_PRIOR_WEIGHT
+        diag[4:] += self._q_tiled(n)
         f[0:3] -= self._p * arrival
-        H[3, 3] += F_PRIOR_WEIGHT
         f[3] -= F_PRIOR_WEIGHT * F_prior
-        idx = np.arange(4, nz)
-        H[idx, idx] += np.tile(self._q, n)
-        lo = np.tile(self._xmin, n + 1) - c.reshape(-1)
-        hi = np.tile(self._xmax, n + 1) - c.reshape(-1)
-        return WindowQP(H=2 * H, f=2 * f, M=M.reshape(-1, nz), c=c.reshape(-1), lo=lo, hi=hi)
+        lo_t, hi_t = self._bounds_tiled(n)
+        H *= 2.0
+        f *= 2.0
+        return WindowQP(H=H, f=f, M=M, c=c, lo=lo_t - c, hi=hi_t - c)
+
+    def _q_tiled(self, n: int) -> NDArray[np.float64]:
+        t = self._tiles.get(("q", n))
+        if t is None:
+            t = self._tiles[("q", n)] = np.tile(self._q, n)
+        return t
+
+    def _bounds_tiled(self, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        t = self._tiles.get(("b", n))
+        if t is None:
+            t = self._tiles[("b", n)] = (np.tile(self._xmin, n + 1), np.tile(self._xmax, n + 1))
+        return t
 
     def _solve(self, qp: WindowQP) -> NDArray[np.float64] | None:
         fac, info = _potrf(qp.H, lower=False, clean=False, overwrite_a=False)
@@ -208,6 +241,19 @@ class MHEUIO:
         return res.z if res.status == QPStatus.OPTIMAL else None
 
     # -- online step -----------------------------------------------------------------------
+    def _push(self, y: NDArray[np.float64], w: float, u: NDArray[np.float64] | None) -> int:
+        """Append a sample (and the input that led to it, None for the first); returns the number
+        of inputs in the window (samples − 1)."""
+        if self._ny == self.settings.N + 1:  # full: drop the oldest sample and input
+            self._Y[:-1], self._W[:-1], self._XS[:-1] = self._Y[1:], self._W[1:], self._XS[1:]
+            self._U[:-1] = self._U[1:]
+            self._ny -= 1
+        self._Y[self._ny], self._W[self._ny] = y, w
+        self._ny += 1
+        if u is not None:
+            self._U[self._ny - 2] = u
+        return self._ny - 1
+
     def step(self, y: Any, u: Any) -> Estimate:
         """Add the measurement ``y = [v, ω]`` of this sample and the input ``u = [F_xR, δ]`` that the
         plant received over the previous interval (including any friction compensation: the
@@ -215,54 +261,54 @@ class MHEUIO:
         t0 = time.perf_counter()
         y = np.asarray(y, dtype=float).reshape(2)
         u = np.asarray(u, dtype=float).reshape(2)
-        first = len(self._y) == 0
-        ok = bool(np.all(np.isfinite(y)))
-        if not np.all(np.isfinite(u)):
+        first = self._ny == 0
+        ok = bool(np.isfinite(y[0]) and np.isfinite(y[1]))
+        if not (np.isfinite(u[0]) and np.isfinite(u[1])):
             # A non-finite input is a caller bug upstream; never poison the window with it.
             u = np.zeros(2)
             ok = False
-        x_pred, F_raw = self._x, 0.0
-        if not first:
-            A, B = self.model.matrices(np.array([u[1], self._x[0], self._x[1]]))
-            pred = A @ self._x + B @ u
-            x_pred = pred - B[:, 0] * self._F  # E_d = −B_d[:, :1]
-            if ok:  # the paper's one-step UIO estimate (P-disturb_estimation), for logging
-                F_raw = float((pred[0] - y[0]) * self.vehicle.mass / self.Td)
         if not ok:
             self._n_rejected += 1
-        if not first:
-            self._u.append(u)
-        self._y.append(y if ok else np.zeros(2))
-        self._w.append(1.0 if ok else 0.0)
-        xs_new = x_pred.copy()
+        n = self._push(y if ok else np.zeros(2), 1.0 if ok else 0.0, None if first else u)
+        if first:
+            self._XS[0] = self._x
+            if not ok:
+                return Estimate(self._x.copy(), self._F, 0.0, EstimatorStatus.REJECTED,
+                                time.perf_counter() - t0)
+            status = EstimatorStatus.WARMUP
+            self._XS[0, 0], self._XS[0, 2] = y[0], y[1]
+            self._x = np.clip(self._XS[0], self._xmin, self._xmax)
+            return Estimate(self._x.copy(), self._F, 0.0, status, time.perf_counter() - t0)
+        # Model along the window at the current scheduling; its last interval (from the previous
+        # estimate, with this input) is also the one-step prediction.
+        us, xs = self._U[:n], self._XS[: n + 1]
+        xs[n - 1] = self._x
+        A, B = self.model.matrices(np.stack([us[:, 1], xs[:n, 0], xs[:n, 1]], axis=-1))
+        pred = A[-1] @ self._x + B[-1] @ u
+        x_pred = pred - B[-1, :, 0] * self._F  # E_d = −B_d[:, :1]
+        F_raw = float((pred[0] - y[0]) * self.vehicle.mass / self.Td) if ok else 0.0
+        xs[n] = x_pred
         if ok:
-            xs_new[0], xs_new[2] = y[0], y[1]
-        self._xs.append(xs_new)
-        if not ok and first:
-            return Estimate(self._x.copy(), self._F, 0.0, EstimatorStatus.REJECTED,
-                            time.perf_counter() - t0)
-        n = len(self._u)
+            xs[n, 0], xs[n, 2] = y[0], y[1]
         if n < 2 or not ok:
-            self._x = np.clip(x_pred if not ok else xs_new, self._xmin, self._xmax)
+            self._x = np.clip(xs[n], self._xmin, self._xmax)
             status = EstimatorStatus.REJECTED if not ok else EstimatorStatus.WARMUP
             return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)
 
-        ys = np.array(self._y)
-        us = np.array(self._u)
-        ws = np.array(self._w)
-        xs = np.array(self._xs)
         # Arrival prior: the previous solution's estimate of the window's first sample.
-        qp = self.build(ys, us, ws, xs, xs[0] if n == self.settings.N else self._arrival, self._F)
+        full = n == self.settings.N
+        qp = self.build(self._Y[: n + 1], us, self._W[: n + 1], xs, xs[0] if full else self._arrival,
+                        self._F, matrices=(A, B))
         z = self._solve(qp)
         if z is None:
             self._n_failed += 1
             self._x = np.clip(x_pred, self._xmin, self._xmax)
             return Estimate(self._x.copy(), self._F, F_raw, EstimatorStatus.FAILED,
                             time.perf_counter() - t0)
-        X = (qp.M @ z + qp.c).reshape(-1, 3)
         # Keep the smoothed trajectory for the next window's scheduling and arrival cost.
-        self._xs = deque((X[i] for i in range(X.shape[0])), maxlen=self.settings.N + 1)
+        X = (qp.M @ z + qp.c).reshape(-1, 3)
+        xs[:] = X
         self._x = X[-1].copy()
         self._F = float(z[3])
-        status = EstimatorStatus.OK if n == self.settings.N else EstimatorStatus.WARMUP
+        status = EstimatorStatus.OK if full else EstimatorStatus.WARMUP
         return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)
