@@ -127,14 +127,17 @@ def condense(
     Q0 = np.concatenate(([0.0], Qs[:-1]))
     SS0 = np.concatenate(([0.0], SS[:-1]))
     lag = _lag(N)  # n − j on and below the diagonal, 0 above
-    mask = lag > 0
-    # Response to ΔU_j (it acts on every w_l, l ≥ j).
-    Gv = np.where(mask, (-Tc * C)[:, None] * (Qs[:, None] - Q0[None, :]), 0.0)
-    Gw = np.where(mask, (-1j * Tc * C)[:, None] * (lag * Sd[:, None] - (SS[:, None] - SS0[None, :])), 0.0)
+    # Response to ΔU_j (it acts on every w_l, l ≥ j); x_n depends on ΔU_j for j < n only, so
+    # the blocks are lower triangular (the formulas are masked by multiplying with tri).
+    tri = _tri(N)
+    Gv = (-Tc * C)[:, None] * (Qs[:, None] - Q0[None, :])
+    Gw = (-1j * Tc * C)[:, None] * (lag * Sd[:, None] - (SS[:, None] - SS0[None, :]))
     G = np.zeros((3 * N, 2 * N))
-    G[:N, :N], G[N:2 * N, :N] = Gv.real, Gv.imag
-    G[:N, N:], G[N:2 * N, N:] = Gw.real, Gw.imag
-    G[2 * N:, N:] = -Tc * lag
+    np.multiply(Gv.real, tri, out=G[:N, :N])
+    np.multiply(Gv.imag, tri, out=G[N:2 * N, :N])
+    np.multiply(Gw.real, tri, out=G[:N, N:])
+    np.multiply(Gw.imag, tri, out=G[N:2 * N, N:])
+    np.multiply(lag, -Tc, out=G[2 * N:, N:])
     # Affine part: ΔU = 0, i.e. u_j = u_prev for all j.
     wv, ww = u_prev[0] - r[:, 0], u_prev[1] - r[:, 1]
     cw = np.cumsum(ww)
@@ -150,16 +153,28 @@ def condense(
     H[N:, N:] += _theta_hessian(N, Tc, float(q[2]))
     term = np.array([N - 1, 2 * N - 1, 3 * N - 1])
     GN, xN = G[term], x_aff[term]
-    Pd = P - np.diag(q)  # the terminal rows carry P instead of Q
+    Pd = P.copy()  # the terminal rows carry P instead of Q
+    Pd.flat[::4] -= q
     PG = Pd @ GN
     H += GN.T @ PG
-    H[np.diag_indices_from(H)] += np.repeat(rdiag, N)
+    H.flat[:: 2 * N + 1] += np.repeat(rdiag, N)
     f = G.T @ (qbar * x_aff) + PG.T @ xN
     c0 = float(x_aff @ (qbar * x_aff) + xN @ Pd @ xN + x0 @ (q * x0))
     return CondensedQP(H=H, f=f, c0=c0, G=G, x_aff=x_aff)
 
 
 _LAG: dict[int, NDArray[np.float64]] = {}
+_TRI: dict[int, NDArray[np.float64]] = {}
+
+
+def _tri(N: int) -> NDArray[np.float64]:
+    """(N, N) lower-triangular ones (cached)."""
+    m = _TRI.get(N)
+    if m is None:
+        m = np.tri(N)
+        m.setflags(write=False)
+        _TRI[N] = m
+    return m
 _THETA_H: dict[tuple[int, float, float], NDArray[np.float64]] = {}
 
 
@@ -214,6 +229,8 @@ class TSMPC:
         du = np.asarray(settings.du_max, dtype=float)
         # Blocked layout (see CondensedQP): [v_0…v_{N−1}, ω_0…ω_{N−1}].
         self._dlb, self._dub = np.repeat(-du, N), np.repeat(du, N)
+        self._dlb2, self._dub2 = -du[:, None], du[:, None]  # the same, broadcast on (2, N)
+        self._umin2, self._umax2 = self._umin[:, None], self._umax[:, None]
         self._L = np.kron(np.eye(2), np.tri(N))  # U = u_prev + L ΔU
         self._term = np.array([N - 1, 2 * N - 1, 3 * N - 1])
         self._lo = np.asarray(model.premise_box.lower)
@@ -243,13 +260,18 @@ class TSMPC:
                 eth[0] = errors[2]
             else:
                 eth = e_th
-        z = np.stack([om, vd, sinc(eth)], axis=-1)
-        zc = np.clip(z, self._lo, self._hi)
-        n_clip = int(np.count_nonzero(np.any(zc != z, axis=-1)))
+        z = np.empty((N, 3))
+        z[:, 0], z[:, 1], z[:, 2] = om, vd, sinc(eth)
+        n_clip = 0
+        if (z < self._lo).any() or (z > self._hi).any():  # rare: count, then clip
+            zc = np.clip(z, self._lo, self._hi)
+            n_clip = int(np.count_nonzero(np.any(zc != z, axis=-1)))
+            z = zc
         Tc = self.model.Tc
-        c = zc[:, 0] * Tc
-        s = zc[:, 1] * zc[:, 2] * Tc
-        r = np.stack([v_d * np.cos(eth), w_d], axis=-1)
+        c = z[:, 0] * Tc
+        s = z[:, 1] * z[:, 2] * Tc
+        r = np.empty((N, 2))
+        r[:, 0], r[:, 1] = v_d * np.cos(eth), w_d
         return c, s, r, n_clip
 
     # -- one QP ---------------------------------------------------------------------------
@@ -259,24 +281,26 @@ class TSMPC:
         """(ΔU, status, QPs solved, active-set iterations); ΔU None on failure."""
         N, S = self.N, self.S
         GN, cN = qp.G[self._term], qp.x_aff[self._term]
-        bl, bu = np.repeat(self._umin - u_prev, N), np.repeat(self._umax - u_prev, N)
         use_term = self.settings.terminal_constraint
 
         def feasible(z: NDArray[np.float64], tol: float = 1e-9) -> bool:
-            U = self._L @ z
-            if np.any(z < self._dlb - tol) or np.any(z > self._dub + tol):
+            dz = z.reshape(2, N)
+            if (dz < self._dlb2 - tol).any() or (dz > self._dub2 + tol).any():
                 return False
-            if np.any(U < bl - tol) or np.any(U > bu + tol):
+            U = np.cumsum(dz, axis=1) + u_prev[:, None]
+            if (U < self._umin2 - tol).any() or (U > self._umax2 + tol).any():
                 return False
             xN = cN + GN @ z
             return not use_term or float(xN @ S @ xN) <= 1.0 + TERMINAL_TOL
 
-        # (1) Unconstrained minimiser.
-        c_fac, info = _potrf(qp.H, lower=False, clean=False, overwrite_a=False)
+        # (1) Unconstrained minimiser. H is symmetric: its transpose is the Fortran-ordered array
+        # LAPACK wants, so no copy is made for the call.
+        c_fac, info = _potrf(qp.H.T, lower=True, clean=False, overwrite_a=False)
         if info == 0:
-            z, info = _potrs(c_fac, -qp.f, lower=False)
+            z, info = _potrs(c_fac, -qp.f, lower=True)
             if info == 0 and feasible(z):
                 return z, MPCStatus.OPTIMAL, 0, 0
+        bl, bu = np.repeat(self._umin - u_prev, N), np.repeat(self._umax - u_prev, N)
         # (2) DAQP with tangent cuts.
         A, lo, hi = self._L, bl, bu
         n_qp = n_it = 0
@@ -333,8 +357,9 @@ class TSMPC:
         up = np.clip(np.asarray(u_prev, dtype=float).reshape(2), self._umin, self._umax)
         v_d = np.asarray(reference.v, dtype=float)[:N]
         w_d = np.asarray(reference.omega, dtype=float)[:N]
-        if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(up)) and v_d.size == N
-                and w_d.size == N and np.all(np.isfinite(v_d)) and np.all(np.isfinite(w_d))):
+        # One finiteness test for all inputs: a NaN or inf anywhere makes the sum non-finite.
+        if not (v_d.size == N and w_d.size == N
+                and np.isfinite(x0.sum() + up.sum() + v_d.sum() + w_d.sum())):
             return self._fallback(x0, up, t0, 0, 0, 0)
 
         omega = e_th = None
@@ -373,7 +398,9 @@ class TSMPC:
 
         du = z.reshape(2, N).T
         U = up + np.cumsum(du, axis=0)
-        X = np.vstack([x0, (qp.x_aff + qp.G @ z).reshape(3, N).T])
+        X = np.empty((N + 1, 3))
+        X[0] = x0
+        X[1:] = (qp.x_aff + qp.G @ z).reshape(3, N).T
         cost = float(z @ qp.H @ z + 2.0 * qp.f @ z + qp.c0)
         res = MPCResult(u=U[0].copy(), x_pred=X, u_pred=U, du=du, cost=cost, status=status,
                         iterations=n_qp, qp_iterations=n_it,
