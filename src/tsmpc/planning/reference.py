@@ -76,6 +76,15 @@ class Reference:
         """t[-1] − t[0] [s]."""
         return float(self.t[-1] - self.t[0])
 
+    @staticmethod
+    def _trusted(arrays: dict[str, NDArray[np.float64]]) -> Reference:
+        """An open Reference from pieces of validated arrays, skipping the checks."""
+        ref = object.__new__(Reference)
+        for name, a in arrays.items():
+            object.__setattr__(ref, name, a)
+        object.__setattr__(ref, "closed", False)
+        return ref
+
     def _replace(self, **arrays: NDArray[np.float64]) -> Reference:
         data = {f.name: getattr(self, f.name) for f in fields(self)}
         data.update(arrays)
@@ -91,6 +100,9 @@ class Reference:
         """n samples from k. Past the end a closed lap wraps around (θ continued by whole turns,
         time continued); an open reference holds v, ω, κ and continues the pose along them."""
         L = len(self)
+        if 0 <= k and k + n <= L and n >= 2:
+            # Called every T_c in the loop: read-only views of checked data need no new checks.
+            return self._trusted({s: getattr(self, s)[k:k + n] for s in _SIGNALS})
         idx = np.arange(k, k + n)
         if idx[-1] < L:
             return Reference(*(getattr(self, s)[idx] for s in _SIGNALS), closed=False)
