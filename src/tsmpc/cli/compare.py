@@ -85,9 +85,9 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
     tt = Table(title=escape("Per-step solve times [ms], tracking and real-time factor"))
     for col in ("method", "MPC med", "MPC p95", "MPC p99", "MPC max", "×REF",
                 "MHE med", "MHE p99", "max|e_y| [m]", "F̂ RMSE [N]", "RT×", "events"):
-        tt.add_column(escape(col), justify="right")
+        tt.add_column(escape(col), justify="right", no_wrap=col == "events")
     for name, m in metrics["methods"].items():
-        ev = ", ".join(f"{k}={v}" for k, v in m["events"].items() if v) or "-"
+        ev = "\n".join(f"{k}={v}" for k, v in m["events"].items() if v) or "-"
         ratio = m.get("mpc_ms_ratio_to_REF")
         tt.add_row(name, f"{m['mpc_ms']['median']:.3f}", f"{m['mpc_ms']['p95']:.3f}",
                    f"{m['mpc_ms']['p99']:.3f}", f"{m['mpc_ms']['max']:.2f}",

@@ -43,7 +43,8 @@ def circuit_figure(logs: dict[str, RunLog]) -> Figure:
         a.plot(first.ref[:, 0], first.ref[:, 1], "k--", lw=1.2, label="reference")
         for name, log in logs.items():
             a.plot(log.state_outer[:, 0], log.state_outer[:, 1], color=_c(name), lw=1.0, label=name)
-        a.set_aspect("equal", adjustable="datalim")
+        # The overview adapts its limits to the data; the zoom keeps its fixed window.
+        a.set_aspect("equal", adjustable="datalim" if a is ax else "box")
         a.set_xlabel("X [m]")
         a.set_ylabel("Y [m]")
     ax.plot(first.ref[0, 0], first.ref[0, 1], "go", ms=6, label="start")
