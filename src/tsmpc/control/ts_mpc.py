@@ -24,6 +24,7 @@ previous plan is returned: status FALLBACK. Nothing raises inside :meth:`TSMPC.s
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from enum import StrEnum
@@ -248,10 +249,16 @@ class TSMPC:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], int]:
         """(c, s, r, n_clipped) for premises (ω_i, v_d,i, e_θ,i) along the horizon."""
         N = self.N
+        Tc = self.model.Tc
+        r = np.empty((N, 2))
         if self.mode == SchedulingMode.FZN:
-            om = np.full(N, u_prev[1])
-            vd = np.full(N, v_d[0])
-            eth = np.full(N, errors[2])
+            # One premise point for the whole horizon: scalars, broadcast at the end.
+            e = float(errors[2])
+            z0 = (float(u_prev[1]), float(v_d[0]), math.sin(e) / e if e != 0.0 else 1.0)
+            zc = [min(max(a, lo), hi) for a, lo, hi in zip(z0, self._lo, self._hi, strict=True)]
+            r[:, 0], r[:, 1] = v_d * math.cos(e), w_d
+            return (np.full(N, zc[0] * Tc), np.full(N, zc[1] * zc[2] * Tc), r,
+                    N if zc != list(z0) else 0)
         else:
             vd = v_d
             om = w_d if omega is None else omega
@@ -267,10 +274,8 @@ class TSMPC:
             zc = np.clip(z, self._lo, self._hi)
             n_clip = int(np.count_nonzero(np.any(zc != z, axis=-1)))
             z = zc
-        Tc = self.model.Tc
         c = z[:, 0] * Tc
         s = z[:, 1] * z[:, 2] * Tc
-        r = np.empty((N, 2))
         r[:, 0], r[:, 1] = v_d * np.cos(eth), w_d
         return c, s, r, n_clip
 
