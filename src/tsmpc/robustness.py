@@ -1,0 +1,114 @@
+"""Named robustness scenarios (issue 8; SPEC §10): conditions the controllers were not designed
+for, applied on top of any reference. Usable from configs, sweeps and the library::
+
+    cfg, sc = apply_robustness("ice_patch", cfg, scenario)
+
+Every scenario is deterministic given the run's seed; sensor faults are small stateful objects
+created per run (a run owns its fault, so runs in parallel never share state).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from dataclasses import replace as dc_replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tsmpc.config import Config, replace
+from tsmpc.planning.reference import Reference
+from tsmpc.scenarios import PatchFriction, SurfacePatch
+from tsmpc.sim.simulator import Scenario
+
+__all__ = [
+    "ROBUSTNESS_SCENARIOS",
+    "DropoutFault",
+    "NaNBurstFault",
+    "apply_robustness",
+    "path_length",
+]
+
+#: Scenario name → one-line description (the names accepted by sweeps and configs).
+ROBUSTNESS_SCENARIOS: dict[str, str] = {
+    "nominal": "no change (the comparison's conditions)",
+    "ice_patch": "30 m of ice (μ = 0.1) at a third of the path; the tyre grip scales with μ(road)",
+    "wet_section": "μ(road) = 0.6 from 30 % to 70 % of the path",
+    "noise_x10": "every sensor-noise σ × 10",
+    "sensor_dropout": "every 5 s all measurements freeze for 0.2 s (last value held)",
+    "nan_bursts": "every 7 s all measurements are NaN for 50 ms",
+    "mass_stiffness_mismatch": "plant mass +20 % and cornering stiffness −20 % (controllers unchanged)",
+}
+
+
+@dataclass
+class DropoutFault:
+    """Measurements frozen at their last value for ``duration_s`` every ``period_s`` (from
+    ``start_s``): a stalled sensor bus. Stateful: one instance per run."""
+
+    period_s: float = 5.0
+    duration_s: float = 0.2
+    start_s: float = 2.0
+    _held: NDArray[np.float64] | None = field(default=None, repr=False)
+
+    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
+        if _in_burst(t, self.start_s, self.period_s, self.duration_s) and self._held is not None:
+            return self._held.copy()
+        self._held = np.array(y, dtype=float)
+        return y
+
+
+@dataclass(frozen=True)
+class NaNBurstFault:
+    """All measurements NaN for ``duration_s`` every ``period_s`` (from ``start_s``)."""
+
+    period_s: float = 7.0
+    duration_s: float = 0.05
+    start_s: float = 3.0
+
+    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
+        if _in_burst(t, self.start_s, self.period_s, self.duration_s):
+            return np.full_like(y, np.nan)
+        return y
+
+
+def _in_burst(t: float, start: float, period: float, duration: float) -> bool:
+    # A tiny tolerance so that sample instants k·T_d on a burst edge are classified consistently.
+    return t >= start - 1e-9 and math.fmod(t - start + 1e-9, period) < duration
+
+
+def path_length(ref: Reference) -> float:
+    """Length [m] of a reference's path (∑ v_d T)."""
+    return float(np.sum(np.abs(ref.v)) * ref.dt)
+
+
+def apply_robustness(name: str, cfg: Config, scenario: Scenario) -> tuple[Config, Scenario]:
+    """(config, scenario) with the named robustness condition applied (see ROBUSTNESS_SCENARIOS).
+
+    Raises ValueError for an unknown name (the message lists the allowed ones).
+    """
+    if name not in ROBUSTNESS_SCENARIOS:
+        raise ValueError(f"unknown robustness scenario {name!r}; allowed: {', '.join(ROBUSTNESS_SCENARIOS)}")
+    label = scenario.name if name == "nominal" else f"{scenario.name}+{name}"
+    meta = {**scenario.meta, "robustness": name}
+    sc = dc_replace(scenario, name=label, meta=meta)
+    L = path_length(scenario.reference)
+    if name == "ice_patch":
+        start = L / 3.0
+        friction = PatchFriction(0.9, (SurfacePatch(start, start + 30.0, 0.1, ramp_m=2.0),))
+        tyre = replace(cfg.tyre, scale_grip_with_road=True)
+        return cfg, dc_replace(sc, friction=friction, plant_tyre=tyre)
+    if name == "wet_section":
+        friction = PatchFriction(0.9, (SurfacePatch(0.3 * L, 0.7 * L, 0.6, ramp_m=10.0),))
+        return cfg, dc_replace(sc, friction=friction)
+    if name == "noise_x10":
+        return replace(cfg, noise=replace(cfg.noise, scale=cfg.noise.scale * 10.0)), sc
+    if name == "sensor_dropout":
+        return cfg, dc_replace(sc, sensor_fault=DropoutFault())
+    if name == "nan_bursts":
+        return cfg, dc_replace(sc, sensor_fault=NaNBurstFault())
+    if name == "mass_stiffness_mismatch":
+        base = scenario.plant_vehicle or cfg.vehicle
+        veh = replace(base, mass=base.mass * 1.2, cornering_stiffness=base.cornering_stiffness * 0.8)
+        return cfg, dc_replace(sc, plant_vehicle=veh)
+    return cfg, sc

@@ -1,0 +1,539 @@
+"""Monte-Carlo and parameter sweeps on Dask (issue 8).
+
+A sweep file (TOML) names a base configuration, the axes and how long each run lasts::
+
+    name = "robustness"
+    duration_s = 20.0                 # simulated seconds per run (omit: the whole reference)
+    base_config = "paper.toml"        # optional, relative to the sweep file
+    [config.mpc]                      # optional inline overrides, merged over the base
+    N = 40
+    [grid]                            # cartesian product of the listed axes
+    method = ["ref", "fzn"]
+    scenario = ["nominal", "noise_x10"]
+    seed = [1, 2]
+    [random]                          # optional: n samples per grid point, from a seed
+    n = 4
+    seed = 7
+    ranges = { mass_scale = [0.9, 1.1] }
+    choices = { friction = ["paper", "dry"] }
+
+Each run is one Dask task (``client.submit(..., retries=...)``); a run that ends early (diverged,
+left the track, raised) is *data*: its record says why. The client writes every finished run's
+record atomically to ``DIR/runs/<id>.json`` as soon as it arrives; ids hash the run's resolved
+parameters, so ``resume`` skips what is on disk and a record is never written twice. A worker that
+dies takes its task with it; the scheduler re-runs the task on another worker. At the end the
+aggregate table (one row per run) is written as CSV and Parquet.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+import os
+import time
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validator, model_validator
+
+from tsmpc.config import Config, validate
+from tsmpc.errors import ConfigError
+from tsmpc.robustness import ROBUSTNESS_SCENARIOS
+from tsmpc.sim.log import atomic_write_bytes, atomic_write_text
+
+__all__ = [
+    "AXES",
+    "FRICTIONS",
+    "RunParams",
+    "RunTask",
+    "SweepResult",
+    "SweepSpec",
+    "aggregate",
+    "dry_run",
+    "expand",
+    "load_sweep",
+    "run_sweep",
+    "run_task",
+]
+
+#: Named friction profiles of the ``friction`` axis.
+FRICTIONS: dict[str, str] = {
+    "paper": "the paper run's μ(road) by time (SPEC §10)",
+    "dry": "dry asphalt, μ = 0.9",
+    "earth": "dry earth, μ = 0.68",
+    "wet": "wet asphalt, μ = 0.6",
+}
+_FRICTION_MU = {"dry": 0.9, "earth": 0.68, "wet": 0.6}
+_METHODS = ("FZN", "REF", "ITER", "NL")
+_FLOAT_AXES = ("noise_scale", "mass_scale", "inertia_scale", "cornering_scale", "speed_scale")
+_CHOICE_AXES = ("method", "friction", "scenario", "track", "seed")
+#: Every axis a sweep may vary.
+AXES = ("method", "friction", "scenario", *_FLOAT_AXES, "track", "seed")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class RunParams(_Strict):
+    """The resolved parameters of one run (one point of the sweep)."""
+
+    method: str = "REF"
+    friction: str = "paper"
+    scenario: str = "nominal"
+    noise_scale: float = 1.0
+    mass_scale: float = 1.0
+    inertia_scale: float = 1.0
+    cornering_scale: float = 1.0
+    speed_scale: float = 1.0
+    track: str = "builtin"
+    seed: int | None = None  #: None: the base config's seed
+
+
+def _check_method(v: str) -> str:
+    m = str(v).strip().upper()
+    if m not in _METHODS:
+        raise ValueError(f"unknown method {v!r}; allowed: {', '.join(x.lower() for x in _METHODS)}")
+    return m
+
+
+def _check_named(v: str, allowed: dict[str, str], what: str) -> str:
+    if v not in allowed:
+        raise ValueError(f"unknown {what} {v!r}; allowed: {', '.join(allowed)}")
+    return v
+
+
+class GridAxes(_Strict):
+    """Values of each axis; the runs are their cartesian product (missing axes keep defaults)."""
+
+    method: list[str] | None = None
+    friction: list[str] | None = None
+    scenario: list[str] | None = None
+    noise_scale: list[PositiveFloat] | None = None
+    mass_scale: list[PositiveFloat] | None = None
+    inertia_scale: list[PositiveFloat] | None = None
+    cornering_scale: list[PositiveFloat] | None = None
+    speed_scale: list[PositiveFloat] | None = None
+    track: list[str] | None = None
+    seed: list[int] | None = None
+
+    @model_validator(mode="after")
+    def _values(self) -> GridAxes:
+        for name in AXES:
+            vals = getattr(self, name)
+            if vals is not None and len(vals) == 0:
+                raise ValueError(f"axis {name!r} is empty: give at least one value or leave it out")
+        if self.method:
+            object.__setattr__(self, "method", [_check_method(m) for m in self.method])
+        for v in self.friction or []:
+            _check_named(v, FRICTIONS, "friction profile")
+        for v in self.scenario or []:
+            _check_named(v, ROBUSTNESS_SCENARIOS, "robustness scenario")
+        return self
+
+
+class RandomSpec(_Strict):
+    """``n`` random samples (per grid point) drawn from ``seed``: floats uniform in ``ranges``,
+    the other axes uniformly from ``choices``."""
+
+    n: int = Field(ge=1, le=100_000)
+    seed: int = 0
+    ranges: dict[str, tuple[PositiveFloat, PositiveFloat]] = Field(default_factory=dict)
+    choices: dict[str, list[Any]] = Field(default_factory=dict)
+
+    @field_validator("ranges")
+    @classmethod
+    def _ranges(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        for k, (lo, hi) in v.items():
+            if k not in _FLOAT_AXES:
+                raise ValueError(f"ranges: {k!r} is not a numeric axis; "
+                                 f"numeric axes: {', '.join(_FLOAT_AXES)}")
+            if lo > hi:
+                raise ValueError(f"ranges.{k}: lower bound {lo} > upper bound {hi}")
+        return v
+
+    @field_validator("choices")
+    @classmethod
+    def _choices(cls, v: dict[str, list[Any]]) -> dict[str, list[Any]]:
+        for k, vals in v.items():
+            if k not in _CHOICE_AXES:
+                raise ValueError(f"choices: {k!r} is not a choice axis; "
+                                 f"choice axes: {', '.join(_CHOICE_AXES)}")
+            if not vals:
+                raise ValueError(f"choices.{k} is empty")
+        return v
+
+
+class SweepSpec(_Strict):
+    """A validated sweep file."""
+
+    name: str = "sweep"
+    duration_s: PositiveFloat | None = None
+    base_config: str | None = None
+    config: dict[str, Any] = Field(default_factory=dict)
+    grid: GridAxes = GridAxes()
+    random: RandomSpec | None = None
+    retries: int = Field(2, ge=0, le=10, description="re-runs of a task whose worker failed")
+    max_lateral_m: PositiveFloat = Field(5.0, description="|e_y| beyond which a run has diverged")
+    #: Folder the relative paths of the file are resolved against (set by load_sweep).
+    root: str = "."
+
+
+@dataclass(frozen=True)
+class RunTask:
+    """Everything a worker needs for one run (picklable; no open files or solvers)."""
+
+    id: str
+    params: RunParams
+    config: dict[str, Any]  #: the resolved base configuration (Config.model_dump())
+    duration_s: float | None
+    max_lateral_m: float
+    root: str
+    cache_dir: str | None = None
+
+
+@dataclass
+class SweepResult:
+    """What a sweep did."""
+
+    out: Path
+    n_runs: int  #: runs in the sweep
+    executed: int  #: records written by this call (the rest were on disk already)
+    skipped: int  #: records found on disk (resume)
+    failed: int  #: tasks lost to repeated worker failures (recorded with status "failed")
+    duplicates: int  #: results that arrived for an id already written (never rewritten)
+    table: Any = None  #: the aggregate pandas DataFrame
+    files: list[Path] = field(default_factory=list)
+
+
+# -- loading and expansion ----------------------------------------------------------------
+def load_sweep(path: str | Path) -> SweepSpec:
+    """Read and validate a sweep file; every problem raises :class:`ConfigError` naming the field,
+    before any task starts (the base config and track files are checked too)."""
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as err:
+        raise ConfigError(f"{p}: cannot read sweep file: {err.strerror}") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{p}: invalid TOML: {err}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{p}: a sweep file is a TOML table")
+    data.setdefault("root", str(p.resolve().parent))
+    spec = validate(SweepSpec, data, source=str(p))
+    base_config(spec, source=str(p))
+    for t in _track_values(spec):
+        _track_path(t, spec, source=str(p))
+    if not expand(spec):
+        raise ConfigError(f"{p}: the sweep has no runs")
+    return spec
+
+
+def base_config(spec: SweepSpec, source: str = "sweep") -> Config:
+    """The base config (file, then inline ``[config]`` overrides), validated."""
+    data: dict[str, Any] = {}
+    if spec.base_config:
+        path = Path(spec.root) / spec.base_config
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except OSError as err:
+            raise ConfigError(f"{source}: base_config: cannot read {path}: {err.strerror}") from None
+        except tomllib.TOMLDecodeError as err:
+            raise ConfigError(f"{source}: base_config: invalid TOML in {path}: {err}") from None
+    merged = _merge(data, spec.config)
+    return validate(Config, merged, source=f"{source}: config")
+
+
+def _merge(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
+    out = dict(a)
+    for k, v in b.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def _track_values(spec: SweepSpec) -> list[str]:
+    vals = list(spec.grid.track or [])
+    if spec.random is not None:
+        vals += [str(v) for v in spec.random.choices.get("track", [])]
+    return vals
+
+
+def _track_path(track: str, spec: SweepSpec, source: str = "sweep") -> Path | None:
+    if track == "builtin":
+        return None
+    p = Path(track)
+    p = p if p.is_absolute() else Path(spec.root) / p
+    if not p.is_file():
+        raise ConfigError(f"{source}: track: {track!r} is neither 'builtin' nor a readable file ({p})")
+    return p
+
+
+def expand(spec: SweepSpec) -> list[RunTask]:
+    """The runs of a sweep, in a stable order, with ids that hash their resolved inputs."""
+    cfg = base_config(spec)
+    cfg_dict = cfg.model_dump(mode="json")
+    grid = {name: getattr(spec.grid, name) for name in AXES if getattr(spec.grid, name) is not None}
+    points = [dict(zip(grid, combo, strict=True)) for combo in itertools.product(*grid.values())] or [{}]
+    if spec.random is not None:
+        rng = np.random.default_rng(spec.random.seed)
+        samples = []
+        for _ in range(spec.random.n):
+            s: dict[str, Any] = {}
+            for k, (lo, hi) in sorted(spec.random.ranges.items()):
+                s[k] = float(rng.uniform(lo, hi))
+            for k, vals in sorted(spec.random.choices.items()):
+                s[k] = vals[int(rng.integers(len(vals)))]
+            samples.append(s)
+        points = [{**p, **s} for p in points for s in samples]
+    tasks, seen = [], set()
+    for point in points:
+        try:
+            params = RunParams(**point)
+            params = params.model_copy(update={"method": _check_method(params.method)})
+            _check_named(params.friction, FRICTIONS, "friction profile")
+            _check_named(params.scenario, ROBUSTNESS_SCENARIOS, "robustness scenario")
+        except ValueError as err:
+            raise ConfigError(f"sweep: random.choices: {err}") from None
+        payload = json.dumps({"params": params.model_dump(), "config": cfg_dict,
+                              "duration_s": spec.duration_s, "max_lateral_m": spec.max_lateral_m},
+                             sort_keys=True)
+        rid = hashlib.sha256(payload.encode()).hexdigest()[:16]
+        if rid in seen:  # the same point twice (e.g. a repeated grid value) is one run
+            continue
+        seen.add(rid)
+        tasks.append(RunTask(rid, params, cfg_dict, spec.duration_s, spec.max_lateral_m, spec.root))
+    return tasks
+
+
+# -- one run (executes on a worker) ---------------------------------------------------------
+def run_task(task: RunTask) -> dict[str, Any]:
+    """Simulate one run and return its record. Never raises for a bad run: a divergence or an
+    exception becomes the record's ``status`` and ``reason``."""
+    t0 = time.perf_counter()
+    try:
+        metrics, status, reason = _simulate(task)
+    except Exception as err:  # a failing run is data, not a crash
+        metrics, status, reason = {}, "error", f"{type(err).__name__}: {err}"
+    return _record(task, status, reason, metrics, time.perf_counter() - t0)
+
+
+def dry_run(task: RunTask) -> dict[str, Any]:
+    """A stand-in for :func:`run_task` that does not simulate: it sleeps a little and returns
+    deterministic fake metrics. For checking a cluster's plumbing (``tsmpc sweep --dry-run``)."""
+    h = int(task.id[:8], 16) / 0xFFFFFFFF
+    time.sleep(0.2 + 0.2 * h)
+    metrics = {"rmse": {k: h for k in ("x", "y", "theta", "v", "omega")}, "max_abs_lateral_m": h,
+               "mpc_ms": {"median": 0.3, "p99": 0.5}, "wall_s": 0.2 + 0.2 * h}
+    return _record(task, "completed", "", metrics, 0.2 + 0.2 * h)
+
+
+def _record(
+    task: RunTask, status: str, reason: str, metrics: dict[str, Any], elapsed: float
+) -> dict[str, Any]:
+    return {"id": task.id, "params": task.params.model_dump(), "status": status, "reason": reason,
+            "metrics": metrics, "elapsed_s": elapsed, "worker_pid": os.getpid()}
+
+
+def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
+    from dataclasses import replace as dc_replace
+
+    from tsmpc.config import replace
+    from tsmpc.planning.circuit import builtin_circuit
+    from tsmpc.planning.reference import Reference
+    from tsmpc.planning.tracks import is_tumftm, load_tumftm, off_track, plan_track
+    from tsmpc.robustness import apply_robustness
+    from tsmpc.scenarios import ConstantFriction, paper_friction_profile
+    from tsmpc.sim.compare import load_scenario
+    from tsmpc.sim.metrics import compute_metrics
+    from tsmpc.sim.simulator import Scenario, simulate
+    from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
+
+    p = task.params
+    cfg = validate(Config, task.config, source="sweep config")
+    if p.seed is not None:
+        cfg = replace(cfg, seed=p.seed)
+    if p.noise_scale != 1.0:
+        cfg = replace(cfg, noise=replace(cfg.noise, scale=cfg.noise.scale * p.noise_scale))
+    Tc, N = cfg.rates.Tc, cfg.mpc.N
+    track = None
+    if p.track == "builtin":
+        sc = Scenario("builtin-circuit", builtin_circuit(dt=Tc), meta={"reference": "builtin-circuit"})
+    else:
+        path = Path(p.track) if Path(p.track).is_absolute() else Path(task.root) / p.track
+        if is_tumftm(path):
+            track = load_tumftm(path)
+            ref = plan_track(track, cfg.planner, dt=Tc, tail_s=(N + 1) * Tc)
+            sc = Scenario(track.name, ref, meta={"reference": str(path)})
+        else:
+            sc = load_scenario(cfg, path)
+    if p.speed_scale != 1.0:  # the same path, traversed faster: time compressed by the scale
+        r = sc.reference
+        s = p.speed_scale
+        fast = Reference(r.t / s, r.x, r.y, r.theta, r.v * s, r.omega * s, r.kappa)
+        sc = dc_replace(sc, reference=fast.resample(Tc))
+    friction = (paper_friction_profile() if p.friction == "paper"
+                else ConstantFriction(_FRICTION_MU[p.friction]))
+    bound = task.max_lateral_m
+    if track is not None:  # beyond the widest point of the track the car is off it for sure
+        bound = min(bound, float(np.max(np.maximum(track.w_left, track.w_right))))
+    sc = dc_replace(sc, friction=friction, divergence_bound_m=bound)
+    if (p.mass_scale, p.inertia_scale, p.cornering_scale) != (1.0, 1.0, 1.0):
+        v = cfg.vehicle
+        sc = dc_replace(sc, plant_vehicle=replace(
+            v, mass=v.mass * p.mass_scale, inertia=v.inertia * p.inertia_scale,
+            cornering_stiffness=v.cornering_stiffness * p.cornering_scale))
+    cfg, sc = apply_robustness(p.scenario, cfg, sc)
+    cache = Path(task.cache_dir) if task.cache_dir else None
+    kd, dd = load_or_design_kinematic(cfg, cache), load_or_design_dynamic(cfg, cache)
+    max_steps = None if task.duration_s is None else max(1, round(task.duration_s / Tc))
+    log = simulate(cfg, p.method, sc, kinematic_design=kd, dynamic_design=dd, max_steps=max_steps)
+    metrics = compute_metrics(log)
+    status, reason = "completed", ""
+    if log.termination != "completed":
+        status, reason = "diverged", log.termination
+    elif track is not None:
+        off = off_track(track, log.state_outer[:, 0], log.state_outer[:, 1])
+        if off.any():
+            k = int(np.argmax(off))
+            status, reason = "diverged", f"left the track at t = {log.t_outer[k] - log.t_outer[0]:.1f} s"
+    return metrics, status, reason
+
+
+# -- execution -----------------------------------------------------------------------------
+ProgressFn = Callable[[int, int, dict[str, Any]], None]
+
+
+def run_sweep(
+    spec: SweepSpec, out: str | Path, *, scheduler: str | None = None, workers: int = 2,
+    resume: bool = False, run_fn: Callable[[RunTask], dict[str, Any]] = run_task,
+    progress: ProgressFn | None = None, plots: bool = True,
+) -> SweepResult:
+    """Run every task of ``spec`` on Dask and write the records, the aggregate and the plots.
+
+    Args:
+        spec: validated sweep (see :func:`load_sweep`).
+        out: output folder (``runs/`` holds one JSON record per run).
+        scheduler: address of an existing Dask scheduler; None starts a LocalCluster of
+            ``workers`` single-threaded worker processes on the loopback interface.
+        resume: skip runs whose record is already in ``out/runs``. Without it an ``out`` that
+            already holds records is refused (nothing is overwritten).
+        run_fn: the task function (default: simulate; :func:`dry_run` for plumbing checks).
+        progress: called as ``progress(done, total, record)`` after each record is written.
+    """
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    out = Path(out)
+    runs_dir = out / "runs"
+    tasks = expand(spec)
+    on_disk = {p.stem for p in runs_dir.glob("*.json")} if runs_dir.is_dir() else set()
+    ids = {t.id for t in tasks}
+    if on_disk & ids and not resume:
+        raise ConfigError(f"{out}: already holds {len(on_disk & ids)} records of this sweep; "
+                          "use --resume to finish it or choose another --out")
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "sweep.json", json.dumps(
+        {"name": spec.name, "spec": spec.model_dump(mode="json"),
+         "runs": [{"id": t.id, **t.params.model_dump()} for t in tasks]}, indent=1))
+    pending = [t for t in tasks if t.id not in on_disk]
+    skipped = len(tasks) - len(pending)
+    cache = out / "design-cache"
+    if pending and run_fn is run_task:
+        # Solve the LMI designs once here; the workers then load them from this folder.
+        from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
+
+        cfg = base_config(spec)
+        load_or_design_kinematic(cfg, cache)
+        load_or_design_dynamic(cfg, cache)
+    pending = [RunTask(t.id, t.params, t.config, t.duration_s, t.max_lateral_m, t.root, str(cache))
+               for t in pending]
+    written: set[str] = set()
+    failed = duplicates = 0
+    done = skipped
+    if pending:
+        cluster = None
+        if scheduler is None:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   host="127.0.0.1", dashboard_address=None)
+            client = Client(cluster)
+        else:
+            client = Client(scheduler)
+        try:
+            futures = {client.submit(run_fn, t, key=f"tsmpc-run-{t.id}", retries=spec.retries,
+                                     pure=False): t for t in pending}
+            for fut in as_completed(futures):
+                task = futures[fut]
+                try:
+                    rec = fut.result()
+                except Exception as err:  # e.g. KilledWorker after repeated worker deaths
+                    failed += 1
+                    rec = _record(task, "failed", f"{type(err).__name__}: {err}", {}, float("nan"))
+                if task.id in written:
+                    duplicates += 1
+                    continue
+                atomic_write_text(runs_dir / f"{task.id}.json", json.dumps(rec, indent=1))
+                written.add(task.id)
+                done += 1
+                if progress is not None:
+                    progress(done, len(tasks), rec)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    table = aggregate(out, [t.id for t in tasks])
+    files = _write_table(table, out)
+    if plots and len(table):
+        from tsmpc.report.sweep_plots import save_sweep_plots
+
+        files += save_sweep_plots(table, out)
+    return SweepResult(out, len(tasks), len(written), skipped, failed, duplicates, table, files)
+
+
+# -- aggregation ---------------------------------------------------------------------------
+def _row(rec: dict[str, Any]) -> dict[str, Any]:
+    m = rec.get("metrics") or {}
+    row: dict[str, Any] = {"id": rec["id"], "status": rec["status"], "reason": rec.get("reason", "")}
+    row.update(rec["params"])
+    for k, v in (m.get("rmse") or {}).items():
+        row[f"rmse_{k}"] = v
+    row["max_abs_lateral_m"] = m.get("max_abs_lateral_m", math.nan)
+    for block in ("mpc_ms", "mhe_ms"):
+        for q in ("median", "p99"):
+            row[f"{block[:3]}_{q}_ms"] = (m.get(block) or {}).get(q, math.nan)
+    for k in ("friction_rmse_N", "slip_rmse_rad", "simulated_s", "wall_s", "realtime_factor"):
+        row[k] = m.get(k, math.nan)
+    for k, v in (m.get("events") or {}).items():
+        row[f"events_{k}"] = v
+    row["elapsed_s"] = rec.get("elapsed_s", math.nan)
+    return row
+
+
+def aggregate(out: str | Path, ids: list[str] | None = None) -> Any:
+    """The aggregate table (pandas DataFrame, one row per run record in ``out/runs``; restricted
+    to ``ids`` in that order when given)."""
+    import pandas as pd
+
+    runs_dir = Path(out) / "runs"
+    recs = {}
+    for p in sorted(runs_dir.glob("*.json")):
+        rec = json.loads(p.read_text())
+        recs[rec["id"]] = rec
+    order = [i for i in ids if i in recs] if ids is not None else list(recs)
+    return pd.DataFrame([_row(recs[i]) for i in order])
+
+
+def _write_table(table: Any, out: Path) -> list[Path]:
+    import io
+
+    csv, parquet = out / "aggregate.csv", out / "aggregate.parquet"
+    atomic_write_text(csv, table.to_csv(index=False))
+    buf = io.BytesIO()
+    table.to_parquet(buf, index=False)
+    atomic_write_bytes(parquet, buf.getvalue())
+    return [csv, parquet]
+
