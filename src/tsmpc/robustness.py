@@ -32,7 +32,7 @@ __all__ = [
 #: Scenario name → one-line description (the names accepted by sweeps and configs).
 ROBUSTNESS_SCENARIOS: dict[str, str] = {
     "nominal": "no change (the comparison's conditions)",
-    "ice_patch": "30 m of ice (μ = 0.1) at a third of the path; the tyre grip scales with μ(road)",
+    "ice_patch": "30 m of ice (μ = 0.1) a third of the way along; the tyre grip scales with μ(road)",
     "wet_section": "μ(road) = 0.6 from 30 % to 70 % of the path",
     "noise_x10": "every sensor-noise σ × 10",
     "sensor_dropout": "every 5 s all measurements freeze for 0.2 s (last value held)",
@@ -77,14 +77,19 @@ def _in_burst(t: float, start: float, period: float, duration: float) -> bool:
     return t >= start - 1e-9 and math.fmod(t - start + 1e-9, period) < duration
 
 
-def path_length(ref: Reference) -> float:
-    """Length [m] of a reference's path (∑ v_d T)."""
-    return float(np.sum(np.abs(ref.v)) * ref.dt)
+def path_length(ref: Reference, until_s: float | None = None) -> float:
+    """Length [m] of a reference's path (∑ v_d T), over its first ``until_s`` seconds if given."""
+    v = ref.v if until_s is None else ref.v[: max(1, round(until_s / ref.dt))]
+    return float(np.sum(np.abs(v)) * ref.dt)
 
 
-def apply_robustness(name: str, cfg: Config, scenario: Scenario) -> tuple[Config, Scenario]:
+def apply_robustness(
+    name: str, cfg: Config, scenario: Scenario, until_s: float | None = None
+) -> tuple[Config, Scenario]:
     """(config, scenario) with the named robustness condition applied (see ROBUSTNESS_SCENARIOS).
 
+    Surface patches are placed relative to the part of the path driven in the first ``until_s``
+    seconds (the whole reference if None), so shortened runs meet them too.
     Raises ValueError for an unknown name (the message lists the allowed ones).
     """
     if name not in ROBUSTNESS_SCENARIOS:
@@ -92,10 +97,11 @@ def apply_robustness(name: str, cfg: Config, scenario: Scenario) -> tuple[Config
     label = scenario.name if name == "nominal" else f"{scenario.name}+{name}"
     meta = {**scenario.meta, "robustness": name}
     sc = dc_replace(scenario, name=label, meta=meta)
-    L = path_length(scenario.reference)
+    L = path_length(scenario.reference, until_s)
     if name == "ice_patch":
         start = L / 3.0
-        friction = PatchFriction(0.9, (SurfacePatch(start, start + 30.0, 0.1, ramp_m=2.0),))
+        length = min(30.0, L / 3.0)
+        friction = PatchFriction(0.9, (SurfacePatch(start, start + length, 0.1, ramp_m=2.0),))
         tyre = replace(cfg.tyre, scale_grip_with_road=True)
         return cfg, dc_replace(sc, friction=friction, plant_tyre=tyre)
     if name == "wet_section":

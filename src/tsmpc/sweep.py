@@ -388,7 +388,7 @@ def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
         sc = dc_replace(sc, plant_vehicle=replace(
             v, mass=v.mass * p.mass_scale, inertia=v.inertia * p.inertia_scale,
             cornering_stiffness=v.cornering_stiffness * p.cornering_scale))
-    cfg, sc = apply_robustness(p.scenario, cfg, sc)
+    cfg, sc = apply_robustness(p.scenario, cfg, sc, until_s=task.duration_s)
     cache = Path(task.cache_dir) if task.cache_dir else None
     kd, dd = load_or_design_kinematic(cfg, cache), load_or_design_dynamic(cfg, cache)
     max_steps = None if task.duration_s is None else max(1, round(task.duration_s / Tc))

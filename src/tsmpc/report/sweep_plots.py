@@ -22,8 +22,12 @@ _STATUS_MARK = {"completed": "o", "diverged": "x", "error": "s", "failed": "s"}
 def _axis_figure(table: Any, axis: str) -> Any:
     metrics = [("rmse_x", "RMSE x [m]"), ("rmse_y", "RMSE y [m]"), ("max_abs_lateral_m", "max |e_y| [m]")]
     fig, axs = plt.subplots(1, len(metrics), figsize=(13, 3.8))
-    col = table[axis].astype(str) if table[axis].dtype == object else table[axis]
-    categorical = col.dtype == object or col.nunique() <= 6
+    from pandas.api.types import is_numeric_dtype
+
+    col = table[axis]
+    categorical = not is_numeric_dtype(col) or col.nunique() <= 6
+    if categorical:
+        col = col.astype(str)
     levels = sorted(col.unique(), key=str)
     for ax, (key, label) in zip(axs, metrics, strict=True):
         for status, mark in _STATUS_MARK.items():
