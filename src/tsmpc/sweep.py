@@ -459,7 +459,7 @@ def run_sweep(
         cluster = None
         if scheduler is None:
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   host="127.0.0.1", dashboard_address=None)
+                                   host="127.0.0.1", dashboard_address=":0")
             client = Client(cluster)
         else:
             client = Client(scheduler)
