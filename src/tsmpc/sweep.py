@@ -195,7 +195,9 @@ class RunTask:
     duration_s: float | None
     max_lateral_m: float
     root: str
-    cache_dir: str | None = None
+    #: (kinematic, dynamic) LMI designs solved and certified once by the client; None: the
+    #: worker loads them from its design cache.
+    designs: tuple[Any, Any] | None = None
 
 
 @dataclass
@@ -389,8 +391,7 @@ def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
             v, mass=v.mass * p.mass_scale, inertia=v.inertia * p.inertia_scale,
             cornering_stiffness=v.cornering_stiffness * p.cornering_scale))
     cfg, sc = apply_robustness(p.scenario, cfg, sc, until_s=task.duration_s)
-    cache = Path(task.cache_dir) if task.cache_dir else None
-    kd, dd = load_or_design_kinematic(cfg, cache), load_or_design_dynamic(cfg, cache)
+    kd, dd = task.designs or (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
     max_steps = None if task.duration_s is None else max(1, round(task.duration_s / Tc))
     log = simulate(cfg, p.method, sc, kinematic_design=kd, dynamic_design=dd, max_steps=max_steps)
     metrics = compute_metrics(log)
@@ -442,16 +443,16 @@ def run_sweep(
          "runs": [{"id": t.id, **t.params.model_dump()} for t in tasks]}, indent=1))
     pending = [t for t in tasks if t.id not in on_disk]
     skipped = len(tasks) - len(pending)
-    cache = out / "design-cache"
     if pending and run_fn is run_task:
-        # Solve the LMI designs once here; the workers then load them from this folder.
+        # The axes never touch the controller settings, so one pair of LMI designs serves every
+        # run: solved (or loaded from the design cache) and certified here, shipped with the
+        # tasks — remote workers need no shared disk and solve nothing.
         from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
         cfg = base_config(spec)
-        load_or_design_kinematic(cfg, cache)
-        load_or_design_dynamic(cfg, cache)
-    pending = [RunTask(t.id, t.params, t.config, t.duration_s, t.max_lateral_m, t.root, str(cache))
-               for t in pending]
+        designs = (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
+        pending = [RunTask(t.id, t.params, t.config, t.duration_s, t.max_lateral_m, t.root, designs)
+                   for t in pending]
     written: set[str] = set()
     failed = duplicates = 0
     done = skipped
