@@ -23,7 +23,7 @@ def _parse_window(text: str | None) -> tuple[int, int] | None:
 
 def _execute(
     methods_text: str, reference: Path | None, window: str | None, out: Path, seed: int | None,
-    config: Path | None, no_plots: bool, oracle: bool, duration: float | None,
+    config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
 ) -> None:
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -49,6 +49,13 @@ def _execute(
         scenario = load_scenario(cfg, reference, _parse_window(window))
     except (TsmpcError, OSError) as err:
         fail(err)
+    if robustness != "nominal":
+        from tsmpc.robustness import apply_robustness
+
+        try:
+            cfg, scenario = apply_robustness(robustness, cfg, scenario, until_s=duration)
+        except ValueError as err:
+            fail(err)
     max_steps = None if duration is None else max(1, round(duration / cfg.rates.Tc))
     with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
                   TextColumn("{task.completed}/{task.total} MPC steps"),
@@ -101,6 +108,8 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
             console.print(f"[red]{name}: {m['termination']}[/red]")
 
 
+_SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
+                  "nan_bursts, mass_stiffness_mismatch (see tsmpc.robustness).")
 _REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..1316 is used unless "
              "--window says otherwise) or a planned CSV (t,x,y,theta,v,omega,kappa). "
              "Default: the built-in paper-like circuit.")
@@ -119,9 +128,10 @@ def compare_cmd(
         False, "--oracle", help="Ablation: true state, no friction compensation."
     ),
     duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
+    robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
-    _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration)
+    _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness)
 
 
 @app.command("run")
@@ -137,8 +147,9 @@ def run_cmd(
         False, "--oracle", help="Ablation: true state, no friction compensation."
     ),
     duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
+    robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
     if "," in method:
         fail(ValueError("--method takes one method; use `tsmpc compare --methods` for several"))
-    _execute(method, reference, window, out, seed, config, no_plots, oracle, duration)
+    _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness)
