@@ -28,6 +28,8 @@ def _axis_figure(table: Any, axis: str) -> Any:
     categorical = not is_numeric_dtype(col) or col.nunique() <= 6
     if categorical:
         col = col.astype(str)
+    if axis == "track":  # file paths: the file name is the label
+        col = col.map(lambda v: Path(v).stem)
     levels = sorted(col.unique(), key=str)
     for ax, (key, label) in zip(axs, metrics, strict=True):
         for status, mark in _STATUS_MARK.items():
@@ -36,8 +38,8 @@ def _axis_figure(table: Any, axis: str) -> Any:
                 continue
             xs = col[sel]
             xpos = np.array([levels.index(v) for v in xs], float) if categorical else xs.to_numpy(float)
-            if categorical:  # spread the points of one level a little so they stay visible
-                xpos = xpos + np.linspace(-0.15, 0.15, xpos.size) if xpos.size > 1 else xpos
+            if categorical:  # spread the points of each level a little so they stay visible
+                xpos = xpos + _jitter(xpos)
             ax.plot(xpos, table.loc[sel, key], mark, ms=5, alpha=0.8, label=status)
         if categorical:
             ax.set_xticks(range(len(levels)), [str(v) for v in levels], rotation=30, ha="right")
@@ -48,6 +50,16 @@ def _axis_figure(table: Any, axis: str) -> Any:
     fig.suptitle(f"sweep: tracking against {axis}")
     fig.tight_layout()
     return fig
+
+
+def _jitter(xpos: np.ndarray) -> np.ndarray:
+    """Offsets in [−0.15, 0.15] spreading the points that share a level."""
+    out = np.zeros_like(xpos)
+    for level in np.unique(xpos):
+        idx = np.flatnonzero(xpos == level)
+        if idx.size > 1:
+            out[idx] = np.linspace(-0.15, 0.15, idx.size)
+    return out
 
 
 def _timing_figure(table: Any) -> Any:
