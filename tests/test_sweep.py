@@ -169,3 +169,20 @@ track = ["builtin", "{tracks_dir / 'Monza.csv'}"]
     assert (t["max_abs_lateral_m"] < 0.2).all()
     assert (t.loc[t["scenario"] == "nan_bursts", "events_mhe_rejected"] > 0).all()
     assert (tmp_path / "out" / "by_scenario.png").stat().st_size > 1000
+
+
+def test_cli_sweep_dry_run_and_bad_file(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from tsmpc.cli import app
+
+    sweep = _write(tmp_path, GRID8)
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["sweep", str(sweep), "--dry-run", "--workers", "2", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert len(pd.read_csv(out / "aggregate.csv")) == 8
+    assert (out / "by_method.png").is_file() and (out / "solve_times.png").is_file()
+    again = CliRunner().invoke(app, ["sweep", str(sweep), "--dry-run", "--out", str(out), "--resume"])
+    assert again.exit_code == 0 and "0 run now, 8 resumed" in again.output
+    bad = CliRunner().invoke(app, ["sweep", str(_write(tmp_path, "[grid]\nmethod = []\n", "b.toml"))])
+    assert bad.exit_code == 2 and "axis 'method' is empty" in bad.output
