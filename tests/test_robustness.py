@@ -9,7 +9,13 @@ from typer.testing import CliRunner
 
 from tsmpc.cli import app
 from tsmpc.config import Config
-from tsmpc.robustness import ROBUSTNESS_SCENARIOS, DropoutFault, NaNBurstFault, apply_robustness
+from tsmpc.robustness import (
+    ROBUSTNESS_SCENARIOS,
+    DropoutFault,
+    NaNBurstFault,
+    apply_robustness,
+    robustness_scenario,
+)
 from tsmpc.sim.compare import load_scenario
 from tsmpc.sim.simulator import Method, simulate
 
@@ -48,6 +54,18 @@ def test_each_scenario_changes_what_it_names(cfg: Config) -> None:
     assert s.friction.mu(0.0, 640.0) == pytest.approx(0.6) and s.friction.mu(0.0, 10.0) == 0.9
     with pytest.raises(ValueError, match="allowed: nominal"):
         apply_robustness("hail", cfg, sc)
+
+
+def test_robustness_scenario_builds_a_typed_case_on_a_reference(cfg: Config) -> None:
+    ref = load_scenario(cfg).reference
+    case = robustness_scenario("noise_x10", cfg, ref)
+    assert case.config.noise.scale == pytest.approx(10 * cfg.noise.scale)
+    assert case.scenario.name == "noise_x10" and case.scenario.reference is ref
+    case = robustness_scenario("sensor_dropout", cfg, ref)
+    assert case.config == cfg and isinstance(case.scenario.sensor_fault, DropoutFault)
+    # The fault is per run: two cases never share a stateful fault object.
+    other = robustness_scenario("sensor_dropout", cfg, ref)
+    assert other.scenario.sensor_fault is not case.scenario.sensor_fault
 
 
 def test_a_shortened_ice_patch_run_meets_the_ice(cfg: Config) -> None:

@@ -1,7 +1,8 @@
 """Named robustness scenarios (issue 8; SPEC §10): conditions the controllers were not designed
 for, applied on top of any reference. Usable from configs, sweeps and the library::
 
-    cfg, sc = apply_robustness("ice_patch", cfg, scenario)
+    case = robustness_scenario("ice_patch", cfg, reference)      # a fresh scenario on a reference
+    cfg, sc = apply_robustness("ice_patch", cfg, scenario)        # on top of an existing scenario
 
 Every scenario is deterministic given the run's seed; sensor faults are small stateful objects
 created per run (a run owns its fault, so runs in parallel never share state).
@@ -12,6 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from dataclasses import replace as dc_replace
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,8 +27,10 @@ __all__ = [
     "ROBUSTNESS_SCENARIOS",
     "DropoutFault",
     "NaNBurstFault",
+    "RobustnessCase",
     "apply_robustness",
     "path_length",
+    "robustness_scenario",
 ]
 
 #: Scenario name → one-line description (the names accepted by sweeps and configs).
@@ -77,15 +81,36 @@ def _in_burst(t: float, start: float, period: float, duration: float) -> bool:
     return t >= start - 1e-9 and math.fmod(t - start + 1e-9, period) < duration
 
 
+class RobustnessCase(NamedTuple):
+    """A robustness scenario ready to simulate: ``simulate(case.config, method, case.scenario)``.
+
+    Both parts are needed because sensor noise lives in the config (``noise.scale``) while the
+    plant, surface and sensor faults live in the :class:`Scenario`. A NamedTuple so that
+    ``cfg, sc = apply_robustness(...)`` unpacks it.
+    """
+
+    config: Config
+    scenario: Scenario
+
+
 def path_length(ref: Reference, until_s: float | None = None) -> float:
     """Length [m] of a reference's path (∑ v_d T), over its first ``until_s`` seconds if given."""
     v = ref.v if until_s is None else ref.v[: max(1, round(until_s / ref.dt))]
     return float(np.sum(np.abs(v)) * ref.dt)
 
 
+def robustness_scenario(
+    name: str, cfg: Config, reference: Reference, *, until_s: float | None = None
+) -> RobustnessCase:
+    """The named robustness scenario on ``reference`` (paper friction profile by time, healthy
+    nominal plant otherwise): :func:`apply_robustness` on a fresh :class:`Scenario`."""
+    case = apply_robustness(name, cfg, Scenario(name, reference), until_s=until_s)
+    return RobustnessCase(case.config, dc_replace(case.scenario, name=name))
+
+
 def apply_robustness(
     name: str, cfg: Config, scenario: Scenario, until_s: float | None = None
-) -> tuple[Config, Scenario]:
+) -> RobustnessCase:
     """(config, scenario) with the named robustness condition applied (see ROBUSTNESS_SCENARIOS).
 
     Surface patches are placed relative to the part of the path driven in the first ``until_s``
@@ -103,18 +128,18 @@ def apply_robustness(
         length = min(30.0, L / 3.0)
         friction = PatchFriction(0.9, (SurfacePatch(start, start + length, 0.1, ramp_m=2.0),))
         tyre = replace(cfg.tyre, scale_grip_with_road=True)
-        return cfg, dc_replace(sc, friction=friction, plant_tyre=tyre)
+        return RobustnessCase(cfg, dc_replace(sc, friction=friction, plant_tyre=tyre))
     if name == "wet_section":
         friction = PatchFriction(0.9, (SurfacePatch(0.3 * L, 0.7 * L, 0.6, ramp_m=10.0),))
-        return cfg, dc_replace(sc, friction=friction)
+        return RobustnessCase(cfg, dc_replace(sc, friction=friction))
     if name == "noise_x10":
-        return replace(cfg, noise=replace(cfg.noise, scale=cfg.noise.scale * 10.0)), sc
+        return RobustnessCase(replace(cfg, noise=replace(cfg.noise, scale=cfg.noise.scale * 10.0)), sc)
     if name == "sensor_dropout":
-        return cfg, dc_replace(sc, sensor_fault=DropoutFault())
+        return RobustnessCase(cfg, dc_replace(sc, sensor_fault=DropoutFault()))
     if name == "nan_bursts":
-        return cfg, dc_replace(sc, sensor_fault=NaNBurstFault())
+        return RobustnessCase(cfg, dc_replace(sc, sensor_fault=NaNBurstFault()))
     if name == "mass_stiffness_mismatch":
         base = scenario.plant_vehicle or cfg.vehicle
         veh = replace(base, mass=base.mass * 1.2, cornering_stiffness=base.cornering_stiffness * 0.8)
-        return cfg, dc_replace(sc, plant_vehicle=veh)
-    return cfg, sc
+        return RobustnessCase(cfg, dc_replace(sc, plant_vehicle=veh))
+    return RobustnessCase(cfg, sc)
