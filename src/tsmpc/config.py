@@ -87,7 +87,13 @@ class VehicleParams(_Frozen):
     mass: PositiveFloat = Field(683.0, description="vehicle mass M [kg]")
     inertia: PositiveFloat = Field(560.94, description="yaw inertia I [kg m^2]")
     cornering_stiffness: PositiveFloat = Field(
-        25000.0, description="cornering stiffness C_x of each axle [N/rad]"
+        25000.0, description="cornering stiffness C_x of each axle [N/rad] (paper: both axles)"
+    )
+    cornering_stiffness_front: PositiveFloat | None = Field(
+        None, description="front-axle cornering stiffness C_f [N/rad]; None = cornering_stiffness"
+    )
+    cornering_stiffness_rear: PositiveFloat | None = Field(
+        None, description="rear-axle cornering stiffness C_r [N/rad]; None = cornering_stiffness"
     )
     frontal_area: PositiveFloat = Field(1.91, description="frontal area A_r [m^2]")
     air_density: PositiveFloat = Field(1.184, description="air density rho [kg/m^3]")
@@ -99,6 +105,46 @@ class VehicleParams(_Frozen):
     def wheelbase(self) -> float:
         """a + b [m]."""
         return self.a + self.b
+
+    @property
+    def C_f(self) -> float:
+        """Front-axle cornering stiffness [N/rad]."""
+        c = self.cornering_stiffness_front
+        return self.cornering_stiffness if c is None else c
+
+    @property
+    def C_r(self) -> float:
+        """Rear-axle cornering stiffness [N/rad]."""
+        c = self.cornering_stiffness_rear
+        return self.cornering_stiffness if c is None else c
+
+    def with_stiffness_scaled(self, factor: float) -> VehicleParams:
+        """A copy with every cornering stiffness (both axles) multiplied by ``factor``."""
+        def sc(c: float | None) -> float | None:
+            return None if c is None else c * factor
+
+        return replace(self, cornering_stiffness=self.cornering_stiffness * factor,
+                       cornering_stiffness_front=sc(self.cornering_stiffness_front),
+                       cornering_stiffness_rear=sc(self.cornering_stiffness_rear))
+
+    @classmethod
+    def from_commonroad(cls, params: Any, *, mu_nominal: float = 0.5) -> VehicleParams:
+        """The single-track equivalent of a CommonRoad parameter set (``vehiclemodels``'
+        ``parameters_vehicleN()``, or any object with the same attributes).
+
+        CommonRoad's single-track model writes each lateral force as μ C_S F_z × slip with the
+        normalised stiffness C_S = −p_ky1 / p_dy1 and μ = p_dy1 (its ``vehicle_dynamics_st``), so
+        the axle stiffnesses at the static loads are C_f = −p_ky1 M g b / (a + b) and
+        C_r = −p_ky1 M g a / (a + b). CommonRoad has no aerodynamic drag (C_d = 0); μ_o is the
+        control models' nominal resistance, as for tsmpc's own plant.
+        """
+        a, b, m, g = float(params.a), float(params.b), float(params.m), 9.81
+        mu_cs = -float(params.tire.p_ky1)  # μ C_S, the same for both axles in CommonRoad's ST
+        return cls(a=a, b=b, mass=m, inertia=float(params.I_z), g=g,
+                   cornering_stiffness=0.5 * mu_cs * m * g,
+                   cornering_stiffness_front=mu_cs * m * g * b / (a + b),
+                   cornering_stiffness_rear=mu_cs * m * g * a / (a + b),
+                   drag_coefficient=0.0, mu_nominal=mu_nominal)
 
     @property
     def drag_factor(self) -> float:
@@ -264,6 +310,13 @@ class LQRSettings(_Frozen):
     force_min: FiniteFloat = Field(-2000.0, description="F_xR lower saturation [N]")
     force_max: FiniteFloat = Field(10000.0, description="F_xR upper saturation [N]")
     delta_max: PositiveFloat = Field(math.radians(25.0), description="|δ| saturation [rad]")
+    force_min_per_kg: float | None = Field(
+        None, le=0.0, allow_inf_nan=False,
+        description="F_xR lower saturation per kg of vehicle mass [N/kg = m/s^2]; "
+        "overrides force_min when set (limits that scale with the mass)")
+    force_max_per_kg: float | None = Field(
+        None, gt=0.0, allow_inf_nan=False,
+        description="F_xR upper saturation per kg of vehicle mass [N/kg]; overrides force_max")
     friction_compensation: bool = Field(True, description="add F̂_fr to the force command")
     oracle: bool = Field(
         False, description="deprecated (old config files): same as simulate(oracle=True), the "
@@ -277,6 +330,15 @@ class LQRSettings(_Frozen):
     def _check(self) -> LQRSettings:
         _interval(self.force_min, self.force_max, "force_min/force_max")
         return self
+
+    def force_limits(self, vehicle: VehicleParams) -> tuple[float, float]:
+        """(F_min, F_max) [N] for ``vehicle``: the per-kg limits × its mass where set."""
+        lo = self.force_min if self.force_min_per_kg is None else self.force_min_per_kg * vehicle.mass
+        hi = self.force_max if self.force_max_per_kg is None else self.force_max_per_kg * vehicle.mass
+        if not lo < hi:
+            raise ConfigError(f"lqr: force limits for a {vehicle.mass:g} kg vehicle give "
+                              f"F_min = {lo:g} N >= F_max = {hi:g} N")
+        return lo, hi
 
 
 class MHESettings(_Frozen):
@@ -344,7 +406,8 @@ class Config(_Frozen):
         """Serialise to TOML; :func:`load_config` reads it back to an equal object."""
         import tomli_w
 
-        return tomli_w.dumps(self.to_dict())
+        # TOML has no null: unset optional fields are omitted (they load back as None)
+        return tomli_w.dumps(self.model_dump(mode="json", exclude_none=True))
 
 
 T = TypeVar("T", bound=BaseModel)

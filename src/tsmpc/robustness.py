@@ -22,6 +22,7 @@ from tsmpc.config import Config, replace
 from tsmpc.planning.reference import Reference
 from tsmpc.scenarios import PatchFriction, SurfacePatch
 from tsmpc.sim.simulator import Scenario
+from tsmpc.vehicle.actuators import Actuators, ForceLag, SteeringServo
 
 __all__ = [
     "ROBUSTNESS_SCENARIOS",
@@ -42,6 +43,8 @@ ROBUSTNESS_SCENARIOS: dict[str, str] = {
     "sensor_dropout": "every 5 s all measurements freeze for 0.2 s (last value held)",
     "nan_bursts": "every 7 s all measurements are NaN for 50 ms",
     "mass_stiffness_mismatch": "plant mass +20 % and cornering stiffness −20 % (controllers unchanged)",
+    "actuator_lag": "steering servo (50 ms lag, 0.4 rad/s) and 0.1 s force lag; the applied inputs "
+    "are measured and given to the MHE",
 }
 
 
@@ -140,6 +143,9 @@ def apply_robustness(
         return RobustnessCase(cfg, dc_replace(sc, sensor_fault=NaNBurstFault()))
     if name == "mass_stiffness_mismatch":
         base = scenario.plant_vehicle or cfg.vehicle
-        veh = replace(base, mass=base.mass * 1.2, cornering_stiffness=base.cornering_stiffness * 0.8)
+        veh = replace(base.with_stiffness_scaled(0.8), mass=base.mass * 1.2)
         return RobustnessCase(cfg, dc_replace(sc, plant_vehicle=veh))
+    if name == "actuator_lag":
+        act = Actuators(SteeringServo(0.05, 0.4), ForceLag(0.1))
+        return RobustnessCase(cfg, dc_replace(sc, actuators=act, measured_input=True))
     return RobustnessCase(cfg, sc)

@@ -388,8 +388,8 @@ def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
     if (p.mass_scale, p.inertia_scale, p.cornering_scale) != (1.0, 1.0, 1.0):
         v = cfg.vehicle
         sc = dc_replace(sc, plant_vehicle=replace(
-            v, mass=v.mass * p.mass_scale, inertia=v.inertia * p.inertia_scale,
-            cornering_stiffness=v.cornering_stiffness * p.cornering_scale))
+            v.with_stiffness_scaled(p.cornering_scale), mass=v.mass * p.mass_scale,
+            inertia=v.inertia * p.inertia_scale))
     cfg, sc = apply_robustness(p.scenario, cfg, sc, until_s=task.duration_s)
     kd, dd = task.designs or (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
     max_steps = None if task.duration_s is None else max(1, round(task.duration_s / Tc))

@@ -87,8 +87,9 @@ class TSLQR:
         self.settings = settings
         self.Td = float(Td)
         self._a = math.exp(-bandwidth * self.Td)
-        self._lo = np.array([settings.force_min, -settings.delta_max])
-        self._hi = np.array([settings.force_max, settings.delta_max])
+        f_lo, f_hi = settings.force_limits(vehicle)
+        self._lo = np.array([f_lo, -settings.delta_max])
+        self._hi = np.array([f_hi, settings.delta_max])
         # The step runs every millisecond on 2-vectors: plain floats beat numpy's per-call cost,
         # so the premise box, vertex bits and gains are unpacked once here.
         box = model.premise_box

@@ -28,6 +28,7 @@ from tsmpc.planning.reference import Reference
 from tsmpc.scenarios import FrictionProfile, SensorNoise, paper_friction_profile
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.plant import Plant
+from tsmpc.vehicle.actuators import Actuators
 from tsmpc.vehicle.plant import VehiclePlant
 
 __all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "default_plant", "simulate"]
@@ -52,6 +53,9 @@ class Scenario:
         friction: μ(road) as a function of time and travelled distance.
         initial_error: (lateral offset [m], heading offset [rad]) of the start pose.
         plant_vehicle, plant_tyre: plant-only parameters (model mismatch); None = the config's.
+        actuators: steering servo / force lag in front of the default plant; None = ideal.
+        measured_input: the platform measures the input the vehicle really received (the
+            plant's ``applied_input``) and gives it to the cascade (the MHE then uses it).
         sensor_fault: measurement corruption (dropouts, NaN bursts); None = healthy sensors.
         divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track width).
         meta: free-form facts written to metrics.json (source file, window, ...).
@@ -63,6 +67,8 @@ class Scenario:
     initial_error: tuple[float, float] = (0.0, 0.0)
     plant_vehicle: VehicleParams | None = None
     plant_tyre: TyreParams | None = None
+    actuators: Actuators | None = None
+    measured_input: bool = False
     sensor_fault: SensorFault | None = None
     divergence_bound_m: float | None = None
     meta: dict[str, Any] = field(default_factory=dict)
@@ -142,9 +148,22 @@ def _start_state(ref: Reference, initial_error: tuple[float, float]) -> NDArray[
 
 
 def default_plant(cfg: Config, scenario: Scenario) -> Plant:
-    """tsmpc's nonlinear plant with the scenario's plant parameters (the config's if None)."""
-    return VehiclePlant(scenario.plant_vehicle or cfg.vehicle, scenario.plant_tyre or cfg.tyre,
-                        cfg.rates.h)
+    """tsmpc's nonlinear plant with the scenario's plant parameters (the config's if None),
+    behind the scenario's actuators if any."""
+    plant = VehiclePlant(scenario.plant_vehicle or cfg.vehicle, scenario.plant_tyre or cfg.tyre,
+                         cfg.rates.h)
+    return plant if scenario.actuators is None else scenario.actuators.wrap(
+        plant, substeps=cfg.rates.plant_per_inner)
+
+
+def _measurement(y: NDArray[np.float64], x: NDArray[np.float64], plant: Plant, oracle: bool,
+                 measured_input: bool) -> Measurement:
+    """The sensor sample the cascade gets: noisy [X, Y, θ, v, ω], plus the applied input if the
+    platform measures it, plus the true [v, α, ω] in the oracle ablation."""
+    u = plant.applied_input if measured_input else None
+    return Measurement.from_array(y, state=x[3:6].copy() if oracle else None,
+                                  force=None if u is None else float(u[0]),
+                                  steering=None if u is None else float(u[1]))
 
 
 def simulate(
@@ -185,7 +204,7 @@ def simulate(
             termination = f"diverged: |e_y| = {abs(e_y):.2f} m > {bound:g} m at t = {k * Tc:.1f} s"
             done = k + 1
             break
-        cmd = cascade.step(t, Measurement.from_array(y, state=x[3:6].copy() if oracle else None))
+        cmd = cascade.step(t, _measurement(y, x, plant, oracle, scenario.measured_input))
         if cmd.plan is not None:
             rec.plan(k, cmd)
         mu = float(scenario.friction.mu(t, s_travel))

@@ -61,7 +61,10 @@ def dynamic_key(cfg: Config) -> str:
     """Hash of every input of the dynamic design."""
     return _hash("dynamic", {"box": cfg.dynamic_box.model_dump(mode="json"),
                              "lmi": cfg.dynamic_lmi.model_dump(mode="json"),
-                             "vehicle": cfg.vehicle.model_dump(mode="json"), "Td": cfg.rates.Td})
+                             # unset optional fields (per-axle stiffness) are left out, so the
+                             # keys of existing designs do not change
+                             "vehicle": cfg.vehicle.model_dump(mode="json", exclude_none=True),
+                             "Td": cfg.rates.Td})
 
 
 def design_to_dict(design: KinematicDesign | DynamicDesign) -> dict[str, Any]:
