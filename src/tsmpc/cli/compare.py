@@ -24,6 +24,7 @@ def _parse_window(text: str | None) -> tuple[int, int] | None:
 def _execute(
     methods_text: str, reference: Path | None, window: str | None, out: Path, seed: int | None,
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
+    plant: str = "tsmpc", cr_vehicle: int = 2,
 ) -> None:
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -56,6 +57,7 @@ def _execute(
             cfg, scenario = apply_robustness(robustness, cfg, scenario, until_s=duration)
         except ValueError as err:
             fail(err)
+    cfg, scenario, plant_factory = _plant_setup(plant, cr_vehicle, cfg, scenario)
     max_steps = None if duration is None else max(1, round(duration / cfg.rates.Tc))
     with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
                   TextColumn("{task.completed}/{task.total} MPC steps"),
@@ -67,11 +69,36 @@ def _execute(
 
         try:
             result = compare(cfg, scenario, methods, out, plots=not no_plots, oracle=oracle,
-                             max_steps=max_steps, progress_factory=factory)
+                             max_steps=max_steps, progress_factory=factory,
+                             plant_factory=plant_factory)
         except TsmpcError as err:
             fail(err)
     _print_tables(console, result.metrics)
     console.print(f"wrote {len(result.files)} files to [bold]{out}[/bold]")
+
+
+def _plant_setup(plant: str, cr_vehicle: int, cfg: Any, scenario: Any) -> tuple[Any, Any, Any]:
+    """(config, scenario, plant factory) for ``--plant``: tsmpc's own, or a CommonRoad model
+    with vehicle ``--cr-vehicle`` (controllers set up for it, applied steering measured)."""
+    from dataclasses import replace as dc_replace
+
+    from tsmpc.errors import TsmpcError
+
+    name = plant.strip().lower()
+    if name == "tsmpc":
+        return cfg, scenario, None
+    from tsmpc.vehicle.commonroad import COMMONROAD_MODELS, CommonRoadPlant, commonroad_config
+
+    if name not in COMMONROAD_MODELS:
+        fail(ValueError(f"unknown --plant {plant!r}; allowed: tsmpc, {', '.join(COMMONROAD_MODELS)}"))
+    try:
+        cfg = commonroad_config(cfg, cr_vehicle)
+        CommonRoadPlant(cr_vehicle, h=cfg.rates.h)  # fail here, before any work, if unusable
+    except TsmpcError as err:
+        fail(err)
+    meta = {**scenario.meta, "plant": name, "cr_vehicle": cr_vehicle}
+    sc = dc_replace(scenario, measured_input=True, meta=meta)
+    return cfg, sc, lambda: CommonRoadPlant(cr_vehicle, h=cfg.rates.h)
 
 
 def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
@@ -109,7 +136,9 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
 
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
-                  "nan_bursts, mass_stiffness_mismatch (see tsmpc.robustness).")
+                  "nan_bursts, mass_stiffness_mismatch, actuator_lag (see tsmpc.robustness).")
+_PLANT_HELP = ("Plant: tsmpc (the built-in nonlinear single-track) or commonroad-st (CommonRoad's "
+               "single-track model behind a steering servo; needs the [commonroad] extra).")
 _REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..1316 is used unless "
              "--window says otherwise) or a planned CSV (t,x,y,theta,v,omega,kappa). "
              "Default: the built-in paper-like circuit.")
@@ -129,9 +158,12 @@ def compare_cmd(
     ),
     duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
     robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
+    plant: str = typer.Option("tsmpc", "--plant", help=_PLANT_HELP),
+    cr_vehicle: int = typer.Option(2, "--cr-vehicle", help="CommonRoad parameter set (1, 2, 3)."),
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
-    _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness)
+    _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
+             plant, cr_vehicle)
 
 
 @app.command("run")
@@ -148,8 +180,11 @@ def run_cmd(
     ),
     duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
     robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
+    plant: str = typer.Option("tsmpc", "--plant", help=_PLANT_HELP),
+    cr_vehicle: int = typer.Option(2, "--cr-vehicle", help="CommonRoad parameter set (1, 2, 3)."),
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
     if "," in method:
         fail(ValueError("--method takes one method; use `tsmpc compare --methods` for several"))
-    _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness)
+    _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
+             plant, cr_vehicle)

@@ -15,6 +15,7 @@ from typing import Any
 from tsmpc.config import Config
 from tsmpc.sim.log import RunLog, atomic_write_text, save_logs_mat, save_logs_npz
 from tsmpc.sim.metrics import compute_metrics
+from tsmpc.sim.plant import Plant
 from tsmpc.sim.simulator import Method, Scenario, simulate
 
 __all__ = ["CompareResult", "compare", "load_scenario", "versions"]
@@ -105,11 +106,13 @@ def compare(
     oracle: bool = False,
     max_steps: int | None = None,
     progress_factory: ProgressFactory | None = None,
+    plant_factory: Callable[[], Plant] | None = None,
 ) -> CompareResult:
     """Run ``methods`` on ``scenario`` and write metrics, tables, time series and figures.
 
-    Every method runs from the same seed (same noise sequence). Nothing is written when
-    ``out_dir`` is None. Files are written atomically.
+    Every method runs from the same seed (same noise sequence) on a fresh plant from
+    ``plant_factory`` (None: tsmpc's own plant). Nothing is written when ``out_dir`` is None.
+    Files are written atomically.
     """
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
@@ -121,8 +124,10 @@ def compare(
         if max_steps is not None:
             k_total = min(k_total, max_steps)
         prog = progress_factory(method.value, k_total) if progress_factory else None
-        logs[method.value] = simulate(cfg, method, scenario, oracle=oracle, kinematic_design=kd,
-                                      dynamic_design=dd, progress=prog, max_steps=max_steps)
+        plant = plant_factory() if plant_factory is not None else None
+        logs[method.value] = simulate(cfg, method, scenario, oracle=oracle, plant=plant,
+                                      kinematic_design=kd, dynamic_design=dd, progress=prog,
+                                      max_steps=max_steps)
     metrics: dict[str, Any] = {
         "methods": {name: compute_metrics(log) for name, log in logs.items()},
         "scenario": _scenario_summary(cfg, scenario, max_steps),
