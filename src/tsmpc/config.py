@@ -29,6 +29,7 @@ __all__ = [
     "LQRSettings",
     "MHESettings",
     "MPCSettings",
+    "Method",
     "NoiseSettings",
     "PlannerSettings",
     "Rates",
@@ -71,12 +72,42 @@ class TyreModel(StrEnum):
     PACEJKA = "pacejka"  #: magic formula with small-slip stiffness C_x and peak μ_tyre F_z
 
 
-class SchedulingMode(StrEnum):
-    """How the TS-MPC schedules its models along the horizon (SPEC §7)."""
+class Method(StrEnum):
+    """The outer loop's method: the TS-MPC with one of its scheduling modes (SPEC §7), or the
+    NL-MPC baseline. One concept for runs (``tsmpc compare --methods``, logs, metrics keys) and
+    for the TS-MPC's scheduling (``mpc.mode``). Parsing is case-insensitive ("ref" = "REF")."""
 
-    FZN = "fzn"  #: frozen: current scheduling values for the whole horizon
-    REF = "ref"  #: planner references along the horizon (the paper's choice)
-    ITER = "iter"  #: previous optimal prediction, re-solved until the schedule converges
+    FZN = "FZN"  #: TS-MPC, frozen: current scheduling values for the whole horizon
+    REF = "REF"  #: TS-MPC, planner references along the horizon (the paper's choice)
+    ITER = "ITER"  #: TS-MPC, previous optimal prediction, re-solved until the schedule converges
+    NL = "NL"  #: nonlinear MPC baseline (CasADi + IPOPT)
+
+    @classmethod
+    def _missing_(cls, value: object) -> Method | None:
+        if isinstance(value, str):
+            up = value.strip().upper()
+            for m in cls:
+                if m.value == up:
+                    return m
+        return None
+
+    @classmethod
+    def parse(cls, text: str) -> Method:
+        """Case-insensitive parse; the error lists the allowed values."""
+        try:
+            return cls(text)
+        except ValueError:
+            allowed = ", ".join(m.value.lower() for m in cls)
+            raise ConfigError(f"unknown method {text!r}; allowed: {allowed}") from None
+
+    @property
+    def is_ts_mpc(self) -> bool:
+        """True for the TS-MPC scheduling modes (FZN, REF, ITER)."""
+        return self is not Method.NL
+
+
+#: The TS-MPC's scheduling modes are the methods FZN, REF and ITER (former name, kept).
+SchedulingMode = Method
 
 
 class VehicleParams(_Frozen):
@@ -289,7 +320,7 @@ class MPCSettings(_Frozen):
     du_max: tuple[PositiveFloat, PositiveFloat] = Field(
         (5.0, 0.3), description="|Δv|, |Δω| per step"
     )
-    mode: SchedulingMode = Field(SchedulingMode.REF, description="scheduling mode")
+    mode: Method = Field(Method.REF, description="TS-MPC scheduling mode: fzn, ref or iter")
     iter_tol: PositiveFloat = Field(1e-3, description="ITER: schedule change tolerance")
     iter_max: int = Field(5, ge=1, le=50, description="ITER: maximum QPs per step")
     soft_penalty: PositiveFloat = Field(1e4, description="exact penalty of soft constraints")
@@ -297,6 +328,8 @@ class MPCSettings(_Frozen):
 
     @model_validator(mode="after")
     def _check(self) -> MPCSettings:
+        if not self.mode.is_ts_mpc:
+            raise ValueError("mode: the TS-MPC scheduling mode is fzn, ref or iter (nl is a method)")
         _diag(self.Q, "Q", 3, strict=False)
         _diag(self.R, "R", 2)
         for i in range(2):

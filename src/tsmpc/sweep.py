@@ -44,8 +44,8 @@ from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validato
 
 from tsmpc.config import Config, validate
 from tsmpc.errors import ConfigError
+from tsmpc.io import atomic_write_bytes, atomic_write_text
 from tsmpc.robustness import ROBUSTNESS_SCENARIOS
-from tsmpc.sim.log import atomic_write_bytes, atomic_write_text
 
 __all__ = [
     "AXES",
@@ -408,12 +408,14 @@ def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
 
 # -- execution -----------------------------------------------------------------------------
 ProgressFn = Callable[[int, int, dict[str, Any]], None]
+#: Writes the summary plots of a sweep table into a folder; returns the files (report layer).
+PlotFn = Callable[[Any, Path, tuple[str, ...]], list[Path]]
 
 
 def run_sweep(
     spec: SweepSpec, out: str | Path, *, scheduler: str | None = None, workers: int = 2,
     resume: bool = False, run_fn: Callable[[RunTask], dict[str, Any]] = run_task,
-    progress: ProgressFn | None = None, plots: bool = True,
+    progress: ProgressFn | None = None, plots: bool = True, plotter: PlotFn | None = None,
 ) -> SweepResult:
     """Run every task of ``spec`` on Dask and write the records, the aggregate and the plots.
 
@@ -426,6 +428,9 @@ def run_sweep(
             already holds records is refused (nothing is overwritten).
         run_fn: the task function (default: simulate; :func:`dry_run` for plumbing checks).
         progress: called as ``progress(done, total, record)`` after each record is written.
+        plots, plotter: write the summary plots with ``plotter(table, out, AXES)``; None = the
+            report layer's :func:`tsmpc.report.sweep_plots.save_sweep_plots`, imported only
+            then (this module imports no plotting code at import time).
     """
     from dask.distributed import Client, LocalCluster, as_completed
 
@@ -489,9 +494,9 @@ def run_sweep(
     table = aggregate(out, [t.id for t in tasks])
     files = _write_table(table, out)
     if plots and len(table):
-        from tsmpc.report.sweep_plots import save_sweep_plots
-
-        files += save_sweep_plots(table, out)
+        if plotter is None:
+            from tsmpc.report.sweep_plots import save_sweep_plots as plotter
+        files += plotter(table, out, AXES)
     return SweepResult(out, len(tasks), len(written), skipped, failed, duplicates, table, files)
 
 

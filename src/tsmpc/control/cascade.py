@@ -22,13 +22,12 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from enum import StrEnum
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tsmpc.config import Config, SchedulingMode
+from tsmpc.config import Config, Method
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.models.kinematic import pose_to_errors
@@ -46,24 +45,6 @@ EVENT_NAMES = (
     "inner_saturated",  # TS-LQR steps with an active saturation
     "pose_rejected",  # MPC steps that used the last good pose (NaN or stale pose)
 )
-
-
-class Method(StrEnum):
-    """Outer-loop method: the TS-MPC with one of its scheduling modes, or the NL-MPC baseline."""
-
-    FZN = "FZN"
-    REF = "REF"
-    ITER = "ITER"
-    NL = "NL"
-
-    @classmethod
-    def parse(cls, text: str) -> Method:
-        """Case-insensitive parse; the error lists the allowed values."""
-        try:
-            return cls(text.strip().upper())
-        except ValueError:
-            allowed = ", ".join(m.value.lower() for m in cls)
-            raise ValueError(f"unknown method {text!r}; allowed: {allowed}") from None
 
 
 @dataclass(frozen=True)
@@ -144,7 +125,7 @@ def build_outer_controller(cfg: Config, method: Method, P: np.ndarray, S: np.nda
         return NLMPC(cfg.mpc, model, P, S)
     from tsmpc.control.ts_mpc import TSMPC
 
-    return TSMPC(cfg.mpc, model, P, S, mode=SchedulingMode(method.value.lower()))
+    return TSMPC(cfg.mpc, model, P, S, mode=method)
 
 
 def _finite(*xs: float) -> bool:

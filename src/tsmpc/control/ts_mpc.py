@@ -39,6 +39,7 @@ from scipy.linalg.lapack import dpotrs as _potrs
 
 from tsmpc.config import MPCSettings, SchedulingMode
 from tsmpc.control.qp import QPStatus, solve_daqp, solve_qcqp_clarabel
+from tsmpc.errors import ConfigError
 from tsmpc.models.kinematic import KinematicTS, sinc
 
 __all__ = ["TSMPC", "CondensedQP", "MPCResult", "MPCStatus", "condense"]
@@ -226,6 +227,8 @@ class TSMPC:
         self.settings = settings
         self.model = model
         self.mode = SchedulingMode(mode or settings.mode)
+        if not self.mode.is_ts_mpc:
+            raise ConfigError(f"TSMPC: {self.mode} is not a TS-MPC scheduling mode (fzn, ref, iter)")
         self.P = np.asarray(P, dtype=float)
         self.S = np.asarray(S, dtype=float)
         N = self.N = settings.N

@@ -137,7 +137,7 @@ class Reference:
 
     def to_csv(self, path: str | Path) -> None:
         """Write ``t,x,y,theta,v,omega,kappa`` rows (atomically)."""
-        from tsmpc.sim.log import atomic_write_text
+        from tsmpc.io import atomic_write_text
 
         data = np.stack([getattr(self, s) for s in _SIGNALS], axis=1)
         lines = [CSV_HEADER] + [",".join(f"{v:.10g}" for v in row) for row in data]

@@ -21,6 +21,8 @@ from tsmpc.sim.simulator import Method, Scenario, simulate
 __all__ = ["CompareResult", "compare", "load_scenario", "versions"]
 
 ProgressFactory = Callable[[str, int], Callable[[int, int], None]]
+#: Draws the figures of a comparison into a folder; returns the files (the report layer's).
+FigureFn = Callable[[dict[str, RunLog], Path], list[Path]]
 
 
 @dataclass(frozen=True)
@@ -107,12 +109,14 @@ def compare(
     max_steps: int | None = None,
     progress_factory: ProgressFactory | None = None,
     plant_factory: Callable[[], Plant] | None = None,
+    figures: FigureFn | None = None,
 ) -> CompareResult:
     """Run ``methods`` on ``scenario`` and write metrics, tables, time series and figures.
 
     Every method runs from the same seed (same noise sequence) on a fresh plant from
     ``plant_factory`` (None: tsmpc's own plant). Nothing is written when ``out_dir`` is None.
-    Files are written atomically.
+    Files are written atomically. Figures (``plots``) are drawn by ``figures(logs, out_dir)``;
+    None = the report layer's :func:`tsmpc.report.figures.save_all`, imported only then.
     """
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
@@ -141,12 +145,13 @@ def compare(
             m["mpc_ms_ratio_to_REF"] = m["mpc_ms"]["median"] / ref_m["mpc_ms"]["median"]
     files: list[Path] = []
     if out_dir is not None:
-        files = write_outputs(cfg, metrics, logs, Path(out_dir), plots=plots)
+        files = write_outputs(cfg, metrics, logs, Path(out_dir), plots=plots, figures=figures)
     return CompareResult(metrics, logs, tuple(files))
 
 
 def write_outputs(
-    cfg: Config, metrics: dict[str, Any], logs: dict[str, RunLog], out: Path, *, plots: bool
+    cfg: Config, metrics: dict[str, Any], logs: dict[str, RunLog], out: Path, *, plots: bool,
+    figures: FigureFn | None = None,
 ) -> list[Path]:
     """metrics.json, rmse.{csv,md,tex}, timeseries.{npz,mat}, config.toml, versions.json, figures."""
     from tsmpc.report.tables import rmse_csv, rmse_latex, rmse_markdown
@@ -169,7 +174,7 @@ def write_outputs(
     save_logs_mat(logs, out / "timeseries.mat")
     files += [out / "timeseries.npz", out / "timeseries.mat"]
     if plots:
-        from tsmpc.report.figures import save_all
-
-        files += save_all(logs, out)
+        if figures is None:
+            from tsmpc.report.figures import save_all as figures
+        files += figures(logs, out)
     return files

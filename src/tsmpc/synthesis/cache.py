@@ -21,7 +21,7 @@ import numpy as np
 
 from tsmpc.config import Config
 from tsmpc.errors import TsmpcError
-from tsmpc.sim.log import atomic_write_text
+from tsmpc.io import atomic_write_text
 from tsmpc.synthesis.certificates import Certificate, check
 from tsmpc.synthesis.dynamic import DynamicDesign, certify_grid, design_dynamic
 from tsmpc.synthesis.kinematic import KinematicDesign, certify_kinematic, design_kinematic
