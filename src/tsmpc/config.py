@@ -16,7 +16,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from tsmpc.errors import ConfigError
 
@@ -326,10 +326,15 @@ class MPCSettings(_Frozen):
     soft_penalty: PositiveFloat = Field(1e4, description="exact penalty of soft constraints")
     terminal_constraint: bool = Field(True, description="impose x_N' S x_N <= 1")
 
+    @field_validator("mode")
+    @classmethod
+    def _ts_mode(cls, v: Method) -> Method:
+        if not v.is_ts_mpc:
+            raise ValueError("the TS-MPC scheduling mode is fzn, ref or iter (nl is a method)")
+        return v
+
     @model_validator(mode="after")
     def _check(self) -> MPCSettings:
-        if not self.mode.is_ts_mpc:
-            raise ValueError("mode: the TS-MPC scheduling mode is fzn, ref or iter (nl is a method)")
         _diag(self.Q, "Q", 3, strict=False)
         _diag(self.R, "R", 2)
         for i in range(2):

@@ -175,6 +175,11 @@ class Cascade:
         self.reset(x0)
 
     # -------------------------------------------------------------------------- state
+    @property
+    def dt(self) -> float:
+        """Call period T_d [s] (the runtime protocol's name)."""
+        return self.Td
+
     def reset(self, x0: ArrayLike | None = None) -> None:
         """Start over (blocks cleared, counters zeroed) from state ``x0`` (6,) or, if None, from
         the first measurement."""

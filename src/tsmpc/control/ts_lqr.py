@@ -99,6 +99,11 @@ class TSLQR:
         self._K2 = self.K.reshape(-1, 6).copy()  # row 2i+j = gain row j of vertex i
         self.reset()
 
+    @property
+    def dt(self) -> float:
+        """Sample time T_d [s] (the runtime protocol's name)."""
+        return self.Td
+
     def reset(self) -> None:
         """Filter states at rest, integrator cleared."""
         self._f = np.zeros(2)
