@@ -98,7 +98,8 @@ def _plant_setup(plant: str, cr_vehicle: int, cfg: Any, scenario: Any) -> tuple[
         fail(err)
     meta = {**scenario.meta, "plant": name, "cr_vehicle": cr_vehicle}
     sc = dc_replace(scenario, measured_input=True, meta=meta)
-    return cfg, sc, lambda: CommonRoadPlant(cr_vehicle, h=cfg.rates.h)
+    model = COMMONROAD_MODELS[name]
+    return cfg, sc, lambda: CommonRoadPlant(cr_vehicle, model=model, h=cfg.rates.h)
 
 
 def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
@@ -137,8 +138,9 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
                   "nan_bursts, mass_stiffness_mismatch, actuator_lag (see tsmpc.robustness).")
-_PLANT_HELP = ("Plant: tsmpc (the built-in nonlinear single-track) or commonroad-st (CommonRoad's "
-               "single-track model behind a steering servo; needs the [commonroad] extra).")
+_PLANT_HELP = ("Plant: tsmpc (the built-in nonlinear single-track), commonroad-st or commonroad-mb "
+               "(CommonRoad's single-track / multi-body model behind a steering servo; needs the "
+               "[commonroad] extra).")
 _REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..1316 is used unless "
              "--window says otherwise) or a planned CSV (t,x,y,theta,v,omega,kappa). "
              "Default: the built-in paper-like circuit.")
