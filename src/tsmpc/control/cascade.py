@@ -10,8 +10,10 @@ runs every T_c/T_d calls on the measured pose, and the MHE-UIO and the TS-LQR ru
         vehicle.apply(cmd.F_xR, cmd.delta)
 
 ``step`` never raises: a NaN or stale sample is rejected (the pose holds its last good value, the
-MHE predicts), MPC and MHE failures fall back inside the blocks, and anything unexpected holds
-the previous command. Every such event is counted in :attr:`Cascade.events`.
+MHE predicts), MPC and MHE failures fall back inside the blocks; an exception escaping a block
+falls back at this level (MPC: the shifted previous plan; MHE: the last estimate, status FAILED),
+and anything else holds the previous command. Every such event is counted in
+:attr:`Cascade.events` (``step_errors`` for exceptions, :attr:`Cascade.last_error` says which).
 
 The cascade does no logging (STYLE §3): each :class:`Command` carries what a logger needs (the
 estimate, the MPC result when the MPC ran at that call, the block timings).
@@ -28,7 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tsmpc.config import Config, Method
-from tsmpc.control.ts_mpc import MPCResult, MPCStatus
+from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.planning.reference import Reference
@@ -226,12 +228,15 @@ class Cascade:
         try:
             cmd = self._step(float(t), measurement)
         except Exception as err:  # the contract: a guidance step never raises
-            self._events["step_errors"] += 1
-            self.last_error = f"{type(err).__name__}: {err}"
+            self._caught(err)
             cmd = self._hold()
         self._calls += 1
         self._last = cmd
         return cmd
+
+    def _caught(self, err: Exception) -> None:
+        self._events["step_errors"] += 1
+        self.last_error = f"{type(err).__name__}: {err}"
 
     def _hold(self) -> Command:
         """The previous command again (a zero command before the first)."""
@@ -268,7 +273,11 @@ class Cascade:
             p = self._pose
             e_meas = np.array(pose_to_errors(p[0], p[1], p[2], ref.x[kk], ref.y[kk], ref.theta[kk]))
             t0 = time.perf_counter()
-            plan = self.mpc.step(e_meas, self._u_prev, ref.window(k, self.cfg.mpc.N + 1))
+            try:
+                plan = self.mpc.step(e_meas, self._u_prev, ref.window(k, self.cfg.mpc.N + 1))
+            except Exception as err:  # a solver bug must not stop the car: shifted plan
+                self._caught(err)
+                plan = shifted_plan(self._plan, e_meas, self._u_prev, self.cfg.mpc.N, t0, 0, 0, 0)
             t_mpc = time.perf_counter() - t0
             self._u_prev = np.asarray(plan.u, dtype=float)
             self._plan = plan
@@ -282,7 +291,14 @@ class Cascade:
             u_mhe = np.array([self._u_applied[0] if m.force is None else float(m.force),
                               self._u_applied[1] if m.steering is None else float(m.steering)])
         t1 = time.perf_counter()
-        est = self.mhe.step(y, u_mhe)
+        try:
+            est = self.mhe.step(y, u_mhe)
+        except Exception as err:  # e.g. a LinAlgError: keep the last estimate, flagged FAILED
+            self._caught(err)
+            last = self.last_estimate
+            x_hat = last.x.copy() if last is not None else np.array([v, 0.0, om])
+            est = Estimate(x_hat, last.F_fr if last is not None else 0.0, 0.0,
+                           EstimatorStatus.FAILED, time.perf_counter() - t1)
         t2 = time.perf_counter()
         inner = est if m.state is None else _oracle_estimate(m.state)
         out = self.lqr.step(inner, v_ref, w_ref)
