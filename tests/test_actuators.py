@@ -57,7 +57,7 @@ def test_servo_lag_rate_limit_and_force_lag_follow_their_laws() -> None:
 
 def test_actuator_lag_scenario_wraps_the_plant_and_measures_the_applied_input(cfg: Config) -> None:
     c, s = apply_robustness("actuator_lag", cfg, load_scenario(cfg))
-    assert s.actuators == Actuators(SteeringServo(0.05, 0.4), ForceLag(0.1)) and s.measured_input
+    assert s.actuators == Actuators(SteeringServo(0.05, 0.4), ForceLag(0.05)) and s.measured_input
     log = simulate(c, Method.REF, s, max_steps=40)
     assert log.termination == "completed"
     # the commanded steering differs from what the servo delivered (the plant state shows it)

@@ -43,8 +43,8 @@ ROBUSTNESS_SCENARIOS: dict[str, str] = {
     "sensor_dropout": "every 5 s all measurements freeze for 0.2 s (last value held)",
     "nan_bursts": "every 7 s all measurements are NaN for 50 ms",
     "mass_stiffness_mismatch": "plant mass +20 % and cornering stiffness −20 % (controllers unchanged)",
-    "actuator_lag": "steering servo (50 ms lag, 0.4 rad/s) and 0.1 s force lag; the applied inputs "
-    "are measured and given to the MHE",
+    "actuator_lag": "steering servo (50 ms lag, 0.4 rad/s) and 50 ms drive-force lag; the applied "
+    "inputs are measured and given to the MHE",
 }
 
 
@@ -146,6 +146,6 @@ def apply_robustness(
         veh = replace(base.with_stiffness_scaled(0.8), mass=base.mass * 1.2)
         return RobustnessCase(cfg, dc_replace(sc, plant_vehicle=veh))
     if name == "actuator_lag":
-        act = Actuators(SteeringServo(0.05, 0.4), ForceLag(0.1))
+        act = Actuators(SteeringServo(0.05, 0.4), ForceLag(0.05))
         return RobustnessCase(cfg, dc_replace(sc, actuators=act, measured_input=True))
     return RobustnessCase(cfg, sc)
