@@ -99,13 +99,13 @@ class RunParams(_Strict):
 def _check_method(v: str) -> str:
     m = str(v).strip().upper()
     if m not in _METHODS:
-        raise ValueError(f"unknown method {v!r}; allowed: {', '.join(x.lower() for x in _METHODS)}")
+        raise ConfigError(f"unknown method {v!r}; allowed: {', '.join(x.lower() for x in _METHODS)}")
     return m
 
 
 def _check_named(v: str, allowed: dict[str, str], what: str) -> str:
     if v not in allowed:
-        raise ValueError(f"unknown {what} {v!r}; allowed: {', '.join(allowed)}")
+        raise ConfigError(f"unknown {what} {v!r}; allowed: {', '.join(allowed)}")
     return v
 
 
@@ -128,7 +128,7 @@ class GridAxes(_Strict):
         for name in AXES:
             vals = getattr(self, name)
             if vals is not None and len(vals) == 0:
-                raise ValueError(f"axis {name!r} is empty: give at least one value or leave it out")
+                raise ConfigError(f"axis {name!r} is empty: give at least one value or leave it out")
         if self.method:
             object.__setattr__(self, "method", [_check_method(m) for m in self.method])
         for v in self.friction or []:
@@ -152,10 +152,10 @@ class RandomSpec(_Strict):
     def _ranges(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
         for k, (lo, hi) in v.items():
             if k not in _FLOAT_AXES:
-                raise ValueError(f"ranges: {k!r} is not a numeric axis; "
+                raise ConfigError(f"ranges: {k!r} is not a numeric axis; "
                                  f"numeric axes: {', '.join(_FLOAT_AXES)}")
             if lo > hi:
-                raise ValueError(f"ranges.{k}: lower bound {lo} > upper bound {hi}")
+                raise ConfigError(f"ranges.{k}: lower bound {lo} > upper bound {hi}")
         return v
 
     @field_validator("choices")
@@ -163,10 +163,10 @@ class RandomSpec(_Strict):
     def _choices(cls, v: dict[str, list[Any]]) -> dict[str, list[Any]]:
         for k, vals in v.items():
             if k not in _CHOICE_AXES:
-                raise ValueError(f"choices: {k!r} is not a choice axis; "
+                raise ConfigError(f"choices: {k!r} is not a choice axis; "
                                  f"choice axes: {', '.join(_CHOICE_AXES)}")
             if not vals:
-                raise ValueError(f"choices.{k} is empty")
+                raise ConfigError(f"choices.{k} is empty")
         return v
 
 

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import Config, SchedulingMode, TyreParams, VehicleParams, replace
-from tsmpc.errors import NonFiniteError
+from tsmpc.errors import ConfigError, NonFiniteError
 from tsmpc.models.dynamic import DynamicTS
 from tsmpc.models.kinematic import KinematicTS, pose_to_errors
 from tsmpc.planning.reference import Reference
@@ -55,7 +55,7 @@ class Method(StrEnum):
             return cls(text.strip().upper())
         except ValueError:
             allowed = ", ".join(m.value.lower() for m in cls)
-            raise ValueError(f"unknown method {text!r}; allowed: {allowed}") from None
+            raise ConfigError(f"unknown method {text!r}; allowed: {allowed}") from None
 
 
 @dataclass(frozen=True)
@@ -145,7 +145,7 @@ def simulate(
         ref = ref.resample(Tc)
     K = len(ref) - N
     if K < 1:
-        raise ValueError(f"reference has {len(ref)} samples: needs more than N = {N} for look-ahead")
+        raise ConfigError(f"reference has {len(ref)} samples: needs more than N = {N} for look-ahead")
     if max_steps is not None:
         K = min(K, int(max_steps))
 
