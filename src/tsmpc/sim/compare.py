@@ -121,18 +121,19 @@ def compare(
     oracle: bool = False,
     max_steps: int | None = None,
     progress_factory: ProgressFactory | None = None,
+    designs: tuple[Any, Any] | None = None,
 ) -> CompareResult:
     """Run ``methods`` on ``scenario`` and write metrics, tables, time series and figures.
 
     Every method runs from the same seed (same noise sequence). Nothing is written when
-    ``out_dir`` is None. Files are written atomically.
+    ``out_dir`` is None. Files are written atomically. ``designs``: the (kinematic, dynamic)
+    LMI designs of ``cfg`` when the caller has them (default: the design cache).
     """
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
     if oracle:
         cfg = replace(cfg, lqr=replace(cfg.lqr, oracle=True, friction_compensation=False))
-    kd = load_or_design_kinematic(cfg)
-    dd = load_or_design_dynamic(cfg)
+    kd, dd = designs or (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
     logs: dict[str, RunLog] = {}
     for method in methods:
         k_total = len(scenario.reference) - cfg.mpc.N
