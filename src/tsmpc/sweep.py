@@ -188,6 +188,13 @@ class RandomSpec(_Strict):
                                  f"choice axes: {', '.join(_CHOICE_AXES)}")
             if not vals:
                 raise ConfigError(f"choices.{k} is empty")
+            for val in vals:  # every value, not only the ones the draws happen to pick
+                try:
+                    RunParams(**{k: val})
+                    if k == "method":
+                        _check_method(val)
+                except ValidationError as err:
+                    raise ConfigError(f"choices.{k}: {val!r}: {err.errors()[0]['msg']}") from None
         return v
 
 
