@@ -147,7 +147,8 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     rows = (d / "paper.csv").read_text().splitlines()
     (d / "paper-5rows.csv").write_text("\n".join(rows[:5]) + "\n")
     (d / "paper-ragged.csv").write_text("\n".join([*rows[:5], rows[5] + ",1.0"]) + "\n")
-    (d / "paper-nan.csv").write_text("\n".join([*rows[:3], rows[3].replace(rows[3].split(",")[7], "nan", 1), *rows[4:]]) + "\n")
+    nan_row = rows[3].replace(rows[3].split(",")[7], "nan", 1)
+    (d / "paper-nan.csv").write_text("\n".join([*rows[:3], nan_row, *rows[4:]]) + "\n")
     (d / "paper-text.csv").write_text("\n".join([*rows[:2], "a,b,c", *rows[3:]]) + "\n")
     zero = np.zeros((6, 300))
     zero[0] = np.arange(300) * 0.1  # moves at 1 m/s in x ...
