@@ -151,9 +151,10 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (d / "paper-nan.csv").write_text("\n".join([*rows[:3], nan_row, *rows[4:]]) + "\n")
     (d / "paper-text.csv").write_text("\n".join([*rows[:2], "a,b,c", *rows[3:]]) + "\n")
     zero = np.zeros((6, 300))
-    zero[0] = np.arange(300) * 0.1  # moves at 1 m/s in x ...
-    zero[3, 100:] = 1.0  # ... but the first 100 columns say v = 0
-    (d / "paper-standstill.csv").write_text("\n".join(",".join(repr(v) for v in r) for r in zero) + "\n")
+    zero[3, 100:] = 1.0  # stands still for 10 s, then drives at 1 m/s along x (consistent pose)
+    zero[0] = np.cumsum(zero[3]) * 0.1
+    (d / "paper-standstill.csv").write_text(
+        "\n".join(",".join(repr(float(v)) for v in r) for r in zero) + "\n")
 
     # tracks and waypoints
     ang = np.linspace(0, 2 * np.pi, 60, endpoint=False)
@@ -267,7 +268,9 @@ CASES: list[tuple[str, list[str], str]] = [
     ("paper-ragged", [*RUN, "--reference", "{D}/paper-ragged.csv"], "different lengths"),
     ("paper-nan", [*RUN, "--reference", "{D}/paper-nan.csv"], "NaN or inf"),
     ("paper-text", [*RUN, "--reference", "{D}/paper-text.csv"], "non-numeric"),
-    ("paper-standstill", [*RUN, "--reference", "{D}/paper-standstill.csv"], "paper-standstill.csv"),
+    ("paper-standstill", [*RUN, "--reference", "{D}/paper-standstill.csv", "--window", "1,300"],
+     "must move"),
+    ("paper-default-window-too-wide", [*RUN, "--reference", "{D}/paper.csv"], "allowed columns are 1..300"),
     ("window-short", [*RUN, "--reference", "{D}/paper.csv", "--window", "5,20"], "N + 2"),
     ("window-reversed", [*RUN, "--reference", "{D}/paper.csv", "--window", "1316,5"], "FIRST < LAST"),
     ("window-zero", [*RUN, "--reference", "{D}/paper.csv", "--window", "0,100"], "1 <= FIRST"),
