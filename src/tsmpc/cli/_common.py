@@ -185,6 +185,7 @@ def handle_interrupts() -> Iterator[None]:
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+        _pending.clear()
 
 
 # -- status while designs are solved -------------------------------------------------------
