@@ -79,7 +79,7 @@ def _fed_to_inner_loop(monkeypatch: pytest.MonkeyPatch, oracle: bool) -> tuple[d
     fed: dict[str, list] = {"x": [], "F_fr": [], "F_comp": []}
     step = TSLQR.step
 
-    def recording(self, estimate, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
+    def recording(self, estimate, *args, **kwargs):
         cmd = step(self, estimate, *args, **kwargs)
         fed["x"].append(np.array(estimate.x, dtype=float))
         fed["F_fr"].append(float(estimate.F_fr))
