@@ -140,7 +140,9 @@ def test_mhe_window_matches_cvxpy(cfg: Config) -> None:
         Xo = (qp.M @ z + qp.c).reshape(-1, 3)
         assert np.allclose(Xo, X.value, rtol=1e-6, atol=1e-6), trial
         assert z[3] == pytest.approx(F.value, rel=1e-6, abs=1e-3)
-        def full(zz: np.ndarray) -> float:  # the textbook objective at the QP variables zz
+        def full(zz: np.ndarray, qp=qp, A=A, B=B, us=us, n=n, arrival=arrival,  # noqa: ANN001
+                 F_prior=F_prior, w=w, ys=ys) -> float:
+            """The textbook objective at the QP variables zz."""
             Xz = (qp.M @ zz + qp.c).reshape(-1, 3)
             Fz = zz[3]
             Wz = np.array([Xz[k + 1] - A[k] @ Xz[k] - B[k] @ us[k] + B[k][:, 0] * Fz for k in range(n)])
@@ -151,9 +153,7 @@ def test_mhe_window_matches_cvxpy(cfg: Config) -> None:
         ours = full(z)
         assert ours == pytest.approx(prob.value, rel=1e-6), trial
         # Our H, f are that objective up to a constant: the difference is the same elsewhere.
-        def quad(zz: np.ndarray) -> float:
-            return float(0.5 * zz @ qp.H @ zz + qp.f @ zz)
-
+        quad = lambda zz, qp=qp: float(0.5 * zz @ qp.H @ zz + qp.f @ zz)  # noqa: E731
         z2 = z + rng.normal(0, 0.01, z.size)
         assert full(z2) - quad(z2) == pytest.approx(ours - quad(z), rel=1e-6, abs=1e-6), trial
 
