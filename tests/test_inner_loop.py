@@ -140,8 +140,8 @@ def test_mhe_window_matches_cvxpy(cfg: Config) -> None:
         Xo = (qp.M @ z + qp.c).reshape(-1, 3)
         assert np.allclose(Xo, X.value, rtol=1e-6, atol=1e-6), trial
         assert z[3] == pytest.approx(F.value, rel=1e-6, abs=1e-3)
-        def full(zz: np.ndarray, qp=qp, A=A, B=B, us=us, n=n, arrival=arrival,  # noqa: ANN001
-                 F_prior=F_prior, w=w, ys=ys) -> float:
+        def full(zz: np.ndarray, qp=qp, A=A, B=B, us=us, n=n, arrival=arrival,
+                 F_prior=F_prior, w=w, ys=ys, p=p, q=q, r=r) -> float:
             """The textbook objective at the QP variables zz."""
             Xz = (qp.M @ zz + qp.c).reshape(-1, 3)
             Fz = zz[3]
