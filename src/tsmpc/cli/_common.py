@@ -191,7 +191,8 @@ def handle_interrupts() -> Iterator[None]:
 # -- status while designs are solved -------------------------------------------------------
 def design_status(cfg: Config) -> tuple[Any, Any]:
     """Load or solve the kinematic and dynamic LMI designs of ``cfg`` with a status line and
-    the elapsed time on stderr (a first run or a changed config solves for about a minute)."""
+    the elapsed time on stderr (a first run or changed design inputs solve for seconds to a
+    minute, depending on the machine and its load)."""
     from rich.console import Console
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
@@ -211,7 +212,7 @@ def design_status(cfg: Config) -> tuple[Any, Any]:
                   console=console, transient=True) as progress:
         for name, fn in (("kinematic", load_or_design_kinematic), ("dynamic", load_or_design_dynamic)):
             what = ("loading from the cache" if cached[name] else
-                    "solving and certifying (new config: up to a minute or two)")
+                    "solving and certifying (new inputs: seconds to a minute)")
             if not console.is_terminal and not cached[name]:
                 console.print(f"LMI design: {name}: {what} ...")
             task = progress.add_task(f"LMI design: {name}: {what}", total=None)
