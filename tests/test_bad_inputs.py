@@ -319,6 +319,8 @@ CASES: list[tuple[str, list[str], str]] = [
      "--connect-timeout"),
     ("sweep-bad-address", ["sweep", "{D}/sweep-good.toml", "--out", "{O}", "--scheduler", "not-an-address"],
      "not a scheduler address"),
+    ("sweep-unreachable", ["sweep", "{D}/sweep-good.toml", "--out", "{O}", "--scheduler",
+                           "tcp://127.0.0.1:1", "--connect-timeout", "0.5"], "no scheduler answered"),
     ("sweep-workers", ["sweep", "{D}/sweep-good.toml", "--out", "{O}", "--workers", "1000"], "--workers"),
     ("sweep-out-file", ["sweep", "{D}/sweep-good.toml", "--out", "{D}/afile"], "exists and is a file"),
     # tracks and waypoints

@@ -65,6 +65,34 @@ def test_overwrite_replaces_only_tsmpc_outputs(tmp_path: Path) -> None:
     assert json.loads((out / "metrics.json").read_text())["scenario"]["tracked_steps"] == 5
 
 
+def test_show_reference_out_folder_writes_into_it(tmp_path: Path) -> None:
+    from tsmpc.planning.circuit import builtin_circuit
+
+    builtin_circuit(dt=0.1).to_csv(tmp_path / "ref.csv")
+    (tmp_path / "figs").mkdir()
+    res = CliRunner().invoke(app, ["show-reference", str(tmp_path / "ref.csv"), "--out",
+                                   str(tmp_path / "figs")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "figs" / "ref.png").stat().st_size > 1000
+    assert not (tmp_path / "figs.png").exists()
+
+
+def test_planner_output_keeps_full_precision(tmp_path: Path) -> None:
+    """A path far from the origin (1e9 m offsets) reads back bit for bit."""
+    import numpy as np
+
+    from tsmpc.config import PlannerSettings
+    from tsmpc.planning.paper_format import load_reference
+    from tsmpc.planning.planner import plan_path
+
+    wp = np.array([[0.0, 0.0], [60.0, 0.0], [120.0, 10.0], [170.0, 40.0]]) + 1e9
+    ref = plan_path(wp, PlannerSettings(), closed=False)
+    ref.to_csv(tmp_path / "far.csv")
+    back = load_reference(tmp_path / "far.csv", window=None)
+    np.testing.assert_array_equal(back.x, ref.x)
+    np.testing.assert_array_equal(back.theta, ref.theta)
+
+
 def _env() -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = str(ROOT / "src") + os.pathsep + env.get("PYTHONPATH", "")
