@@ -104,8 +104,11 @@ def test_a_worker_killed_mid_sweep_loses_nothing_and_counts_nothing_twice(tmp_pa
     text = GRID8.replace('seed = [1, 2]', 'seed = [1, 2, 3]')  # 12 runs of 0.2–0.4 s
     spec = load_sweep(_write(tmp_path, text))
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=":0") as c, Client(c) as client:
-        pids = list(client.run(os.getpid).values())
+                      dashboard_address=":0") as c:
+        # A second client open during the sweep makes distributed flaky (futures' events bound
+        # to another event loop): ask for the worker pids, then close it.
+        with Client(c) as client:
+            pids = list(client.run(os.getpid).values())
         killed: list[int] = []
 
         def kill_one(done: int, total: int, rec: dict) -> None:
@@ -140,14 +143,14 @@ def test_records_already_received_are_not_recomputed_after_a_worker_loss(tmp_pat
     import sys
 
     import cloudpickle
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import LocalCluster
 
     cloudpickle.register_pickle_by_value(sys.modules[__name__])
     text = GRID8.replace('seed = [1, 2]', 'seed = [1, 2, 3]')  # 12 runs of 0.2–0.4 s
     spec = load_sweep(_write(tmp_path, text))
     received: list[str] = []
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=":0") as c, Client(c):
+                      dashboard_address=":0") as c:
         def kill_producer(done: int, total: int, rec: dict) -> None:
             received.append(rec["id"])
             if done == 3:
