@@ -24,6 +24,7 @@ __all__ = [
     "Config",
     "DynamicBox",
     "DynamicLMISettings",
+    "FrictionEstimate",
     "KinematicBox",
     "KinematicLMISettings",
     "LQRSettings",
@@ -77,6 +78,13 @@ class SchedulingMode(StrEnum):
     FZN = "fzn"  #: frozen: current scheduling values for the whole horizon
     REF = "ref"  #: planner references along the horizon (the paper's choice)
     ITER = "iter"  #: previous optimal prediction, re-solved until the schedule converges
+
+
+class FrictionEstimate(StrEnum):
+    """Which friction-force estimate the inner loop compensates (SPEC §9)."""
+
+    WINDOW = "window"  #: window-constant unknown input of the MHE (ours: low noise)
+    UIO = "uio"  #: the paper's one-step UIO formula F̂ = Θ(y − C(Ax̂ + Bu)) (σ ≈ 340 N)
 
 
 class VehicleParams(_Frozen):
@@ -265,9 +273,19 @@ class LQRSettings(_Frozen):
     force_max: FiniteFloat = Field(10000.0, description="F_xR upper saturation [N]")
     delta_max: PositiveFloat = Field(math.radians(25.0), description="|δ| saturation [rad]")
     friction_compensation: bool = Field(True, description="add F̂_fr to the force command")
+    friction_estimate: FrictionEstimate = Field(
+        FrictionEstimate.WINDOW, description="compensated F̂_fr: MHE window fit or the paper's UIO formula"
+    )
     oracle: bool = Field(False, description="ablation: true state, no compensation")
+    # Beyond the paper (SPEC §13): proportional *feedback* on the speed error, not a feed-forward.
+    speed_feedback: bool = Field(
+        True, description="speed-error feedback M (v_ref − v̂)/τ added to the force (beyond the paper)"
+    )
     speed_time_constant: PositiveFloat = Field(
-        0.3, description="speed feed-forward M (v_ref − v̂)/τ: time constant τ [s] (SPEC §8)"
+        0.3, description="time constant τ [s] of the speed-error feedback M (v_ref − v̂)/τ"
+    )
+    acceleration_feedforward: bool = Field(
+        False, description="add M·a_ref, the outer loop's planned acceleration, to the force [feed-forward]"
     )
 
     @model_validator(mode="after")
