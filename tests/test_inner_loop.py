@@ -160,7 +160,7 @@ def _discrete_reference_gain(cfg: Config, z: np.ndarray, K: np.ndarray) -> np.nd
 def test_lqr_law_matches_vectorised_blend(cfg: Config, dd) -> None:
     """The float fast path of TSLQR.step equals the textbook law u = N̄ r + Σμ_i(ϑ)K_i x with the
     memberships of SchedulingBox (numpy) and N̄ from the discrete (Euler) model, inside and
-    outside the premise box; speed-error feedback and acceleration feed-forward add M·(…)."""
+    outside the premise box; the speed-error feedback adds M (v_ref − v̂)/τ."""
     dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, Td)
     rng = np.random.default_rng(3)
     lo, hi = dyn.premise_box.lower, dyn.premise_box.upper
@@ -169,8 +169,8 @@ def test_lqr_law_matches_vectorised_blend(cfg: Config, dd) -> None:
         ref = np.asarray(dyn.premise_box.memberships(z))
         fast = TSLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, Td)._memberships(*z)
         np.testing.assert_allclose(fast, ref, atol=1e-14)
-    for fb, ff in ((False, False), (True, False), (False, True)):
-        st = replace(cfg.lqr, friction_compensation=False, speed_feedback=fb, acceleration_feedforward=ff)
+    for fb in (False, True):
+        st = replace(cfg.lqr, friction_compensation=False, speed_feedback=fb)
         lqr = TSLQR(dd.K, dyn, cfg.vehicle, st, Td)
 
         class E:
@@ -178,10 +178,10 @@ def test_lqr_law_matches_vectorised_blend(cfg: Config, dd) -> None:
             F_fr = 0.0
             F_fr_raw = 0.0
 
-        v_ref, w_ref, a_ref = 10.0, 0.1, 0.7
-        cmd = lqr.step(E, v_ref, w_ref, a_ref)  # first step: bumpless start
+        v_ref, w_ref = 10.0, 0.1
+        cmd = lqr.step(E, v_ref, w_ref)  # first step: bumpless start
         f0 = lqr._f.copy()
-        cmd = lqr.step(E, v_ref, w_ref, a_ref)
+        cmd = lqr.step(E, v_ref, w_ref)
         z = np.array([f0[1], E.x[0], E.x[1]])
         K = np.tensordot(dyn.premise_box.memberships(z), dd.K, axes=(0, 0))
         N = _discrete_reference_gain(cfg, z, K)
@@ -189,8 +189,7 @@ def test_lqr_law_matches_vectorised_blend(cfg: Config, dd) -> None:
         u_f = N @ [v_ref, w_ref] + K @ x
         a = lqr._a
         np.testing.assert_allclose(lqr._f, a * f0 + (1 - a) * u_f, rtol=1e-9)
-        F_add = cfg.vehicle.mass * ((v_ref - E.x[0]) / st.speed_time_constant if fb else 0.0)
-        F_add += cfg.vehicle.mass * a_ref if ff else 0.0
+        F_add = cfg.vehicle.mass * (v_ref - E.x[0]) / st.speed_time_constant if fb else 0.0
         assert cmd.F_xR == pytest.approx(f0[0] + F_add, rel=1e-12)
         assert cmd.delta == pytest.approx(f0[1], rel=1e-12)
 

@@ -284,9 +284,6 @@ class LQRSettings(_Frozen):
     speed_time_constant: PositiveFloat = Field(
         0.3, description="time constant τ [s] of the speed-error feedback M (v_ref − v̂)/τ"
     )
-    acceleration_feedforward: bool = Field(
-        False, description="add M·a_ref, the outer loop's planned acceleration, to the force [feed-forward]"
-    )
 
     @model_validator(mode="after")
     def _check(self) -> LQRSettings:

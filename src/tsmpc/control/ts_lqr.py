@@ -9,7 +9,7 @@ Law, every T_d, with ϑ = (δ_f, v̂, α̂) clipped into the box and r = [v_ref,
     u_f = N̄(ϑ) r + K(ϑ) x                              (reference feed-forward + state feedback)
     f⁺ = e^{−λT_d} f + (1 − e^{−λT_d}) u_f     (the Apkarian input filter, the plant input)
     ζ⁺ = ζ + T_d (ω_ref − ω̂)                   (yaw-rate integral; frozen while saturated)
-    F_xR = F_f + F̂_fr [+ M a_ref] [+ M (v_ref − v̂)/τ],   δ = δ_f      (then saturations)
+    F_xR = F_f + F̂_fr [+ M (v_ref − v̂)/τ],   δ = δ_f      (then saturations)
 
 N̄ is the classical static reference gain of the plant + filter loop (A, B the 5-state augmented
 model at ϑ without the integrator, K₅ = K without its ζ column): on the nominal model a constant r
@@ -18,14 +18,11 @@ removes what the model misses (tyre nonlinearity) and the compensation F̂_fr re
 road resistance. The steady state of ``x⁺ = A_d x + B_d u`` is that of ``ẋ = A x + B u`` for
 Euler and ZOH alike, so N̄ is computed from the continuous matrices: N̄ = −[C (A + B K₅)⁻¹ B]⁻¹.
 
-The bracketed force terms are switches of :class:`~tsmpc.config.LQRSettings`:
-
-* ``acceleration_feedforward`` — ``M a_ref`` with a_ref the outer loop's planned acceleration
-  (a function of the references only: a feed-forward);
-* ``speed_feedback`` — ``M (v_ref − v̂)/τ`` (τ = ``speed_time_constant``): proportional
-  *feedback* on the speed error, beyond the paper; it makes v follow the outer loop's command
-  within ≈ τ where the LMI design's own speed mode takes seconds (README, "Why the paper's inner
-  loop lags").
+The bracketed term is the switch ``speed_feedback`` of :class:`~tsmpc.config.LQRSettings`:
+``M (v_ref − v̂)/τ`` (τ = ``speed_time_constant``) is proportional *feedback* on the speed error,
+beyond the paper; it makes v follow the outer loop's command within ≈ τ where the paper's loop
+takes seconds (README, "Why the paper's inner loop lags"). ``friction_estimate`` chooses the
+compensated F̂_fr: the MHE's window fit (default) or the paper's one-step UIO formula.
 
 Anti-windup: the filter states are clamped to the saturation limits and ζ stops integrating
 while an input saturates.
@@ -145,12 +142,9 @@ class TSLQR:
         Ba[3, 0] = Ba[4, 1] = self.bandwidth
         return Aa, Ba
 
-    def step(self, estimate: Any, v_ref: float, omega_ref: float, a_ref: float = 0.0) -> InnerCommand:
+    def step(self, estimate: Any, v_ref: float, omega_ref: float) -> InnerCommand:
         """One inner step from the estimate (``.x`` = [v̂, α̂, ω̂], ``.F_fr``, ``.F_fr_raw``) and
-        the outer-loop references; returns the plant input for the next T_d.
-
-        ``a_ref`` [m/s²] is the outer loop's planned acceleration (its next move minus the
-        current one over T_c); it is used only with ``settings.acceleration_feedforward``."""
+        the outer-loop references; returns the plant input for the next T_d."""
         v, al, om = (float(c) for c in estimate.x)
         if not (math.isfinite(v) and math.isfinite(al) and math.isfinite(om)):
             # Never command from a corrupted estimate: hold the last input.
@@ -174,10 +168,8 @@ class TSLQR:
         u0, u1 = min(max(float(u[0]), Fmin), Fmax), min(max(float(u[1]), dmin), dmax)
         # Force terms outside the filter: the plant receives the filter state (held over T_d).
         F_add = 0.0
-        if st.acceleration_feedforward and math.isfinite(a_ref):
-            F_add += self.vehicle.mass * a_ref
         if st.speed_feedback:  # feedback on the speed error (beyond the paper)
-            F_add += self.vehicle.mass * (v_ref - v) / st.speed_time_constant
+            F_add = self.vehicle.mass * (v_ref - v) / st.speed_time_constant
         comp = 0.0
         if st.friction_compensation and not st.oracle:
             F_hat = float(estimate.F_fr if st.friction_estimate == FrictionEstimate.WINDOW

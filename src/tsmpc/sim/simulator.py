@@ -238,8 +238,6 @@ def simulate(
         mpc_qpit[k] = res.qp_iterations
         mpc_clip[k] = res.n_clipped
         v_ref, w_ref = float(u_prev[0]), float(u_prev[1])
-        up = np.asarray(res.u_pred)  # planned acceleration: the inner loop's optional feed-forward
-        a_ref = float(up[1, 0] - up[0, 0]) / Tc if up.shape[0] > 1 else 0.0
         try:
             for j in range(n_in):
                 t = (k * n_in + j) * Td
@@ -249,7 +247,7 @@ def simulate(
                 t1 = clock()
                 e = mhe.step(y, u_applied)
                 t2 = clock()
-                cmd = lqr.step(_oracle_estimate(x) if oracle else e, v_ref, w_ref, a_ref)
+                cmd = lqr.step(_oracle_estimate(x) if oracle else e, v_ref, w_ref)
                 t3 = clock()
                 u_applied = np.array([cmd.F_xR, cmd.delta])
                 state[m], est[m], meas[m] = x, e.x, y
