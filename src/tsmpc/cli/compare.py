@@ -110,7 +110,7 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
 
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
-                  "nan_bursts, mass_stiffness_mismatch (see tsmpc.robustness).")
+                  "nan_bursts, mass_stiffness_mismatch, offset_start (see tsmpc.robustness).")
 _PRESET_HELP = ("Named configuration under --config: 'default' (our best cascade) or 'paper' (the cascade "
                 "as published: no speed-error feedback, the paper's UIO friction estimate).")
 _REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..1316 is used unless "
