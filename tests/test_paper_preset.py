@@ -209,7 +209,8 @@ def test_offset_start_makes_the_methods_differ(cfg: Config, paper_reference_path
 def test_sweep_base_config_accepts_a_preset(tmp_path: Path) -> None:
     from tsmpc.sweep import base_config, load_sweep
 
-    (tmp_path / "base.toml").write_text('preset = "paper"\n[lqr]\nspeed_time_constant = 0.7\n', encoding="utf-8")
+    base = 'preset = "paper"\n[lqr]\nspeed_time_constant = 0.7\n'
+    (tmp_path / "base.toml").write_text(base, encoding="utf-8")
     (tmp_path / "s.toml").write_text('name = "p"\nbase_config = "base.toml"\n[grid]\nmethod = ["ref"]\n',
                                      encoding="utf-8")
     c = base_config(load_sweep(tmp_path / "s.toml"))

@@ -278,7 +278,10 @@ class LQRSettings(_Frozen):
     friction_estimate: FrictionEstimate = Field(
         FrictionEstimate.WINDOW, description="compensated F̂_fr: MHE window fit or the paper's UIO formula"
     )
-    oracle: bool = Field(False, description="ablation: true state, no compensation")
+    oracle: bool = Field(
+        False, description="deprecated (old config files): same as simulate(oracle=True), the "
+        "simulation's ablation with the true state and no compensation"
+    )
     # Beyond the paper (SPEC §13): proportional *feedback* on the speed error, not a feed-forward.
     speed_feedback: bool = Field(
         True, description="speed-error feedback M (v_ref − v̂)/τ added to the force (beyond the paper)"

@@ -80,7 +80,7 @@ class TSLQR:
         gains: (8, 2, 6) vertex gains of the dynamic design (u = K x, physical units).
         model: dynamic TS model (its premise box and memberships schedule the gains).
         vehicle: vehicle parameters (equilibrium).
-        settings: saturations, compensation switch, oracle flag.
+        settings: saturations, compensation switch.
         Td: sample time [s].
         bandwidth: Apkarian filter λ [rad/s] (must match the design).
     """
@@ -171,7 +171,7 @@ class TSLQR:
         if st.speed_feedback:  # feedback on the speed error (beyond the paper)
             F_add = self.vehicle.mass * (v_ref - v) / st.speed_time_constant
         comp = 0.0
-        if st.friction_compensation and not st.oracle:
+        if st.friction_compensation:
             F_hat = float(estimate.F_fr if st.friction_estimate == FrictionEstimate.WINDOW
                           else estimate.F_fr_raw)
             comp = F_hat if math.isfinite(F_hat) else 0.0
