@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import Config, replace
+from tsmpc.errors import ConfigError
 from tsmpc.planning.reference import Reference
 from tsmpc.scenarios import PatchFriction, SurfacePatch
 from tsmpc.sim.simulator import Scenario
@@ -45,6 +46,8 @@ ROBUSTNESS_SCENARIOS: dict[str, str] = {
     "mass_stiffness_mismatch": "plant mass +20 % and cornering stiffness −20 % (controllers unchanged)",
     "actuator_lag": "steering servo (50 ms lag, 0.4 rad/s) and 50 ms drive-force lag; the applied "
     "inputs are measured and given to the MHE",
+    "offset_start": "start 2 m left of the path with a 0.2 rad (11.5°) heading error: the e_θ premise "
+    "leaves its ±5° box and the outer-loop methods schedule the transient differently",
 }
 
 
@@ -121,7 +124,7 @@ def apply_robustness(
     Raises ValueError for an unknown name (the message lists the allowed ones).
     """
     if name not in ROBUSTNESS_SCENARIOS:
-        raise ValueError(f"unknown robustness scenario {name!r}; allowed: {', '.join(ROBUSTNESS_SCENARIOS)}")
+        raise ConfigError(f"unknown robustness scenario {name!r}; allowed: {', '.join(ROBUSTNESS_SCENARIOS)}")
     label = scenario.name if name == "nominal" else f"{scenario.name}+{name}"
     meta = {**scenario.meta, "robustness": name}
     sc = dc_replace(scenario, name=label, meta=meta)
@@ -148,4 +151,6 @@ def apply_robustness(
     if name == "actuator_lag":
         act = Actuators(SteeringServo(0.05, 0.4), ForceLag(0.05))
         return RobustnessCase(cfg, dc_replace(sc, actuators=act, measured_input=True))
+    if name == "offset_start":
+        return RobustnessCase(cfg, dc_replace(sc, initial_error=(2.0, 0.2)))
     return RobustnessCase(cfg, sc)
