@@ -21,7 +21,7 @@ from tsmpc.vehicle.commonroad import CommonRoadPlant, commonroad_config
 cfg = commonroad_config(Config(), vehicle_id=2)  # its parameters, force limits per kg
 steps = int(os.environ.get("TSMPC_EXAMPLE_STEPS", "0")) or None
 # the platform measures the applied steering (a CAN signal on real cars): the MHE uses it
-scenario = replace(load_scenario(cfg), measured_input=True)
+scenario = replace(load_scenario(cfg), measured_steering=True)
 own = replace(scenario, plant_tyre=TyreParams(model=TyreModel.LINEAR),
               actuators=Actuators(SteeringServo(time_constant_s=0.05, rate_limit=0.4)))
 runs = {"CommonRoad ST": simulate(cfg, "ref", scenario, plant=CommonRoadPlant(2), max_steps=steps),

@@ -55,9 +55,10 @@ def test_servo_lag_rate_limit_and_force_lag_follow_their_laws() -> None:
         SteeringServo(-1.0)
 
 
-def test_actuator_lag_scenario_wraps_the_plant_and_measures_the_applied_input(cfg: Config) -> None:
+def test_actuator_lag_scenario_wraps_the_plant_and_measures_the_steering(cfg: Config) -> None:
     c, s = apply_robustness("actuator_lag", cfg, load_scenario(cfg))
-    assert s.actuators == Actuators(SteeringServo(0.05, 0.4), ForceLag(0.05)) and s.measured_input
+    assert s.actuators == Actuators(SteeringServo(0.05, 0.4), ForceLag(0.05))
+    assert s.measured_steering and not s.measured_force
     log = simulate(c, Method.REF, s, max_steps=40)
     assert log.termination == "completed"
     # the commanded steering differs from what the servo delivered (the plant state shows it)
@@ -68,7 +69,7 @@ def _yaw_oscillation(cfg: Config, measured: bool) -> tuple[float, float]:
     """Peak of ω minus its 1 s moving average while v > 12 m/s, on the circuit's fast section
     (62-82 s, up to 14.7 m/s) behind a 50 ms / 0.4 rad/s steering servo; and max |e_y|."""
     ref = builtin_circuit(dt=cfg.rates.Tc).slice(620, 820)
-    sc = Scenario("fast", ref, actuators=Actuators(SteeringServo(0.05, 0.4)), measured_input=measured)
+    sc = Scenario("fast", ref, actuators=Actuators(SteeringServo(0.05, 0.4)), measured_steering=measured)
     log = simulate(cfg, Method.REF, sc)
     assert log.termination == "completed"
     w = log.state[:, 5]

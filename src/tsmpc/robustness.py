@@ -45,7 +45,7 @@ ROBUSTNESS_SCENARIOS: dict[str, str] = {
     "nan_bursts": "every 7 s all measurements are NaN for 50 ms",
     "mass_stiffness_mismatch": "plant mass +20 % and cornering stiffness −20 % (controllers unchanged)",
     "actuator_lag": "steering servo (50 ms lag, 0.4 rad/s) and 50 ms drive-force lag; the applied "
-    "inputs are measured and given to the MHE",
+    "steering angle is measured and given to the MHE (the delivered force is not)",
     "offset_start": "start 2 m left of the path with a 0.2 rad (11.5°) heading error: the e_θ premise "
     "leaves its ±5° box and the outer-loop methods schedule the transient differently",
 }
@@ -150,7 +150,7 @@ def apply_robustness(
         return RobustnessCase(cfg, dc_replace(sc, plant_vehicle=veh))
     if name == "actuator_lag":
         act = Actuators(SteeringServo(0.05, 0.4), ForceLag(0.05))
-        return RobustnessCase(cfg, dc_replace(sc, actuators=act, measured_input=True))
+        return RobustnessCase(cfg, dc_replace(sc, actuators=act, measured_steering=True))
     if name == "offset_start":
         return RobustnessCase(cfg, dc_replace(sc, initial_error=(2.0, 0.2)))
     return RobustnessCase(cfg, sc)

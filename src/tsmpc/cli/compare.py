@@ -132,7 +132,7 @@ def _execute(
 
 def _plant_setup(plant: str, cr_vehicle: int, cfg: Any, scenario: Any) -> tuple[Any, Any, Any]:
     """(config, scenario, plant factory) for ``--plant``: tsmpc's own, or a CommonRoad model
-    with vehicle ``--cr-vehicle`` (controllers set up for it, applied steering measured)."""
+    with vehicle ``--cr-vehicle`` (controllers set up for it, the servo's steering angle measured)."""
     from dataclasses import replace as dc_replace
 
     name = plant.strip().lower()
@@ -148,7 +148,7 @@ def _plant_setup(plant: str, cr_vehicle: int, cfg: Any, scenario: Any) -> tuple[
     except TsmpcError as err:
         fail(err)
     meta = {**scenario.meta, "plant": name, "cr_vehicle": cr_vehicle}
-    sc = dc_replace(scenario, measured_input=True, meta=meta)
+    sc = dc_replace(scenario, measured_steering=True, meta=meta)
     model = COMMONROAD_MODELS[name]
     return cfg, sc, lambda: CommonRoadPlant(cr_vehicle, model=model, h=cfg.rates.h)
 

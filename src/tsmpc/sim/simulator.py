@@ -54,8 +54,9 @@ class Scenario:
         initial_error: (lateral offset [m], heading offset [rad]) of the start pose.
         plant_vehicle, plant_tyre: plant-only parameters (model mismatch); None = the config's.
         actuators: steering servo / force lag in front of the default plant; None = ideal.
-        measured_input: the platform measures the input the vehicle really received (the
-            plant's ``applied_input``) and gives it to the cascade (the MHE then uses it).
+        measured_steering, measured_force: the platform measures the steering angle / drive
+            force the vehicle really received (the plant's ``applied_input``) and gives it to the
+            cascade (the MHE then uses it instead of the command).
         sensor_fault: measurement corruption (dropouts, NaN bursts); None = healthy sensors.
         divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track width).
         meta: free-form facts written to metrics.json (source file, window, ...).
@@ -68,7 +69,8 @@ class Scenario:
     plant_vehicle: VehicleParams | None = None
     plant_tyre: TyreParams | None = None
     actuators: Actuators | None = None
-    measured_input: bool = False
+    measured_steering: bool = False
+    measured_force: bool = False
     sensor_fault: SensorFault | None = None
     divergence_bound_m: float | None = None
     meta: dict[str, Any] = field(default_factory=dict)
@@ -157,13 +159,14 @@ def default_plant(cfg: Config, scenario: Scenario) -> Plant:
 
 
 def _measurement(y: NDArray[np.float64], x: NDArray[np.float64], plant: Plant, oracle: bool,
-                 measured_input: bool) -> Measurement:
-    """The sensor sample the cascade gets: noisy [X, Y, θ, v, ω], plus the applied input if the
-    platform measures it, plus the true [v, α, ω] in the oracle ablation."""
-    u = plant.applied_input if measured_input else None
+                 sc: Scenario) -> Measurement:
+    """The sensor sample the cascade gets: noisy [X, Y, θ, v, ω], plus the applied steering /
+    force where the platform measures them, plus the true [v, α, ω] in the oracle ablation."""
+    u = plant.applied_input if (sc.measured_steering or sc.measured_force) else None
     return Measurement.from_array(y, state=x[3:6].copy() if oracle else None,
-                                  force=None if u is None else float(u[0]),
-                                  steering=None if u is None else float(u[1]))
+                                  force=float(u[0]) if u is not None and sc.measured_force else None,
+                                  steering=float(u[1]) if u is not None and sc.measured_steering
+                                  else None)
 
 
 def simulate(
@@ -204,7 +207,7 @@ def simulate(
             termination = f"diverged: |e_y| = {abs(e_y):.2f} m > {bound:g} m at t = {k * Tc:.1f} s"
             done = k + 1
             break
-        cmd = cascade.step(t, _measurement(y, x, plant, oracle, scenario.measured_input))
+        cmd = cascade.step(t, _measurement(y, x, plant, oracle, scenario))
         if cmd.plan is not None:
             rec.plan(k, cmd)
         mu = float(scenario.friction.mu(t, s_travel))
