@@ -97,8 +97,6 @@ def _execute(
             if overwrite:
                 _remove_previous_outputs(out)
             mark_partial(out, "running", methods=[m.value for m in methods])
-            if oracle:
-                cfg = replace(cfg, lqr=replace(cfg.lqr, oracle=True, friction_compensation=False))
             try:
                 designs = design_status(cfg)
             except TsmpcError as err:  # e.g. an infeasible LMI for these weights and boxes
