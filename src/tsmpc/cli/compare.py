@@ -166,6 +166,8 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
                   "nan_bursts, mass_stiffness_mismatch, offset_start (see tsmpc.robustness).")
+_PRESET_HELP = ("Named configuration under --config: 'default' (our best cascade) or 'paper' (the cascade "
+                "as published: no speed-error feedback, the paper's UIO friction estimate).")
 _REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..1316 is used unless "
              "--window says otherwise) or a planned CSV (t,x,y,theta,v,omega,kappa). "
              "Default: the built-in paper-like circuit.")
@@ -182,10 +184,7 @@ _OPT_ORACLE = typer.Option(False, "--oracle", help="Ablation: the inner loop get
                            "no friction compensation.")
 _OPT_DURATION = typer.Option(None, "--duration", help="Track only the first S s (finite, >= 0.1).")
 _OPT_SCENARIO = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP)
-# The named configuration (issue 13): 'default' or 'paper'; the --config file's fields override it.
-_OPT_PRESET = typer.Option(None, "--preset", help="Named configuration under --config: 'default' (our "
-                           "best cascade) or 'paper' (the cascade as published: no speed-error "
-                           "feedback, the paper's UIO friction estimate).")
+_OPT_PRESET = typer.Option(None, "--preset", help=_PRESET_HELP)
 _OPT_OVERWRITE = typer.Option(False, "--overwrite", help="Write into a non-empty --out folder, "
                               "replacing tsmpc's outputs of an earlier run (other files are kept).")
 
