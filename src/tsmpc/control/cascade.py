@@ -188,8 +188,7 @@ class Cascade:
         self._x0 = None if x0 is None else np.asarray(x0, dtype=float).reshape(6).copy()
         self.mhe.reset(None if self._x0 is None else self._x0[3:6].copy())
         self.lqr.reset()
-        if hasattr(self.mpc, "reset"):
-            self.mpc.reset()
+        self.mpc.reset()
         self._calls = 0
         self._pose = None if self._x0 is None else self._x0[:3].copy()
         self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
