@@ -168,5 +168,5 @@ def write_outputs(
     if plots:
         from tsmpc.report.figures import save_all
 
-        files += save_all(logs, out)
+        files += save_all(logs, out, cfg)
     return files
