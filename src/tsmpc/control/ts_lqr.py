@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import LQRSettings, VehicleParams
+from tsmpc.errors import ConfigError
 from tsmpc.models.dynamic import DynamicTS, continuous_matrices
 
 __all__ = ["TSLQR", "InnerCommand", "equilibrium"]
@@ -70,7 +71,7 @@ class TSLQR:
         gains: (8, 2, 6) vertex gains of the dynamic design (u = K x, physical units).
         model: dynamic TS model (its premise box and memberships schedule the gains).
         vehicle: vehicle parameters (equilibrium).
-        settings: saturations, compensation switch, oracle flag.
+        settings: saturations, compensation switch.
         Td: sample time [s].
         bandwidth: Apkarian filter λ [rad/s] (must match the design).
     """
@@ -81,7 +82,7 @@ class TSLQR:
     ) -> None:
         self.K = np.asarray(gains, dtype=float)
         if self.K.shape != (model.n_vertices, 2, 6):
-            raise ValueError(f"TSLQR: gains must have shape ({model.n_vertices}, 2, 6), got {self.K.shape}")
+            raise ConfigError(f"TSLQR: gains must have shape ({model.n_vertices}, 2, 6), got {self.K.shape}")
         self.model = model
         self.vehicle = vehicle
         self.settings = settings
@@ -151,7 +152,7 @@ class TSLQR:
         u0, u1 = min(max(u0, Fmin), Fmax), min(max(u1, dmin), dmax)
         # The plant receives the filter state (held over T_d); the filter then moves toward u_f.
         comp = 0.0
-        if self.settings.friction_compensation and not self.settings.oracle:
+        if self.settings.friction_compensation:
             F_hat = float(estimate.F_fr)
             comp = F_hat if math.isfinite(F_hat) else 0.0
         out0 = f0 + F_ff + comp

@@ -37,6 +37,7 @@ from scipy.linalg.lapack import dpotrs as _potrs
 
 from tsmpc.config import MHESettings, VehicleParams
 from tsmpc.control.qp import QPStatus, solve_daqp
+from tsmpc.errors import ConfigError
 from tsmpc.models.dynamic import DynamicTS
 
 __all__ = ["MHEUIO", "Estimate", "EstimatorStatus", "WindowQP"]
@@ -127,7 +128,7 @@ class MHEUIO:
         x0: NDArray[np.float64] | None = None,
     ) -> None:
         if abs(model.Td - Td) > 1e-12:
-            raise ValueError(f"MHEUIO: Td = {Td} differs from the model's Td = {model.Td}")
+            raise ConfigError(f"MHEUIO: Td = {Td} differs from the model's Td = {model.Td}")
         self.settings = settings
         self.model = model
         self.vehicle = vehicle
