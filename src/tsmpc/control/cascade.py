@@ -174,7 +174,7 @@ class Cascade:
     ) -> None:
         from tsmpc.control.ts_lqr import TSLQR
         from tsmpc.errors import ConfigError
-from tsmpc.estimation.mhe_uio import MHEUIO
+        from tsmpc.estimation.mhe_uio import MHEUIO
         from tsmpc.models.dynamic import DynamicTS
         from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
