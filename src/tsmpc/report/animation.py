@@ -104,7 +104,8 @@ def animate_run(
         road_width: draw borders at ± road_width/2 around the reference instead (no track) [m].
         fps: frames per second of the files; with ``every = 1`` and fps = 1/T_c it plays in real time.
         every: one frame every ``every`` MPC steps.
-        start_s, duration_s: the part of the run to render [s].
+        start_s: first simulated second rendered [s].
+        duration_s: seconds rendered (None: to the end) [s].
         view_m: width of the car-following view [m].
         size_px: (width, height) of the frames [px].
         mp4: also write an MP4 when ffmpeg is on the PATH.
