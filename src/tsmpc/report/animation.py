@@ -219,7 +219,7 @@ def _render(
     car = Polygon(car_outline(0, 0, 0, vehicle), closed=True, fc="tab:blue", ec="k", lw=1.0, animated=True)
     ax.add_patch(car)
     # The per-frame numbers are drawn by Pillow: matplotlib's glyph rendering would cost ~10 ms a frame.
-    font = _font(round(11 * h / 600))
+    font = _font(max(10, round(11 * h / 600)))
     box_xy = (int(ax.bbox.x0) + 6, int(h - ax.bbox.y1) + 6)
     ax.legend(handles=[ref_line, trail, pred], loc="upper right", fontsize=7)
     dot, = ov.plot([], [], "o", color="tab:red", ms=5, animated=True)
