@@ -55,7 +55,7 @@ def _remove_previous_outputs(out: Path) -> None:
 def _execute(
     methods_text: str, reference: Path | None, window: str | None, out: Path, seed: int | None,
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
-    overwrite: bool = False,
+    overwrite: bool = False, preset: str | None = None,
 ) -> None:
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -71,7 +71,7 @@ def _execute(
     finite("--duration", duration, lo=0.1)
     if seed is not None and seed < 0:
         fail(ConfigError(f"--seed = {seed}: must be an integer >= 0"))
-    cfg = load_config_or_exit(config)
+    cfg = load_config_or_exit(config, preset)
     if seed is not None:
         cfg = replace(cfg, seed=seed)
     try:
@@ -166,7 +166,9 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
 
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
-                  "nan_bursts, mass_stiffness_mismatch (see tsmpc.robustness).")
+                  "nan_bursts, mass_stiffness_mismatch, offset_start (see tsmpc.robustness).")
+_PRESET_HELP = ("Named configuration under --config: 'default' (our best cascade) or 'paper' (the cascade "
+                "as published: no speed-error feedback, the paper's UIO friction estimate).")
 _REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..1316 is used unless "
              "--window says otherwise) or a planned CSV (t,x,y,theta,v,omega,kappa). "
              "Default: the built-in paper-like circuit.")
@@ -182,6 +184,7 @@ _OPT_NO_PLOTS = typer.Option(False, "--no-plots", help="Skip the figures.")
 _OPT_ORACLE = typer.Option(False, "--oracle", help="Ablation: true state, no friction compensation.")
 _OPT_DURATION = typer.Option(None, "--duration", help="Track only the first S s (finite, >= 0.1).")
 _OPT_SCENARIO = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP)
+_OPT_PRESET = typer.Option(None, "--preset", help=_PRESET_HELP)
 _OPT_OVERWRITE = typer.Option(False, "--overwrite", help="Write into a non-empty --out folder, "
                               "replacing tsmpc's outputs of an earlier run (other files are kept).")
 
@@ -199,10 +202,11 @@ def compare_cmd(
     duration: float | None = _OPT_DURATION,
     robustness: str = _OPT_SCENARIO,
     overwrite: bool = _OPT_OVERWRITE,
+    preset: str | None = _OPT_PRESET,
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
     _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
-             overwrite)
+             overwrite, preset)
 
 
 @app.command("run")
@@ -218,9 +222,10 @@ def run_cmd(
     duration: float | None = _OPT_DURATION,
     robustness: str = _OPT_SCENARIO,
     overwrite: bool = _OPT_OVERWRITE,
+    preset: str | None = _OPT_PRESET,
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
     if "," in method:
         fail(ConfigError("--method takes one method; use `tsmpc compare --methods` for several"))
     _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
-             overwrite)
+             overwrite, preset)

@@ -174,7 +174,6 @@ class Cascade:
         x0: ArrayLike | None = None, max_age_s: float | None = None,
     ) -> None:
         from tsmpc.control.ts_lqr import TSLQR
-        from tsmpc.errors import ConfigError
         from tsmpc.estimation.mhe_uio import MHEUIO
         from tsmpc.models.dynamic import DynamicTS
         from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
