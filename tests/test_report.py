@@ -197,3 +197,20 @@ def test_sweep_plots_colour_by_a_second_axis(tmp_path: Path) -> None:
     assert {p.name for p in files} == {"by_method.png", "by_noise_scale.png", "by_friction.png",
                                        "solve_times.png"}
     assert all(p.read_bytes().startswith(PNG_MAGIC) for p in files)
+
+
+@pytest.mark.slow
+def test_animate_writes_an_mp4_when_ffmpeg_is_present(run_dir: Path, tmp_path: Path) -> None:
+    import shutil
+
+    from tsmpc.report.animation import animate_run
+
+    log = load_run(run_dir).logs["REF"]
+    res = animate_run(log, tmp_path / "a.gif", duration_s=1.0, size_px=(321, 241))
+    assert res.frames == 10 and res.gif.is_file()
+    if shutil.which("ffmpeg") is None:
+        assert res.mp4 is None  # no ffmpeg: the GIF alone, no error
+        return
+    assert res.mp4 == tmp_path / "a.mp4"
+    assert res.mp4.read_bytes()[4:8] == b"ftyp"  # an MP4 container (odd sizes cropped to even)
+    assert not list(tmp_path.glob(".*tmp*"))  # no temporary file left behind
