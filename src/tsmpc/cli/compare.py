@@ -98,9 +98,11 @@ def _execute(
             if overwrite:
                 _remove_previous_outputs(out)
             mark_partial(out, "running", methods=[m.value for m in methods])
-            if oracle:
-                cfg = replace(cfg, lqr=replace(cfg.lqr, oracle=True, friction_compensation=False))
-            designs = design_status(cfg)
+            try:
+                designs = design_status(cfg)
+            except TsmpcError as err:  # e.g. an infeasible LMI for these weights and boxes
+                (out / PARTIAL_MARKER).unlink(missing_ok=True)
+                fail(f"LMI design failed: {err}", code=1)
             with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
                           TextColumn("{task.completed}/{task.total} MPC steps"),
                           TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
