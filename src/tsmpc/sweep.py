@@ -47,6 +47,7 @@ from tsmpc.config import Config, resolve_preset, validate
 from tsmpc.errors import ConfigError
 from tsmpc.io import atomic_write_bytes, atomic_write_text
 from tsmpc.robustness import ROBUSTNESS_SCENARIOS
+from tsmpc.sweep_axes import _CHOICE_AXES, _FLOAT_AXES, AXES
 
 __all__ = [
     "AXES",
@@ -73,10 +74,6 @@ FRICTIONS: dict[str, str] = {
 }
 _FRICTION_MU = {"dry": 0.9, "earth": 0.68, "wet": 0.6}
 _METHODS = ("FZN", "REF", "ITER", "NL")
-_FLOAT_AXES = ("noise_scale", "mass_scale", "inertia_scale", "cornering_scale", "speed_scale")
-_CHOICE_AXES = ("method", "friction", "scenario", "track", "seed")
-#: Every axis a sweep may vary.
-AXES = ("method", "friction", "scenario", *_FLOAT_AXES, "track", "seed")
 #: Allowed (exclusive lower, inclusive upper) bounds of the numeric axes.
 AXIS_LIMITS: dict[str, tuple[float, float]] = {
     "noise_scale": (0.0, 1000.0), "mass_scale": (0.0, 10.0), "inertia_scale": (0.0, 10.0),

@@ -22,7 +22,7 @@ __all__ = ["CompareResult", "compare", "load_scenario", "versions"]
 
 ProgressFactory = Callable[[str, int], Callable[[int, int], None]]
 #: Draws the figures of a comparison into a folder; returns the files (the report layer's).
-FigureFn = Callable[[dict[str, RunLog], Path], list[Path]]
+FigureFn = Callable[[dict[str, RunLog], Path, Config], list[Path]]
 
 
 @dataclass(frozen=True)
@@ -132,7 +132,7 @@ def compare(
 
     Every method runs from the same seed (same noise sequence) on a fresh plant from
     ``plant_factory`` (None: tsmpc's own plant). Nothing is written when ``out_dir`` is None.
-    Files are written atomically. Figures (``plots``) are drawn by ``figures(logs, out_dir)``;
+    Files are written atomically. Figures (``plots``) are drawn by ``figures(logs, out_dir, cfg)``;
     None = the report layer's :func:`tsmpc.report.figures.save_all`, imported only then.
     ``designs``: the (kinematic, dynamic) LMI designs of ``cfg`` when the caller has them
     (default: the design cache).
@@ -171,7 +171,8 @@ def write_outputs(
     cfg: Config, metrics: dict[str, Any], logs: dict[str, RunLog], out: Path, *, plots: bool,
     figures: FigureFn | None = None,
 ) -> list[Path]:
-    """metrics.json, rmse.{csv,md,tex}, timeseries.{npz,mat}, config.toml, versions.json, figures."""
+    """metrics.json, rmse.{csv,md,tex}, timeseries.{npz,mat}, config.toml, versions.json, figures,
+    and last report.html (one self-contained page of all of it)."""
     from tsmpc.report.tables import rmse_csv, rmse_latex, rmse_markdown
 
     out.mkdir(parents=True, exist_ok=True)
@@ -194,5 +195,8 @@ def write_outputs(
     if plots:
         if figures is None:
             from tsmpc.report.figures import save_all as figures
-        files += figures(logs, out)
+        files += figures(logs, out, cfg)
+    from tsmpc.report.html import write_report
+
+    files.append(write_report(out, metrics, files))
     return files
