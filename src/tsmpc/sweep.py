@@ -494,9 +494,10 @@ def run_sweep(
             already holds records is refused (nothing is overwritten).
         run_fn: the task function (default: simulate; :func:`dry_run` for plumbing checks).
         progress: called as ``progress(done, total, record)`` after each record is written.
-        plots, plotter: write the summary plots with ``plotter(table, out, AXES)``; None = the
-            report layer's :func:`tsmpc.report.sweep_plots.save_sweep_plots`, imported only
-            then (this module imports no plotting code at import time).
+        plots: write the summary plots.
+        plotter: writes them as ``plotter(table, out, AXES)``; None = the report layer's
+            :func:`tsmpc.report.sweep_plots.save_sweep_plots`, imported only then (this module
+            imports no plotting code at import time).
         connect_timeout: seconds to wait for ``scheduler`` before giving up (ConfigError).
         design_fn: loads or solves the LMI designs of the base config (e.g. with a status line).
     """

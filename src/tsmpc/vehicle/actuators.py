@@ -87,7 +87,8 @@ class ActuatedPlant:
 
     Args:
         plant: the vehicle.
-        steering, force: the actuators (None = ideal).
+        steering: the steering servo (None = ideal steering).
+        force: the drive-force lag (None = ideal force).
         substeps: actuator sub-steps per ``step`` call (the wrapped plant is stepped with each
             sub-step's actuator output; its own ``step`` must accept ``dt / substeps``).
 
