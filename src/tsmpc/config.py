@@ -332,6 +332,9 @@ class Config(_Frozen):
     noise: NoiseSettings = NoiseSettings()
     planner: PlannerSettings = PlannerSettings()
     seed: int = Field(0, ge=0, description="seed of every random draw of a run")
+    divergence_bound_m: PositiveFloat = Field(
+        5.0, description="|e_y| [m] beyond which a run is diverged (when the track width is unknown)"
+    )
 
     def to_dict(self) -> dict[str, Any]:
         """JSON/TOML-ready nested dict (enums as strings)."""

@@ -24,6 +24,7 @@ def _parse_window(text: str | None) -> tuple[int, int] | None:
 def _execute(
     methods_text: str, reference: Path | None, window: str | None, out: Path, seed: int | None,
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
+    laps: int = 1,
 ) -> None:
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -46,7 +47,7 @@ def _execute(
     if not methods:
         fail(ValueError("--methods is empty"))
     try:
-        scenario = load_scenario(cfg, reference, _parse_window(window))
+        scenario = load_scenario(cfg, reference, _parse_window(window), laps=laps)
     except (TsmpcError, OSError) as err:
         fail(err)
     if robustness != "nominal":
@@ -72,6 +73,8 @@ def _execute(
             fail(err)
     _print_tables(console, result.metrics)
     console.print(f"wrote {len(result.files)} files to [bold]{out}[/bold]")
+    if result.metrics.get("diverged"):  # exit codes: 0 ok, 1 a method diverged, 2 invalid input
+        raise typer.Exit(1)
 
 
 def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
@@ -86,6 +89,9 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
     for col in ("approach", "x [m]", "y [m]", "θ [rad]", "v [m/s]", "ω [rad/s]"):
         t.add_column(escape(col), justify="right" if col != "approach" else "left")
     for label, vals in rmse_rows(metrics, paper):
+        if label.endswith("(diverged)"):  # never RMSEs as if the run had completed
+            t.add_row(label, *(["diverged"] + ["—"] * (len(vals) - 1)), style="bold red")
+            continue
         style = "dim" if label.endswith("(paper)") else None
         t.add_row(label, *(f"{v:.3f}" for v in vals), style=style)
     console.print(t)
@@ -95,6 +101,10 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
         tt.add_column(escape(col), justify="right", no_wrap=col == "events")
     for name, m in metrics["methods"].items():
         ev = "\n".join(f"{k}={v}" for k, v in m["events"].items() if v) or "-"
+        if m.get("status") == "diverged":  # timings of a run cut short are not comparable
+            tt.add_row(name, *(["—"] * 7), f"{m['max_abs_lateral_m']:.3f}", "—", "—", ev,
+                       style="bold red")
+            continue
         ratio = m.get("mpc_ms_ratio_to_REF")
         tt.add_row(name, f"{m['mpc_ms']['median']:.3f}", f"{m['mpc_ms']['p95']:.3f}",
                    f"{m['mpc_ms']['p99']:.3f}", f"{m['mpc_ms']['max']:.2f}",
@@ -110,6 +120,7 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
                   "nan_bursts, mass_stiffness_mismatch (see tsmpc.robustness).")
+_LAPS_HELP = "Laps of a closed track (a planned track CSV); the look-ahead wraps around the lap."
 _REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..1316 is used unless "
              "--window says otherwise) or a planned CSV (t,x,y,theta,v,omega,kappa). "
              "Default: the built-in paper-like circuit.")
@@ -129,9 +140,11 @@ def compare_cmd(
     ),
     duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
     robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
+    laps: int = typer.Option(1, "--laps", min=1, help=_LAPS_HELP),
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
-    _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness)
+    _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
+             laps)
 
 
 @app.command("run")
@@ -148,8 +161,10 @@ def run_cmd(
     ),
     duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
     robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
+    laps: int = typer.Option(1, "--laps", min=1, help=_LAPS_HELP),
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
     if "," in method:
         fail(ValueError("--method takes one method; use `tsmpc compare --methods` for several"))
-    _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness)
+    _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
+             laps)

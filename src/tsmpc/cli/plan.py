@@ -93,18 +93,22 @@ def plan(
                                    a_brake_max=a_brake, v_start=v_start)
     except ValidationError as err:
         fail(ValueError(f"invalid limits: {err.errors()[0]['loc'][0]}: {err.errors()[0]['msg']}"))
+    meta: dict[str, object] = {}
     try:
         if is_tumftm(source):
             track = load_tumftm(source)
             ref = plan_path(track.centre, settings, closed=True if closed is None else closed, dt=dt,
                             laps=laps, tail_s=tail)
+            # The narrowest half-width: beyond it the car has left the road somewhere on the lap.
+            half = float(min(track.w_left.min(), track.w_right.min()))
+            meta = {"source": source.name, "half_width_m": f"{half:.3f}"}
         else:
             wp, cap = _read_waypoints(source)
             ref = plan_path(wp, settings, closed=bool(closed), dt=dt, laps=laps, tail_s=tail, v_cap=cap)
         if fmt is OutputFormat.paper:
             save_paper_format(ref, out)
         else:
-            ref.to_csv(out)
+            ref.to_csv(out, meta)
     except (TsmpcError, OSError) as err:
         fail(err)
     typer.echo(f"{out}: {len(ref)} samples, {ref.duration:.1f} s, max v {ref.v.max():.2f} m/s, "

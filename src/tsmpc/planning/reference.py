@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from tsmpc.errors import DataFormatError
 
-__all__ = ["CSV_HEADER", "Reference"]
+__all__ = ["CSV_HEADER", "Reference", "read_csv_meta"]
 
 CSV_HEADER = "t,x,y,theta,v,omega,kappa"
 _SIGNALS = ("t", "x", "y", "theta", "v", "omega", "kappa")
@@ -125,6 +125,16 @@ class Reference:
             y[i] = py + v * np.sin(th[i]) * dt
         return Reference(t, x, y, th, self.v[ji], self.omega[ji], self.kappa[ji], closed=False)
 
+    def repeat(self, laps: int) -> Reference:
+        """``laps`` consecutive laps of a closed reference (itself closed: the look-ahead past
+        the last lap wraps into the next one)."""
+        if laps < 1 or (laps > 1 and not self.closed):
+            raise DataFormatError(f"laps = {laps}: must be ≥ 1, and > 1 only for a closed lap")
+        if laps == 1:
+            return self
+        w = self.window(0, laps * len(self))
+        return Reference(w.t, w.x, w.y, w.theta, w.v, w.omega, w.kappa, closed=True)
+
     def resample(self, dt: float) -> Reference:
         """Resample to step ``dt`` (linear interpolation of every signal; θ is unwrapped so this
         is continuous)."""
@@ -135,17 +145,23 @@ class Reference:
         return Reference(t, *(np.interp(t, self.t, getattr(self, s)) for s in _SIGNALS[1:]),
                          closed=self.closed)
 
-    def to_csv(self, path: str | Path) -> None:
-        """Write ``t,x,y,theta,v,omega,kappa`` rows (atomically)."""
+    def to_csv(self, path: str | Path, meta: dict[str, object] | None = None) -> None:
+        """Write ``t,x,y,theta,v,omega,kappa`` rows (atomically).
+
+        A ``# key=value;...`` line after the header carries ``closed`` and any ``meta`` (e.g. the
+        track's ``half_width_m``): what the samples alone cannot say."""
         from tsmpc.sim.log import atomic_write_text
 
         data = np.stack([getattr(self, s) for s in _SIGNALS], axis=1)
-        lines = [CSV_HEADER] + [",".join(f"{v:.10g}" for v in row) for row in data]
+        info = {"closed": str(self.closed).lower(), **(meta or {})}
+        lines = [CSV_HEADER, "# " + ";".join(f"{k}={v}" for k, v in info.items())]
+        lines += [",".join(f"{v:.10g}" for v in row) for row in data]
         atomic_write_text(path, "\n".join(lines) + "\n")
 
     @classmethod
-    def from_csv(cls, path: str | Path, closed: bool = False) -> Reference:
-        """Read a CSV written by :meth:`to_csv` (header ``t,x,y,theta,v,omega,kappa``)."""
+    def from_csv(cls, path: str | Path, closed: bool | None = None) -> Reference:
+        """Read a CSV written by :meth:`to_csv` (header ``t,x,y,theta,v,omega,kappa``; ``#`` lines
+        are metadata). ``closed`` None: as the file says (open when it does not say)."""
         p = Path(path)
         try:
             text = p.read_text(encoding="utf-8")
@@ -154,10 +170,35 @@ class Reference:
         lines = [ln for ln in text.splitlines() if ln.strip()]
         if not lines or lines[0].replace(" ", "") != CSV_HEADER:
             raise DataFormatError(f"{p}: expected the header '{CSV_HEADER}'")
+        meta = _parse_meta(lines[1:])
+        rows = [ln for ln in lines[1:] if not ln.lstrip().startswith("#")]
         try:
-            data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+            data = np.array([[float(v) for v in ln.split(",")] for ln in rows])
         except ValueError as err:
             raise DataFormatError(f"{p}: non-numeric value ({err})") from None
         if data.ndim != 2 or data.shape[1] != 7:
             raise DataFormatError(f"{p}: expected 7 columns per row")
+        if closed is None:
+            closed = meta.get("closed", "false").strip().lower() == "true"
         return cls(*data.T, closed=closed)
+
+
+def _parse_meta(lines: list[str]) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for ln in lines:
+        if ln.lstrip().startswith("#"):
+            for item in ln.lstrip()[1:].split(";"):
+                if "=" in item:
+                    k, v = item.split("=", 1)
+                    out[k.strip()] = v.strip()
+    return out
+
+
+def read_csv_meta(path: str | Path) -> dict[str, str]:
+    """The ``# key=value`` metadata of a planned CSV (empty for files without any)."""
+    try:
+        with Path(path).open(encoding="utf-8") as fh:
+            lines = [fh.readline() for _ in range(4)]
+    except (OSError, UnicodeDecodeError):
+        return {}
+    return _parse_meta(lines[1:])

@@ -28,7 +28,7 @@ from tsmpc.scenarios import FrictionProfile, SensorNoise, paper_friction_profile
 from tsmpc.sim.log import RunLog
 from tsmpc.vehicle.plant import Plant
 
-__all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "simulate"]
+__all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "simulate", "tracked_steps"]
 
 ProgressFn = Callable[[int, int], None]
 
@@ -69,7 +69,8 @@ class Scenario:
         initial_error: (lateral offset [m], heading offset [rad]) of the start pose.
         plant_vehicle, plant_tyre: plant-only parameters (model mismatch); None = the config's.
         sensor_fault: measurement corruption (dropouts, NaN bursts); None = healthy sensors.
-        divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track width).
+        divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track's
+            half-width); None = ``cfg.divergence_bound_m``.
         meta: free-form facts written to metrics.json (source file, window, ...).
     """
 
@@ -94,6 +95,12 @@ def build_outer_controller(cfg: Config, method: Method, P: np.ndarray, S: np.nda
     from tsmpc.control.ts_mpc import TSMPC
 
     return TSMPC(cfg.mpc, model, P, S, mode=SchedulingMode(method.value.lower()))
+
+
+def tracked_steps(ref: Reference, N: int) -> int:
+    """Outer steps a run tracks: a closed lap to its end (its look-ahead wraps into the next lap,
+    see :meth:`Reference.window`); an open reference keeps its last N samples as look-ahead."""
+    return len(ref) if ref.closed else len(ref) - N
 
 
 def _oracle_estimate(x: np.ndarray) -> Any:
@@ -143,7 +150,7 @@ def simulate(
     ref = scenario.reference
     if abs(ref.dt - Tc) > 1e-9:
         ref = ref.resample(Tc)
-    K = len(ref) - N
+    K = tracked_steps(ref, N)
     if K < 1:
         raise ValueError(f"reference has {len(ref)} samples: needs more than N = {N} for look-ahead")
     if max_steps is not None:
@@ -155,7 +162,9 @@ def simulate(
     lqr = TSLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, Td, bandwidth=cfg.dynamic_lmi.filter_bandwidth)
     plant = Plant(scenario.plant_vehicle or cfg.vehicle, scenario.plant_tyre or cfg.tyre, rates.h)
     fault = scenario.sensor_fault
-    bound = scenario.divergence_bound_m
+    # A run leaving the road is a result (diverged), not a number: the track's half-width when
+    # the scenario knows it, else the configured default.
+    bound = scenario.divergence_bound_m or cfg.divergence_bound_m
     noise = SensorNoise(cfg.noise, cfg.seed)
     friction = scenario.friction
     p = cfg.vehicle
