@@ -83,8 +83,8 @@ def test_closed_lap_is_tracked_to_its_end_with_wrapping_look_ahead() -> None:
     np.testing.assert_allclose(two.x[L:], ref.x, atol=1e-9)
     np.testing.assert_allclose(two.theta[L:] - ref.theta, 2 * np.pi, atol=1e-6)
     cfg = Config()
-    from tsmpc.sim.simulator import Scenario
     from tsmpc.scenarios import ConstantFriction
+    from tsmpc.sim.simulator import Scenario
 
     sc = Scenario("ring", two, friction=ConstantFriction(0.9))
     log = simulate(cfg, Method.REF, sc)

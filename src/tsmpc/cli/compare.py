@@ -24,7 +24,7 @@ def _parse_window(text: str | None) -> tuple[int, int] | None:
 def _execute(
     methods_text: str, reference: Path | None, window: str | None, out: Path, seed: int | None,
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
-    laps: int = 1,
+    laps: int = 1, dt: float | None = None,
 ) -> None:
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -47,7 +47,7 @@ def _execute(
     if not methods:
         fail(ValueError("--methods is empty"))
     try:
-        scenario = load_scenario(cfg, reference, _parse_window(window), laps=laps)
+        scenario = load_scenario(cfg, reference, _parse_window(window), laps=laps, dt=dt)
     except (TsmpcError, OSError) as err:
         fail(err)
     if robustness != "nominal":
@@ -120,6 +120,8 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
                   "nan_bursts, mass_stiffness_mismatch (see tsmpc.robustness).")
+_DT_HELP = ("Column period [s] of a paper-format file (default: measured from the data; a value the "
+            "data contradict is refused).")
 _LAPS_HELP = "Laps of a closed track (a planned track CSV); the look-ahead wraps around the lap."
 _REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..1316 is used unless "
              "--window says otherwise) or a planned CSV (t,x,y,theta,v,omega,kappa). "
@@ -141,10 +143,11 @@ def compare_cmd(
     duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
     robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
     laps: int = typer.Option(1, "--laps", min=1, help=_LAPS_HELP),
+    dt: float | None = typer.Option(None, "--dt", min=1e-4, help=_DT_HELP),
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
     _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
-             laps)
+             laps, dt)
 
 
 @app.command("run")
@@ -162,9 +165,10 @@ def run_cmd(
     duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
     robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
     laps: int = typer.Option(1, "--laps", min=1, help=_LAPS_HELP),
+    dt: float | None = typer.Option(None, "--dt", min=1e-4, help=_DT_HELP),
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
     if "," in method:
         fail(ValueError("--method takes one method; use `tsmpc compare --methods` for several"))
     _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
-             laps)
+             laps, dt)

@@ -49,13 +49,21 @@ def load_scenario(
     *,
     use_paper_window: bool = True,
     laps: int = 1,
+    dt: float | None = None,
 ) -> Scenario:
     """The comparison scenario: the built-in circuit (``reference=None``), a paper-format file
     (the paper-run window of columns 5…1316 unless ``window`` says otherwise) or a planned CSV;
     the paper's time-based friction profile applies in every case. ``laps`` > 1 repeats a closed
-    lap (a planned track)."""
+    lap (a planned track). A paper-format file's column period is measured (``dt`` given: checked
+    against the data); the default window is the paper run's time span at that period, and the
+    paper's Table 5 rows go beside ours only for the paper's own run (``paper_reference``)."""
     from tsmpc.planning.circuit import builtin_circuit
-    from tsmpc.planning.paper_format import PAPER_RUN_WINDOW, load_reference
+    from tsmpc.planning.paper_format import (
+        is_paper_run,
+        load_paper_reference,
+        load_reference,
+        paper_window,
+    )
     from tsmpc.scenarios import paper_friction_profile
 
     if reference is None:
@@ -65,8 +73,15 @@ def load_scenario(
     from tsmpc.planning.reference import read_csv_meta
 
     paper = _is_paper_format(Path(reference))
-    win = window if window is not None else (PAPER_RUN_WINDOW if (paper and use_paper_window) else None)
-    ref = load_reference(reference, window=win)
+    if paper:  # measure the column period on the whole file, then take the window in it
+        full = load_paper_reference(reference, window=None, dt=dt)
+        win = window if window is not None else (paper_window(full.dt) if use_paper_window
+                                                 else None)
+        ref = full if win is None else load_paper_reference(reference, window=win, dt=full.dt)
+        paper_run = is_paper_run(full, win, cfg.rates.Tc)
+    else:
+        win, paper_run = window, False
+        ref = load_reference(reference, window=win)
     if laps != 1:
         if not ref.closed:
             from tsmpc.errors import DataFormatError
@@ -82,7 +97,8 @@ def load_scenario(
     bound = bound if bound is not None and bound > 0 else None
     return Scenario(Path(reference).stem, ref, paper_friction_profile(), divergence_bound_m=bound,
                     meta={"reference": str(reference), "window": list(win) if win else None,
-                          "paper_reference": paper, "divergence_bound_m": bound
+                          "paper_reference": paper_run, "paper_format": paper,
+                          "column_period_s": ref.dt, "divergence_bound_m": bound
                           or cfg.divergence_bound_m, "closed": ref.closed, "laps": laps})
 
 
