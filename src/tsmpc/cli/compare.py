@@ -24,7 +24,7 @@ def _parse_window(text: str | None) -> tuple[int, int] | None:
 def _execute(
     methods_text: str, reference: Path | None, window: str | None, out: Path, seed: int | None,
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
-    laps: int = 1, dt: float | None = None,
+    laps: int = 1, dt: float | None = None, strict_box: bool = False,
 ) -> None:
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -57,6 +57,7 @@ def _execute(
             cfg, scenario = apply_robustness(robustness, cfg, scenario, until_s=duration)
         except ValueError as err:
             fail(err)
+    cfg = _fit_envelope(console, cfg, scenario, strict_box)
     max_steps = None if duration is None else max(1, round(duration / cfg.rates.Tc))
     with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
                   TextColumn("{task.completed}/{task.total} MPC steps"),
@@ -75,6 +76,29 @@ def _execute(
     console.print(f"wrote {len(result.files)} files to [bold]{out}[/bold]")
     if result.metrics.get("diverged"):  # exit codes: 0 ok, 1 a method diverged, 2 invalid input
         raise typer.Exit(1)
+
+
+def _fit_envelope(console: Any, cfg: Any, scenario: Any, strict: bool) -> Any:
+    """The config whose certified designs cover the reference (SPEC §13), or exit 2 before any
+    simulation: boxes widened and designs re-solved (one line says so), or refused (--strict-box,
+    no certified design)."""
+    from tsmpc.envelope import fit_envelope
+    from tsmpc.errors import TsmpcError
+    from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
+
+    try:
+        fit = fit_envelope(cfg, scenario.reference, strict=strict)
+    except TsmpcError as err:
+        fail(err)
+    if fit.widened:
+        console.print(fit.message)
+        try:
+            load_or_design_kinematic(fit.config)
+            load_or_design_dynamic(fit.config)
+        except TsmpcError as err:
+            fail(ValueError(f"no certified design covers the reference ({fit.ranges.describe()}): "
+                            f"{err}"))
+    return fit.config
 
 
 def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
@@ -120,6 +144,8 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
                   "nan_bursts, mass_stiffness_mismatch (see tsmpc.robustness).")
+_STRICT_HELP = ("Refuse a reference that leaves the designs' scheduling boxes (default: widen the boxes "
+                "by a margin and re-solve and re-certify the designs, cached).")
 _DT_HELP = ("Column period [s] of a paper-format file (default: measured from the data; a value the "
             "data contradict is refused).")
 _LAPS_HELP = "Laps of a closed track (a planned track CSV); the look-ahead wraps around the lap."
@@ -144,10 +170,11 @@ def compare_cmd(
     robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
     laps: int = typer.Option(1, "--laps", min=1, help=_LAPS_HELP),
     dt: float | None = typer.Option(None, "--dt", min=1e-4, help=_DT_HELP),
+    strict_box: bool = typer.Option(False, "--strict-box", help=_STRICT_HELP),
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
     _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
-             laps, dt)
+             laps, dt, strict_box)
 
 
 @app.command("run")
@@ -166,9 +193,10 @@ def run_cmd(
     robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
     laps: int = typer.Option(1, "--laps", min=1, help=_LAPS_HELP),
     dt: float | None = typer.Option(None, "--dt", min=1e-4, help=_DT_HELP),
+    strict_box: bool = typer.Option(False, "--strict-box", help=_STRICT_HELP),
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
     if "," in method:
         fail(ValueError("--method takes one method; use `tsmpc compare --methods` for several"))
     _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
-             laps, dt)
+             laps, dt, strict_box)

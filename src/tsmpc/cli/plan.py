@@ -113,6 +113,24 @@ def plan(
         fail(err)
     typer.echo(f"{out}: {len(ref)} samples, {ref.duration:.1f} s, max v {ref.v.max():.2f} m/s, "
                f"max |omega| {abs(ref.omega).max():.3f} rad/s")
+    _warn_envelope(ref)
+
+
+def _warn_envelope(ref: object) -> None:
+    """Warn when the plan leaves the default design box (SPEC §13): runs will widen it."""
+    from tsmpc.config import Config
+    from tsmpc.envelope import reference_ranges, shortfalls
+
+    cfg = Config()
+    short = shortfalls(cfg, reference_ranges(ref, cfg))  # type: ignore[arg-type]
+    if short:
+        by_what: dict[str, list[str]] = {}
+        for sf in short:
+            by_what.setdefault(sf.what, []).append(f"{sf.field} {sf.have:g}")
+        items = "; ".join(f"{w} > {', '.join(f)}" for w, f in by_what.items())
+        typer.secho(f"warning: the plan exceeds the default design box ({items}): compare/run "
+                    "widen the boxes and re-certify the designs (--strict-box refuses)",
+                    err=True, fg=typer.colors.YELLOW)
 
 
 @app.command("show-reference")
