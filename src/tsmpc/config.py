@@ -248,6 +248,12 @@ class MPCSettings(_Frozen):
     iter_max: int = Field(5, ge=1, le=50, description="ITER: maximum QPs per step")
     soft_penalty: PositiveFloat = Field(1e4, description="exact penalty of soft constraints")
     terminal_constraint: bool = Field(True, description="impose x_N' S x_N <= 1")
+    slip_aware: bool = Field(
+        True, description="beyond the paper: errors of the velocity pose θ + α̂ (MHE) feed the MPC"
+    )
+    tangent_heading: bool = Field(
+        True, description="beyond the paper: θ_d + ω_d(k+1) T_c / 2, the path tangent at sample k"
+    )
 
     @model_validator(mode="after")
     def _check(self) -> MPCSettings:

@@ -91,7 +91,7 @@ def _fit_envelope(console: Any, cfg: Any, scenario: Any, strict: bool) -> Any:
     except TsmpcError as err:
         fail(err)
     if fit.widened:
-        console.print(fit.message)
+        console.print(fit.message, markup=False, highlight=False)
         try:
             load_or_design_kinematic(fit.config)
             load_or_design_dynamic(fit.config)

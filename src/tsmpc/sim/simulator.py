@@ -135,6 +135,7 @@ def simulate(
     A non-finite plant state ends the run early; the log then holds the steps done and
     ``termination`` says why. Controller and estimator failures are counted, never raised.
     """
+    from tsmpc.control.slip_aware import outer_loop_errors
     from tsmpc.control.ts_lqr import TSLQR
     from tsmpc.estimation.mhe_uio import MHEUIO
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
@@ -213,6 +214,7 @@ def simulate(
     n_pose_rejected = 0
     termination = "completed"
     done = K
+    slip_aware, tangent, alpha_hat = cfg.mpc.slip_aware, cfg.mpc.tangent_heading, 0.0
     t_start = clock()
     m = 0
     def measure(t: float) -> NDArray[np.float64]:
@@ -235,8 +237,12 @@ def simulate(
                            f"at t = {k * Tc:.1f} s")
             done = k + 1
             break
+        window = ref.window(k, N + 1)
+        if slip_aware or tangent:  # beyond the paper (tsmpc.control.slip_aware)
+            e_meas = outer_loop_errors(pose_meas, refs[k, :3], alpha_hat if slip_aware else 0.0,
+                                       float(window.omega[1]) * Tc if tangent else 0.0)
         t0 = clock()
-        res = mpc.step(e_meas, u_prev, ref.window(k, N + 1))
+        res = mpc.step(e_meas, u_prev, window)
         mpc_time[k] = clock() - t0
         u_prev = np.asarray(res.u, dtype=float)
         u_c[k] = u_prev
@@ -265,6 +271,7 @@ def simulate(
                 mu_log[m], cmd_log[m], sat[m] = mu, u_applied, cmd.saturated
                 mhe_time[m], lqr_time[m], mhe_status[m] = t2 - t1, t3 - t2, str(e.status)
                 m += 1
+                alpha_hat = float(e.x[1])
                 x = plant.step(x, u_applied, mu, n_pl)
                 s_travel += max(x[3], 0.0) * Td
         except NonFiniteError as err:
