@@ -56,3 +56,21 @@ def test_paper_reference_lateral_error_with_and_without(paper_reference_path: Pa
     assert on["termination"] == off["termination"] == "completed"
     assert on["rmse"]["y"] <= 0.06 and on["max_abs_lateral_m"] <= 0.15
     assert off["rmse"]["y"] > 0.09
+
+
+def test_slip_gate_passes_a_good_estimate_and_bounds_a_biased_one() -> None:
+    """A car on a circle (R = 50 m, 12 m/s) whose velocity points α = 0.03 rad left of its body:
+    the course over ground measures α, so α̂ = 0.031 passes and α̂ = 0.1 (a model mismatch)
+    is bounded to within the band around 0.03."""
+    from tsmpc.control.slip_aware import GATE_RAD, SlipGate
+
+    R, v, Tc, alpha = 50.0, 12.0, 0.1, 0.03
+    gate = SlipGate(Tc, position_sigma=0.0)
+    biased = SlipGate(Tc, position_sigma=0.0)
+    for k in range(12):
+        phi = v * k * Tc / R  # position angle on the circle; velocity heading φ + π/2
+        pose = np.array([R * np.cos(phi), R * np.sin(phi), phi + np.pi / 2 - alpha])
+        good, bad = gate(pose, 0.031), biased(pose, 0.1)
+    assert good == pytest.approx(0.031)
+    assert abs(bad - alpha) <= GATE_RAD + 1e-3 and bad < 0.04
+    assert biased.n_gated > 0 and gate.n_gated == 0

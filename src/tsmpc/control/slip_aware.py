@@ -12,18 +12,36 @@ body-slip estimate: with heading θ_v = θ + α the model's equations hold exact
 θ̇_v = ω + α̇ (= ω in a steady corner). This is a transformation of the measured state that
 reaches the MPC — the TS model, its scheduling box and the LMI certificates are unchanged
 (e_θ,v stays inside the box's e_θ range as long as the body-frame one did plus |α|).
+
+α̂ comes from a model (the MHE's dynamic model); with a plant the model does not describe (a
+foreign or kinematic vehicle) it can be biased by 0.1 rad, and through the MPC's light e_y weight
+every milliradian of heading bias costs ≈ 14 mm of lateral offset. :class:`SlipGate` therefore
+bounds α̂ by a model-free measurement, the course over ground of the measured positions over a
+few MPC steps: the chord's direction is the mean velocity heading along it, so
+α ≈ atan2(ΔY, ΔX) − (θ_first + θ_last)/2 (no model, no yaw rate: robust to a chattering input).
+On the nominal plant α̂ is far more accurate than that course and lies inside the band around
+it, so the gate only acts on a model mismatch.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.models.kinematic import pose_to_errors
 
-__all__ = ["outer_loop_errors", "velocity_frame_errors"]
+__all__ = ["SlipGate", "outer_loop_errors", "velocity_frame_errors"]
+
+#: Half-width of the band around the course-based slip that α̂ must lie in [rad], plus the
+#: course's own noise (4 σ from the position noise over the chord).
+GATE_RAD = 0.004
+#: Shortest chord [m] the course is measured on (below: α̂ is used unbounded).
+MIN_CHORD_M = 0.3
+#: MPC steps spanned by the chord.
+BASELINE = 5
 
 
 def velocity_frame_errors(
@@ -51,3 +69,46 @@ def outer_loop_errors(
     """
     r = np.array([ref_pose[0], ref_pose[1], ref_pose[2] + 0.5 * dtheta_next])
     return velocity_frame_errors(pose, r, alpha_hat)
+
+
+class SlipGate:
+    """α̂ bounded by the course over ground of the MPC poses (see the module docstring).
+
+    The course is the direction of the chord over the last ``BASELINE`` MPC steps (a longer chord
+    divides the position noise); the slip it measures is that minus the mean body heading at the
+    chord's ends.
+
+    Args:
+        Tc: time between two calls [s] (kept for the record).
+        position_sigma: standard deviation of the measured X, Y [m] (sets the band's noise part).
+    """
+
+    def __init__(self, Tc: float, position_sigma: float = 0.0) -> None:
+        self.Tc = float(Tc)
+        self.sigma = float(position_sigma)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the previous poses."""
+        self._poses: deque[NDArray[np.float64]] = deque(maxlen=BASELINE + 1)
+        self.n_gated = 0
+
+    def __call__(self, pose: NDArray[np.float64], alpha_hat: float) -> float:
+        """The slip to use at this MPC step, from the measured pose (X, Y, θ) and α̂."""
+        a = alpha_hat if math.isfinite(alpha_hat) else 0.0
+        self._poses.append(np.array(pose[:3], dtype=float))
+        first = self._poses[0]
+        n = len(self._poses) - 1
+        if n < 1:
+            return a
+        dx, dy = float(pose[0] - first[0]), float(pose[1] - first[1])
+        chord = math.hypot(dx, dy)
+        if not chord >= MIN_CHORD_M:  # standing, slow, or held poses: no course to compare
+            return a
+        d_th = (float(pose[2]) - float(first[2]) + math.pi) % (2 * math.pi) - math.pi
+        mean_th = float(first[2]) + 0.5 * d_th
+        a_course = (math.atan2(dy, dx) - mean_th + math.pi) % (2 * math.pi) - math.pi
+        band = GATE_RAD + 4.0 * math.sqrt(2.0) * self.sigma / chord
+        out = min(max(a, a_course - band), a_course + band)
+        self.n_gated += out != a
+        return out
