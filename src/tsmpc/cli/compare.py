@@ -138,8 +138,11 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
                    f"{m['realtime_factor']:.1f}", ev)
     console.print(tt)
     for name, m in metrics["methods"].items():
+        if m.get("max_abs_lateral_per_lap_m"):
+            laps = ", ".join(f"{v:.3f}" for v in m["max_abs_lateral_per_lap_m"])
+            console.print(f"{name}: max |e_y| per lap [m]: {laps}", markup=False)
         if m["termination"] != "completed":
-            console.print(f"[red]{name}: {m['termination']}[/red]")
+            console.print(f"[red]{name}: {escape(m['termination'])}[/red]")
 
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
