@@ -86,11 +86,14 @@ def test_closed_lap_is_tracked_to_its_end_with_wrapping_look_ahead() -> None:
     from tsmpc.scenarios import ConstantFriction
     from tsmpc.sim.simulator import Scenario
 
-    sc = Scenario("ring", two, friction=ConstantFriction(0.9))
-    log = simulate(cfg, Method.REF, sc)
+    sc = Scenario("ring", two, friction=ConstantFriction(0.9), meta={"laps": 2})
+    res = compare(cfg, sc, [Method.REF], None)
+    log = res.logs["REF"]
     assert log.termination == "completed" and log.n_outer == 2 * L
     # the end of the second lap is driven (not left as look-ahead) and tracked
-    assert np.max(np.abs(log.errors[L:, 1])) < 0.5
+    per_lap = res.metrics["methods"]["REF"]["max_abs_lateral_per_lap_m"]
+    assert len(per_lap) == 2 and max(per_lap) < 0.5
+    assert per_lap[1] == pytest.approx(float(np.max(np.abs(log.errors[L:, 1]))))
 
 
 def test_laps_on_an_open_reference_is_refused(tmp_path: Path) -> None:
