@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import Config, replace
+from tsmpc.errors import ConfigError
 from tsmpc.planning.reference import Reference
 from tsmpc.scenarios import PatchFriction, SurfacePatch
 from tsmpc.sim.simulator import Scenario
@@ -42,6 +43,8 @@ ROBUSTNESS_SCENARIOS: dict[str, str] = {
     "sensor_dropout": "every 5 s all measurements freeze for 0.2 s (last value held)",
     "nan_bursts": "every 7 s all measurements are NaN for 50 ms",
     "mass_stiffness_mismatch": "plant mass +20 % and cornering stiffness −20 % (controllers unchanged)",
+    "offset_start": "start 2 m left of the path with a 0.2 rad (11.5°) heading error: the e_θ premise "
+    "leaves its ±5° box and the outer-loop methods schedule the transient differently",
 }
 
 
@@ -118,7 +121,7 @@ def apply_robustness(
     Raises ValueError for an unknown name (the message lists the allowed ones).
     """
     if name not in ROBUSTNESS_SCENARIOS:
-        raise ValueError(f"unknown robustness scenario {name!r}; allowed: {', '.join(ROBUSTNESS_SCENARIOS)}")
+        raise ConfigError(f"unknown robustness scenario {name!r}; allowed: {', '.join(ROBUSTNESS_SCENARIOS)}")
     label = scenario.name if name == "nominal" else f"{scenario.name}+{name}"
     meta = {**scenario.meta, "robustness": name}
     sc = dc_replace(scenario, name=label, meta=meta)
@@ -142,4 +145,6 @@ def apply_robustness(
         base = scenario.plant_vehicle or cfg.vehicle
         veh = replace(base, mass=base.mass * 1.2, cornering_stiffness=base.cornering_stiffness * 0.8)
         return RobustnessCase(cfg, dc_replace(sc, plant_vehicle=veh))
+    if name == "offset_start":
+        return RobustnessCase(cfg, dc_replace(sc, initial_error=(2.0, 0.2)))
     return RobustnessCase(cfg, sc)
