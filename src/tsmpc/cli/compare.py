@@ -101,9 +101,11 @@ def _execute(
             if overwrite:
                 _remove_previous_outputs(out)
             mark_partial(out, "running", methods=[m.value for m in methods])
-            if oracle:
-                cfg = replace(cfg, lqr=replace(cfg.lqr, oracle=True, friction_compensation=False))
-            designs = design_status(cfg)
+            try:
+                designs = design_status(cfg)
+            except TsmpcError as err:  # e.g. an infeasible LMI for these weights and boxes
+                (out / PARTIAL_MARKER).unlink(missing_ok=True)
+                fail(f"LMI design failed: {err}", code=1)
             with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
                           TextColumn("{task.completed}/{task.total} MPC steps"),
                           TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
@@ -226,7 +228,8 @@ _OPT_WINDOW = typer.Option(None, "--window", help="1-based FIRST,LAST: columns o
 _OPT_SEED = typer.Option(None, "--seed", help="Seed of the sensor noise, >= 0 (default: config).")
 _OPT_CONFIG = typer.Option(None, "--config", help="TOML config file.")
 _OPT_NO_PLOTS = typer.Option(False, "--no-plots", help="Skip the figures.")
-_OPT_ORACLE = typer.Option(False, "--oracle", help="Ablation: true state, no friction compensation.")
+_OPT_ORACLE = typer.Option(False, "--oracle", help="Ablation: the inner loop gets the true state, "
+                           "no friction compensation.")
 _OPT_DURATION = typer.Option(None, "--duration", help="Track only the first S s (finite, >= 0.1).")
 _OPT_SCENARIO = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP)
 _OPT_PRESET = typer.Option(None, "--preset", help=_PRESET_HELP)
