@@ -31,7 +31,8 @@ from tsmpc.sim.plant import Plant
 from tsmpc.vehicle.actuators import Actuators
 from tsmpc.vehicle.plant import VehiclePlant
 
-__all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "default_plant", "simulate"]
+__all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "default_plant", "simulate",
+           "tracked_steps"]
 
 ProgressFn = Callable[[int, int], None]
 
@@ -58,7 +59,8 @@ class Scenario:
             force the vehicle really received (the plant's ``applied_input``) and gives it to the
             cascade (the MHE then uses it instead of the command).
         sensor_fault: measurement corruption (dropouts, NaN bursts); None = healthy sensors.
-        divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track width).
+        divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track's
+            half-width); None = ``cfg.divergence_bound_m``.
         meta: free-form facts written to metrics.json (source file, window, ...).
     """
 
@@ -141,6 +143,12 @@ class _Recorder:
             mhe_status=self.mhe_status[i], **facts)
 
 
+def tracked_steps(ref: Reference, N: int) -> int:
+    """Outer steps a run tracks: a closed lap to its end (its look-ahead wraps into the next lap,
+    see :meth:`Reference.window`); an open reference keeps its last N samples as look-ahead."""
+    return len(ref) if ref.closed else len(ref) - N
+
+
 def _start_state(ref: Reference, initial_error: tuple[float, float]) -> NDArray[np.float64]:
     """Start pose on the reference, optionally offset laterally and in heading."""
     th0 = float(ref.theta[0])
@@ -174,19 +182,19 @@ def simulate(
     plant: Plant | None = None, kinematic_design: Any = None, dynamic_design: Any = None,
     progress: ProgressFn | None = None, max_steps: int | None = None,
 ) -> RunLog:
-    """Run ``method`` on ``scenario``: ``plant`` ↔ :class:`~tsmpc.control.cascade.Cascade` every
-    T_d, everything logged. ``plant`` = any :class:`~tsmpc.sim.plant.Plant` (None: tsmpc's own
-    with the scenario's parameters, :func:`default_plant`). ``oracle`` (or ``cfg.lqr.oracle``):
-    the ablation where the TS-LQR gets the true [v, α, ω] and no friction compensation (the MHE
-    still runs and is logged). Designs come from the cache when None; ``progress(k, K)`` is
-    called after each outer step; ``max_steps`` shortens the run. A non-finite plant state or
-    |e_y| beyond ``scenario.divergence_bound_m`` ends the run early (``termination`` says why);
-    controller and estimator failures are counted in ``events``, never raised."""
+    """Run ``method`` on ``scenario``: ``plant`` (any :class:`~tsmpc.sim.plant.Plant`; None:
+    :func:`default_plant`) ↔ :class:`~tsmpc.control.cascade.Cascade` every T_d, all logged.
+    ``oracle`` (or ``cfg.lqr.oracle``): the TS-LQR gets the true [v, α, ω] and no friction
+    compensation (the MHE still runs). Designs: the cache's when None; ``progress(k, K)`` after
+    each outer step; ``max_steps`` shortens the run. A non-finite plant state or |e_y| beyond
+    ``scenario.divergence_bound_m`` (the track's half-width; None: the config's) ends the run
+    (``termination`` says why); closed laps run to their end (:func:`tracked_steps`); block
+    failures are counted in ``events``, never raised."""
     oracle = oracle or cfg.lqr.oracle
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=kinematic_design,
                       dynamic_design=dynamic_design)
     ref, N, Tc, Td, n_in = cascade.reference, cfg.mpc.N, cfg.rates.Tc, cfg.rates.Td, cascade.n_inner
-    K = len(ref) - N
+    K = tracked_steps(ref, N)
     if K < 1:
         raise ConfigError(f"reference has {len(ref)} samples: needs more than N = {N} for look-ahead")
     K = K if max_steps is None else min(K, int(max_steps))
@@ -195,7 +203,8 @@ def simulate(
     plant.reset(x)
     cascade.reset(x)
     rec = _Recorder(ref, K, n_in, N, Tc, Td)
-    noise, fault, bound = SensorNoise(cfg.noise, cfg.seed), scenario.sensor_fault, scenario.divergence_bound_m
+    noise, fault = SensorNoise(cfg.noise, cfg.seed), scenario.sensor_fault
+    bound = scenario.divergence_bound_m or cfg.divergence_bound_m  # off the road: diverged
     termination, done, rows, s_travel, t_start = "completed", K, 0, 0.0, time.perf_counter()
     for m in range(K * n_in):
         k, j = divmod(m, n_in)
