@@ -1,0 +1,125 @@
+"""Compiled kernels (tsmpc.kernels) against their numpy oracles, on recorded and random data.
+
+Tolerances: the kernels solve the same problems by other factorisations (Riccati recursion,
+block-tridiagonal elimination) or evaluate the same formulas in another order, so they agree to
+rounding amplified by the problems' conditioning: 1e-8 on inputs/states (the issue's bound), and
+far tighter where the arithmetic is identical (plant, LQR: 1e-10)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from tsmpc import kernels
+from tsmpc.config import Config, SchedulingMode, replace
+from tsmpc.control.ts_mpc import TSMPC, MPCStatus, condense
+from tsmpc.models.kinematic import KinematicTS, nonlinear_step
+from tsmpc.synthesis.cache import load_or_design_kinematic
+
+pytestmark = pytest.mark.skipif(not kernels.enabled(), reason="TSMPC_NO_JIT is set")
+
+N = 40
+
+
+@pytest.fixture(scope="module")
+def kdesign(cfg: Config):
+    return load_or_design_kinematic(cfg)
+
+
+def _pair(cfg: Config, design, mode: str, **changes) -> tuple[TSMPC, TSMPC]:
+    st = replace(cfg.mpc, **changes) if changes else cfg.mpc
+    model = KinematicTS(cfg.kinematic_box, cfg.rates.Tc)
+    return (TSMPC(st, model, design.P, design.S, mode=SchedulingMode(mode), jit=True),
+            TSMPC(st, model, design.P, design.S, mode=SchedulingMode(mode), jit=False))
+
+
+def _same(ra, rb, tol: float = 1e-8) -> None:
+    assert ra.status == rb.status
+    assert ra.n_clipped == rb.n_clipped
+    assert ra.iterations == rb.iterations
+    np.testing.assert_allclose(ra.u_pred, rb.u_pred, rtol=0, atol=tol)
+    np.testing.assert_allclose(ra.du, rb.du, rtol=0, atol=tol)
+    np.testing.assert_allclose(ra.x_pred, rb.x_pred, rtol=0, atol=tol)
+    assert ra.cost == pytest.approx(rb.cost, rel=1e-9, abs=1e-9)
+
+
+def test_riccati_kernel_is_the_condensed_unconstrained_minimiser() -> None:
+    mk = kernels.load("mpc")
+    assert mk is not None
+    rng = np.random.default_rng(1)
+    Tc = 0.1
+    for _ in range(200):
+        c = rng.uniform(-0.14, 0.14, N)
+        s = rng.uniform(0.1, 1.8, N)
+        x0 = rng.normal(size=3) * [2, 2, 0.1]
+        up, r = rng.normal(size=2) + np.array([8.0, 0.0]), rng.normal(size=(N, 2)) + np.array([8.0, 0.0])
+        q, R = rng.uniform(0.05, 15, 3), rng.uniform(1e-5, 5, 2)
+        M = rng.normal(size=(3, 3))
+        P = M @ M.T + np.eye(3)
+        qp = condense(x0, up, r, c, s, Tc, q, P, R)
+        z = np.linalg.solve(qp.H, -qp.f)
+        U, DU, X = np.empty((N, 2)), np.empty((N, 2)), np.empty((N + 1, 3))
+        cost = mk.riccati(x0, up, c, s, r, Tc, q, P, R, U, DU, X)
+        # Random weights down to R_v = 1e-5 give cond(H) ≈ 1e7: agreement relative to the size
+        # of the answer, and the Riccati answer is at least as good a minimiser (KKT residual).
+        zr = DU.T.reshape(-1)
+        scale = max(1.0, np.abs(z).max())
+        np.testing.assert_allclose(zr, z, rtol=0, atol=1e-8 * scale)
+        np.testing.assert_allclose(X[1:], (qp.x_aff + qp.G @ z).reshape(3, N).T, rtol=0,
+                                   atol=1e-8 * max(1.0, np.abs(X).max()))
+        res_chol, res_ric = np.abs(qp.H @ z + qp.f).max(), np.abs(qp.H @ zr + qp.f).max()
+        assert res_ric <= 3.0 * res_chol + 1e-12 * np.abs(qp.f).max()
+        assert cost == pytest.approx(z @ qp.H @ z + 2 * qp.f @ z + qp.c0, rel=1e-9)
+
+
+@pytest.mark.parametrize("mode", ["fzn", "ref", "iter"])
+def test_mpc_fast_path_equals_the_condensed_path_on_the_paper_reference(
+    cfg: Config, kdesign, paper_reference_path, mode: str
+) -> None:
+    from tsmpc.planning.paper_format import load_paper_reference
+
+    ref = load_paper_reference(paper_reference_path)
+    a, b = _pair(cfg, kdesign, mode)
+    e, u = np.array([0.0, 2.0, 0.1]), np.array([ref.v[0], ref.omega[0]])
+    statuses = set()
+    for k in range(400):
+        w = ref.window(k, N + 1)
+        ra, rb = a.step(e, u, w), b.step(e, u, w)
+        _same(ra, rb)
+        statuses.add((rb.status, rb.iterations > 0))
+        u = rb.u
+        e = nonlinear_step(e, u, w.v[0], w.omega[0], cfg.rates.Tc)
+    assert (MPCStatus.OPTIMAL, False) in statuses  # the fast path was taken
+
+
+@pytest.mark.parametrize("mode", ["fzn", "ref", "iter"])
+def test_mpc_fast_path_equals_the_condensed_path_on_random_data(cfg: Config, kdesign, mode: str) -> None:
+    """Random errors, previous inputs and references, including ones where a rate, input or the
+    terminal constraint is active (the kernel must hand those to the QP path: same answer)."""
+    rng = np.random.default_rng(7)
+    a, b = _pair(cfg, kdesign, mode)
+    n_qp = n_fast = 0
+    for _ in range(150):
+        if rng.random() < 0.3:
+            a.reset()
+            b.reset()
+        e = rng.normal(size=3) * [1.5, 1.5, 0.08]
+        u = np.array([rng.uniform(0, 18), rng.uniform(-1.4, 1.4)])
+        v = np.clip(u[0] + np.cumsum(rng.normal(0, 0.3, N + 1)), 0.5, 17.5)
+        w = np.clip(u[1] + np.cumsum(rng.normal(0, 0.05, N + 1)), -1.3, 1.3)
+        ref = SimpleNamespace(v=v, omega=w)
+        ra, rb = a.step(e, u, ref), b.step(e, u, ref)
+        _same(ra, rb)
+        if rb.iterations:
+            n_qp += 1
+        else:
+            n_fast += 1
+    assert n_qp > 0 and n_fast > 0  # both paths exercised
+
+
+def test_mpc_kernel_switch_off(cfg: Config, kdesign, monkeypatch) -> None:
+    monkeypatch.setenv("TSMPC_NO_JIT", "1")
+    a = TSMPC(cfg.mpc, KinematicTS(cfg.kinematic_box, cfg.rates.Tc), kdesign.P, kdesign.S)
+    assert a._kern is None
