@@ -123,3 +123,93 @@ def test_mpc_kernel_switch_off(cfg: Config, kdesign, monkeypatch) -> None:
     monkeypatch.setenv("TSMPC_NO_JIT", "1")
     a = TSMPC(cfg.mpc, KinematicTS(cfg.kinematic_box, cfg.rates.Tc), kdesign.P, kdesign.S)
     assert a._kern is None
+
+
+# -- MHE-UIO -----------------------------------------------------------------------------------
+#: F̂ tolerance [N]. F enters the window only through T_d/M ≈ 1.5e-5 (m/s)/N per sample, and the
+#: Schur complement that determines it is the small difference h_FF − hᵀT⁻¹h (≈ 1e-10 against
+#: terms of ≈ 1e-9), so agreement in F̂ is ≈ 1e4 × looser than in x̂ in absolute terms: 1e-4 N is
+#: 1e-7 of the ±1000 N range of the friction force (observed: ≈ 2e-6 N).
+F_TOL = 1e-4
+
+
+def _mhe_pair(cfg: Config, x0):
+    from tsmpc.estimation.mhe_uio import MHEUIO
+    from tsmpc.models.dynamic import DynamicTS
+
+    dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, cfg.rates.Td)
+    return (MHEUIO(cfg.mhe, dyn, cfg.vehicle, cfg.rates.Td, x0, jit=True),
+            MHEUIO(cfg.mhe, dyn, cfg.vehicle, cfg.rates.Td, x0, jit=False))
+
+
+def test_mhe_kernel_equals_the_dense_qp_in_the_closed_inner_loop(cfg: Config) -> None:
+    """Recorded data: the inner loop closed on the Pacejka plant with speed and yaw-rate
+    references, a friction change and two rejected (NaN) measurements."""
+    from tsmpc.control.ts_lqr import TSLQR
+    from tsmpc.models.dynamic import DynamicTS
+    from tsmpc.scenarios import SensorNoise
+    from tsmpc.synthesis.cache import load_or_design_dynamic
+    from tsmpc.vehicle.plant import Plant
+
+    Td = cfg.rates.Td
+    dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, Td)
+    lqr = TSLQR(load_or_design_dynamic(cfg).K, dyn, cfg.vehicle, cfg.lqr, Td)
+    plant = Plant(cfg.vehicle, cfg.tyre, cfg.rates.h)
+    noise = SensorNoise(cfg.noise, 0)
+    x = np.array([0.0, 0.0, 0.0, 10.0, 0.0, 0.0])
+    a, b = _mhe_pair(cfg, x[3:6])
+    u = np.zeros(2)
+    seen = set()
+    for k in range(1200):
+        y = np.array([x[3], x[5]]) + noise.sample()[3:5]
+        if k in (77, 640):
+            y[0] = np.nan
+        ea, eb = a.step(y, u), b.step(y, u)
+        assert ea.status == eb.status
+        seen.add(eb.status)
+        np.testing.assert_allclose(ea.x, eb.x, rtol=0, atol=1e-8)
+        assert abs(ea.F_fr - eb.F_fr) <= F_TOL
+        assert ea.F_fr_raw == pytest.approx(eb.F_fr_raw, rel=1e-9, abs=1e-6)
+        cmd = lqr.step(eb, 10.0 + 3.0 * np.sin(0.003 * k), 0.15 * np.sin(0.03 * (k // 10)))
+        u = np.array([cmd.F_xR, cmd.delta])
+        x = plant.step(x, u, 0.9 if k < 600 else 0.5, cfg.rates.plant_per_inner)
+    assert {"ok", "warmup", "rejected"} <= {str(s) for s in seen}
+
+
+def test_mhe_kernel_equals_the_dense_qp_on_random_windows(cfg: Config) -> None:
+    """Random windows (measurements, inputs, scheduling, rejected samples, arrival, F prior) solved
+    by the banded kernel and by the dense build + Cholesky."""
+    from tsmpc.estimation.mhe_uio import F_PRIOR_WEIGHT, MHEUIO
+    from tsmpc.models.dynamic import DynamicTS
+
+    mk = kernels.load("mhe")
+    dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, cfg.rates.Td)
+    mhe = MHEUIO(cfg.mhe, dyn, cfg.vehicle, cfg.rates.Td, jit=False)
+    rng = np.random.default_rng(11)
+    for trial in range(200):
+        n = int(rng.integers(2, cfg.mhe.N + 1))
+        v = rng.uniform(2.0, 20.0)
+        xs = np.column_stack([v + rng.normal(0, 0.3, n + 1), rng.uniform(-0.1, 0.1, n + 1),
+                              rng.uniform(-1, 1, n + 1)])
+        us = np.column_stack([rng.normal(500, 2000, n), rng.uniform(-0.4, 0.4, n)])
+        ys = xs[:, [0, 2]] + rng.normal(0, 0.05, (n + 1, 2))
+        w = (rng.random(n + 1) > 0.1).astype(float)
+        arrival, F_prior = xs[0] + rng.normal(0, 0.1, 3), rng.normal(0, 500)
+        A, B = dyn.matrices(np.stack([us[:, 1], xs[:n, 0], xs[:n, 1]], axis=-1))
+        qp = mhe.build(ys, us, w, xs, arrival, F_prior, matrices=(A, B))
+        z = np.linalg.solve(qp.H, -qp.f)
+        X_ref = (qp.M @ z + qp.c).reshape(-1, 3)
+        X = np.empty((n + 1, 3))
+        F = mk.banded_solve(ys, w, us, A, B, n, arrival, F_prior, mhe._q, mhe._r, mhe._p,
+                            F_PRIOR_WEIGHT, X)
+        np.testing.assert_allclose(X, X_ref, rtol=0, atol=1e-8, err_msg=f"trial {trial}")
+        assert abs(F - z[3]) <= F_TOL
+        # and the kernel's own model evaluation equals DynamicTS.matrices
+        Ak, Bk = np.empty((n, 3, 3)), np.empty((n, 3, 2))
+        box = dyn.premise_box
+        p = cfg.vehicle
+        mk.euler_matrices(us, xs, n, np.asarray(box.lower), np.asarray(box.upper), p.mass, p.inertia,
+                          p.cornering_stiffness, p.a, p.b, p.mu_nominal * p.g, p.drag_factor,
+                          cfg.rates.Td, Ak, Bk)
+        np.testing.assert_allclose(Ak, A, rtol=1e-14, atol=1e-15)
+        np.testing.assert_allclose(Bk, B, rtol=1e-14, atol=1e-15)
