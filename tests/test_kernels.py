@@ -213,3 +213,36 @@ def test_mhe_kernel_equals_the_dense_qp_on_random_windows(cfg: Config) -> None:
                           cfg.rates.Td, Ak, Bk)
         np.testing.assert_allclose(Ak, A, rtol=1e-14, atol=1e-15)
         np.testing.assert_allclose(Bk, B, rtol=1e-14, atol=1e-15)
+
+
+# -- plant block -------------------------------------------------------------------------------
+@pytest.mark.parametrize("tyre", ["pacejka", "linear"])
+@pytest.mark.parametrize("scale_grip", [False, True])
+def test_plant_block_equals_the_float_rk4(cfg: Config, tyre: str, scale_grip: bool) -> None:
+    from tsmpc.config import TyreParams
+    from tsmpc.vehicle.plant import Plant
+
+    tp = TyreParams(model=tyre, scale_grip_with_road=scale_grip)
+    a = Plant(cfg.vehicle, tp, cfg.rates.h, jit=True)
+    b = Plant(cfg.vehicle, tp, cfg.rates.h, jit=False)
+    assert a._kern is not None and b._kern is None
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        # random states including the low-speed regularisation (v < v_floor) and reversing
+        x = np.array([*rng.normal(0, 50, 2), rng.normal(0, 3), rng.uniform(-1, 20),
+                      rng.normal(0, 0.1), rng.normal(0, 0.5)])
+        u = (rng.normal(0, 4000), rng.uniform(-0.45, 0.45))
+        mu, n = rng.uniform(0.0, 1.0), int(rng.integers(1, 20))
+        np.testing.assert_allclose(a.step(x, u, mu, n), b.step(x, u, mu, n), rtol=1e-12, atol=1e-10)
+
+
+def test_plant_block_non_finite_raises_as_before(cfg: Config) -> None:
+    from tsmpc.errors import NonFiniteError
+    from tsmpc.vehicle.plant import Plant
+
+    p = Plant(cfg.vehicle, cfg.tyre, cfg.rates.h, jit=True)
+    x = np.array([0.0, 0.0, 0.0, 10.0, 0.0, 0.0])
+    with pytest.raises(NonFiniteError, match="non-finite input"):
+        p.step(x, (np.nan, 0.0), 0.9, 10)
+    with pytest.raises(NonFiniteError, match="non-finite state"):
+        p.step(np.array([0.0, 0.0, 0.0, np.inf, 0.0, 0.0]), (0.0, 0.0), 0.9, 10)

@@ -52,6 +52,8 @@ class Plant:
         tyre: tyre model of the plant.
         h: RK4 step [s].
         constants: low-speed regularisation.
+        jit: integrate :meth:`step` by the compiled block (:mod:`tsmpc.kernels.plant`, the same
+            arithmetic); None = unless ``TSMPC_NO_JIT`` is set; False = the float closure only.
     """
 
     n_x = 6
@@ -63,6 +65,7 @@ class Plant:
         tyre: TyreParams,
         h: float = 0.001,
         constants: PlantConstants = PlantConstants(),
+        jit: bool | None = None,
     ) -> None:
         if not (h > 0 and math.isfinite(h)):
             raise ValueError(f"h must be a positive finite step, got {h}")
@@ -74,6 +77,13 @@ class Plant:
         self._fz = (fzf, fzr)
         self._linear = tyre.model == TyreModel.LINEAR
         self._rhs = self._make_rhs()
+        self._kern = None
+        if jit is None or jit:
+            from tsmpc import kernels
+
+            self._kern = kernels.load("plant")
+            if self._kern is not None:
+                self._cst = self._kern.pack(self)
 
     # ------------------------------------------------------------------ model
     def _make_rhs(self):
@@ -144,6 +154,17 @@ class Plant:
         Raises :class:`NonFiniteError` on NaN/inf state or input, or if the integration itself
         produces a non-finite state.
         """
+        if self._kern is not None and type(x) is np.ndarray and x.shape == (6,) and x.dtype == np.float64:
+            try:
+                F, d = u
+                F, d, mu = float(F), float(d), float(mu_road)
+            except (TypeError, ValueError):
+                pass  # the checked path below names the problem
+            else:
+                out, ok = self._kern.rk4_block(x, F, d, mu, int(n_steps), self.h, self._cst)
+                if ok:
+                    return out
+                # non-finite: the checked path below raises with the exact message
         (X, Y, th, v, al, om), (F, d), mu = self._checked(x, u, mu_road)
         h = self.h
         h2 = 0.5 * h
