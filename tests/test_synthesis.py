@@ -118,12 +118,19 @@ def test_cache_roundtrip_and_tamper_detection(cfg: Config, tmp_path, kd) -> None
     assert len(files) == 1
     d2 = cache.load_or_design_kinematic(cfg, tmp_path)
     assert np.array_equal(d1.S, d2.S) and np.array_equal(d1.K, d2.K)
-    # A tampered entry fails its recomputed certificates and is re-solved, not trusted.
-    data = json.loads(files[0].read_text())
-    data["K"] = (10 * np.asarray(data["K"])).tolist()
-    files[0].write_text(json.dumps(data))
-    d3 = cache.load_or_design_kinematic(cfg, tmp_path)
-    assert np.allclose(d3.K, d1.K)
+    # A tampered entry fails its recomputed certificates and is re-solved, not trusted: every stored
+    # matrix the MPC uses (K, the terminal cost P, the terminal set S) is checked on load.
+    clean = files[0].read_text()
+    for field, scale in (("K", 10.0), ("S", 0.2), ("P", 0.2), ("Z", 1.5)):
+        data = json.loads(clean)
+        data[field] = (scale * np.asarray(data[field])).tolist()
+        files[0].write_text(json.dumps(data))
+        with pytest.raises(CertificateError):
+            cache._recheck(cache.design_from_dict(data), cfg)
+        d3 = cache.load_or_design_kinematic(cfg, tmp_path)
+        assert np.allclose(d3.K, d1.K) and np.allclose(d3.S, d1.S) and np.allclose(d3.P, d1.P), field
+        # The re-solved design replaced the tampered file.
+        cache._recheck(cache.design_from_dict(json.loads(files[0].read_text())), cfg)
     # A changed input is a different key.
     cfg2 = replace(cfg, rates=replace(cfg.rates, Tc=0.05, Td=0.01))
     assert cache.kinematic_key(cfg2) != cache.kinematic_key(cfg)

@@ -173,6 +173,49 @@ def test_terminal_cuts_make_the_ellipsoid_exact(cfg: Config, design) -> None:
     del rng
 
 
+def test_an_inexact_socp_answer_is_rechecked_and_polished_onto_the_ellipsoid(
+        cfg: Config, design, monkeypatch) -> None:
+    """Every binding instance goes to the SOCP (no cuts), whose answer is pushed 1e-8 outside the
+    terminal set — what an interior-point solver at a looser tolerance returns. The step must not
+    return it as OPTIMAL: it is re-checked and re-solved inside the ellipsoid at the same cost."""
+    from dataclasses import replace as dc_replace
+
+    import tsmpc.control.ts_mpc as ts_mpc
+
+    monkeypatch.setattr(ts_mpc, "MAX_CUTS", 0)
+    exact = _run_instances(cfg, design)
+    real = ts_mpc.solve_qcqp_clarabel
+    pushed = 0
+
+    def inexact(H, f, dlb, dub, L, bl, bu, S, cN, GN, soft_penalty=None, radius=1.0):
+        nonlocal pushed
+        res = real(H, f, dlb, dub, L, bl, bu, S, cN, GN, soft_penalty=soft_penalty, radius=radius)
+        if soft_penalty is None and res.status == ts_mpc.QPStatus.OPTIMAL:
+            g = GN.T @ (S @ (cN + GN @ res.z))
+            res = dc_replace(res, z=res.z + 0.5e-8 * g / (g @ g))  # level + ≈ 1e-8
+            pushed += 1
+        return res
+
+    monkeypatch.setattr(ts_mpc, "solve_qcqp_clarabel", inexact)
+    polished = _run_instances(cfg, design)
+    assert pushed > 0
+    for (st0, _, J0), (st1, lvl1, J1) in zip(exact, polished, strict=True):
+        assert st1 == st0
+        if st1 == MPCStatus.OPTIMAL:
+            assert lvl1 <= 1 + 1e-9
+            assert J1 == pytest.approx(J0, rel=1e-6, abs=1e-9)
+
+
+def _run_instances(cfg: Config, design) -> list[tuple[MPCStatus, float, float]]:
+    mpc = _mpc(cfg, design, "ref")
+    out = []
+    for x0, up, vd, wd in _instances(60, seed=11):
+        res = mpc.step(x0, up, SimpleNamespace(v=vd, omega=wd))
+        mpc.reset()
+        out.append((res.status, float(res.x_pred[-1] @ design.S @ res.x_pred[-1]), res.cost))
+    return out
+
+
 @pytest.mark.parametrize("mode", ["fzn", "ref", "iter"])
 def test_closed_loop_converges_along_the_paper_reference(cfg: Config, design, mode: str,
                                                          paper_reference_path) -> None:

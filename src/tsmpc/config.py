@@ -265,7 +265,10 @@ class LQRSettings(_Frozen):
     force_max: FiniteFloat = Field(10000.0, description="F_xR upper saturation [N]")
     delta_max: PositiveFloat = Field(math.radians(25.0), description="|δ| saturation [rad]")
     friction_compensation: bool = Field(True, description="add F̂_fr to the force command")
-    oracle: bool = Field(False, description="ablation: true state, no compensation")
+    oracle: bool = Field(
+        False, description="deprecated (old config files): same as simulate(oracle=True), the "
+        "simulation's ablation with the true state and no compensation"
+    )
     speed_time_constant: PositiveFloat = Field(
         0.3, description="speed feed-forward M (v_ref − v̂)/τ: time constant τ [s] (SPEC §8)"
     )

@@ -74,9 +74,9 @@ def solve_qcqp_clarabel(
     H: NDArray[np.float64], f: NDArray[np.float64], lb: NDArray[np.float64], ub: NDArray[np.float64],
     A: NDArray[np.float64], bl: NDArray[np.float64], bu: NDArray[np.float64],
     S: NDArray[np.float64], c: NDArray[np.float64], G: NDArray[np.float64],
-    soft_penalty: float | None = None,
+    soft_penalty: float | None = None, radius: float = 1.0,
 ) -> QPResult:
-    """Exact QP + one ellipsoid ``‖Lᵀ(c + Gz)‖ ≤ 1 + σ`` (``S = L Lᵀ``) with Clarabel.
+    """Exact QP + one ellipsoid ``‖Lᵀ(c + Gz)‖ ≤ radius + σ`` (``S = L Lᵀ``) with Clarabel.
 
     σ ≡ 0 for the hard problem. The soft problem adds ``soft_penalty · σ``, σ ≥ 0: the exact L1
     penalty of the ellipsoid in its norm form, which (unlike a slack on the squared level) stays
@@ -121,7 +121,7 @@ def solve_qcqp_clarabel(
     Gz[:, :n] = G
     A_soc = np.zeros((m + 1, nz))
     b_soc = np.zeros(m + 1)
-    b_soc[0] = 1.0
+    b_soc[0] = radius
     A_soc[1:] = -Lt @ Gz
     b_soc[1:] = Lt @ c
     if soft:

@@ -70,7 +70,7 @@ class TSLQR:
         gains: (8, 2, 6) vertex gains of the dynamic design (u = K x, physical units).
         model: dynamic TS model (its premise box and memberships schedule the gains).
         vehicle: vehicle parameters (equilibrium).
-        settings: saturations, compensation switch, oracle flag.
+        settings: saturations, compensation switch.
         Td: sample time [s].
         bandwidth: Apkarian filter λ [rad/s] (must match the design).
     """
@@ -151,7 +151,7 @@ class TSLQR:
         u0, u1 = min(max(u0, Fmin), Fmax), min(max(u1, dmin), dmax)
         # The plant receives the filter state (held over T_d); the filter then moves toward u_f.
         comp = 0.0
-        if self.settings.friction_compensation and not self.settings.oracle:
+        if self.settings.friction_compensation:
             F_hat = float(estimate.F_fr)
             comp = F_hat if math.isfinite(F_hat) else 0.0
         out0 = f0 + F_ff + comp

@@ -16,7 +16,9 @@ Solving. (1) The unconstrained minimiser (Cholesky) is accepted when it satisfie
 constraint — on closed-loop data the usual case. (2) Otherwise DAQP solves the QP with the input
 and rate constraints; the ellipsoid is handled by supporting-hyperplane (tangent) cuts at the
 radial projection of the current terminal state, re-solved until ``x_NᵀSx_N ≤ 1 + 1e-9``.
-(3) If the cuts do not converge, Clarabel solves the exact SOCP. (4) If the hard problem is
+(3) If the cuts do not converge, Clarabel solves the exact SOCP; its answer is re-checked and,
+when it leaves the ellipsoid by the interior-point tolerance, re-solved with a slightly tightened
+radius (no solver answer is returned unchecked). (4) If the hard problem is
 infeasible, the exactly penalised soft problem (slack σ on ``‖S^½ x_N‖ ≤ 1 + σ``, L1 weight
 ``soft_penalty``) is solved by Clarabel: status SOFT. (5) If everything fails, the shifted
 previous plan is returned: status FALLBACK. Nothing raises inside :meth:`TSMPC.step`.
@@ -46,6 +48,10 @@ __all__ = ["TSMPC", "CondensedQP", "MPCResult", "MPCStatus", "condense"]
 TERMINAL_TOL = 1e-9
 #: Cuts before switching to the exact SOCP.
 MAX_CUTS = 30
+#: Radii of the exact SOCP, tried in turn until its answer passes the re-check (1, then tightened).
+SOCP_RADII = (1.0, 1.0 - 1e-7, 1.0 - 1e-5)
+#: Absolute tolerance on input/rate limits accepted from the soft (interior-point) answer.
+SOFT_LIMIT_TOL = 1e-7
 
 
 class MPCStatus(StrEnum):
@@ -299,11 +305,7 @@ class TSMPC:
         use_term = self.settings.terminal_constraint
 
         def feasible(z: NDArray[np.float64], tol: float = 1e-9) -> bool:
-            dz = z.reshape(2, N)
-            if (dz < self._dlb2 - tol).any() or (dz > self._dub2 + tol).any():
-                return False
-            U = np.cumsum(dz, axis=1) + u_prev[:, None]
-            if (U < self._umin2 - tol).any() or (U > self._umax2 + tol).any():
+            if not self._within_limits(z, u_prev, tol):
                 return False
             xN = cN + GN @ z
             return not use_term or float(xN @ S @ xN) <= 1.0 + TERMINAL_TOL
@@ -339,22 +341,39 @@ class TSMPC:
             lo = np.append(lo, -1e30)
             hi = np.append(hi, 1.0 - a @ cN)
             sense = np.append(res.active, 0).astype(np.int32) if res.active is not None else None
-        # (3)/(4) Exact SOCP; soft version when the hard one is infeasible.
+        # (3)/(4) Exact SOCP; soft version when the hard one is infeasible. An interior-point answer
+        # meets the cone only to the solver's tolerance (level 1 + a few 1e-9 on current Clarabel):
+        # every answer is re-checked, and when it is outside the ellipsoid the SOCP is re-solved
+        # with the radius tightened by a margin larger than that tolerance (the cost changes by
+        # O(margin · multiplier), far below any tracking effect).
         if not use_term:
             return None, MPCStatus.FALLBACK, n_qp, n_it
         H2, f2 = 2.0 * qp.H, 2.0 * qp.f  # Clarabel minimises ½zᵀPz + qᵀz; J = zᵀHz + 2fᵀz
-        res = solve_qcqp_clarabel(H2, f2, self._dlb, self._dub, self._L, bl, bu, S, cN, GN)
-        n_qp += 1
-        n_it += res.iterations
-        if res.status == QPStatus.OPTIMAL:
-            return res.z, MPCStatus.OPTIMAL, n_qp, n_it
+        for radius in SOCP_RADII:
+            res = solve_qcqp_clarabel(H2, f2, self._dlb, self._dub, self._L, bl, bu, S, cN, GN,
+                                      radius=radius)
+            n_qp += 1
+            n_it += res.iterations
+            if res.status != QPStatus.OPTIMAL:
+                break
+            if feasible(res.z):
+                return res.z, MPCStatus.OPTIMAL, n_qp, n_it
         res = solve_qcqp_clarabel(H2, f2, self._dlb, self._dub, self._L, bl, bu, S, cN, GN,
                                   soft_penalty=self.settings.soft_penalty)
         n_qp += 1
         n_it += res.iterations
-        if res.status == QPStatus.OPTIMAL:
+        # The soft answer relaxes only the ellipsoid: its input and rate limits are re-checked.
+        if res.status == QPStatus.OPTIMAL and self._within_limits(res.z, u_prev, SOFT_LIMIT_TOL):
             return res.z, MPCStatus.SOFT, n_qp, n_it
         return None, MPCStatus.FALLBACK, n_qp, n_it
+
+    def _within_limits(self, z: NDArray[np.float64], u_prev: NDArray[np.float64], tol: float) -> bool:
+        """Input and rate limits of ΔU (the terminal set excluded), with an absolute tolerance."""
+        dz = z.reshape(2, self.N)
+        if (dz < self._dlb2 - tol).any() or (dz > self._dub2 + tol).any():
+            return False
+        U = np.cumsum(dz, axis=1) + u_prev[:, None]
+        return not ((U < self._umin2 - tol).any() or (U > self._umax2 + tol).any())
 
     # -- online step ----------------------------------------------------------------------
     def step(self, errors: Any, u_prev: Any, reference: Any) -> MPCResult:

@@ -12,7 +12,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from tsmpc.config import Config, replace
+from tsmpc.config import Config
 from tsmpc.sim.log import RunLog, atomic_write_text, save_logs_mat, save_logs_npz
 from tsmpc.sim.metrics import compute_metrics
 from tsmpc.sim.simulator import Method, Scenario, simulate
@@ -113,8 +113,6 @@ def compare(
     """
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
-    if oracle:
-        cfg = replace(cfg, lqr=replace(cfg.lqr, oracle=True, friction_compensation=False))
     kd = load_or_design_kinematic(cfg)
     dd = load_or_design_dynamic(cfg)
     logs: dict[str, RunLog] = {}

@@ -1,9 +1,11 @@
 """Multi-rate closed-loop simulation of the cascade (SPEC §1, §10).
 
-Outer kinematic MPC every T_c, inner MHE-UIO + TS-LQR every T_d, plant RK4 every h, with exactly
-T_c/T_d inner steps per outer step and T_d/h plant steps per inner step (integer counters, no
-accumulated floating-point time, so nothing drifts). The blocks only compute; this module times
-them, feeds them and logs everything into a :class:`~tsmpc.sim.log.RunLog`.
+A thin loop: every T_d the simulator reads the plant's state, adds sensor noise and faults, calls
+the :class:`~tsmpc.control.cascade.Cascade` (outer MPC every T_c/T_d calls, MHE-UIO + TS-LQR
+every call) and applies its command to the plant (any :class:`~tsmpc.sim.plant.Plant`; tsmpc's
+own integrates RK4 steps of h). Time is an integer step counter (no accumulated floating-point
+time, so nothing drifts). The blocks only compute; this module logs everything into a
+:class:`~tsmpc.sim.log.RunLog`.
 
 A run is reproducible from ``cfg.seed``: the sensor noise is the only random draw.
 """
@@ -13,22 +15,22 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from enum import StrEnum
 from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tsmpc.config import Config, SchedulingMode, TyreParams, VehicleParams, replace
+from tsmpc.config import Config, TyreParams, VehicleParams
+from tsmpc.control.cascade import Cascade, Command, Measurement, Method, build_outer_controller
 from tsmpc.errors import NonFiniteError
-from tsmpc.models.dynamic import DynamicTS
-from tsmpc.models.kinematic import KinematicTS, pose_to_errors
+from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.planning.reference import Reference
 from tsmpc.scenarios import FrictionProfile, SensorNoise, paper_friction_profile
 from tsmpc.sim.log import RunLog
-from tsmpc.vehicle.plant import Plant
+from tsmpc.sim.plant import Plant
+from tsmpc.vehicle.plant import VehiclePlant
 
-__all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "simulate"]
+__all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "default_plant", "simulate"]
 
 ProgressFn = Callable[[int, int], None]
 
@@ -38,24 +40,6 @@ class SensorFault(Protocol):
     ``[X, Y, θ, v, ω]``; returns what the sensors deliver (may hold values or return NaN)."""
 
     def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]: ...
-
-
-class Method(StrEnum):
-    """Outer-loop method of a run."""
-
-    FZN = "FZN"
-    REF = "REF"
-    ITER = "ITER"
-    NL = "NL"
-
-    @classmethod
-    def parse(cls, text: str) -> Method:
-        """Case-insensitive parse; the error lists the allowed values."""
-        try:
-            return cls(text.strip().upper())
-        except ValueError:
-            allowed = ", ".join(m.value.lower() for m in cls)
-            raise ValueError(f"unknown method {text!r}; allowed: {allowed}") from None
 
 
 @dataclass(frozen=True)
@@ -84,208 +68,141 @@ class Scenario:
     meta: dict[str, Any] = field(default_factory=dict)
 
 
-def build_outer_controller(cfg: Config, method: Method, P: np.ndarray, S: np.ndarray) -> Any:
-    """The outer MPC of ``method`` with the terminal ingredients (P, S) of the kinematic design."""
-    model = KinematicTS(cfg.kinematic_box, cfg.rates.Tc)
-    if method == Method.NL:
-        from tsmpc.control.nl_mpc import NLMPC
+class _Recorder:
+    """Preallocated log arrays of a run (K outer rows, K·T_c/T_d inner rows) → :class:`RunLog`."""
 
-        return NLMPC(cfg.mpc, model, P, S)
-    from tsmpc.control.ts_mpc import TSMPC
+    def __init__(self, ref: Reference, K: int, n_in: int, N: int, Tc: float, Td: float) -> None:
+        M = K * n_in
+        t0 = float(ref.t[0])
+        self.t_outer = np.arange(K) * Tc + t0
+        self.t_inner = np.arange(M) * Td + t0
+        self.refs = np.stack([ref.x[:K], ref.y[:K], ref.theta[:K], ref.v[:K], ref.omega[:K]], axis=1)
+        self.N = N
+        z = np.zeros
+        self.state_outer, self.errors, self.errors_meas = z((K, 6)), z((K, 3)), z((K, 3))
+        self.u_c, self.x_pred, self.mpc_time = z((K, 2)), z((K, N + 1, 3)), z(K)
+        self.mpc_status = np.empty(K, dtype="<U16")
+        self.mpc_it, self.mpc_qpit, self.mpc_clip = (z(K, dtype=np.int64) for _ in range(3))
+        self.state, self.est, self.meas = z((M, 6)), z((M, 3)), z((M, 2))
+        self.f_hat, self.f_raw, self.f_true, self.mu, self.mhe_time, self.lqr_time = z((6, M))
+        self.cmd, self.sat = z((M, 2)), z(M, dtype=bool)
+        self.mhe_status = np.empty(M, dtype="<U16")
 
-    return TSMPC(cfg.mpc, model, P, S, mode=SchedulingMode(method.value.lower()))
+    def outer(self, k: int, x: NDArray[np.float64]) -> float:
+        """Log the true state at outer step k; returns the true lateral error e_y."""
+        r = self.refs[k]
+        self.state_outer[k] = x
+        self.errors[k] = pose_to_errors(x[0], x[1], x[2], r[0], r[1], r[2])
+        return float(self.errors[k, 1])
+
+    def plan(self, k: int, cmd: Command) -> None:
+        res = cmd.plan
+        assert res is not None and cmd.errors_measured is not None
+        self.errors_meas[k], self.mpc_time[k] = cmd.errors_measured, cmd.mpc_time_s
+        self.u_c[k] = res.u
+        xp = np.asarray(res.x_pred)
+        self.x_pred[k, : xp.shape[0]] = xp[: self.N + 1]
+        self.mpc_status[k] = str(res.status)
+        self.mpc_it[k], self.mpc_qpit[k], self.mpc_clip[k] = (res.iterations, res.qp_iterations,
+                                                              res.n_clipped)
+
+    def inner(self, m: int, x: NDArray[np.float64], y: NDArray[np.float64], cmd: Command,
+              mu: float, f_true: float | None) -> None:
+        e = cmd.estimate
+        self.state[m], self.est[m], self.meas[m] = x, e.x, y
+        self.f_hat[m], self.f_raw[m] = e.F_fr, e.F_fr_raw
+        self.f_true[m] = np.nan if f_true is None else f_true
+        self.mu[m], self.cmd[m], self.sat[m] = mu, (cmd.F_xR, cmd.delta), cmd.saturated
+        self.mhe_time[m], self.lqr_time[m], self.mhe_status[m] = (cmd.mhe_time_s, cmd.lqr_time_s,
+                                                                  str(cmd.estimate.status))
+
+    def log(self, method: str, scenario: str, Tc: float, Td: float, done: int, m: int, **facts: Any
+            ) -> RunLog:
+        o, i = slice(0, done), slice(0, m)
+        return RunLog(
+            method=method, scenario=scenario, Tc=Tc, Td=Td,
+            t_outer=self.t_outer[o], ref=self.refs[o], state_outer=self.state_outer[o],
+            errors=self.errors[o], errors_measured=self.errors_meas[o], u_c=self.u_c[o],
+            x_pred=self.x_pred[o], mpc_time_s=self.mpc_time[o], mpc_status=self.mpc_status[o],
+            mpc_iterations=self.mpc_it[o], mpc_qp_iterations=self.mpc_qpit[o],
+            mpc_clipped=self.mpc_clip[o],
+            t_inner=self.t_inner[i], state=self.state[i], estimate=self.est[i],
+            measurement=self.meas[i], F_fr_hat=self.f_hat[i], F_fr_raw=self.f_raw[i],
+            F_fr_true=self.f_true[i], mu_road=self.mu[i], command=self.cmd[i],
+            saturated=self.sat[i], mhe_time_s=self.mhe_time[i], lqr_time_s=self.lqr_time[i],
+            mhe_status=self.mhe_status[i], **facts)
 
 
-def _oracle_estimate(x: np.ndarray) -> Any:
-    from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
+def _start_state(ref: Reference, initial_error: tuple[float, float]) -> NDArray[np.float64]:
+    """Start pose on the reference, optionally offset laterally and in heading."""
+    th0 = float(ref.theta[0])
+    lat, dth = initial_error
+    return np.array([ref.x[0] - lat * np.sin(th0), ref.y[0] + lat * np.cos(th0), th0 + dth,
+                     max(float(ref.v[0]), 0.0), 0.0, float(ref.omega[0])])
 
-    return Estimate(x=x[3:6].copy(), F_fr=0.0, F_fr_raw=0.0, status=EstimatorStatus.OK,
-                    solve_time_s=0.0)
+
+def default_plant(cfg: Config, scenario: Scenario) -> Plant:
+    """tsmpc's nonlinear plant with the scenario's plant parameters (the config's if None)."""
+    return VehiclePlant(scenario.plant_vehicle or cfg.vehicle, scenario.plant_tyre or cfg.tyre,
+                        cfg.rates.h)
 
 
 def simulate(
-    cfg: Config,
-    method: Method | str,
-    scenario: Scenario,
-    *,
-    oracle: bool = False,
-    kinematic_design: Any = None,
-    dynamic_design: Any = None,
-    progress: ProgressFn | None = None,
-    max_steps: int | None = None,
+    cfg: Config, method: Method | str, scenario: Scenario, *, oracle: bool = False,
+    plant: Plant | None = None, kinematic_design: Any = None, dynamic_design: Any = None,
+    progress: ProgressFn | None = None, max_steps: int | None = None,
 ) -> RunLog:
-    """Run the closed loop of ``method`` on ``scenario`` and return its log.
-
-    Args:
-        cfg: configuration (rates, vehicle, controllers, noise, seed).
-        method: outer-loop method (FZN, REF, ITER, NL).
-        scenario: reference, friction profile, initial error.
-        oracle: ablation: the inner controller gets the true state and no friction compensation.
-        kinematic_design, dynamic_design: LMI designs; loaded from the design cache if None.
-        progress: called as ``progress(k, K)`` after each outer step.
-        max_steps: stop after this many outer steps (shortened runs).
-
-    A non-finite plant state ends the run early; the log then holds the steps done and
-    ``termination`` says why. Controller and estimator failures are counted, never raised.
-    """
-    from tsmpc.control.ts_lqr import TSLQR
-    from tsmpc.estimation.mhe_uio import MHEUIO
-    from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
-
-    method = Method.parse(method) if isinstance(method, str) else method
-    if oracle:
-        cfg = replace(cfg, lqr=replace(cfg.lqr, oracle=True, friction_compensation=False))
-    kd = kinematic_design or load_or_design_kinematic(cfg)
-    dd = dynamic_design or load_or_design_dynamic(cfg)
-    rates, N = cfg.rates, cfg.mpc.N
-    n_in, n_pl = rates.inner_per_outer, rates.plant_per_inner
-    Tc, Td = rates.Tc, rates.Td
-    ref = scenario.reference
-    if abs(ref.dt - Tc) > 1e-9:
-        ref = ref.resample(Tc)
+    """Run ``method`` on ``scenario``: ``plant`` ↔ :class:`~tsmpc.control.cascade.Cascade` every
+    T_d, everything logged. ``plant`` = any :class:`~tsmpc.sim.plant.Plant` (None: tsmpc's own
+    with the scenario's parameters, :func:`default_plant`). ``oracle`` (or ``cfg.lqr.oracle``):
+    the ablation where the TS-LQR gets the true [v, α, ω] and no friction compensation (the MHE
+    still runs and is logged). Designs come from the cache when None; ``progress(k, K)`` is
+    called after each outer step; ``max_steps`` shortens the run. A non-finite plant state or
+    |e_y| beyond ``scenario.divergence_bound_m`` ends the run early (``termination`` says why);
+    controller and estimator failures are counted in ``events``, never raised."""
+    oracle = oracle or cfg.lqr.oracle
+    cascade = Cascade(cfg, method, scenario.reference, kinematic_design=kinematic_design,
+                      dynamic_design=dynamic_design)
+    ref, N, Tc, Td, n_in = cascade.reference, cfg.mpc.N, cfg.rates.Tc, cfg.rates.Td, cascade.n_inner
     K = len(ref) - N
     if K < 1:
         raise ValueError(f"reference has {len(ref)} samples: needs more than N = {N} for look-ahead")
-    if max_steps is not None:
-        K = min(K, int(max_steps))
-
-    mpc = build_outer_controller(cfg, method, kd.P, kd.S)
-    dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, Td)
-    mhe_model = dyn
-    lqr = TSLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, Td, bandwidth=cfg.dynamic_lmi.filter_bandwidth)
-    plant = Plant(scenario.plant_vehicle or cfg.vehicle, scenario.plant_tyre or cfg.tyre, rates.h)
-    fault = scenario.sensor_fault
-    bound = scenario.divergence_bound_m
-    noise = SensorNoise(cfg.noise, cfg.seed)
-    friction = scenario.friction
-    p = cfg.vehicle
-    # The disturbance the UIO should see: the plant's resistance minus the model's nominal one.
-    mg = plant.vehicle.mass * plant.vehicle.g
-
-    # Start pose on the reference, optionally offset laterally and in heading.
-    th0 = float(ref.theta[0])
-    lat, dth = scenario.initial_error
-    x = np.array([ref.x[0] - lat * np.sin(th0), ref.y[0] + lat * np.cos(th0), th0 + dth,
-                  max(float(ref.v[0]), 0.0), 0.0, float(ref.omega[0])])
-    mhe = MHEUIO(cfg.mhe, mhe_model, p, Td, x0=x[3:6].copy())
-
-    M = K * n_in
-    t_outer = np.arange(K) * Tc + float(ref.t[0])
-    refs = np.stack([ref.x[:K], ref.y[:K], ref.theta[:K], ref.v[:K], ref.omega[:K]], axis=1)
-    state_outer = np.zeros((K, 6))
-    errors = np.zeros((K, 3))
-    errors_meas = np.zeros((K, 3))
-    u_c = np.zeros((K, 2))
-    x_pred = np.zeros((K, N + 1, 3))
-    mpc_time = np.zeros(K)
-    mpc_status = np.empty(K, dtype="<U16")
-    mpc_it = np.zeros(K, dtype=np.int64)
-    mpc_qpit = np.zeros(K, dtype=np.int64)
-    mpc_clip = np.zeros(K, dtype=np.int64)
-    t_inner = np.arange(M) * Td + float(ref.t[0])
-    state = np.zeros((M, 6))
-    est = np.zeros((M, 3))
-    meas = np.zeros((M, 2))
-    f_hat = np.zeros(M)
-    f_raw = np.zeros(M)
-    f_true = np.zeros(M)
-    mu_log = np.zeros(M)
-    cmd_log = np.zeros((M, 2))
-    sat = np.zeros(M, dtype=bool)
-    mhe_time = np.zeros(M)
-    lqr_time = np.zeros(M)
-    mhe_status = np.empty(M, dtype="<U16")
-
-    clock = time.perf_counter
-    u_prev = np.array([x[3], x[5]])
-    u_applied = np.zeros(2)
-    s_travel = 0.0
-    pose_meas = x[:3].copy()
-    n_pose_rejected = 0
-    termination = "completed"
-    done = K
-    t_start = clock()
-    m = 0
-    def measure(t: float) -> NDArray[np.float64]:
-        y5 = np.array([x[0], x[1], x[2], x[3], x[5]]) + noise.sample()
-        return fault(t, y5) if fault is not None else y5
-
-    for k in range(K):
-        y0 = measure(k * Tc)  # the pose part feeds the MPC this step
-        state_outer[k] = x
-        errors[k] = pose_to_errors(x[0], x[1], x[2], refs[k, 0], refs[k, 1], refs[k, 2])
-        if np.all(np.isfinite(y0[:3])):
-            pose_meas = y0[:3]
-        else:  # keep the last good pose; the MPC never sees NaN
-            n_pose_rejected += 1
-        e_meas = pose_to_errors(pose_meas[0], pose_meas[1], pose_meas[2],
-                                refs[k, 0], refs[k, 1], refs[k, 2])
-        errors_meas[k] = e_meas
-        if bound is not None and abs(errors[k, 1]) > bound:
-            termination = (f"diverged: |e_y| = {abs(errors[k, 1]):.2f} m > {bound:g} m "
-                           f"at t = {k * Tc:.1f} s")
+    K = K if max_steps is None else min(K, int(max_steps))
+    plant = plant if plant is not None else default_plant(cfg, scenario)
+    x = _start_state(ref, scenario.initial_error)
+    plant.reset(x)
+    cascade.reset(x)
+    rec = _Recorder(ref, K, n_in, N, Tc, Td)
+    noise, fault, bound = SensorNoise(cfg.noise, cfg.seed), scenario.sensor_fault, scenario.divergence_bound_m
+    termination, done, rows, s_travel, t_start = "completed", K, 0, 0.0, time.perf_counter()
+    for m in range(K * n_in):
+        k, j = divmod(m, n_in)
+        t = m * Td
+        y = np.array([x[0], x[1], x[2], x[3], x[5]]) + noise.sample()
+        y = fault(k * Tc if j == 0 else t, y) if fault is not None else y
+        e_y = rec.outer(k, x) if j == 0 else 0.0
+        if bound is not None and abs(e_y) > bound:
+            termination = f"diverged: |e_y| = {abs(e_y):.2f} m > {bound:g} m at t = {k * Tc:.1f} s"
             done = k + 1
             break
-        t0 = clock()
-        res = mpc.step(e_meas, u_prev, ref.window(k, N + 1))
-        mpc_time[k] = clock() - t0
-        u_prev = np.asarray(res.u, dtype=float)
-        u_c[k] = u_prev
-        xp = np.asarray(res.x_pred)
-        x_pred[k, : xp.shape[0]] = xp[: N + 1]
-        mpc_status[k] = str(res.status)
-        mpc_it[k] = res.iterations
-        mpc_qpit[k] = res.qp_iterations
-        mpc_clip[k] = res.n_clipped
-        v_ref, w_ref = float(u_prev[0]), float(u_prev[1])
+        cmd = cascade.step(t, Measurement.from_array(y, state=x[3:6].copy() if oracle else None))
+        if cmd.plan is not None:
+            rec.plan(k, cmd)
+        mu = float(scenario.friction.mu(t, s_travel))
         try:
-            for j in range(n_in):
-                t = (k * n_in + j) * Td
-                yj = y0 if j == 0 else measure(t)
-                mu = float(friction.mu(t, s_travel))
-                y = yj[3:5]
-                t1 = clock()
-                e = mhe.step(y, u_applied)
-                t2 = clock()
-                cmd = lqr.step(_oracle_estimate(x) if oracle else e, v_ref, w_ref)
-                t3 = clock()
-                u_applied = np.array([cmd.F_xR, cmd.delta])
-                state[m], est[m], meas[m] = x, e.x, y
-                f_hat[m], f_raw[m] = e.F_fr, e.F_fr_raw
-                f_true[m] = (mu - p.mu_nominal) * mg
-                mu_log[m], cmd_log[m], sat[m] = mu, u_applied, cmd.saturated
-                mhe_time[m], lqr_time[m], mhe_status[m] = t2 - t1, t3 - t2, str(e.status)
-                m += 1
-                x = plant.step(x, u_applied, mu, n_pl)
-                s_travel += max(x[3], 0.0) * Td
+            x_next = plant.step(cmd.u, Td, mu)
+            if not np.all(np.isfinite(x_next)):
+                raise NonFiniteError(f"plant: non-finite state {x_next}")
         except NonFiniteError as err:
-            termination = f"plant diverged at t = {k * Tc:.2f} s: {err}"
-            done = k + 1
+            termination, done, x_next = f"plant diverged at t = {k * Tc:.2f} s: {err}", k + 1, None
+        rec.inner(m, x, y[3:5], cmd, mu, plant.friction_force)
+        rows = m + 1
+        if x_next is None:
             break
-        if progress is not None:
+        x = x_next
+        s_travel += max(x[3], 0.0) * Td
+        if progress is not None and j == n_in - 1:
             progress(k + 1, K)
-    wall = clock() - t_start
-
-    events = {
-        "mpc_soft": int(np.count_nonzero(mpc_status[:done] == "soft")),
-        "mpc_fallback": int(np.count_nonzero(mpc_status[:done] == "fallback")),
-        "mpc_scheduling_clipped": int(mpc_clip[:done].sum()),
-        "mhe_rejected": int(np.count_nonzero(mhe_status[:m] == "rejected")),
-        "mhe_failed": int(np.count_nonzero(mhe_status[:m] == "failed")),
-        "inner_saturated": int(np.count_nonzero(sat[:m])),
-        "pose_rejected": n_pose_rejected,
-    }
-    return RunLog(
-        method=method.value, scenario=scenario.name, Tc=Tc, Td=Td,
-        t_outer=t_outer[:done], ref=refs[:done], state_outer=state_outer[:done],
-        errors=errors[:done], errors_measured=errors_meas[:done], u_c=u_c[:done],
-        x_pred=x_pred[:done], mpc_time_s=mpc_time[:done], mpc_status=mpc_status[:done],
-        mpc_iterations=mpc_it[:done], mpc_qp_iterations=mpc_qpit[:done],
-        mpc_clipped=mpc_clip[:done],
-        t_inner=t_inner[:m], state=state[:m], estimate=est[:m], measurement=meas[:m],
-        F_fr_hat=f_hat[:m], F_fr_raw=f_raw[:m], F_fr_true=f_true[:m], mu_road=mu_log[:m],
-        command=cmd_log[:m], saturated=sat[:m], mhe_time_s=mhe_time[:m],
-        lqr_time_s=lqr_time[:m], mhe_status=mhe_status[:m],
-        wall_s=wall, termination=termination, events=events,
-        meta={"oracle": oracle, "seed": cfg.seed, **scenario.meta},
-    )
+    return rec.log(cascade.method.value, scenario.name, Tc, Td, done, rows,
+                   wall_s=time.perf_counter() - t_start, termination=termination, events=cascade.events,
+                   meta={"oracle": oracle, "seed": cfg.seed, **scenario.meta})

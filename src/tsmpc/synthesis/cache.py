@@ -100,7 +100,7 @@ def _recheck(design: KinematicDesign | DynamicDesign, cfg: Config) -> None:
         ts = KinematicTS(cfg.kinematic_box, cfg.rates.Tc)
         certs = certify_kinematic(ts.A_vertices, ts.B, np.diag(cfg.kinematic_lmi.Q),
                                   np.diag(cfg.kinematic_lmi.R), design.Y, design.K, design.Z,
-                                  np.diag(np.square(cfg.kinematic_lmi.u_bar)))
+                                  np.diag(np.square(cfg.kinematic_lmi.u_bar)), P=design.P, S=design.S)
     else:
         _, _, certs = certify_grid(design.K, design.P, cfg.dynamic_box, cfg.vehicle, design.Td,
                                    design.bandwidth, cfg.dynamic_lmi.grid_points)

@@ -42,6 +42,9 @@ __all__ = ["KinematicDesign", "design_kinematic"]
 #: Clarabel's log-det solve can end "optimal_inaccurate" a hair outside the feasible set; the design
 #: is then re-solved with the next, stricter ε (the certificates decide, never the status).
 LMI_EPS = (1e-6, 1e-5, 3e-5)
+#: Largest entry of ``P Y − I`` / ``S Z − I`` accepted for a stored inverse (the SDP's Y, Z are
+#: well conditioned: cond ≈ 1e2–1e4, so a float64 inverse is exact to ≈ 1e-12).
+INVERSE_TOL = 1e-8
 
 
 @dataclass(frozen=True)
@@ -134,7 +137,7 @@ def _design(
     S = np.linalg.inv(Zv)
     S = 0.5 * (S + S.T)
 
-    certs = certify_kinematic(A, B, Q, R, Yv, K, Zv, ubar2)
+    certs = certify_kinematic(A, B, Q, R, Yv, K, Zv, ubar2, P=P, S=S)
     check(certs, "kinematic design")
     return KinematicDesign(Y=Yv, P=P, K=K, Z=Zv, S=S, certificates=tuple(certs),
                            solve_time_s=time.perf_counter() - t0,
@@ -144,11 +147,21 @@ def _design(
 def certify_kinematic(
     A: NDArray[np.float64], B: NDArray[np.float64], Q: NDArray[np.float64], R: NDArray[np.float64],
     Y: NDArray[np.float64], K: NDArray[np.float64], Z: NDArray[np.float64], ubar2: NDArray[np.float64],
+    *, P: NDArray[np.float64] | None = None, S: NDArray[np.float64] | None = None,
 ) -> list[Certificate]:
-    """Recompute every kinematic LMI with numpy (independently of the solver's matrices)."""
-    P = np.linalg.inv(Y)
+    """Recompute every kinematic LMI with numpy (independently of the solver's matrices).
+
+    The MPC uses the stored terminal cost ``P`` and terminal set ``S``, not Y and Z: when given,
+    they are certified too (``P Y = I`` and ``S Z = I`` to :data:`INVERSE_TOL`), so a design whose
+    P or S was altered after the solve is rejected.
+    """
     certs = [Certificate("Y positive definite", neg_def_margin(-Y)),
              Certificate("Z positive definite", neg_def_margin(-Z))]
+    for name, M, N in (("P = Y^-1", P, Y), ("S = Z^-1", S, Z)):
+        if M is not None:
+            err = float(np.max(np.abs(M @ N - np.eye(N.shape[0]))))
+            certs.append(Certificate(name, err - INVERSE_TOL if np.isfinite(err) else np.inf))
+    P = np.linalg.inv(Y)
     for i in range(A.shape[0]):
         Acl = A[i] + B @ K[i]
         # The Riccati inequality itself, and the Schur block the SDP imposed (scaled by Y).

@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from tsmpc.config import TyreModel, TyreParams, VehicleParams
 from tsmpc.errors import NonFiniteError
 
-__all__ = ["INPUT_NAMES", "STATE_NAMES", "Plant", "PlantConstants"]
+__all__ = ["INPUT_NAMES", "STATE_NAMES", "Plant", "PlantConstants", "VehiclePlant"]
 
 STATE_NAMES = ("X", "Y", "theta", "v", "alpha", "omega")
 INPUT_NAMES = ("F_xR", "delta")
@@ -191,3 +191,58 @@ class Plant:
         """Unknown friction disturbance F_fr = (μ(road) − μ_o) M g seen by the models [N]."""
         p = self.vehicle
         return (float(mu_road) - p.mu_nominal) * p.mass * p.g
+
+
+class VehiclePlant:
+    """tsmpc's nonlinear plant as a stateful vehicle (the :class:`tsmpc.sim.plant.Plant`
+    protocol): owns the state, integrates :class:`Plant` with RK4 steps of h over each ``dt``.
+
+    Args:
+        vehicle, tyre, h, constants: as for :class:`Plant`.
+    """
+
+    def __init__(
+        self,
+        vehicle: VehicleParams,
+        tyre: TyreParams,
+        h: float = 0.001,
+        constants: PlantConstants = PlantConstants(),
+    ) -> None:
+        self.model = Plant(vehicle, tyre, h, constants)
+        self.vehicle = vehicle
+        self._mg = vehicle.mass * vehicle.g
+        self._x = np.zeros(6)
+        self._u = np.zeros(2)
+        self._f: float | None = None
+
+    def reset(self, x0: ArrayLike) -> None:
+        """State ``x0`` (6,), no input applied yet."""
+        self._x = np.asarray(x0, dtype=float).reshape(6).copy()
+        self._u = np.zeros(2)
+        self._f = None
+
+    @property
+    def state(self) -> NDArray[np.float64]:
+        """Current state (6,)."""
+        return self._x.copy()
+
+    def step(self, u: ArrayLike, dt: float, mu_road: float) -> NDArray[np.float64]:
+        """Hold ``u`` for ``dt`` (a whole number of RK4 steps h); returns the new state.
+        Raises :class:`NonFiniteError` on a non-finite input or state."""
+        n = round(dt / self.model.h)
+        if n < 1 or abs(n * self.model.h - dt) > 1e-9 * max(1.0, dt):
+            raise ValueError(f"VehiclePlant: dt = {dt} must be a positive multiple of h = {self.model.h}")
+        self._u = np.asarray(u, dtype=float).reshape(2).copy()
+        self._f = (float(mu_road) - self.vehicle.mu_nominal) * self._mg
+        self._x = self.model.step(self._x, self._u, mu_road, n)
+        return self._x.copy()
+
+    @property
+    def applied_input(self) -> NDArray[np.float64]:
+        """The last input (no actuator dynamics: the command itself)."""
+        return self._u.copy()
+
+    @property
+    def friction_force(self) -> float | None:
+        """(μ(road) − μ_o) M g of the last step [N]."""
+        return self._f

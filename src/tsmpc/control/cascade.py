@@ -1,0 +1,315 @@
+"""The guidance system as one runtime object: outer MPC + MHE-UIO + TS-LQR (paper Fig. 1; SPEC §1).
+
+A vehicle stack calls :meth:`Cascade.step` every T_d with the latest sensor sample and applies the
+returned :class:`Command` until the next call. Inside, the outer kinematic MPC (TS-MPC or NL-MPC)
+runs every T_c/T_d calls on the measured pose, and the MHE-UIO and the TS-LQR run every call::
+
+    cascade = Cascade(cfg, Method.REF, reference)
+    while driving:
+        cmd = cascade.step(t, Measurement(pose=(X, Y, θ), v=v, omega=ω))
+        vehicle.apply(cmd.F_xR, cmd.delta)
+
+``step`` never raises: a NaN or stale sample is rejected (the pose holds its last good value, the
+MHE predicts), MPC and MHE failures fall back inside the blocks, and anything unexpected holds
+the previous command. Every such event is counted in :attr:`Cascade.events`.
+
+The cascade does no logging (STYLE §3): each :class:`Command` carries what a logger needs (the
+estimate, the MPC result when the MPC ran at that call, the block timings).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tsmpc.config import Config, SchedulingMode
+from tsmpc.control.ts_mpc import MPCResult, MPCStatus
+from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
+from tsmpc.models.kinematic import pose_to_errors
+from tsmpc.planning.reference import Reference
+
+__all__ = ["EVENT_NAMES", "Cascade", "Command", "Measurement", "Method", "build_outer_controller"]
+
+#: Counters of :attr:`Cascade.events` (also the ``events`` of a run's metrics).
+EVENT_NAMES = (
+    "mpc_soft",  # the MPC solved the softened problem
+    "mpc_fallback",  # the MPC returned its shifted previous plan
+    "mpc_scheduling_clipped",  # scheduling values clipped into the kinematic box (summed)
+    "mhe_rejected",  # MHE samples rejected (NaN or stale speed/yaw rate)
+    "mhe_failed",  # MHE solver failures (model prediction used)
+    "inner_saturated",  # TS-LQR steps with an active saturation
+    "pose_rejected",  # MPC steps that used the last good pose (NaN or stale pose)
+)
+
+
+class Method(StrEnum):
+    """Outer-loop method: the TS-MPC with one of its scheduling modes, or the NL-MPC baseline."""
+
+    FZN = "FZN"
+    REF = "REF"
+    ITER = "ITER"
+    NL = "NL"
+
+    @classmethod
+    def parse(cls, text: str) -> Method:
+        """Case-insensitive parse; the error lists the allowed values."""
+        try:
+            return cls(text.strip().upper())
+        except ValueError:
+            allowed = ", ".join(m.value.lower() for m in cls)
+            raise ValueError(f"unknown method {text!r}; allowed: {allowed}") from None
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One sensor sample delivered to :meth:`Cascade.step`.
+
+    Attributes:
+        pose: (X [m], Y [m], θ [rad]) global pose of the CoG.
+        v: speed of the CoG [m/s].
+        omega: yaw rate [rad/s].
+        steering: front steering actually applied over the last T_d [rad], if the platform
+            measures it (an actuator with lag); the MHE then uses it instead of the command.
+        force: rear drive force actually applied over the last T_d [N], if measured.
+        stamp: time the sample was taken [s] (same clock as ``t`` of ``step``); a sample older
+            than the cascade's ``max_age_s`` is rejected as stale. None = fresh.
+        state: ground-truth [v, α, ω] (simulation only: the *oracle* ablation). When given, the
+            TS-LQR uses it instead of the MHE's estimate and gets no friction compensation.
+    """
+
+    pose: tuple[float, float, float]
+    v: float
+    omega: float
+    steering: float | None = None
+    force: float | None = None
+    stamp: float | None = None
+    state: NDArray[np.float64] | None = None
+
+    @classmethod
+    def from_array(cls, y: ArrayLike, **kwargs: Any) -> Measurement:
+        """From ``[X, Y, θ, v, ω]`` (the simulator's sensor vector)."""
+        a = np.asarray(y, dtype=float).reshape(5)
+        return cls((float(a[0]), float(a[1]), float(a[2])), float(a[3]), float(a[4]), **kwargs)
+
+
+@dataclass(frozen=True)
+class Command:
+    """The plant input for the next T_d and what produced it.
+
+    Attributes:
+        F_xR: rear drive force [N] (after feed-forward, friction compensation, saturation).
+        delta: front steering [rad].
+        saturated: an inner-loop saturation was active.
+        v_ref, omega_ref: the outer loop's references in force [m/s, rad/s].
+        estimate: the MHE-UIO's estimate at this call.
+        plan: the MPC result when the MPC ran at this call, else None.
+        errors_measured: the errors [e_x, e_y, e_θ] the MPC saw (None when it did not run).
+        mpc_time_s, mhe_time_s, lqr_time_s: wall time of each block at this call [s].
+        held: True when an unexpected error made the cascade hold its previous command.
+    """
+
+    F_xR: float
+    delta: float
+    saturated: bool
+    v_ref: float
+    omega_ref: float
+    estimate: Estimate
+    plan: MPCResult | None = None
+    errors_measured: NDArray[np.float64] | None = None
+    mpc_time_s: float = 0.0
+    mhe_time_s: float = 0.0
+    lqr_time_s: float = 0.0
+    held: bool = False
+
+    @property
+    def u(self) -> NDArray[np.float64]:
+        """[F_xR, δ] as an array (the plant input)."""
+        return np.array([self.F_xR, self.delta])
+
+
+def build_outer_controller(cfg: Config, method: Method, P: np.ndarray, S: np.ndarray) -> Any:
+    """The outer MPC of ``method`` with the terminal ingredients (P, S) of the kinematic design."""
+    from tsmpc.models.kinematic import KinematicTS
+
+    model = KinematicTS(cfg.kinematic_box, cfg.rates.Tc)
+    if method == Method.NL:
+        from tsmpc.control.nl_mpc import NLMPC
+
+        return NLMPC(cfg.mpc, model, P, S)
+    from tsmpc.control.ts_mpc import TSMPC
+
+    return TSMPC(cfg.mpc, model, P, S, mode=SchedulingMode(method.value.lower()))
+
+
+def _finite(*xs: float) -> bool:
+    return all(math.isfinite(x) for x in xs)
+
+
+class Cascade:
+    """Outer MPC (every T_c) + MHE-UIO and TS-LQR (every T_d), called every T_d.
+
+    Args:
+        cfg: configuration (rates, vehicle, MPC, MHE, LQR settings).
+        method: outer-loop method (FZN, REF, ITER: TS-MPC scheduling; NL: NL-MPC).
+        reference: the reference to track; resampled to T_c if needed. Call ``step`` with
+            ``t`` = time since the reference's first sample: the MPC tracks sample ``t / T_c``.
+        kinematic_design, dynamic_design: LMI designs; loaded from the design cache if None.
+        x0: initial state [X, Y, θ, v, α, ω] (MHE start, first MPC input, pose fallback);
+            None = taken from the first measurement (α = 0).
+        max_age_s: a measurement whose ``stamp`` is older than this is rejected [s]
+            (default: T_c).
+    """
+
+    def __init__(
+        self, cfg: Config, method: Method | str, reference: Reference, *,
+        kinematic_design: Any = None, dynamic_design: Any = None,
+        x0: ArrayLike | None = None, max_age_s: float | None = None,
+    ) -> None:
+        from tsmpc.control.ts_lqr import TSLQR
+        from tsmpc.estimation.mhe_uio import MHEUIO
+        from tsmpc.models.dynamic import DynamicTS
+        from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
+
+        self.cfg = cfg
+        self.method = Method.parse(method) if isinstance(method, str) else method
+        rates = cfg.rates
+        self.Tc, self.Td = rates.Tc, rates.Td
+        self.n_inner = rates.inner_per_outer
+        ref = reference if abs(reference.dt - self.Tc) <= 1e-9 else reference.resample(self.Tc)
+        self.reference = ref
+        kd = kinematic_design or load_or_design_kinematic(cfg)
+        dd = dynamic_design or load_or_design_dynamic(cfg)
+        self.mpc = build_outer_controller(cfg, self.method, kd.P, kd.S)
+        dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, self.Td)
+        self.lqr = TSLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, self.Td,
+                         bandwidth=cfg.dynamic_lmi.filter_bandwidth)
+        self.mhe = MHEUIO(cfg.mhe, dyn, cfg.vehicle, self.Td)
+        self.max_age_s = self.Tc if max_age_s is None else float(max_age_s)
+        self.reset(x0)
+
+    # -------------------------------------------------------------------------- state
+    def reset(self, x0: ArrayLike | None = None) -> None:
+        """Start over (blocks cleared, counters zeroed) from state ``x0`` (6,) or, if None, from
+        the first measurement."""
+        self._x0 = None if x0 is None else np.asarray(x0, dtype=float).reshape(6).copy()
+        self.mhe.reset(None if self._x0 is None else self._x0[3:6].copy())
+        self.lqr.reset()
+        if hasattr(self.mpc, "reset"):
+            self.mpc.reset()
+        self._calls = 0
+        self._pose = None if self._x0 is None else self._x0[:3].copy()
+        self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
+        self._u_applied = np.zeros(2)
+        self._last: Command | None = None
+        self._plan: MPCResult | None = None
+        self._events = dict.fromkeys(EVENT_NAMES, 0)
+        self._events["stale_rejected"] = 0
+        self._events["step_errors"] = 0
+        self.last_error: str | None = None
+
+    @property
+    def events(self) -> dict[str, int]:
+        """Event counters since the last reset (see :data:`EVENT_NAMES`; plus ``stale_rejected``,
+        samples rejected for their age, and ``step_errors``, unexpected errors caught)."""
+        return dict(self._events)
+
+    @property
+    def last_plan(self) -> MPCResult | None:
+        """The last MPC result (predicted errors, planned inputs), None before the first."""
+        return self._plan
+
+    @property
+    def last_estimate(self) -> Estimate | None:
+        """The last MHE-UIO estimate, None before the first call."""
+        return None if self._last is None else self._last.estimate
+
+    @property
+    def last_command(self) -> Command | None:
+        """The last command returned."""
+        return self._last
+
+    # --------------------------------------------------------------------------- step
+    def step(self, t: float, measurement: Measurement) -> Command:
+        """One call every T_d: the command to apply until the next call. Never raises."""
+        try:
+            cmd = self._step(float(t), measurement)
+        except Exception as err:  # the contract: a guidance step never raises
+            self._events["step_errors"] += 1
+            self.last_error = f"{type(err).__name__}: {err}"
+            cmd = self._hold()
+        self._calls += 1
+        self._last = cmd
+        return cmd
+
+    def _hold(self) -> Command:
+        """The previous command again (a zero command before the first)."""
+        last = self._last
+        if last is None:
+            est = Estimate(np.zeros(3), 0.0, 0.0, EstimatorStatus.FAILED, 0.0)
+            return Command(0.0, 0.0, False, 0.0, 0.0, est, held=True)
+        return Command(last.F_xR, last.delta, last.saturated, last.v_ref, last.omega_ref,
+                       last.estimate, held=True)
+
+    def _fresh(self, t: float, m: Measurement) -> bool:
+        if m.stamp is None or t - float(m.stamp) <= self.max_age_s + 1e-12:
+            return True
+        self._events["stale_rejected"] += 1
+        return False
+
+    def _step(self, t: float, m: Measurement) -> Command:
+        X, Y, th = (float(c) for c in m.pose)
+        v, om = float(m.v), float(m.omega)
+        if self._x0 is None:  # start from the first measurement
+            self.reset(np.nan_to_num(np.array([X, Y, th, v, 0.0, om])))
+        ev = self._events
+        fresh = self._fresh(t, m)
+        plan = e_meas = None
+        t_mpc = 0.0
+        if self._calls % self.n_inner == 0:
+            if fresh and _finite(X, Y, th):
+                self._pose = np.array([X, Y, th])
+            else:  # keep the last good pose: the MPC never sees NaN
+                ev["pose_rejected"] += 1
+            k = max(math.floor(t / self.Tc + 1e-6), 0)
+            ref = self.reference
+            kk = min(k, len(ref) - 1)
+            p = self._pose
+            e_meas = np.array(pose_to_errors(p[0], p[1], p[2], ref.x[kk], ref.y[kk], ref.theta[kk]))
+            t0 = time.perf_counter()
+            plan = self.mpc.step(e_meas, self._u_prev, ref.window(k, self.cfg.mpc.N + 1))
+            t_mpc = time.perf_counter() - t0
+            self._u_prev = np.asarray(plan.u, dtype=float)
+            self._plan = plan
+            ev["mpc_soft"] += plan.status == MPCStatus.SOFT
+            ev["mpc_fallback"] += plan.status == MPCStatus.FALLBACK
+            ev["mpc_scheduling_clipped"] += int(plan.n_clipped)
+        v_ref, w_ref = float(self._u_prev[0]), float(self._u_prev[1])
+        y = np.array([v, om]) if fresh else np.full(2, np.nan)
+        u_mhe = self._u_applied
+        if m.force is not None or m.steering is not None:
+            u_mhe = np.array([self._u_applied[0] if m.force is None else float(m.force),
+                              self._u_applied[1] if m.steering is None else float(m.steering)])
+        t1 = time.perf_counter()
+        est = self.mhe.step(y, u_mhe)
+        t2 = time.perf_counter()
+        inner = est if m.state is None else _oracle_estimate(m.state)
+        out = self.lqr.step(inner, v_ref, w_ref)
+        t3 = time.perf_counter()
+        self._u_applied = np.array([out.F_xR, out.delta])
+        ev["mhe_rejected"] += est.status == EstimatorStatus.REJECTED
+        ev["mhe_failed"] += est.status == EstimatorStatus.FAILED
+        ev["inner_saturated"] += bool(out.saturated)
+        return Command(out.F_xR, out.delta, bool(out.saturated), v_ref, w_ref, est, plan, e_meas,
+                       t_mpc, t2 - t1, t3 - t2)
+
+
+def _oracle_estimate(state: ArrayLike) -> Estimate:
+    """The true [v, α, ω] as an estimate, without friction compensation (F̂ = 0)."""
+    x = np.asarray(state, dtype=float).reshape(3).copy()
+    return Estimate(x=x, F_fr=0.0, F_fr_raw=0.0, status=EstimatorStatus.OK, solve_time_s=0.0)
