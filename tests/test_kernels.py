@@ -246,3 +246,30 @@ def test_plant_block_non_finite_raises_as_before(cfg: Config) -> None:
         p.step(x, (np.nan, 0.0), 0.9, 10)
     with pytest.raises(NonFiniteError, match="non-finite state"):
         p.step(np.array([0.0, 0.0, 0.0, np.inf, 0.0, 0.0]), (0.0, 0.0), 0.9, 10)
+
+
+def test_kernels_stand_down_when_the_model_differs(cfg: Config) -> None:
+    """A model edited on the numpy side only must not be silently replaced by the kernel's."""
+    from tsmpc.estimation.mhe_uio import MHEUIO
+    from tsmpc.models.dynamic import DynamicTS
+    from tsmpc.vehicle.plant import Plant
+
+    class Scaled(DynamicTS):
+        def matrices(self, z):
+            A, B = super().matrices(z)
+            return A, 1.01 * B
+
+    dyn = Scaled(cfg.dynamic_box, cfg.vehicle, cfg.rates.Td)
+    mhe = MHEUIO(cfg.mhe, dyn, cfg.vehicle, cfg.rates.Td, jit=True)
+    assert mhe._kern is not None and mhe._kargs[-1] is False  # kernel solves, numpy evaluates
+    ref = MHEUIO(cfg.mhe, dyn, cfg.vehicle, cfg.rates.Td, jit=False)
+    for k in range(60):
+        y, u = np.array([10.0 + 0.01 * k, 0.1]), np.array([800.0, 0.02])
+        np.testing.assert_allclose(mhe.step(y, u).x, ref.step(y, u).x, rtol=0, atol=1e-8)
+
+    class OtherPlant(Plant):
+        def _make_rhs(self):
+            f = super()._make_rhs()
+            return lambda *a: tuple(1.001 * v for v in f(*a))
+
+    assert OtherPlant(cfg.vehicle, cfg.tyre, cfg.rates.h, jit=True)._kern is None

@@ -129,15 +129,39 @@ class MHEUIO:
         if self._kern is not None:
             n = settings.N
             p, box = getattr(model, "params", vehicle), model.premise_box
+            try:
+                phys = (float(p.mass), float(p.inertia), float(p.cornering_stiffness), float(p.a),
+                        float(p.b), float(p.mu_nominal * p.g), float(p.drag_factor))
+                euler = getattr(model, "method", None) == Discretization.EULER
+            except (AttributeError, TypeError):
+                phys, euler = (1.0,) * 7, False
             self._kargs = (
                 self._q, self._r, self._p, F_PRIOR_WEIGHT, self._xmin, self._xmax,
                 np.asarray(box.lower, dtype=float), np.asarray(box.upper, dtype=float),
-                float(p.mass), float(p.inertia), float(p.cornering_stiffness), float(p.a), float(p.b),
-                float(p.mu_nominal * p.g), float(p.drag_factor), self.Td,
-                model.method == Discretization.EULER,
+                *phys, self.Td, euler,
             )
             self._Ab, self._Bb, self._Xb = np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3))
+            if self._kargs[-1] and not self._kernel_model_agrees():
+                # The model is not the one the kernel evaluates: numpy evaluates it, the kernel solves.
+                self._kargs = (*self._kargs[:-1], False)
         self.reset(x0)
+
+    def _kernel_model_agrees(self) -> bool:
+        """The kernel's Euler matrices equal ``model.matrices`` at a few premise points (guards
+        against a model edited on one side only)."""
+        try:
+            lo, hi = (np.asarray(b, dtype=float) for b in (self.model.premise_box.lower,
+                                                             self.model.premise_box.upper))
+            z = lo + (hi - lo) * np.array([[0.1, 0.2, 0.3], [0.9, 0.5, 0.7], [0.5, -0.2, 1.3]])
+            A, B = self.model.matrices(z)
+            U = np.column_stack([np.zeros(3), z[:, 0]])
+            Ak, Bk = np.empty((3, 3, 3)), np.empty((3, 3, 2))
+            k = self._kargs
+            self._kern.euler_matrices(U, z[:, [1, 2, 0]], 3, k[6], k[7], *k[8:16], Ak, Bk)
+            return bool(np.allclose(Ak, A, rtol=1e-12, atol=1e-14)
+                        and np.allclose(Bk, B, rtol=1e-12, atol=1e-14))
+        except Exception:  # any mismatch of shapes or attributes: do not trust the kernel's model
+            return False
 
     def reset(self, x0: NDArray[np.float64] | None = None) -> None:
         """Empty the window; start from ``x0`` (or rest) with F̂ = 0."""

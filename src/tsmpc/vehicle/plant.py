@@ -84,6 +84,8 @@ class Plant:
             self._kern = kernels.load("plant")
             if self._kern is not None:
                 self._cst = self._kern.pack(self)
+                if not self._kernel_agrees():
+                    self._kern = None  # the model changed without the kernel: numpy only
 
     # ------------------------------------------------------------------ model
     def _make_rhs(self):
@@ -125,6 +127,19 @@ class Plant:
             return v * cos(th + al), v * sin(th + al), om, vdot, adot, wdot
 
         return rhs
+
+    def _kernel_agrees(self) -> bool:
+        """The compiled block reproduces the float closure on two probe states (guards against a
+        model edited on one side only)."""
+        for xp in ((0.0, 0.0, 0.3, 8.0, 0.02, 0.1), (1.0, -2.0, -1.0, 0.3, -0.05, -0.4)):
+            x = np.array(xp)
+            kern, self._kern = self._kern, None
+            ref = self.step(x, (1500.0, 0.05), 0.7, 3)
+            self._kern = kern
+            out, ok = kern.rk4_block(x, 1500.0, 0.05, 0.7, 3, self.h, self._cst)
+            if not ok or np.abs(out - ref).max() > 1e-10 * (1.0 + np.abs(ref).max()):
+                return False
+        return True
 
     def derivatives(self, x: ArrayLike, u: ArrayLike, mu_road: float) -> NDArray[np.float64]:
         """ẋ (6,) at state x (6,), input u = [F_xR, δ] and road friction μ(road)."""
