@@ -345,6 +345,10 @@ def _record(
 def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
     from dataclasses import replace as dc_replace
 
+    from tsmpc.blas import limit_blas_threads
+
+    limit_blas_threads()  # a Dask worker per core: one BLAS thread each (tsmpc.blas)
+
     from tsmpc.config import replace
     from tsmpc.planning.circuit import builtin_circuit
     from tsmpc.planning.reference import Reference

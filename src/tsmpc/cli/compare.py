@@ -28,11 +28,13 @@ def _execute(
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+    from tsmpc.blas import limit_blas_threads
     from tsmpc.config import replace
     from tsmpc.errors import TsmpcError
     from tsmpc.sim.compare import compare, load_scenario
     from tsmpc.sim.simulator import Method
 
+    limit_blas_threads()
     console = Console()
     if not console.is_terminal:  # piped to a file or CI log: do not squeeze the tables to 80 columns
         console = Console(width=140)

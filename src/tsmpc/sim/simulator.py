@@ -159,7 +159,11 @@ def simulate(
     still runs and is logged). Designs come from the cache when None; ``progress(k, K)`` is
     called after each outer step; ``max_steps`` shortens the run. A non-finite plant state or
     |e_y| beyond ``scenario.divergence_bound_m`` ends the run early (``termination`` says why);
-    controller and estimator failures are counted in ``events``, never raised."""
+    controller and estimator failures are counted in ``events``, never raised. The process uses
+    one BLAS thread unless ``TSMPC_BLAS_THREADS`` says otherwise (:mod:`tsmpc.blas`)."""
+    from tsmpc.blas import limit_blas_threads
+
+    limit_blas_threads()
     oracle = oracle or cfg.lqr.oracle
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=kinematic_design,
                       dynamic_design=dynamic_design)
