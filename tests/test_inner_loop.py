@@ -143,9 +143,24 @@ def test_mhe_window_matches_cvxpy(cfg: Config) -> None:
         del ours
 
 
+def _discrete_reference_gain(cfg: Config, z: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """N̄ = [C (I − A_d − B_d K₅)⁻¹ B_d]⁻¹ from the Euler plant + filter model of DynamicTS."""
+    Ad, Bd = DynamicTS(cfg.dynamic_box, cfg.vehicle, Td).matrices(z)
+    lam = cfg.dynamic_lmi.filter_bandwidth
+    A5 = np.zeros((5, 5))
+    A5[:3, :3], A5[:3, 3:] = Ad, Bd  # u = filter state
+    A5[3:, 3:] = (1.0 - lam * Td) * np.eye(2)
+    B5 = np.zeros((5, 2))
+    B5[3:, :] = lam * Td * np.eye(2)
+    C = np.zeros((2, 5))
+    C[0, 0] = C[1, 2] = 1.0
+    return np.linalg.inv(C @ np.linalg.solve(np.eye(5) - A5 - B5 @ K[:, :5], B5))
+
+
 def test_lqr_law_matches_vectorised_blend(cfg: Config, dd) -> None:
-    """The float fast path of TSLQR.step equals the textbook law u = u_eq + Σμ_i(ϑ)K_i x̃ with the
-    memberships of SchedulingBox (numpy), inside and outside the premise box."""
+    """The float fast path of TSLQR.step equals the textbook law u = N̄ r + Σμ_i(ϑ)K_i x with the
+    memberships of SchedulingBox (numpy) and N̄ from the discrete (Euler) model, inside and
+    outside the premise box; the speed-error feedback adds M (v_ref − v̂)/τ."""
     dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, Td)
     rng = np.random.default_rng(3)
     lo, hi = dyn.premise_box.lower, dyn.premise_box.upper
@@ -154,20 +169,52 @@ def test_lqr_law_matches_vectorised_blend(cfg: Config, dd) -> None:
         ref = np.asarray(dyn.premise_box.memberships(z))
         fast = TSLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, Td)._memberships(*z)
         np.testing.assert_allclose(fast, ref, atol=1e-14)
-    lqr = TSLQR(dd.K, dyn, cfg.vehicle, replace(cfg.lqr, friction_compensation=False), Td)
+    for fb in (False, True):
+        st = replace(cfg.lqr, friction_compensation=False, speed_feedback=fb)
+        lqr = TSLQR(dd.K, dyn, cfg.vehicle, st, Td)
 
-    class E:
-        x = np.array([9.7, 0.01, 0.12])
-        F_fr = 0.0
+        class E:
+            x = np.array([9.7, 0.01, 0.12])
+            F_fr = 0.0
+            F_fr_raw = 0.0
 
-    v_ref, w_ref = 10.0, 0.1
-    cmd = lqr.step(E, v_ref, w_ref)
-    a_eq, F_eq, d_eq = equilibrium(v_ref, w_ref, cfg.vehicle)
-    xt = np.array([E.x[0] - v_ref, E.x[1] - a_eq, E.x[2] - w_ref, 0.0, 0.0, 0.0])  # bumpless start
-    mu = dyn.premise_box.memberships(np.array([d_eq, E.x[0], E.x[1]]))
-    u_f = np.array([F_eq, d_eq]) + np.tensordot(mu, dd.K, axes=(0, 0)) @ xt
-    a = lqr._a
-    np.testing.assert_allclose(lqr._f, a * np.array([F_eq, d_eq]) + (1 - a) * u_f, rtol=1e-12)
-    F_ff = cfg.vehicle.mass * (v_ref - E.x[0]) / cfg.lqr.speed_time_constant
-    assert cmd.F_xR == pytest.approx(F_eq + F_ff, rel=1e-12)
-    assert cmd.delta == pytest.approx(d_eq, rel=1e-12)
+        v_ref, w_ref = 10.0, 0.1
+        cmd = lqr.step(E, v_ref, w_ref)  # first step: bumpless start
+        f0 = lqr._f.copy()
+        cmd = lqr.step(E, v_ref, w_ref)
+        z = np.array([f0[1], E.x[0], E.x[1]])
+        K = np.tensordot(dyn.premise_box.memberships(z), dd.K, axes=(0, 0))
+        N = _discrete_reference_gain(cfg, z, K)
+        x = np.array([*E.x, *f0, Td * (w_ref - E.x[2])])
+        u_f = N @ [v_ref, w_ref] + K @ x
+        a = lqr._a
+        np.testing.assert_allclose(lqr._f, a * f0 + (1 - a) * u_f, rtol=1e-9)
+        F_add = cfg.vehicle.mass * (v_ref - E.x[0]) / st.speed_time_constant if fb else 0.0
+        assert cmd.F_xR == pytest.approx(f0[0] + F_add, rel=1e-12)
+        assert cmd.delta == pytest.approx(f0[1], rel=1e-12)
+
+
+def test_static_reference_gain_zero_steady_state_error(cfg: Config, dd) -> None:
+    """SPEC §8: with u = N̄ r + K x, constant (v, ω) references are tracked with zero steady-state
+    error on the nominal model and the integrator rests at 0. Independent check: iterate the
+    discrete Euler loop (DynamicTS matrices, filter, integrator) frozen at the scheduling point to
+    its fixed point, and compare its steady state with :func:`equilibrium` (nonlinear solve)."""
+    dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, Td)
+    lam = cfg.dynamic_lmi.filter_bandwidth
+    lqr = TSLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, Td)
+    for v_ref, w_ref in ((3.0, 0.0), (8.0, 0.25), (12.0, -0.1), (17.0, 0.05)):
+        a_eq, F_eq, d_eq = equilibrium(v_ref, w_ref, cfg.vehicle, iters=30)
+        z = np.array([d_eq, v_ref, a_eq])
+        K = np.tensordot(dyn.premise_box.memberships(z), dd.K, axes=(0, 0))
+        N = lqr.reference_gain(d_eq, v_ref, K)
+        np.testing.assert_allclose(N, _discrete_reference_gain(cfg, z, K), rtol=1e-8)
+        Ad, Bd = dyn.matrices(z)
+        x = np.zeros(6)  # [v, α, ω, F_f, δ_f, ζ], from rest
+        for _ in range(20000):  # 200 s: the slowest closed-loop mode is a few seconds
+            u = N @ [v_ref, w_ref] + K @ x
+            x = np.concatenate([Ad @ x[:3] + Bd @ x[3:5], x[3:5] + lam * Td * (u - x[3:5]),
+                                [x[5] + Td * (w_ref - x[2])]])
+        assert x[0] == pytest.approx(v_ref, abs=1e-8)
+        assert x[2] == pytest.approx(w_ref, abs=1e-9)
+        assert x[5] == pytest.approx(0.0, abs=1e-6)  # the integrator is not needed at steady state
+        np.testing.assert_allclose(x[1:5], [a_eq, w_ref, F_eq, d_eq], rtol=1e-6, atol=1e-9)

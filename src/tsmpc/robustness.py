@@ -42,6 +42,8 @@ ROBUSTNESS_SCENARIOS: dict[str, str] = {
     "sensor_dropout": "every 5 s all measurements freeze for 0.2 s (last value held)",
     "nan_bursts": "every 7 s all measurements are NaN for 50 ms",
     "mass_stiffness_mismatch": "plant mass +20 % and cornering stiffness −20 % (controllers unchanged)",
+    "offset_start": "start 2 m left of the path with a 0.2 rad (11.5°) heading error: the e_θ premise "
+    "leaves its ±5° box and the outer-loop methods schedule the transient differently",
 }
 
 
@@ -142,4 +144,6 @@ def apply_robustness(
         base = scenario.plant_vehicle or cfg.vehicle
         veh = replace(base, mass=base.mass * 1.2, cornering_stiffness=base.cornering_stiffness * 0.8)
         return RobustnessCase(cfg, dc_replace(sc, plant_vehicle=veh))
+    if name == "offset_start":
+        return RobustnessCase(cfg, dc_replace(sc, initial_error=(2.0, 0.2)))
     return RobustnessCase(cfg, sc)

@@ -18,10 +18,11 @@ def fail(err: Exception, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
-def load_config_or_exit(path: Path | None) -> Config:
-    """Load the config at ``path`` (defaults if None); a bad file exits with a clear message."""
+def load_config_or_exit(path: Path | None, preset: str | None = None) -> Config:
+    """Load the config at ``path`` (defaults if None) on top of ``preset``; a bad file or an
+    unknown preset exits with a clear message."""
     try:
-        return load_config(path)
+        return load_config(path, preset)
     except TsmpcError as err:
         fail(err)
         raise  # unreachable, for type checkers

@@ -24,6 +24,7 @@ def _parse_window(text: str | None) -> tuple[int, int] | None:
 def _execute(
     methods_text: str, reference: Path | None, window: str | None, out: Path, seed: int | None,
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
+    preset: str | None = None,
 ) -> None:
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -38,7 +39,7 @@ def _execute(
     console = Console()
     if not console.is_terminal:  # piped to a file or CI log: do not squeeze the tables to 80 columns
         console = Console(width=140)
-    cfg = load_config_or_exit(config)
+    cfg = load_config_or_exit(config, preset)
     if seed is not None:
         cfg = replace(cfg, seed=seed)
     try:
@@ -111,7 +112,9 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
 
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
-                  "nan_bursts, mass_stiffness_mismatch (see tsmpc.robustness).")
+                  "nan_bursts, mass_stiffness_mismatch, offset_start (see tsmpc.robustness).")
+_PRESET_HELP = ("Named configuration under --config: 'default' (our best cascade) or 'paper' (the cascade "
+                "as published: no speed-error feedback, the paper's UIO friction estimate).")
 _REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..1316 is used unless "
              "--window says otherwise) or a planned CSV (t,x,y,theta,v,omega,kappa). "
              "Default: the built-in paper-like circuit.")
@@ -127,13 +130,14 @@ def compare_cmd(
     config: Path | None = typer.Option(None, "--config", help="TOML config file."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Skip the figures."),
     oracle: bool = typer.Option(
-        False, "--oracle", help="Ablation: true state, no friction compensation."
+        False, "--oracle", help="Ablation: the inner loop gets the true state, no friction compensation."
     ),
     duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
     robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
+    preset: str | None = typer.Option(None, "--preset", help=_PRESET_HELP),
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
-    _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness)
+    _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness, preset)
 
 
 @app.command("run")
@@ -146,12 +150,13 @@ def run_cmd(
     config: Path | None = typer.Option(None, "--config", help="TOML config file."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Skip the figures."),
     oracle: bool = typer.Option(
-        False, "--oracle", help="Ablation: true state, no friction compensation."
+        False, "--oracle", help="Ablation: the inner loop gets the true state, no friction compensation."
     ),
     duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
     robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
+    preset: str | None = typer.Option(None, "--preset", help=_PRESET_HELP),
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
     if "," in method:
         fail(ValueError("--method takes one method; use `tsmpc compare --methods` for several"))
-    _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness)
+    _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness, preset)

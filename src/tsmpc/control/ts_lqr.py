@@ -1,19 +1,29 @@
 """Inner loop: gain-scheduled TS-LQR on the Apkarian-augmented model with friction compensation
 (paper Sec. 3.2, Sec. 4; SPEC §6, §8).
 
-Law, every T_d, with ϑ = (δ_f, v̂, α̂) clipped into the box::
+Law, every T_d, with ϑ = (δ_f, v̂, α̂) clipped into the box and r = [v_ref, ω_ref]::
 
-    (α_eq, F_eq, δ_eq) = equilibrium of the nominal model at (v_ref, ω_ref)      (feed-forward)
-    F_ff = M (a_ref + (v_ref − v̂)/τ)             (planned acceleration + speed feed-forward)
-    x̃ = [v̂ − v_ref, α̂ − α_eq, ω̂ − ω_ref, F_f − F_eq, δ_f − δ_eq, ζ]
-    u_f = [F_eq, δ_eq] + K(ϑ) x̃,     K(ϑ) = Σ μ_i(ϑ) K_i
+    K(ϑ) = Σ μ_i(ϑ) K_i                                 (the LMI design, 2 × 6)
+    N̄(ϑ) = [C (I − A − B K₅)⁻¹ B]⁻¹                     (static reference gain, C = rows v, ω)
+    x = [v̂, α̂, ω̂, F_f, δ_f, ζ]
+    u_f = N̄(ϑ) r + K(ϑ) x                              (reference feed-forward + state feedback)
     f⁺ = e^{−λT_d} f + (1 − e^{−λT_d}) u_f     (the Apkarian input filter, the plant input)
     ζ⁺ = ζ + T_d (ω_ref − ω̂)                   (yaw-rate integral; frozen while saturated)
-    F_xR = F_f + F_ff + F̂_fr,   δ = δ_f         (feed-forward, friction compensation, saturations)
+    F_xR = F_f + F̂_fr [+ M (v_ref − v̂)/τ],   δ = δ_f      (then saturations)
 
-At a constant reference on the nominal model the equilibrium makes x̃ = 0 a fixed point, so v and
-ω are tracked without steady-state error; the integrator removes what the model misses (tyre
-nonlinearity) in ω, and the compensation F̂_fr removes the unknown road resistance in v.
+N̄ is the classical static reference gain of the plant + filter loop (A, B the 5-state augmented
+model at ϑ without the integrator, K₅ = K without its ζ column): on the nominal model a constant r
+is tracked with zero steady-state error *and* ζ = 0 at the steady state, so the integrator only
+removes what the model misses (tyre nonlinearity) and the compensation F̂_fr removes the unknown
+road resistance. The steady state of ``x⁺ = A_d x + B_d u`` is that of ``ẋ = A x + B u`` for
+Euler and ZOH alike, so N̄ is computed from the continuous matrices: N̄ = −[C (A + B K₅)⁻¹ B]⁻¹.
+
+The bracketed term is the switch ``speed_feedback`` of :class:`~tsmpc.config.LQRSettings`:
+``M (v_ref − v̂)/τ`` (τ = ``speed_time_constant``) is proportional *feedback* on the speed error,
+beyond the paper; it makes v follow the outer loop's command within ≈ τ where the paper's loop
+takes seconds (README, "Why the paper's inner loop lags"). ``friction_estimate`` chooses the
+compensated F̂_fr: the MHE's window fit (default) or the paper's one-step UIO formula.
+
 Anti-windup: the filter states are clamped to the saturation limits and ζ stops integrating
 while an input saturates.
 """
@@ -27,7 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tsmpc.config import LQRSettings, VehicleParams
+from tsmpc.config import FrictionEstimate, LQRSettings, VehicleParams
 from tsmpc.models.dynamic import DynamicTS, continuous_matrices
 
 __all__ = ["TSLQR", "InnerCommand", "equilibrium"]
@@ -86,16 +96,16 @@ class TSLQR:
         self.vehicle = vehicle
         self.settings = settings
         self.Td = float(Td)
+        self.bandwidth = float(bandwidth)
         self._a = math.exp(-bandwidth * self.Td)
         self._lo = np.array([settings.force_min, -settings.delta_max])
         self._hi = np.array([settings.force_max, settings.delta_max])
-        # The step runs every millisecond on 2-vectors: plain floats beat numpy's per-call cost,
-        # so the premise box, vertex bits and gains are unpacked once here.
+        # The step runs every T_d on 2-vectors: plain floats beat numpy's per-call cost, so the
+        # premise box and vertex bits are unpacked once here.
         box = model.premise_box
         self._zlo = tuple(float(v) for v in box.lower)
         self._zhi = tuple(float(v) for v in box.upper)
         self._bits = tuple(tuple(bool(b) for b in row) for row in box.vertex_bits)
-        self._K2 = self.K.reshape(-1, 6).copy()  # row 2i+j = gain row j of vertex i
         self.reset()
 
     def reset(self) -> None:
@@ -103,8 +113,6 @@ class TSLQR:
         self._f = np.zeros(2)
         self._zeta = 0.0
         self._applied = np.zeros(2)
-        self._eq_key: tuple[float, float] | None = None
-        self._eq = (0.0, 0.0, 0.0)
         self._started = False
 
     @property
@@ -112,49 +120,62 @@ class TSLQR:
         """The last plant input [F_xR, δ] (what the MHE must see)."""
         return self._applied.copy()
 
-    def step(self, estimate: Any, v_ref: float, omega_ref: float, a_ref: float = 0.0) -> InnerCommand:
-        """One inner step from the estimate (``.x`` = [v̂, α̂, ω̂], ``.F_fr``) and the outer-loop
-        references; returns the plant input for the next T_d.
+    def reference_gain(self, delta: float, v: float, K: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Static reference gain N̄ (2 × 2) at ϑ = (δ, v) for the blended gain K (2 × 6).
 
-        ``a_ref`` [m/s²] is the planned acceleration of the outer loop (its next move minus the
-        current one over T_c): the force feed-forward ``M a_ref`` is added to the equilibrium
-        force, so speed ramps do not have to be tracked by feedback alone (the paper's weights
-        penalise filter-state deviations hard, which makes pure feedback slow in v)."""
+        N̄ = −[C (A + B K₅)⁻¹ B]⁻¹ on the continuous plant + filter model (5 states; equal to the
+        discrete [C (I − A_d − B_d K₅)⁻¹ B_d]⁻¹ for Euler and ZOH): with u = N̄ r + K x the
+        steady state of the nominal loop has C x = r and ζ = 0 (SPEC §8)."""
+        Aa, Ba = self._plant_filter(delta, v)
+        X = np.linalg.solve(Aa + Ba @ K[:, :5], Ba)  # (A + B K₅)⁻¹ B
+        return -np.linalg.inv(X[[0, 2], :])
+
+    def _plant_filter(self, delta: float, v: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Continuous plant + Apkarian filter (5 × 5, 5 × 2) at (δ, v) clipped into the box."""
+        delta = min(max(delta, self._zlo[0]), self._zhi[0])
+        v = min(max(v, self._zlo[1]), self._zhi[1])
+        A, B = continuous_matrices(v, delta, self.vehicle)
+        Aa = np.zeros((5, 5))
+        Aa[:3, :3], Aa[:3, 3:] = A, B
+        Aa[3, 3] = Aa[4, 4] = -self.bandwidth
+        Ba = np.zeros((5, 2))
+        Ba[3, 0] = Ba[4, 1] = self.bandwidth
+        return Aa, Ba
+
+    def step(self, estimate: Any, v_ref: float, omega_ref: float) -> InnerCommand:
+        """One inner step from the estimate (``.x`` = [v̂, α̂, ω̂], ``.F_fr``, ``.F_fr_raw``) and
+        the outer-loop references; returns the plant input for the next T_d."""
         v, al, om = (float(c) for c in estimate.x)
         if not (math.isfinite(v) and math.isfinite(al) and math.isfinite(om)):
             # Never command from a corrupted estimate: hold the last input.
             return InnerCommand(float(self._applied[0]), float(self._applied[1]), True, 0.0)
-        key = (round(v_ref, 9), round(omega_ref, 9))
-        if key != self._eq_key:  # the references change every T_c only
-            self._eq = equilibrium(v_ref, omega_ref, self.vehicle)
-            self._eq_key = key
-        a_eq, F_eq, d_eq = self._eq
+        st = self.settings
         Fmin, dmin = float(self._lo[0]), float(self._lo[1])
         Fmax, dmax = float(self._hi[0]), float(self._hi[1])
-        # Speed feed-forward: the outer loop's model assumes v follows v_ref within T_c, but the
-        # paper's weights (filter-state deviations cost 0.1/N²) make the LQR's own speed loop slow
-        # (≈ 9 s); the planned acceleration plus a first-order approach to v_ref (time constant
-        # τ, well below the 0.1 s filter) supplies the force the cascade expects.
-        a_ff = (a_ref if math.isfinite(a_ref) else 0.0) + (v_ref - v) / self.settings.speed_time_constant
-        F_ff = self.vehicle.mass * a_ff  # applied directly: the filter is the LQR's, not the feed-forward's
-        if not self._started:  # bumpless start: the filter begins at the equilibrium input
-            self._f = np.array([min(max(F_eq, Fmin), Fmax), min(max(d_eq, dmin), dmax)])
+        r = np.array([v_ref, omega_ref])
+        if not self._started:  # bumpless start: filter at the steady-state input of r, ζ = 0
+            K0 = np.tensordot(np.asarray(self._memberships(0.0, v, al)), self.K, axes=(0, 0))
+            u_ss = self._steady_input(0.0, v, K0, r)
+            self._f = np.array([min(max(u_ss[0], Fmin), Fmax), min(max(u_ss[1], dmin), dmax)])
             self._started = True
         f0, f1 = float(self._f[0]), float(self._f[1])
-        xt = np.array([v - v_ref, al - a_eq, om - omega_ref, f0 - F_eq, f1 - d_eq, self._zeta])
-        # K(ϑ) x̃ = Σ μ_i(ϑ) K_i x̃: all vertex products in one (16, 6) @ (6,) product, then blended.
-        Kx = (self._K2 @ xt).tolist()
-        u0, u1 = F_eq, d_eq
-        for i, m in enumerate(self._memberships(f1, v, al)):
-            u0 += m * Kx[2 * i]
-            u1 += m * Kx[2 * i + 1]
-        u0, u1 = min(max(u0, Fmin), Fmax), min(max(u1, dmin), dmax)
-        # The plant receives the filter state (held over T_d); the filter then moves toward u_f.
+        # K(ϑ) = Σ μ_i(ϑ) K_i, ϑ = (δ_f, v̂, α̂).
+        mu = self._memberships(f1, v, al)
+        K = np.tensordot(np.asarray(mu), self.K, axes=(0, 0))
+        Nbar = self.reference_gain(f1, v, K)
+        x = np.array([v, al, om, f0, f1, self._zeta])
+        u = Nbar @ r + K @ x
+        u0, u1 = min(max(float(u[0]), Fmin), Fmax), min(max(float(u[1]), dmin), dmax)
+        # Force terms outside the filter: the plant receives the filter state (held over T_d).
+        F_add = 0.0
+        if st.speed_feedback:  # feedback on the speed error (beyond the paper)
+            F_add = self.vehicle.mass * (v_ref - v) / st.speed_time_constant
         comp = 0.0
-        if self.settings.friction_compensation:
-            F_hat = float(estimate.F_fr)
+        if st.friction_compensation:  # (the oracle ablation's estimate carries F̂ = 0)
+            F_hat = float(estimate.F_fr if st.friction_estimate == FrictionEstimate.WINDOW
+                          else estimate.F_fr_raw)
             comp = F_hat if math.isfinite(F_hat) else 0.0
-        out0 = f0 + F_ff + comp
+        out0 = f0 + F_add + comp
         o0, o1 = min(max(out0, Fmin), Fmax), min(max(f1, dmin), dmax)
         saturated = o0 != out0 or o1 != f1
         a = self._a
@@ -164,6 +185,14 @@ class TSLQR:
             self._zeta += self.Td * (omega_ref - om)
         self._applied = np.array([o0, o1])
         return InnerCommand(o0, o1, saturated, comp)
+
+    def _steady_input(self, delta: float, v: float, K: NDArray[np.float64], r: NDArray[np.float64]
+                      ) -> NDArray[np.float64]:
+        """Filter input at the nominal steady state of reference r (u = N̄ r + K₅ x_ss)."""
+        Nbar = self.reference_gain(delta, v, K)
+        Aa, Ba = self._plant_filter(delta, v)
+        xss = -np.linalg.solve(Aa + Ba @ K[:, :5], Ba @ (Nbar @ r))
+        return xss[3:5]
 
     def _memberships(self, *z: float) -> list[float]:
         """μ_i(ϑ) of the dynamic box (same as ``SchedulingBox.memberships``, on floats)."""

@@ -7,11 +7,12 @@ A_d(ϑ), B_d(ϑ), not the vertex blend), ``x_{k+1} = A_k x_k + B_k u_k + E_k F +
 
 Unknown input. The paper's UIO removes F from the state equation with ``Θ = (C E)⁺`` and
 recovers it as ``F̂_raw = Θ(y_k − C(A x̂ + B u))`` — with ``Θ = −M/T_d`` that estimate carries the
-speed-sensor noise amplified ×68 300 (σ ≈ 340 N for σ_v = 5 mm/s), unusable as a feed-forward.
-We keep that formula for logging (``F_fr_raw``) and instead estimate F as a *window-constant
+speed-sensor noise amplified ×68 300 (σ ≈ 340 N for σ_v = 5 mm/s): compensated as is, it puts
+that noise on the force command. We return that formula as ``F_fr_raw`` (compensated only by the
+``paper`` preset, ``lqr.friction_estimate = "uio"``) and estimate F as a *window-constant
 unknown input* inside the MHE: the least-squares fit over the 30 samples of the same decoupled
-relation, with the previous window's F as arrival prior. It reaches the controller without
-further filtering.
+relation, with the previous window's F as arrival prior (``F_fr``, the default's compensation).
+It reaches the controller without further filtering.
 
 Window QP (variables ``z = [x_0, F, w_0 … w_{N−1}]``, 3 + 1 + 3N)::
 
