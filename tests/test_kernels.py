@@ -273,3 +273,50 @@ def test_kernels_stand_down_when_the_model_differs(cfg: Config) -> None:
             return lambda *a: tuple(1.001 * v for v in f(*a))
 
     assert OtherPlant(cfg.vehicle, cfg.tyre, cfg.rates.h, jit=True)._kern is None
+
+
+# -- TS-LQR ------------------------------------------------------------------------------------
+@pytest.mark.parametrize("changes", [{}, {"speed_feedback": False, "friction_estimate": "uio"},
+                                     {"friction_compensation": False}])
+def test_lqr_kernel_equals_the_numpy_step(cfg: Config, changes: dict) -> None:
+    """Closed against the Pacejka plant (recorded) with random estimates mixed in (random data):
+    starts, saturations, the frozen integrator, non-finite F̂ and estimates."""
+    from tsmpc.control.ts_lqr import TSLQR
+    from tsmpc.models.dynamic import DynamicTS
+    from tsmpc.synthesis.cache import load_or_design_dynamic
+    from tsmpc.vehicle.plant import Plant
+
+    st = replace(cfg.lqr, **changes) if changes else cfg.lqr
+    Td = cfg.rates.Td
+    dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, Td)
+    K = load_or_design_dynamic(cfg).K
+    a = TSLQR(K, dyn, cfg.vehicle, st, Td, bandwidth=cfg.dynamic_lmi.filter_bandwidth, jit=True)
+    b = TSLQR(K, dyn, cfg.vehicle, st, Td, bandwidth=cfg.dynamic_lmi.filter_bandwidth, jit=False)
+    assert a._kern is not None and b._kern is None
+    plant = Plant(cfg.vehicle, cfg.tyre, cfg.rates.h)
+    rng = np.random.default_rng(2)
+    x = np.array([0.0, 0.0, 0.0, 8.0, 0.0, 0.0])
+    n_sat = 0
+    for k in range(2500):
+        if k % 700 == 0:
+            a.reset()
+            b.reset()
+        if rng.random() < 0.1:  # random estimate anywhere in (and beyond) the box
+            est = SimpleNamespace(x=np.array([rng.uniform(0, 22), rng.uniform(-0.15, 0.15),
+                                              rng.uniform(-1.5, 1.5)]),
+                                  F_fr=rng.choice([rng.normal(0, 800), np.nan]), F_fr_raw=rng.normal(0, 900))
+        else:
+            est = SimpleNamespace(x=x[3:6].copy(), F_fr=-300.0, F_fr_raw=-250.0)
+        if k == 1234:
+            est.x[1] = np.nan
+        v_ref = 8.0 + 6.0 * np.sin(0.002 * k) + (15.0 if 1500 < k < 1530 else 0.0)
+        w_ref = 0.3 * np.sin(0.004 * k)
+        ca, cb = a.step(est, v_ref, w_ref), b.step(est, v_ref, w_ref)
+        assert ca.saturated == cb.saturated
+        assert ca.F_xR == pytest.approx(cb.F_xR, rel=1e-10, abs=1e-10)
+        assert ca.delta == pytest.approx(cb.delta, rel=1e-10, abs=1e-12)
+        assert ca.F_comp == cb.F_comp
+        np.testing.assert_allclose(a._s, b._s, rtol=1e-10, atol=1e-12)
+        n_sat += cb.saturated
+        x = plant.step(x, (cb.F_xR, cb.delta), 0.9, cfg.rates.plant_per_inner)
+    assert n_sat > 0

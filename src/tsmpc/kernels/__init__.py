@@ -25,7 +25,7 @@ from typing import Any
 
 __all__ = ["enabled", "load", "numba_cache_dir", "warmup"]
 
-_MODULES = ("mpc", "mhe", "plant")
+_MODULES = ("mpc", "mhe", "plant", "lqr")
 _LOADED: dict[str, ModuleType] | None = None
 _FAILED = False
 

@@ -250,5 +250,8 @@ def warm() -> None:
     N = 4
     z3, z2, zN = np.zeros(3), np.zeros(2), np.ones(N)
     eye3 = np.eye(3)
-    fast_step(1, z3, z2, zN, zN, zN, True, zN, True, -np.ones(3), np.ones(3), 0.1, np.ones(3), eye3,
-              np.ones(2), eye3, np.ones(2), -np.ones(2), np.ones(2), True, 1, 1e-3)
+    ro = np.ones(N)
+    ro.setflags(write=False)  # Reference.window hands out read-only views: another numba type
+    for vd in (zN, ro):
+        fast_step(1, z3, z2, vd, vd, zN, True, zN, True, -np.ones(3), np.ones(3), 0.1, np.ones(3), eye3,
+                  np.ones(2), eye3, np.ones(2), -np.ones(2), np.ones(2), True, 1, 1e-3)
