@@ -36,6 +36,9 @@ def _execute(
     from tsmpc.sim.simulator import Method
 
     limit_blas_threads()
+    from tsmpc import kernels
+
+    kernels.warmup()  # compile/load before the progress bars (the first run prints a status line)
     console = Console()
     if not console.is_terminal:  # piped to a file or CI log: do not squeeze the tables to 80 columns
         console = Console(width=140)
