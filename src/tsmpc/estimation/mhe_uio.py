@@ -303,9 +303,9 @@ class MHEUIO:
         us, xs = self._U[:n], self._XS[: n + 1]
         full = n == self.settings.N
         try:
+            if self._kern is not None:  # compiled: no numpy warnings, non-finite results flagged
+                return self._step_kernel(y, u, ok, n, full, t0)
             with np.errstate(all="ignore"):  # overflow is detected below, not warned about
-                if self._kern is not None:
-                    return self._step_kernel(y, u, ok, n, full, t0)
                 return self._step_dense(y, u, ok, n, full, us, xs, None, t0)
         except (np.linalg.LinAlgError, ValueError, ArithmeticError) as err:
             # A linear-algebra failure is a failed estimate, never an exception in the loop.
@@ -340,7 +340,8 @@ class MHEUIO:
             status = EstimatorStatus.REJECTED if not ok else EstimatorStatus.WARMUP
             return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)
         if code == 1:  # a state bound is active (or a pivot failed): the dense QP decides
-            return self._step_dense(y, u, ok, n, full, us, xs, (A.copy(), B.copy()), t0, F_raw)
+            with np.errstate(all="ignore"):
+                return self._step_dense(y, u, ok, n, full, us, xs, (A.copy(), B.copy()), t0, F_raw)
         self._x = xs[n].copy()
         self._F = float(F)
         status = EstimatorStatus.OK if full else EstimatorStatus.WARMUP
