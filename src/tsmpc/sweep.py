@@ -455,6 +455,10 @@ def run_sweep(
 
         cfg = base_config(spec)
         designs = (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
+        if scheduler is None:  # local workers share this machine's kernel cache: compile it once here
+            from tsmpc import kernels
+
+            kernels.warmup()
         pending = [RunTask(t.id, t.params, t.config, t.duration_s, t.max_lateral_m, t.root, designs)
                    for t in pending]
     written: set[str] = set()
