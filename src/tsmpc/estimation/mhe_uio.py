@@ -26,6 +26,7 @@ when it satisfies the bounds, else DAQP (fresh solve); no cvxpy in the loop.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from enum import StrEnum
@@ -283,8 +284,8 @@ class MHEUIO:
         y = np.asarray(y, dtype=float).reshape(2)
         u = np.asarray(u, dtype=float).reshape(2)
         first = self._ny == 0
-        ok = bool(np.isfinite(y[0]) and np.isfinite(y[1]))
-        if not (np.isfinite(u[0]) and np.isfinite(u[1])):
+        ok = math.isfinite(y[0]) and math.isfinite(y[1])  # on floats: numpy's scalar test is slow
+        if not (math.isfinite(u[0]) and math.isfinite(u[1])):
             # A non-finite input is a caller bug upstream; never poison the window with it.
             u = np.zeros(2)
             ok = False
@@ -333,7 +334,7 @@ class MHEUIO:
             self._Y[: n + 1], self._W[: n + 1], us, xs, n, self._x, self._F, u, ok, full, self._arrival,
             *self._kargs[:-1], eval_model, A, B, self._Xb[: n + 1])
         F_raw = float((pred_v - y[0]) * self.vehicle.mass / self.Td) if ok else 0.0
-        if code == 3 or not np.isfinite(F_raw):
+        if code == 3 or not math.isfinite(F_raw):
             return self._failed(F_raw, t0)
         if code == 2:
             self._x = np.clip(xs[n], self._xmin, self._xmax)
