@@ -46,4 +46,4 @@ def test_plan_errors(tmp_path: Path) -> None:
     res = runner.invoke(app, ["plan", str(bad), "--out", str(tmp_path / "o.csv")])
     assert res.exit_code == 2 and "numeric" in res.output
     res = runner.invoke(app, ["plan", str(bad), "--out", str(tmp_path / "o.csv"), "--v-max", "-1"])
-    assert res.exit_code == 2 and "v_max" in res.output
+    assert res.exit_code == 2 and "--v-max" in res.output

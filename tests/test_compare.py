@@ -72,11 +72,42 @@ def test_multirate_counts_do_not_drift() -> None:
     np.testing.assert_allclose(log.t_inner[::10], log.t_outer, atol=1e-12)
 
 
-def test_oracle_flag_disables_compensation(tmp_path: Path) -> None:
+def _fed_to_inner_loop(monkeypatch: pytest.MonkeyPatch, oracle: bool) -> tuple[dict, object]:
+    """Run 30 REF steps recording what the inner loop was fed at every T_d."""
+    from tsmpc.control.ts_lqr import TSLQR
+
+    fed: dict[str, list] = {"x": [], "F_fr": [], "F_comp": []}
+    step = TSLQR.step
+
+    def recording(self, estimate, *args, **kwargs):
+        cmd = step(self, estimate, *args, **kwargs)
+        fed["x"].append(np.array(estimate.x, dtype=float))
+        fed["F_fr"].append(float(estimate.F_fr))
+        fed["F_comp"].append(float(cmd.F_comp))
+        return cmd
+
+    monkeypatch.setattr(TSLQR, "step", recording)
     cfg = Config()
-    res = compare(cfg, load_scenario(cfg), [Method.REF], None, oracle=True, max_steps=50)
-    assert res.metrics["oracle"] is True
-    assert res.metrics["methods"]["REF"]["termination"] == "completed"
+    res = compare(cfg, load_scenario(cfg), [Method.REF], None, oracle=oracle, max_steps=30)
+    return {k: np.array(v) for k, v in fed.items()}, res
+
+
+def test_oracle_flag_disables_compensation(monkeypatch: pytest.MonkeyPatch) -> None:
+    """--oracle: the inner loop is fed the true plant state (v, α, ω of the log's state) and no
+    friction compensation; without it, the MHE's estimate and a non-zero compensation."""
+    fed, res = _fed_to_inner_loop(monkeypatch, oracle=True)
+    log = res.logs["REF"]
+    assert res.metrics["oracle"] is True and log.termination == "completed"
+    assert fed["x"].shape == log.state[:, 3:6].shape
+    np.testing.assert_array_equal(fed["x"], log.state[:, 3:6])  # the true state, bit for bit
+    assert np.all(fed["F_fr"] == 0.0) and np.all(fed["F_comp"] == 0.0)
+    # The same check on a normal run fails: the estimate differs from the truth (sensor noise)
+    # and the friction compensation acts (μ(road) ≠ μ_o on the paper's profile).
+    fed_n, res_n = _fed_to_inner_loop(monkeypatch, oracle=False)
+    log_n = res_n.logs["REF"]
+    np.testing.assert_array_equal(fed_n["x"], log_n.estimate)
+    assert np.max(np.abs(fed_n["x"] - log_n.state[:, 3:6])) > 1e-4
+    assert np.max(np.abs(fed_n["F_comp"])) > 10.0
 
 
 def test_bad_method_is_rejected() -> None:

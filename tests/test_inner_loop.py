@@ -122,7 +122,6 @@ def test_mhe_window_matches_cvxpy(cfg: Config) -> None:
         arrival, F_prior = xs[0] + rng.normal(0, 0.05, 3), rng.uniform(-500, 2000)
         qp = mhe.build(ys, us, w, xs, arrival, F_prior)
         z = mhe._solve(qp)
-        ours = 0.5 * z @ qp.H @ z + qp.f @ z
 
         A, B = dyn.matrices(np.stack([us[:, 1], xs[:n, 0], xs[:n, 1]], axis=-1))
         X = cp.Variable((n + 1, 3))
@@ -136,11 +135,27 @@ def test_mhe_window_matches_cvxpy(cfg: Config) -> None:
                 + cp.sum(cp.multiply(w[:, None] * r[None, :], cp.square(ys - X[:, [0, 2]]))))
         prob = cp.Problem(cp.Minimize(cost), cons)
         prob.solve(solver=cp.CLARABEL, tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12)
-        # ours omits the constant ‖·‖² terms: compare the minimisers through the full objective.
+        # Our QP omits the constant ‖·‖² terms: compare the minimisers, and the full objective
+        # evaluated (with numpy) at our minimiser against cvxpy's optimal value.
         Xo = (qp.M @ z + qp.c).reshape(-1, 3)
         assert np.allclose(Xo, X.value, rtol=1e-6, atol=1e-6), trial
         assert z[3] == pytest.approx(F.value, rel=1e-6, abs=1e-3)
-        del ours
+        def full(zz: np.ndarray, qp=qp, A=A, B=B, us=us, n=n, arrival=arrival,
+                 F_prior=F_prior, w=w, ys=ys, p=p, q=q, r=r) -> float:
+            """The textbook objective at the QP variables zz."""
+            Xz = (qp.M @ zz + qp.c).reshape(-1, 3)
+            Fz = zz[3]
+            Wz = np.array([Xz[k + 1] - A[k] @ Xz[k] - B[k] @ us[k] + B[k][:, 0] * Fz for k in range(n)])
+            return float(np.sum(p * (Xz[0] - arrival) ** 2) + 1e-10 * (Fz - F_prior) ** 2
+                         + np.sum(q * Wz**2)
+                         + np.sum(w[:, None] * r[None, :] * (ys - Xz[:, [0, 2]]) ** 2))
+
+        ours = full(z)
+        assert ours == pytest.approx(prob.value, rel=1e-6), trial
+        # Our H, f are that objective up to a constant: the difference is the same elsewhere.
+        quad = lambda zz, qp=qp: float(0.5 * zz @ qp.H @ zz + qp.f @ zz)  # noqa: E731
+        z2 = z + rng.normal(0, 0.01, z.size)
+        assert full(z2) - quad(z2) == pytest.approx(ours - quad(z), rel=1e-6, abs=1e-6), trial
 
 
 def _discrete_reference_gain(cfg: Config, z: np.ndarray, K: np.ndarray) -> np.ndarray:

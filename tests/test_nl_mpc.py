@@ -61,9 +61,21 @@ def test_nl_mpc_predictions_satisfy_the_nonlinear_model(cfg: Config, parts) -> N
 
 def test_nl_mpc_soft_and_fallback(cfg: Config, parts) -> None:
     d, model = parts
-    nl = NLMPC(cfg.mpc, model, d.P, d.S)
+    """Each status where it belongs: a reachable terminal set is met exactly (OPTIMAL); an
+    unreachable one (80 m off) is relaxed (SOFT, x_N' S x_N > 1); a NaN state never reaches the
+    solver (FALLBACK: the previous plan shifted by one step, or the held input without one)."""
     ref = SimpleNamespace(v=np.full(N, 10.0), omega=np.zeros(N))
-    far = nl.step(np.array([80.0, -60.0, 0.4]), np.array([10.0, 0.0]), ref)
-    assert far.status in (MPCStatus.SOFT, MPCStatus.FALLBACK)
-    bad = nl.step(np.array([np.nan, 0.0, 0.0]), np.array([10.0, 0.0]), ref)
+    u_prev = np.array([10.0, 0.0])
+    near = NLMPC(cfg.mpc, model, d.P, d.S).step(np.array([2.0, 1.0, 0.05]), u_prev, ref)
+    assert near.status == MPCStatus.OPTIMAL
+    assert near.x_pred[-1] @ d.S @ near.x_pred[-1] <= 1.0 + 1e-6
+    nl = NLMPC(cfg.mpc, model, d.P, d.S)
+    far = nl.step(np.array([80.0, -60.0, 0.4]), u_prev, ref)
+    assert far.status == MPCStatus.SOFT
+    assert far.x_pred[-1] @ d.S @ far.x_pred[-1] > 1.0 + 1e-3
+    bad = nl.step(np.array([np.nan, 0.0, 0.0]), u_prev, ref)
     assert bad.status == MPCStatus.FALLBACK
+    np.testing.assert_array_equal(bad.u, far.u_pred[1])
+    first = NLMPC(cfg.mpc, model, d.P, d.S).step(np.array([np.nan, 0.0, 0.0]), u_prev, ref)
+    assert first.status == MPCStatus.FALLBACK
+    np.testing.assert_array_equal(first.u, u_prev)

@@ -83,6 +83,12 @@ def test_cli_run_takes_a_scenario(tmp_path) -> None:
     import json
 
     m = json.loads((tmp_path / "metrics.json").read_text())["methods"]["REF"]
-    assert m["events"]["mhe_rejected"] == 5 and m["events"]["pose_rejected"] >= 0
+    # One burst in 4 s (at 3.00 s, 50 ms): 5 inner samples (T_d = 10 ms) reach the MHE as NaN and
+    # are rejected; exactly one outer sample (t = 3.0 s, T_c = 100 ms) has a NaN pose, which the
+    # MPC replaces by the last good one.
+    assert m["events"]["mhe_rejected"] == 5 and m["events"]["pose_rejected"] == 1
+    assert m["termination"] == "completed"
+    ts = np.load(tmp_path / "timeseries.npz")
+    assert np.all(np.isfinite(ts["REF_errors_measured"]))  # the MPC never saw a NaN
     bad = CliRunner().invoke(app, ["run", "--scenario", "hail", "--duration", "1"])
     assert bad.exit_code == 2 and "unknown robustness scenario 'hail'" in bad.output

@@ -54,16 +54,16 @@ class _Frozen(BaseModel):
 
 def _interval(lo: float, hi: float, name: str) -> None:
     if not lo < hi:
-        raise ValueError(f"{name}: lower bound {lo} must be < upper bound {hi}")
+        raise ConfigError(f"{name}: lower bound {lo} must be < upper bound {hi}")
 
 
 def _diag(values: tuple[float, ...], name: str, n: int, *, strict: bool = True) -> None:
     if len(values) != n:
-        raise ValueError(f"{name}: expected {n} diagonal entries, got {len(values)}")
+        raise ConfigError(f"{name}: expected {n} diagonal entries, got {len(values)}")
     bad = [v for v in values if (v <= 0 if strict else v < 0)]
     if bad:
         kind = "positive" if strict else "non-negative"
-        raise ValueError(f"{name}: entries must be {kind}, got {values}")
+        raise ConfigError(f"{name}: entries must be {kind}, got {values}")
 
 
 class TyreModel(StrEnum):
@@ -91,9 +91,9 @@ class FrictionEstimate(StrEnum):
 class VehicleParams(_Frozen):
     """Vehicle parameters, paper Table 1."""
 
-    a: PositiveFloat = Field(0.758, description="CoG to front axle [m]")
-    b: PositiveFloat = Field(1.036, description="CoG to rear axle [m]")
-    mass: PositiveFloat = Field(683.0, description="vehicle mass M [kg]")
+    a: PositiveFloat = Field(0.758, le=20.0, description="CoG to front axle [m]")
+    b: PositiveFloat = Field(1.036, le=20.0, description="CoG to rear axle [m]")
+    mass: PositiveFloat = Field(683.0, le=1e5, description="vehicle mass M [kg]")
     inertia: PositiveFloat = Field(560.94, description="yaw inertia I [kg m^2]")
     cornering_stiffness: PositiveFloat = Field(
         25000.0, description="cornering stiffness C_x of each axle [N/rad]"
@@ -101,7 +101,7 @@ class VehicleParams(_Frozen):
     frontal_area: PositiveFloat = Field(1.91, description="frontal area A_r [m^2]")
     air_density: PositiveFloat = Field(1.184, description="air density rho [kg/m^3]")
     drag_coefficient: NonNegFloat = Field(0.36, description="drag coefficient C_d [-]")
-    mu_nominal: NonNegFloat = Field(0.5, description="nominal friction mu_o of the models [-]")
+    mu_nominal: NonNegFloat = Field(0.5, le=3.0, description="nominal friction mu_o of the models [-]")
     g: PositiveFloat = Field(9.81, description="gravity [m/s^2]")
 
     @property
@@ -126,7 +126,7 @@ class TyreParams(_Frozen):
     D = μ_tyre F_z and B = C_x / (C D) so that the small-slip stiffness equals C_x."""
 
     model: TyreModel = Field(TyreModel.PACEJKA, description="lateral tyre model of the plant")
-    mu_tyre: PositiveFloat = Field(0.9, description="peak lateral grip coefficient [-]")
+    mu_tyre: PositiveFloat = Field(0.9, le=3.0, description="peak lateral grip coefficient [-]")
     shape_c: float = Field(1.3, gt=1.0, lt=2.0, description="Pacejka shape factor C [-]")
     curvature_e: float = Field(
         -0.5, ge=-5.0, lt=1.0, description="Pacejka curvature factor E [-] (E < 1)"
@@ -140,16 +140,16 @@ class TyreParams(_Frozen):
 class Rates(_Frozen):
     """Sample times (SPEC §1). T_c / T_d and T_d / h must be integers."""
 
-    Tc: PositiveFloat = Field(0.1, description="outer loop (MPC) sample time [s]")
+    Tc: PositiveFloat = Field(0.1, le=1.0, description="outer loop (MPC) sample time [s]")
     Td: PositiveFloat = Field(0.01, description="inner loop (LQR, MHE) sample time [s]")
-    h: PositiveFloat = Field(0.001, description="plant RK4 integration step [s]")
+    h: PositiveFloat = Field(0.001, ge=1e-5, description="plant RK4 integration step [s]")
 
     @model_validator(mode="after")
     def _integer_ratios(self) -> Rates:
         for num, den, name in ((self.Tc, self.Td, "Tc/Td"), (self.Td, self.h, "Td/h")):
             ratio = num / den
             if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
-                raise ValueError(f"{name} = {ratio:.6g} must be a positive integer")
+                raise ConfigError(f"{name} = {ratio:.6g} must be a positive integer")
         return self
 
     @property
@@ -182,7 +182,7 @@ class KinematicBox(_Frozen):
         _interval(*self.v_d, "v_d")
         _interval(*self.e_theta, "e_theta")
         if max(abs(self.e_theta[0]), abs(self.e_theta[1])) >= math.pi:
-            raise ValueError("e_theta: bounds must lie inside (-pi, pi)")
+            raise ConfigError("e_theta: bounds must lie inside (-pi, pi)")
         return self
 
     @classmethod
@@ -211,8 +211,8 @@ class DynamicBox(_Frozen):
 class KinematicLMISettings(_Frozen):
     """Kinematic LQR-LMI and terminal set (SPEC §6)."""
 
-    Q: tuple[float, ...] = Field((1.0, 1.5, 3.0), description="diag Q_TS")
-    R: tuple[float, ...] = Field((1.0, 3.0), description="diag R_TS")
+    Q: tuple[FiniteFloat, ...] = Field((1.0, 1.5, 3.0), description="diag Q_TS")
+    R: tuple[FiniteFloat, ...] = Field((1.0, 3.0), description="diag R_TS")
     u_bar: tuple[PositiveFloat, PositiveFloat] = Field(
         (18.0, 1.4), description="input bound of the terminal-set LMI [m/s, rad/s]"
     )
@@ -227,10 +227,10 @@ class KinematicLMISettings(_Frozen):
 class DynamicLMISettings(_Frozen):
     """Dynamic TS-LMI-LQR on the Apkarian-augmented model (SPEC §6)."""
 
-    Q: tuple[float, ...] = Field(
+    Q: tuple[FiniteFloat, ...] = Field(
         (2500.0, 0.1, 0.1, 0.1, 1e5, 9e4), description="diag Q on [v, α, ω, F_f, δ_f, ζ]"
     )
-    R: tuple[float, ...] = Field((0.001, 9.0), description="diag R on [F_xR, δ]")
+    R: tuple[FiniteFloat, ...] = Field((0.001, 9.0), description="diag R on [F_xR, δ]")
     filter_bandwidth: PositiveFloat = Field(10.0, description="Apkarian filter λ [rad/s]")
     grid_points: int = Field(15, ge=3, le=101, description="certificate grid points per axis")
 
@@ -245,8 +245,8 @@ class MPCSettings(_Frozen):
     """Kinematic TS-MPC and NL-MPC (SPEC §7, paper Table 2)."""
 
     N: int = Field(40, ge=2, le=400, description="prediction horizon [steps]")
-    Q: tuple[float, ...] = Field((1.133, 0.067, 13.333), description="diag state weight")
-    R: tuple[float, ...] = Field((0.000005, 5.5), description="diag input-rate weight")
+    Q: tuple[FiniteFloat, ...] = Field((1.133, 0.067, 13.333), description="diag state weight")
+    R: tuple[FiniteFloat, ...] = Field((0.000005, 5.5), description="diag input-rate weight")
     u_min: tuple[FiniteFloat, FiniteFloat] = Field((0.0, -1.4), description="[v, ω] lower")
     u_max: tuple[FiniteFloat, FiniteFloat] = Field((18.0, 1.4), description="[v, ω] upper")
     du_max: tuple[PositiveFloat, PositiveFloat] = Field(
@@ -299,9 +299,9 @@ class MHESettings(_Frozen):
     """TS-MHE-UIO (SPEC §9)."""
 
     N: int = Field(30, ge=2, le=300, description="estimation horizon [inner steps]")
-    Q: tuple[float, ...] = Field((10.0, 10.0, 2.0), description="diag process weight")
-    R: tuple[float, ...] = Field((0.033, 0.033), description="diag measurement weight")
-    P: tuple[float, ...] = Field((2.0, 2.0, 2.0), description="diag arrival-cost weight")
+    Q: tuple[FiniteFloat, ...] = Field((10.0, 10.0, 2.0), description="diag process weight")
+    R: tuple[FiniteFloat, ...] = Field((0.033, 0.033), description="diag measurement weight")
+    P: tuple[FiniteFloat, ...] = Field((2.0, 2.0, 2.0), description="diag arrival-cost weight")
     x_min: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field((0.0, -0.1, -1.4))
     x_max: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field((18.0, 0.1, 1.4))
 
@@ -322,13 +322,13 @@ class NoiseSettings(_Frozen):
     omega: NonNegFloat = Field(1e-4, description="σ of ω [rad/s]")
     position: NonNegFloat = Field(0.001, description="σ of X and Y [m]")
     theta: NonNegFloat = Field(1e-4, description="σ of θ [rad]")
-    scale: NonNegFloat = Field(1.0, description="multiplies every σ")
+    scale: NonNegFloat = Field(1.0, le=1e4, description="multiplies every σ")
 
 
 class PlannerSettings(_Frozen):
     """Speed-profile limits of the planner (SPEC §10)."""
 
-    v_max: PositiveFloat = Field(14.7, description="maximum speed [m/s]")
+    v_max: PositiveFloat = Field(14.7, le=150.0, description="maximum speed [m/s]")
     a_lat_max: PositiveFloat = Field(3.0, description="lateral acceleration limit [m/s^2]")
     a_lon_max: PositiveFloat = Field(2.6, description="longitudinal acceleration limit [m/s^2]")
     a_brake_max: PositiveFloat = Field(3.0, description="braking deceleration limit [m/s^2]")
@@ -436,11 +436,11 @@ def load_config(path: str | Path | None = None, preset: str | None = None) -> Co
     """
     if path is None:
         return Config() if preset is None else Config.preset(preset)
+    from tsmpc.textfile import read_text
+
     p = Path(path)
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as err:
-        raise ConfigError(f"{p}: cannot read config file: {err.strerror}") from None
+        data = tomllib.loads(read_text(p, "config file (TOML)", ConfigError))
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{p}: invalid TOML: {err}") from None
     name = data.pop("preset", None)

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import Config, replace
+from tsmpc.errors import ConfigError
 from tsmpc.planning.reference import Reference
 from tsmpc.scenarios import PatchFriction, SurfacePatch
 from tsmpc.sim.simulator import Scenario
@@ -120,7 +121,7 @@ def apply_robustness(
     Raises ValueError for an unknown name (the message lists the allowed ones).
     """
     if name not in ROBUSTNESS_SCENARIOS:
-        raise ValueError(f"unknown robustness scenario {name!r}; allowed: {', '.join(ROBUSTNESS_SCENARIOS)}")
+        raise ConfigError(f"unknown robustness scenario {name!r}; allowed: {', '.join(ROBUSTNESS_SCENARIOS)}")
     label = scenario.name if name == "nominal" else f"{scenario.name}+{name}"
     meta = {**scenario.meta, "robustness": name}
     sc = dc_replace(scenario, name=label, meta=meta)

@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tsmpc.config import NoiseSettings
+from tsmpc.errors import ConfigError
 
 __all__ = [
     "ConstantFriction",
@@ -103,7 +104,7 @@ class SurfacePatch:
 
     def __post_init__(self) -> None:
         if not (self.end_m > self.start_m and self.mu >= 0 and self.ramp_m >= 0):
-            raise ValueError(f"bad surface patch {self}: need end_m > start_m, mu >= 0, ramp_m >= 0")
+            raise ConfigError(f"bad surface patch {self}: need end_m > start_m, mu >= 0, ramp_m >= 0")
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ A sweep file (TOML) names a base configuration, the axes and how long each run l
     [random]                          # optional: n samples per grid point, from a seed
     n = 4
     seed = 7
+    per_grid_point = true             # fresh draws at each point (default: the same draws)
     ranges = { mass_scale = [0.9, 1.1] }
     choices = { friction = ["paper", "dry"] }
 
@@ -37,10 +38,10 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from tsmpc.config import Config, validate
 from tsmpc.errors import ConfigError
@@ -55,6 +56,7 @@ __all__ = [
     "SweepResult",
     "SweepSpec",
     "aggregate",
+    "connect",
     "dry_run",
     "expand",
     "load_sweep",
@@ -75,6 +77,18 @@ _FLOAT_AXES = ("noise_scale", "mass_scale", "inertia_scale", "cornering_scale", 
 _CHOICE_AXES = ("method", "friction", "scenario", "track", "seed")
 #: Every axis a sweep may vary.
 AXES = ("method", "friction", "scenario", *_FLOAT_AXES, "track", "seed")
+#: Allowed (exclusive lower, inclusive upper) bounds of the numeric axes.
+AXIS_LIMITS: dict[str, tuple[float, float]] = {
+    "noise_scale": (0.0, 1000.0), "mass_scale": (0.0, 10.0), "inertia_scale": (0.0, 10.0),
+    "cornering_scale": (0.0, 10.0),
+    # Faster than 3x the planned speed leaves any sensible scheduling box (and the road).
+    "speed_scale": (0.0, 3.0),
+}
+_Noise = Annotated[float, Field(gt=0.0, le=1000.0, allow_inf_nan=False)]
+_Scale = Annotated[float, Field(gt=0.0, le=10.0, allow_inf_nan=False)]
+_Speed = Annotated[float, Field(gt=0.0, le=3.0, allow_inf_nan=False)]
+_Seed = Annotated[int, Field(ge=0, lt=2**63)]
+_Duration = Annotated[float, Field(gt=0.0, le=1e5, allow_inf_nan=False)]
 
 
 class _Strict(BaseModel):
@@ -87,25 +101,25 @@ class RunParams(_Strict):
     method: str = "REF"
     friction: str = "paper"
     scenario: str = "nominal"
-    noise_scale: float = 1.0
-    mass_scale: float = 1.0
-    inertia_scale: float = 1.0
-    cornering_scale: float = 1.0
-    speed_scale: float = 1.0
+    noise_scale: _Noise = 1.0
+    mass_scale: _Scale = 1.0
+    inertia_scale: _Scale = 1.0
+    cornering_scale: _Scale = 1.0
+    speed_scale: _Speed = 1.0
     track: str = "builtin"
-    seed: int | None = None  #: None: the base config's seed
+    seed: _Seed | None = None  #: None: the base config's seed
 
 
 def _check_method(v: str) -> str:
     m = str(v).strip().upper()
     if m not in _METHODS:
-        raise ValueError(f"unknown method {v!r}; allowed: {', '.join(x.lower() for x in _METHODS)}")
+        raise ConfigError(f"unknown method {v!r}; allowed: {', '.join(x.lower() for x in _METHODS)}")
     return m
 
 
 def _check_named(v: str, allowed: dict[str, str], what: str) -> str:
     if v not in allowed:
-        raise ValueError(f"unknown {what} {v!r}; allowed: {', '.join(allowed)}")
+        raise ConfigError(f"unknown {what} {v!r}; allowed: {', '.join(allowed)}")
     return v
 
 
@@ -115,20 +129,20 @@ class GridAxes(_Strict):
     method: list[str] | None = None
     friction: list[str] | None = None
     scenario: list[str] | None = None
-    noise_scale: list[PositiveFloat] | None = None
-    mass_scale: list[PositiveFloat] | None = None
-    inertia_scale: list[PositiveFloat] | None = None
-    cornering_scale: list[PositiveFloat] | None = None
-    speed_scale: list[PositiveFloat] | None = None
+    noise_scale: list[_Noise] | None = None
+    mass_scale: list[_Scale] | None = None
+    inertia_scale: list[_Scale] | None = None
+    cornering_scale: list[_Scale] | None = None
+    speed_scale: list[_Speed] | None = None
     track: list[str] | None = None
-    seed: list[int] | None = None
+    seed: list[_Seed] | None = None
 
     @model_validator(mode="after")
     def _values(self) -> GridAxes:
         for name in AXES:
             vals = getattr(self, name)
             if vals is not None and len(vals) == 0:
-                raise ValueError(f"axis {name!r} is empty: give at least one value or leave it out")
+                raise ConfigError(f"axis {name!r} is empty: give at least one value or leave it out")
         if self.method:
             object.__setattr__(self, "method", [_check_method(m) for m in self.method])
         for v in self.friction or []:
@@ -139,12 +153,15 @@ class GridAxes(_Strict):
 
 
 class RandomSpec(_Strict):
-    """``n`` random samples (per grid point) drawn from ``seed``: floats uniform in ``ranges``,
-    the other axes uniformly from ``choices``."""
+    """``n`` random samples per grid point drawn from ``seed``: floats uniform in ``ranges``,
+    the other axes uniformly from ``choices``. ``per_grid_point = false`` (default): the same
+    n draws at every grid point (common random numbers: methods compared on equal draws);
+    ``true``: fresh draws at every grid point."""
 
     n: int = Field(ge=1, le=100_000)
-    seed: int = 0
-    ranges: dict[str, tuple[PositiveFloat, PositiveFloat]] = Field(default_factory=dict)
+    seed: _Seed = 0
+    per_grid_point: bool = False
+    ranges: dict[str, tuple[float, float]] = Field(default_factory=dict)
     choices: dict[str, list[Any]] = Field(default_factory=dict)
 
     @field_validator("ranges")
@@ -152,10 +169,14 @@ class RandomSpec(_Strict):
     def _ranges(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
         for k, (lo, hi) in v.items():
             if k not in _FLOAT_AXES:
-                raise ValueError(f"ranges: {k!r} is not a numeric axis; "
+                raise ConfigError(f"ranges: {k!r} is not a numeric axis; "
                                  f"numeric axes: {', '.join(_FLOAT_AXES)}")
+            a, b = AXIS_LIMITS[k]
+            for x in (lo, hi):
+                if not (math.isfinite(x) and a < x <= b):
+                    raise ConfigError(f"ranges.{k}: {x!r} is outside the allowed ({a:g}, {b:g}]")
             if lo > hi:
-                raise ValueError(f"ranges.{k}: lower bound {lo} > upper bound {hi}")
+                raise ConfigError(f"ranges.{k}: lower bound {lo} > upper bound {hi}")
         return v
 
     @field_validator("choices")
@@ -163,10 +184,17 @@ class RandomSpec(_Strict):
     def _choices(cls, v: dict[str, list[Any]]) -> dict[str, list[Any]]:
         for k, vals in v.items():
             if k not in _CHOICE_AXES:
-                raise ValueError(f"choices: {k!r} is not a choice axis; "
+                raise ConfigError(f"choices: {k!r} is not a choice axis; "
                                  f"choice axes: {', '.join(_CHOICE_AXES)}")
             if not vals:
-                raise ValueError(f"choices.{k} is empty")
+                raise ConfigError(f"choices.{k} is empty")
+            for val in vals:  # every value, not only the ones the draws happen to pick
+                try:
+                    RunParams(**{k: val})
+                    if k == "method":
+                        _check_method(val)
+                except ValidationError as err:
+                    raise ConfigError(f"choices.{k}: {val!r}: {err.errors()[0]['msg']}") from None
         return v
 
 
@@ -174,13 +202,14 @@ class SweepSpec(_Strict):
     """A validated sweep file."""
 
     name: str = "sweep"
-    duration_s: PositiveFloat | None = None
+    duration_s: _Duration | None = None
     base_config: str | None = None
     config: dict[str, Any] = Field(default_factory=dict)
     grid: GridAxes = GridAxes()
     random: RandomSpec | None = None
     retries: int = Field(2, ge=0, le=10, description="re-runs of a task whose worker failed")
-    max_lateral_m: PositiveFloat = Field(5.0, description="|e_y| beyond which a run has diverged")
+    max_lateral_m: float = Field(5.0, gt=0.0, le=1e3, allow_inf_nan=False,
+                                 description="|e_y| beyond which a run has diverged")
     #: Folder the relative paths of the file are resolved against (set by load_sweep).
     root: str = "."
 
@@ -218,34 +247,60 @@ class SweepResult:
 def load_sweep(path: str | Path) -> SweepSpec:
     """Read and validate a sweep file; every problem raises :class:`ConfigError` naming the field,
     before any task starts (the base config and track files are checked too)."""
+    from tsmpc.textfile import read_text
+
     p = Path(path)
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as err:
-        raise ConfigError(f"{p}: cannot read sweep file: {err.strerror}") from None
+        data = tomllib.loads(read_text(p, "sweep file (TOML)", ConfigError))
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{p}: invalid TOML: {err}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: a sweep file is a TOML table")
     data.setdefault("root", str(p.resolve().parent))
     spec = validate(SweepSpec, data, source=str(p))
-    base_config(spec, source=str(p))
-    for t in _track_values(spec):
-        _track_path(t, spec, source=str(p))
-    if not expand(spec):
+    cfg = base_config(spec, source=str(p))
+    for t in dict.fromkeys(_track_values(spec)):
+        _check_track(t, spec, cfg, source=str(p))
+    try:
+        tasks = expand(spec)
+    except ConfigError as err:
+        raise ConfigError(f"{p}: {err}") from None
+    if not tasks:
         raise ConfigError(f"{p}: the sweep has no runs")
     return spec
+
+
+def _check_track(track: str, spec: SweepSpec, cfg: Config, source: str) -> None:
+    """Load (and plan) a track value as a run would, so a bad file fails before any task."""
+    from tsmpc.errors import TsmpcError
+    from tsmpc.planning.tracks import is_tumftm, load_tumftm, plan_track
+    from tsmpc.sim.compare import check_trackable, load_scenario
+
+    path = _track_path(track, spec, source=source)
+    if path is None:
+        return
+    try:
+        if is_tumftm(path):
+            t = load_tumftm(path)
+            ref = plan_track(t, cfg.planner, dt=cfg.rates.Tc, tail_s=(cfg.mpc.N + 1) * cfg.rates.Tc)
+            check_trackable(ref, cfg, str(path))
+        else:
+            load_scenario(cfg, path)
+    except TsmpcError as err:
+        raise ConfigError(f"{source}: track {track!r}: {err}") from None
 
 
 def base_config(spec: SweepSpec, source: str = "sweep") -> Config:
     """The base config (file, then inline ``[config]`` overrides), validated."""
     data: dict[str, Any] = {}
     if spec.base_config:
+        from tsmpc.textfile import read_text
+
         path = Path(spec.root) / spec.base_config
         try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except OSError as err:
-            raise ConfigError(f"{source}: base_config: cannot read {path}: {err.strerror}") from None
+            data = tomllib.loads(read_text(path, "config file (TOML)", ConfigError))
+        except ConfigError as err:
+            raise ConfigError(f"{source}: base_config: {err}") from None
         except tomllib.TOMLDecodeError as err:
             raise ConfigError(f"{source}: base_config: invalid TOML in {path}: {err}") from None
     merged = _merge(data, spec.config)
@@ -283,16 +338,25 @@ def expand(spec: SweepSpec) -> list[RunTask]:
     grid = {name: getattr(spec.grid, name) for name in AXES if getattr(spec.grid, name) is not None}
     points = [dict(zip(grid, combo, strict=True)) for combo in itertools.product(*grid.values())] or [{}]
     if spec.random is not None:
-        rng = np.random.default_rng(spec.random.seed)
-        samples = []
-        for _ in range(spec.random.n):
-            s: dict[str, Any] = {}
-            for k, (lo, hi) in sorted(spec.random.ranges.items()):
-                s[k] = float(rng.uniform(lo, hi))
-            for k, vals in sorted(spec.random.choices.items()):
-                s[k] = vals[int(rng.integers(len(vals)))]
-            samples.append(s)
-        points = [{**p, **s} for p in points for s in samples]
+        rs = spec.random
+        rng = np.random.default_rng(rs.seed)
+
+        def draw() -> list[dict[str, Any]]:
+            samples = []
+            for _ in range(rs.n):
+                s: dict[str, Any] = {}
+                for k, (lo, hi) in sorted(rs.ranges.items()):
+                    s[k] = float(rng.uniform(lo, hi))
+                for k, vals in sorted(rs.choices.items()):
+                    s[k] = vals[int(rng.integers(len(vals)))]
+                samples.append(s)
+            return samples
+
+        if rs.per_grid_point:  # fresh draws at each point, in grid order (reproducible)
+            points = [{**p, **s} for p in points for s in draw()]
+        else:  # the same draws at every point
+            shared = draw()
+            points = [{**p, **s} for p in points for s in shared]
     tasks, seen = [], set()
     for point in points:
         try:
@@ -300,8 +364,12 @@ def expand(spec: SweepSpec) -> list[RunTask]:
             params = params.model_copy(update={"method": _check_method(params.method)})
             _check_named(params.friction, FRICTIONS, "friction profile")
             _check_named(params.scenario, ROBUSTNESS_SCENARIOS, "robustness scenario")
+        except ValidationError as err:
+            from tsmpc.config import format_validation_error
+
+            raise ConfigError("random.choices: " + format_validation_error(err, "run")) from None
         except ValueError as err:
-            raise ConfigError(f"sweep: random.choices: {err}") from None
+            raise ConfigError(f"random.choices: {err}") from None
         payload = json.dumps({"params": params.model_dump(), "config": cfg_dict,
                               "duration_s": spec.duration_s, "max_lateral_m": spec.max_lateral_m},
                              sort_keys=True)
@@ -417,7 +485,8 @@ ProgressFn = Callable[[int, int, dict[str, Any]], None]
 def run_sweep(
     spec: SweepSpec, out: str | Path, *, scheduler: str | None = None, workers: int = 2,
     resume: bool = False, run_fn: Callable[[RunTask], dict[str, Any]] = run_task,
-    progress: ProgressFn | None = None, plots: bool = True,
+    progress: ProgressFn | None = None, plots: bool = True, connect_timeout: float = 5.0,
+    design_fn: Callable[[Config], tuple[Any, Any]] | None = None,
 ) -> SweepResult:
     """Run every task of ``spec`` on Dask and write the records, the aggregate and the plots.
 
@@ -430,8 +499,10 @@ def run_sweep(
             already holds records is refused (nothing is overwritten).
         run_fn: the task function (default: simulate; :func:`dry_run` for plumbing checks).
         progress: called as ``progress(done, total, record)`` after each record is written.
+        connect_timeout: seconds to wait for ``scheduler`` before giving up (ConfigError).
+        design_fn: loads or solves the LMI designs of the base config (e.g. with a status line).
     """
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import as_completed
 
     out = Path(out)
     runs_dir = out / "runs"
@@ -441,47 +512,44 @@ def run_sweep(
     if on_disk & ids and not resume:
         raise ConfigError(f"{out}: already holds {len(on_disk & ids)} records of this sweep; "
                           "use --resume to finish it or choose another --out")
+    pending = [t for t in tasks if t.id not in on_disk]
+    skipped = len(tasks) - len(pending)
+    written: set[str] = set()
+    failed = duplicates = 0
+    done = skipped
+    # Connect first (a wrong address fails in seconds, before anything is written).
+    client, cluster = connect(scheduler, workers, connect_timeout) if pending else (None, None)
     runs_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "sweep.json", json.dumps(
         {"name": spec.name, "spec": spec.model_dump(mode="json"),
          "runs": [{"id": t.id, **t.params.model_dump()} for t in tasks]}, indent=1))
-    pending = [t for t in tasks if t.id not in on_disk]
-    skipped = len(tasks) - len(pending)
-    if pending and run_fn is run_task:
-        # The axes never touch the controller settings, so one pair of LMI designs serves every
-        # run: solved (or loaded from the design cache) and certified here, shipped with the
-        # tasks — remote workers need no shared disk and solve nothing.
-        from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
-
-        cfg = base_config(spec)
-        designs = (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
-        if scheduler is None:  # local workers share this machine's kernel cache: compile it once here
-            from tsmpc import kernels
-
-            kernels.warmup()
-        pending = [RunTask(t.id, t.params, t.config, t.duration_s, t.max_lateral_m, t.root, designs)
-                   for t in pending]
-    written: set[str] = set()
-    failed = duplicates = 0
-    done = skipped
-    if pending:
-        cluster = None
-        if scheduler is None:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   host="127.0.0.1", dashboard_address=":0")
-            client = Client(cluster)
-        else:
-            client = Client(scheduler)
+    if client is not None:
         try:
+            if run_fn is run_task:
+                # The axes never touch the controller settings, so one pair of LMI designs serves
+                # every run: solved (or loaded from the design cache) and certified here, shipped
+                # with the tasks — remote workers need no shared disk and solve nothing.
+                cfg = base_config(spec)
+                designs = design_fn(cfg) if design_fn is not None else _designs(cfg)
+                if scheduler is None:  # local workers share this machine's kernel cache: fill it once
+                    from tsmpc import kernels
+
+                    kernels.warmup()
+                pending = [RunTask(t.id, t.params, t.config, t.duration_s, t.max_lateral_m, t.root,
+                                   designs) for t in pending]
             futures = {client.submit(run_fn, t, key=f"tsmpc-run-{t.id}", retries=spec.retries,
                                      pure=False): t for t in pending}
             for fut in as_completed(futures):
-                task = futures[fut]
+                task = futures.pop(fut)
                 try:
                     rec = fut.result()
                 except Exception as err:  # e.g. KilledWorker after repeated worker deaths
                     failed += 1
                     rec = _record(task, "failed", f"{type(err).__name__}: {err}", {}, float("nan"))
+                # Forget the result on the cluster at once: a finished task whose result still
+                # sits in a worker's memory would be recomputed if that worker died.
+                fut.release()
+                del fut
                 if task.id in written:
                     duplicates += 1
                     continue
@@ -501,6 +569,46 @@ def run_sweep(
 
         files += save_sweep_plots(table, out)
     return SweepResult(out, len(tasks), len(written), skipped, failed, duplicates, table, files)
+
+
+def _designs(cfg: Config) -> tuple[Any, Any]:
+    from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
+
+    return load_or_design_kinematic(cfg), load_or_design_dynamic(cfg)
+
+
+def connect(scheduler: str | None, workers: int, timeout: float = 5.0) -> tuple[Any, Any]:
+    """(client, cluster): a client of the scheduler at ``scheduler`` (within ``timeout`` s), or
+    of a new LocalCluster of ``workers`` single-threaded processes (cluster None when remote).
+    An unreachable or malformed address raises :class:`ConfigError` (one line)."""
+    import logging
+
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=":0")
+        return Client(cluster), cluster
+    if not math.isfinite(timeout) or timeout <= 0:
+        raise ConfigError(f"--connect-timeout = {timeout}: must be a finite number > 0")
+    from distributed.comm import parse_address
+
+    try:
+        proto, loc = parse_address(scheduler)
+        if proto not in ("tcp", "tls", "inproc", "ucx", "ws", "wss") or ":" not in loc:
+            raise ValueError("expected PROTOCOL://HOST:PORT, e.g. tcp://127.0.0.1:8786")
+    except (ValueError, TypeError) as err:
+        raise ConfigError(f"--scheduler {scheduler!r}: not a scheduler address ({err})") from None
+    quiet = logging.getLogger("distributed")
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)  # the connection retries log tracebacks of their own
+    try:
+        return Client(scheduler, timeout=timeout), None
+    except (OSError, TimeoutError, ValueError) as err:
+        raise ConfigError(f"--scheduler {scheduler}: no scheduler answered within {timeout:g} s "
+                          f"({type(err).__name__}); check the address or --connect-timeout") from None
+    finally:
+        quiet.setLevel(level)
 
 
 # -- aggregation ---------------------------------------------------------------------------

@@ -8,7 +8,19 @@ from typing import Any
 import typer
 
 from tsmpc.cli import app
-from tsmpc.cli._common import fail, load_config_or_exit
+from tsmpc.cli._common import (
+    PARTIAL_MARKER,
+    Interrupted,
+    check_interrupted,
+    check_out_dir,
+    design_status,
+    fail,
+    finite,
+    handle_interrupts,
+    load_config_or_exit,
+    mark_partial,
+)
+from tsmpc.errors import ConfigError, TsmpcError
 
 
 def _parse_window(text: str | None) -> tuple[int, int] | None:
@@ -17,21 +29,38 @@ def _parse_window(text: str | None) -> tuple[int, int] | None:
     try:
         a, b = (int(v) for v in text.split(","))
     except ValueError:
-        fail(ValueError(f"--window must be 'FIRST,LAST' (1-based columns), got {text!r}"))
+        fail(ConfigError(f"--window must be 'FIRST,LAST' (1-based columns), got {text!r}"))
+    if not 1 <= a < b:
+        fail(ConfigError(f"--window {a},{b}: need 1 <= FIRST < LAST (1-based columns)"))
     return a, b
+
+
+#: Files a compare/run writes into --out (figures: FIGURES names as .png and .pdf).
+_OUTPUT_FILES = ("metrics.json", "rmse.csv", "rmse.md", "rmse.tex", "config.toml", "versions.json",
+                 "timeseries.npz", "timeseries.mat", PARTIAL_MARKER)
+
+
+def _remove_previous_outputs(out: Path) -> None:
+    """--overwrite: remove tsmpc's files of an earlier run (never anything else) so the folder
+    never mixes new and stale results."""
+    from tsmpc.report.figures import FIGURES
+
+    for p in out.iterdir():
+        if p.is_file() and (p.name in _OUTPUT_FILES
+                            or (p.suffix in (".png", ".pdf") and p.stem in FIGURES)):
+            p.unlink()
 
 
 def _execute(
     methods_text: str, reference: Path | None, window: str | None, out: Path, seed: int | None,
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
-    preset: str | None = None,
+    overwrite: bool = False, preset: str | None = None,
 ) -> None:
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from tsmpc.blas import limit_blas_threads
     from tsmpc.config import replace
-    from tsmpc.errors import TsmpcError
     from tsmpc.sim.compare import compare, load_scenario
     from tsmpc.sim.simulator import Method
 
@@ -42,6 +71,10 @@ def _execute(
     console = Console()
     if not console.is_terminal:  # piped to a file or CI log: do not squeeze the tables to 80 columns
         console = Console(width=140)
+    # Every input is checked before any work: options, config, reference, output folder.
+    finite("--duration", duration, lo=0.1)
+    if seed is not None and seed < 0:
+        fail(ConfigError(f"--seed = {seed}: must be an integer >= 0"))
     cfg = load_config_or_exit(config, preset)
     if seed is not None:
         cfg = replace(cfg, seed=seed)
@@ -50,7 +83,7 @@ def _execute(
     except ValueError as err:
         fail(err)
     if not methods:
-        fail(ValueError("--methods is empty"))
+        fail(ConfigError("--methods is empty"))
     try:
         scenario = load_scenario(cfg, reference, _parse_window(window))
     except (TsmpcError, OSError) as err:
@@ -62,22 +95,44 @@ def _execute(
             cfg, scenario = apply_robustness(robustness, cfg, scenario, until_s=duration)
         except ValueError as err:
             fail(err)
+    check_out_dir(out, overwrite=overwrite)
     max_steps = None if duration is None else max(1, round(duration / cfg.rates.Tc))
-    with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
-                  TextColumn("{task.completed}/{task.total} MPC steps"),
-                  TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
-
-        def factory(name: str, total: int) -> Any:
-            task = progress.add_task(name, total=total)
-            return lambda k, _k_total: progress.update(task, completed=k)
-
+    with handle_interrupts():
         try:
-            result = compare(cfg, scenario, methods, out, plots=not no_plots, oracle=oracle,
-                             max_steps=max_steps, progress_factory=factory)
-        except TsmpcError as err:
-            fail(err)
+            if overwrite:
+                _remove_previous_outputs(out)
+            mark_partial(out, "running", methods=[m.value for m in methods])
+            if oracle:
+                cfg = replace(cfg, lqr=replace(cfg.lqr, oracle=True, friction_compensation=False))
+            designs = design_status(cfg)
+            with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
+                          TextColumn("{task.completed}/{task.total} MPC steps"),
+                          TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
+
+                def factory(name: str, total: int) -> Any:
+                    task = progress.add_task(name, total=total)
+
+                    def update(k: int, _k_total: int) -> None:
+                        check_interrupted()  # a solver may have swallowed the signal
+                        progress.update(task, completed=k)
+                    return update
+
+                try:
+                    result = compare(cfg, scenario, methods, out, plots=not no_plots, oracle=oracle,
+                                     max_steps=max_steps, progress_factory=factory, designs=designs)
+                except TsmpcError as err:
+                    fail(err, code=1)
+            (out / PARTIAL_MARKER).unlink(missing_ok=True)
+        except Interrupted as sig:
+            mark_partial(out, "interrupted", signal=str(sig))
+            typer.secho(f"interrupted ({sig}): {out} holds a partial run (see {out / PARTIAL_MARKER})",
+                        err=True, fg=typer.colors.RED)
+            raise typer.Exit(sig.code) from None
     _print_tables(console, result.metrics)
     console.print(f"wrote {len(result.files)} files to [bold]{out}[/bold]")
+    bad = [n for n, m in result.metrics["methods"].items() if m["termination"] != "completed"]
+    if bad:
+        raise typer.Exit(1)
 
 
 def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
@@ -123,43 +178,58 @@ _REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..13
              "Default: the built-in paper-like circuit.")
 
 
+# Options shared by ``compare`` and ``run`` (one definition, two commands).
+_OPT_REFERENCE = typer.Option(None, "--reference", help=_REF_HELP)
+_OPT_WINDOW = typer.Option(None, "--window", help="1-based FIRST,LAST: columns of a paper file, "
+                           "rows of a planned CSV.")
+_OPT_SEED = typer.Option(None, "--seed", help="Seed of the sensor noise, >= 0 (default: config).")
+_OPT_CONFIG = typer.Option(None, "--config", help="TOML config file.")
+_OPT_NO_PLOTS = typer.Option(False, "--no-plots", help="Skip the figures.")
+_OPT_ORACLE = typer.Option(False, "--oracle", help="Ablation: true state, no friction compensation.")
+_OPT_DURATION = typer.Option(None, "--duration", help="Track only the first S s (finite, >= 0.1).")
+_OPT_SCENARIO = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP)
+_OPT_PRESET = typer.Option(None, "--preset", help=_PRESET_HELP)
+_OPT_OVERWRITE = typer.Option(False, "--overwrite", help="Write into a non-empty --out folder, "
+                              "replacing tsmpc's outputs of an earlier run (other files are kept).")
+
+
 @app.command("compare")
 def compare_cmd(
-    reference: Path | None = typer.Option(None, "--reference", help=_REF_HELP),
-    window: str | None = typer.Option(None, "--window", help="1-based columns FIRST,LAST of a paper file."),
+    reference: Path | None = _OPT_REFERENCE,
+    window: str | None = _OPT_WINDOW,
     methods: str = typer.Option("fzn,ref,iter,nl", "--methods", help="Comma-separated: fzn,ref,iter,nl."),
-    out: Path = typer.Option(Path("results/compare"), "--out", help="Output folder."),
-    seed: int | None = typer.Option(None, "--seed", help="Seed of the sensor noise (default: config)."),
-    config: Path | None = typer.Option(None, "--config", help="TOML config file."),
-    no_plots: bool = typer.Option(False, "--no-plots", help="Skip the figures."),
-    oracle: bool = typer.Option(
-        False, "--oracle", help="Ablation: the inner loop gets the true state, no friction compensation."
-    ),
-    duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
-    robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
-    preset: str | None = typer.Option(None, "--preset", help=_PRESET_HELP),
+    out: Path = typer.Option(Path("results/compare"), "--out", help="Output folder (new or empty)."),
+    seed: int | None = _OPT_SEED,
+    config: Path | None = _OPT_CONFIG,
+    no_plots: bool = _OPT_NO_PLOTS,
+    oracle: bool = _OPT_ORACLE,
+    duration: float | None = _OPT_DURATION,
+    robustness: str = _OPT_SCENARIO,
+    overwrite: bool = _OPT_OVERWRITE,
+    preset: str | None = _OPT_PRESET,
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
-    _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness, preset)
+    _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
+             overwrite, preset)
 
 
 @app.command("run")
 def run_cmd(
     method: str = typer.Option("ref", "--method", help="One of fzn, ref, iter, nl."),
-    reference: Path | None = typer.Option(None, "--reference", help=_REF_HELP),
-    window: str | None = typer.Option(None, "--window", help="1-based columns FIRST,LAST of a paper file."),
-    out: Path = typer.Option(Path("results/run"), "--out", help="Output folder."),
-    seed: int | None = typer.Option(None, "--seed", help="Seed of the sensor noise (default: config)."),
-    config: Path | None = typer.Option(None, "--config", help="TOML config file."),
-    no_plots: bool = typer.Option(False, "--no-plots", help="Skip the figures."),
-    oracle: bool = typer.Option(
-        False, "--oracle", help="Ablation: the inner loop gets the true state, no friction compensation."
-    ),
-    duration: float | None = typer.Option(None, "--duration", min=0.1, help="Track only the first S s."),
-    robustness: str = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP),
-    preset: str | None = typer.Option(None, "--preset", help=_PRESET_HELP),
+    reference: Path | None = _OPT_REFERENCE,
+    window: str | None = _OPT_WINDOW,
+    out: Path = typer.Option(Path("results/run"), "--out", help="Output folder (new or empty)."),
+    seed: int | None = _OPT_SEED,
+    config: Path | None = _OPT_CONFIG,
+    no_plots: bool = _OPT_NO_PLOTS,
+    oracle: bool = _OPT_ORACLE,
+    duration: float | None = _OPT_DURATION,
+    robustness: str = _OPT_SCENARIO,
+    overwrite: bool = _OPT_OVERWRITE,
+    preset: str | None = _OPT_PRESET,
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
     if "," in method:
-        fail(ValueError("--method takes one method; use `tsmpc compare --methods` for several"))
-    _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness, preset)
+        fail(ConfigError("--method takes one method; use `tsmpc compare --methods` for several"))
+    _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
+             overwrite, preset)

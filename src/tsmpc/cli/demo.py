@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from tsmpc.cli import app
-from tsmpc.cli._common import load_config_or_exit
+from tsmpc.cli._common import finite, load_config_or_exit
 
 
 @app.command("plant-demo")
@@ -22,6 +22,7 @@ def plant_demo(
 
     from tsmpc.vehicle.plant import STATE_NAMES, Plant
 
+    finite("--duration", duration, lo=0.0, hi=3600.0)
     cfg = load_config_or_exit(config)
     plant = Plant(cfg.vehicle, cfg.tyre, cfg.rates.h)
     x = np.array([0.0, 0.0, 0.0, 5.0, 0.0, 0.0])

@@ -10,7 +10,8 @@ from typing import TYPE_CHECKING
 import typer
 
 from tsmpc.cli import app
-from tsmpc.cli._common import fail
+from tsmpc.cli._common import check_out_file, fail, finite
+from tsmpc.errors import ConfigError
 
 if TYPE_CHECKING:
     import numpy as np
@@ -40,11 +41,9 @@ def _read_waypoints(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64
     import numpy as np
 
     from tsmpc.errors import DataFormatError
+    from tsmpc.textfile import read_text
 
-    try:
-        lines = [ln.strip() for ln in path.read_text(encoding="utf-8").splitlines()]
-    except (OSError, UnicodeDecodeError) as err:
-        raise DataFormatError(f"{path}: cannot read waypoints: {err}") from None
+    lines = [ln.strip() for ln in read_text(path, "waypoints CSV (x,y rows)").splitlines()]
     lines = [ln for ln in lines if ln and not ln.startswith("#")]
     header = None
     if lines and not _is_number(lines[0].split(",")[0]):
@@ -56,6 +55,9 @@ def _read_waypoints(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64
         raise DataFormatError(f"{path}: waypoints must be numeric 'x,y' rows ({err})") from None
     if data.ndim != 2 or data.shape[0] < 2 or data.shape[1] < 2:
         raise DataFormatError(f"{path}: expected at least 2 rows of 'x,y' waypoints")
+    if not np.all(np.isfinite(data)):
+        raise DataFormatError(f"{path}: data row {int(np.argwhere(~np.isfinite(data))[0, 0]) + 1}: "
+                              "NaN or inf (waypoints must be finite)")
     ix, iy = (header.index("x"), header.index("y")) if header and {"x", "y"} <= set(header) else (0, 1)
     cap = data[:, header.index("v")] if header and "v" in header else None
     return data[:, [ix, iy]], cap
@@ -78,6 +80,7 @@ def plan(
                                        help="Closed lap or open path [default: closed for tracks]."),
     fmt: OutputFormat = typer.Option(OutputFormat.csv, "--format",
                                      help="csv: t,x,y,theta,v,omega,kappa rows; paper: 6-row format."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing --out file."),
 ) -> None:
     """Plan a smooth reference (continuous curvature, limited speed profile) from a track or waypoints."""
     from pydantic import ValidationError
@@ -88,11 +91,19 @@ def plan(
     from tsmpc.planning.planner import plan_path
     from tsmpc.planning.tracks import is_tumftm, load_tumftm
 
+    finite("--dt", dt, lo=0.0, lo_open=True, hi=10.0)
+    finite("--tail", tail, lo=0.0, hi=3600.0)
+    if laps > 1000:
+        fail(ConfigError(f"--laps = {laps}: at most 1000"))
     try:
         settings = PlannerSettings(v_max=v_max, a_lat_max=a_lat, a_lon_max=a_lon,
                                    a_brake_max=a_brake, v_start=v_start)
     except ValidationError as err:
-        fail(ValueError(f"invalid limits: {err.errors()[0]['loc'][0]}: {err.errors()[0]['msg']}"))
+        e = err.errors()[0]
+        opt = {"v_max": "--v-max", "a_lat_max": "--a-lat", "a_lon_max": "--a-lon",
+               "a_brake_max": "--a-brake", "v_start": "--v-start"}.get(str(e["loc"][0]), e["loc"][0])
+        fail(ConfigError(f"{opt} = {e.get('input')!r}: {e['msg']}"))
+    check_out_file(out, overwrite=overwrite)
     try:
         if is_tumftm(source):
             track = load_tumftm(source)
@@ -105,8 +116,11 @@ def plan(
             save_paper_format(ref, out)
         else:
             ref.to_csv(out)
-    except (TsmpcError, OSError) as err:
-        fail(err)
+    except TsmpcError as err:
+        msg = str(err)
+        fail(msg if msg.startswith(str(source)) else f"{source}: {msg}")
+    except OSError as err:
+        fail(f"--out {out}: cannot write ({err.strerror or err})")
     typer.echo(f"{out}: {len(ref)} samples, {ref.duration:.1f} s, max v {ref.v.max():.2f} m/s, "
                f"max |omega| {abs(ref.omega).max():.3f} rad/s")
 
@@ -114,7 +128,8 @@ def plan(
 @app.command("show-reference")
 def show_reference(
     file: Path = typer.Argument(..., help="Reference (planned CSV or paper format) or TUMFTM track."),
-    out: Path | None = typer.Option(None, "--out", "-o", help="PNG to write [default: FILE.png]."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="PNG to write, or an existing folder "
+                                    "(writes FOLDER/FILE-stem.png) [default: FILE.png]."),
     window: str | None = typer.Option(None, help="Paper-format columns 'FIRST,LAST' (1-based) "
                                       "[default: all]."),
 ) -> None:
@@ -130,8 +145,12 @@ def show_reference(
         try:
             a, b = (int(v) for v in window.split(","))
         except ValueError:
-            fail(ValueError(f"--window must be 'FIRST,LAST' (1-based columns), got {window!r}"))
+            fail(ConfigError(f"--window must be 'FIRST,LAST' (1-based columns), got {window!r}"))
         win = (a, b)
+    png_path = out or file.with_suffix(".png")
+    if out is not None and (out.is_dir() or str(out).endswith(("/", "\\"))):
+        png_path = out / f"{file.stem}.png"
+    check_out_file(png_path)
     track = None
     try:
         if is_tumftm(file):
@@ -139,7 +158,7 @@ def show_reference(
             ref = plan_track(track, PlannerSettings())
         else:
             ref = load_reference(file, window=win)
-        png = save_reference_figure(ref, out or file.with_suffix(".png"), track=track, title=file.stem)
+        png = save_reference_figure(ref, png_path, track=track, title=file.stem)
     except (TsmpcError, OSError) as err:
         fail(err)
     typer.echo(f"wrote {png}")

@@ -7,7 +7,17 @@ from pathlib import Path
 import typer
 
 from tsmpc.cli import app
-from tsmpc.cli._common import fail
+from tsmpc.cli._common import (
+    PARTIAL_MARKER,
+    Interrupted,
+    check_out_dir,
+    design_status,
+    fail,
+    finite,
+    handle_interrupts,
+    mark_partial,
+)
+from tsmpc.errors import ConfigError
 
 
 @app.command("sweep")
@@ -21,6 +31,8 @@ def sweep_cmd(
     no_plots: bool = typer.Option(False, "--no-plots", help="Skip the summary plots."),
     dry_run: bool = typer.Option(
         False, "--dry-run", help="Check the cluster plumbing: tasks sleep instead of simulating."),
+    connect_timeout: float = typer.Option(
+        5.0, "--connect-timeout", help="Seconds to wait for --scheduler before giving up."),
 ) -> None:
     """Run every point of a sweep as a Dask task; write one record per run, the aggregate table
     (CSV, Parquet) and summary plots."""
@@ -33,10 +45,17 @@ def sweep_cmd(
     from tsmpc.sweep import expand, load_sweep, run_sweep, run_task
 
     console = Console()
+    finite("--connect-timeout", connect_timeout, lo=0.0, lo_open=True, hi=600.0)
+    if workers > 64:
+        fail(ConfigError(f"--workers = {workers}: at most 64 local worker processes"))
     try:
         spec = load_sweep(sweep_file)  # every problem is reported before any task starts
     except TsmpcError as err:
         fail(err)
+    if resume:
+        check_out_dir(out, overwrite=True)  # records on disk are kept and skipped
+    else:
+        check_out_dir(out, overwrite=False)
     n = len(expand(spec))
     where = scheduler or f"a local cluster of {workers} worker processes"
     console.print(f"sweep [bold]{spec.name}[/bold]: {n} runs on {where} → {out}")
@@ -51,10 +70,23 @@ def sweep_cmd(
             progress.update(task, completed=done, description=" ".join(f"{k}={v}" for k, v in counts.items()))
 
         try:
-            res = run_sweep(spec, out, scheduler=scheduler, workers=workers, resume=resume,
-                            run_fn=dry_fn if dry_run else run_task, progress=on_record, plots=not no_plots)
+            with handle_interrupts():
+                mark_partial(out, "running")
+                res = run_sweep(spec, out, scheduler=scheduler, workers=workers, resume=resume,
+                                run_fn=dry_fn if dry_run else run_task, progress=on_record,
+                                plots=not no_plots, connect_timeout=connect_timeout,
+                                design_fn=design_status)
+                (out / PARTIAL_MARKER).unlink(missing_ok=True)
         except TsmpcError as err:
+            progress.stop()
+            (out / PARTIAL_MARKER).unlink(missing_ok=True)  # nothing ran: nothing partial
             fail(err)
+        except Interrupted as sig:
+            mark_partial(out, "interrupted", signal=str(sig))
+            progress.stop()
+            typer.secho(f"interrupted ({sig}): the records finished so far are in {out / 'runs'}; "
+                        f"finish the sweep with --resume", err=True, fg=typer.colors.RED)
+            raise typer.Exit(sig.code) from None
     t = Table(title=f"sweep {spec.name}: {res.n_runs} runs ({res.executed} run now, {res.skipped} resumed)")
     for col in ("status", "runs", "RMSE y median [m]", "max |e_y| worst [m]", "MPC median [ms]"):
         t.add_column(col.replace("[", "\\["), justify="right")

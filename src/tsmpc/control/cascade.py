@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tsmpc.config import Config, SchedulingMode
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
+from tsmpc.errors import ConfigError
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.planning.reference import Reference
@@ -63,7 +64,7 @@ class Method(StrEnum):
             return cls(text.strip().upper())
         except ValueError:
             allowed = ", ".join(m.value.lower() for m in cls)
-            raise ValueError(f"unknown method {text!r}; allowed: {allowed}") from None
+            raise ConfigError(f"unknown method {text!r}; allowed: {allowed}") from None
 
 
 @dataclass(frozen=True)

@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import FrictionEstimate, LQRSettings, VehicleParams
+from tsmpc.errors import ConfigError
 from tsmpc.models.dynamic import DynamicTS, continuous_matrices
 
 __all__ = ["TSLQR", "InnerCommand", "equilibrium"]
@@ -93,7 +94,7 @@ class TSLQR:
     ) -> None:
         self.K = np.asarray(gains, dtype=float)
         if self.K.shape != (model.n_vertices, 2, 6):
-            raise ValueError(f"TSLQR: gains must have shape ({model.n_vertices}, 2, 6), got {self.K.shape}")
+            raise ConfigError(f"TSLQR: gains must have shape ({model.n_vertices}, 2, 6), got {self.K.shape}")
         self.model = model
         self.vehicle = vehicle
         self.settings = settings

@@ -39,6 +39,7 @@ from scipy.linalg.lapack import dpotrs as _potrs
 
 from tsmpc.config import MHESettings, VehicleParams
 from tsmpc.control.qp import QPStatus, solve_daqp
+from tsmpc.errors import ConfigError
 from tsmpc.models.dynamic import Discretization, DynamicTS
 
 __all__ = ["MHEUIO", "Estimate", "EstimatorStatus", "WindowQP"]
@@ -110,7 +111,7 @@ class MHEUIO:
         x0: NDArray[np.float64] | None = None, jit: bool | None = None,
     ) -> None:
         if abs(model.Td - Td) > 1e-12:
-            raise ValueError(f"MHEUIO: Td = {Td} differs from the model's Td = {model.Td}")
+            raise ConfigError(f"MHEUIO: Td = {Td} differs from the model's Td = {model.Td}")
         self.settings = settings
         self.model = model
         self.vehicle = vehicle

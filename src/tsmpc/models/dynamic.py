@@ -31,6 +31,7 @@ import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from tsmpc.config import DynamicBox, VehicleParams
+from tsmpc.errors import ConfigError
 from tsmpc.models.polytope import SchedulingBox
 
 __all__ = [
@@ -88,7 +89,7 @@ def discretize(
     if method == Discretization.EULER:
         return np.eye(n) + T * A, T * B
     if method != Discretization.ZOH:
-        raise ValueError(f"unknown discretisation {method!r}; allowed: euler, zoh")
+        raise ConfigError(f"unknown discretisation {method!r}; allowed: euler, zoh")
     big = np.zeros((*A.shape[:-2], n + m, n + m))
     big[..., :n, :n] = A * T
     big[..., :n, n:] = B * T

@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tsmpc.errors import ConfigError
+
 __all__ = ["SchedulingBox"]
 
 
@@ -43,9 +45,9 @@ class SchedulingBox:
         lo = np.asarray(lower, dtype=float).reshape(-1)
         hi = np.asarray(upper, dtype=float).reshape(-1)
         if not (len(names) == lo.size == hi.size):
-            raise ValueError("SchedulingBox: names, lower and upper must have the same length")
+            raise ConfigError("SchedulingBox: names, lower and upper must have the same length")
         if not np.all(np.isfinite(lo)) or not np.all(np.isfinite(hi)) or np.any(lo >= hi):
-            raise ValueError(f"SchedulingBox: need finite lower < upper, got {lo} and {hi}")
+            raise ConfigError(f"SchedulingBox: need finite lower < upper, got {lo} and {hi}")
         lo.setflags(write=False)
         hi.setflags(write=False)
         r = lo.size

@@ -32,7 +32,15 @@ from tsmpc.errors import DataFormatError, SolverError
 from tsmpc.planning.reference import Reference
 
 __all__ = [
-    "JERK_MAX", "PathGeometry", "SpeedProfile", "integrate_pose", "path_geometry", "plan_path",
+    "JERK_MAX",
+    "MAX_PATH_LENGTH_M",
+    "MAX_SAMPLES",
+    "PathGeometry",
+    "SpeedProfile",
+    "check_waypoints",
+    "integrate_pose",
+    "path_geometry",
+    "plan_path",
     "speed_profile",
 ]
 
@@ -42,6 +50,59 @@ DS = 0.25
 DS_SPEED = 1.0
 #: Default longitudinal jerk bound [m/s³] (comfort level); makes dv_d/dt continuous.
 JERK_MAX = 2.0
+#: Longest path planned [m] (the geometry grid and the speed LP grow with the length).
+MAX_PATH_LENGTH_M = 200_000.0
+#: Most output samples planned (≈ 2.3 days at 0.1 s; each sample is 7 doubles).
+MAX_SAMPLES = 2_000_000
+#: A turn sharper than this between consecutive waypoint chords is a direction reversal [deg].
+MAX_WAYPOINT_TURN_DEG = 160.0
+
+
+def check_waypoints(wp: NDArray[np.float64], closed: bool) -> None:
+    """Refuse paths the planner cannot drive forward: direction reversals (consecutive chords
+    turning back by more than :data:`MAX_WAYPOINT_TURN_DEG`), a closing chord much longer than
+    the path's segments (a half lap "closed" by a straight line) and paths longer than
+    :data:`MAX_PATH_LENGTH_M`. Waypoints are numbered from 1 in file order."""
+    seg_vec = np.diff(wp, axis=0)
+    seg = np.hypot(seg_vec[:, 0], seg_vec[:, 1])
+    keep = seg > 1e-9
+    idx = np.flatnonzero(keep)  # chord i goes from waypoint i to i + 1
+    vec = seg_vec[keep]
+    length = float(seg.sum())
+    if closed and wp.shape[0] >= 3:
+        closing = float(np.hypot(*(wp[0] - wp[-1])))
+        med = float(np.median(seg[keep])) if keep.any() else 0.0
+        if closing > 5.0 * med and closing > 0.15 * length and closing > 1.0:
+            raise DataFormatError(
+                f"planner: the closing chord from the last waypoint to the first is {closing:.0f} m "
+                f"while the median segment is {med:.3g} m: the waypoints do not form a lap "
+                "(add waypoints along the closing stretch, or plan an open path with --open)")
+        length += closing
+        if closing > 1e-9:
+            vec = np.vstack([vec, wp[0] - wp[-1], vec[:1]])
+            idx = np.concatenate([idx, [wp.shape[0] - 1, idx[0]]])
+    if vec.shape[0] >= 2:
+        cross = vec[:-1, 0] * vec[1:, 1] - vec[:-1, 1] * vec[1:, 0]
+        dot = np.sum(vec[:-1] * vec[1:], axis=1)
+        turn = np.degrees(np.abs(np.arctan2(cross, dot)))
+        bad = np.flatnonzero(turn > MAX_WAYPOINT_TURN_DEG)
+        if bad.size:
+            i = int(bad[0])
+            at = (int(idx[i]) + 1) % wp.shape[0] + 1
+            raise DataFormatError(
+                f"planner: waypoint {at}: the path turns back by {turn[i]:.0f} deg (direction "
+                f"reversal; at most {MAX_WAYPOINT_TURN_DEG:.0f} deg between consecutive chords): "
+                "the planner plans forward driving only")
+    if length > MAX_PATH_LENGTH_M:
+        raise DataFormatError(f"planner: the path is {length:.3g} m long; at most "
+                              f"{MAX_PATH_LENGTH_M:.0f} m (check the units: metres expected)")
+
+
+def _check_samples(n: float, what: str) -> None:
+    if not n <= MAX_SAMPLES:
+        raise DataFormatError(
+            f"planner: {what} gives {n:.3g} samples, more than the limit of {MAX_SAMPLES:,}: "
+            "raise --dt or --v-max, or shorten the path")
 
 
 @dataclass(frozen=True)
@@ -333,9 +394,18 @@ def plan_path(
     """
     if laps < 1 or (laps > 1 and not closed):
         raise DataFormatError("planner: laps must be ≥ 1, and > 1 only for closed paths")
-    if not dt > 0 or tail_s < 0:
-        raise DataFormatError("planner: dt must be positive and tail_s non-negative")
-    geo = path_geometry(waypoints, closed=closed, v_cap=v_cap)
+    if not (np.isfinite(dt) and dt > 0) or not (np.isfinite(tail_s) and tail_s >= 0):
+        raise DataFormatError(f"planner: dt must be positive and finite (got {dt}) and tail_s "
+                              f"finite and >= 0 (got {tail_s})")
+    wp = np.asarray(waypoints, dtype=float)
+    if wp.ndim != 2 or wp.shape[1] != 2 or not np.all(np.isfinite(wp)):
+        raise DataFormatError("planner: waypoints must be a finite (n, 2) array of x, y [m]")
+    check_waypoints(wp, closed)
+    chord = float(np.sum(np.hypot(*np.diff(wp, axis=0).T)))
+    # The car is never faster than v_max: a lower bound on the samples, checked before any work.
+    _check_samples(laps * chord / (settings.v_max * dt) + tail_s / dt,
+                   f"a {chord:.0f} m path at <= {settings.v_max:g} m/s every dt = {dt:g} s")
+    geo = path_geometry(wp, closed=closed, v_cap=v_cap)
     L = geo.length
     prof = speed_profile(geo, settings, omega_max=omega_max, jerk_max=jerk_max)
     s_n, v_n = prof.s, prof.v
@@ -347,6 +417,7 @@ def plan_path(
         n_main = laps * n_lap
     else:
         n_main = int(np.floor(T_lap / dt)) + 1
+    _check_samples(n_main + tail_s / dt, f"a lap time of {T_lap:.4g} s every dt = {dt:g} s")
     n = n_main + int(np.ceil(tail_s / dt - 1e-9))
     t = np.arange(n) * dt
     if closed:

@@ -14,7 +14,12 @@ from numpy.typing import NDArray
 
 from tsmpc.errors import DataFormatError
 
-__all__ = ["CSV_HEADER", "Reference"]
+__all__ = ["CSV_HEADER", "POSE_TOLERANCE_M", "Reference", "check_consistency", "check_window"]
+
+#: Largest mismatch [m] accepted between a step of the position and v_d·T (plus 10 % of v_d·T).
+POSE_TOLERANCE_M = 0.05
+#: Largest mismatch [rad] accepted between a step of θ_d and ω_d·T (plus 10 % of |ω_d|·T).
+HEADING_TOLERANCE_RAD = 0.02
 
 CSV_HEADER = "t,x,y,theta,v,omega,kappa"
 _SIGNALS = ("t", "x", "y", "theta", "v", "omega", "kappa")
@@ -129,7 +134,7 @@ class Reference:
         """Resample to step ``dt`` (linear interpolation of every signal; θ is unwrapped so this
         is continuous)."""
         if not dt > 0:
-            raise ValueError(f"dt must be positive, got {dt}")
+            raise DataFormatError(f"dt must be positive, got {dt}")
         n = int(np.floor(self.duration / dt + 1e-9)) + 1
         t = self.t[0] + np.arange(n) * dt
         return Reference(t, *(np.interp(t, self.t, getattr(self, s)) for s in _SIGNALS[1:]),
@@ -140,17 +145,20 @@ class Reference:
         from tsmpc.sim.log import atomic_write_text
 
         data = np.stack([getattr(self, s) for s in _SIGNALS], axis=1)
-        lines = [CSV_HEADER] + [",".join(f"{v:.10g}" for v in row) for row in data]
+        # repr: the shortest text that reads back to the same double (full precision, any size).
+        lines = [CSV_HEADER] + [",".join(repr(float(v)) for v in row) for row in data]
         atomic_write_text(path, "\n".join(lines) + "\n")
 
     @classmethod
-    def from_csv(cls, path: str | Path, closed: bool = False) -> Reference:
-        """Read a CSV written by :meth:`to_csv` (header ``t,x,y,theta,v,omega,kappa``)."""
+    def from_csv(cls, path: str | Path, closed: bool = False, *, text: str | None = None) -> Reference:
+        """Read a CSV written by :meth:`to_csv` (header ``t,x,y,theta,v,omega,kappa``); values
+        must be finite, speeds ≥ 0 and the pose consistent with v and ω (:func:`check_consistency`).
+        ``text``: the file's content when the caller has read it already."""
+        from tsmpc.textfile import read_text
+
         p = Path(path)
-        try:
-            text = p.read_text(encoding="utf-8")
-        except OSError as err:
-            raise DataFormatError(f"{p}: cannot read reference: {err.strerror}") from None
+        if text is None:
+            text = read_text(p, "reference")
         lines = [ln for ln in text.splitlines() if ln.strip()]
         if not lines or lines[0].replace(" ", "") != CSV_HEADER:
             raise DataFormatError(f"{p}: expected the header '{CSV_HEADER}'")
@@ -159,5 +167,70 @@ class Reference:
         except ValueError as err:
             raise DataFormatError(f"{p}: non-numeric value ({err})") from None
         if data.ndim != 2 or data.shape[1] != 7:
-            raise DataFormatError(f"{p}: expected 7 columns per row")
-        return cls(*data.T, closed=closed)
+            raise DataFormatError(f"{p}: expected 7 columns per row (t,x,y,theta,v,omega,kappa)")
+        if not np.all(np.isfinite(data)):
+            r, c = np.argwhere(~np.isfinite(data))[0]
+            raise DataFormatError(f"{p}: line {r + 2}: {_SIGNALS[c]} is {data[r, c]} (must be finite)")
+        try:
+            ref = cls(*data.T, closed=closed)
+        except DataFormatError as err:
+            raise DataFormatError(f"{p}: {err}") from None
+        check_consistency(ref, str(p), first_sample=2, what="line")
+        return ref
+
+
+def check_window(
+    window: tuple[int, int], n: int, source: str, unit: str = "column"
+) -> tuple[int, int]:
+    """Check 1-based inclusive ``window`` = (FIRST, LAST) against ``n`` samples."""
+    a, b = window
+    if not 1 <= a < b <= n:
+        why = ("FIRST must be < LAST" if a >= b else f"allowed {unit}s are 1..{n}")
+        raise DataFormatError(f"{source}: --window {a},{b}: {why} (1-based {unit}s FIRST,LAST)")
+    return a, b
+
+
+def check_consistency(ref: Reference, source: str, *, first_sample: int = 1,
+                      what: str = "sample") -> None:
+    """Speeds ≥ 0 and the pose consistent with v_d and ω_d under the paper's integration
+    (x(k) − x(k−1) ≈ v(k) T along θ(k), θ(k) − θ(k−1) ≈ ω(k) T) within
+    :data:`POSE_TOLERANCE_M` / :data:`HEADING_TOLERANCE_RAD` + 10 %; the previous sample's
+    speed is accepted too (planners differ in that convention). Raises :class:`DataFormatError`
+    naming the first bad ``what`` (line / column number)."""
+    def where(k: int) -> str:
+        return f"{source}: {what} {first_sample + k}"
+
+    neg = np.flatnonzero(ref.v < 0)
+    if neg.size:
+        k = int(neg[0])
+        raise DataFormatError(f"{where(k)}: v = {ref.v[k]:.6g} m/s; speeds must be >= 0")
+    dt = ref.dt
+    step = np.hypot(np.diff(ref.x), np.diff(ref.y))
+    err = np.minimum(np.abs(step - ref.v[1:] * dt), np.abs(step - ref.v[:-1] * dt))
+    tol = POSE_TOLERANCE_M + 0.1 * np.maximum(ref.v[1:], ref.v[:-1]) * dt
+    bad = np.flatnonzero(err > tol)
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise DataFormatError(
+            f"{where(k)}: the position moves {step[k - 1]:.4g} m in one step but v*T = "
+            f"{ref.v[k] * dt:.4g} m (tolerance {tol[k - 1]:.3g} m): x, y and v are inconsistent")
+    dth = np.diff(ref.theta)
+    err = np.minimum(np.abs(dth - ref.omega[1:] * dt), np.abs(dth - ref.omega[:-1] * dt))
+    tol = HEADING_TOLERANCE_RAD + 0.1 * np.maximum(np.abs(ref.omega[1:]), np.abs(ref.omega[:-1])) * dt
+    bad = np.flatnonzero(err > tol)
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise DataFormatError(
+            f"{where(k)}: theta changes {dth[k - 1]:.4g} rad in one step but omega*T = "
+            f"{ref.omega[k] * dt:.4g} rad (tolerance {tol[k - 1]:.3g} rad): theta and omega "
+            "are inconsistent")
+    moving = np.flatnonzero(step > 0.1)
+    if moving.size:
+        hd = np.arctan2(np.diff(ref.y), np.diff(ref.x))[moving]
+        off = np.abs(np.angle(np.exp(1j * (hd - ref.theta[moving + 1]))))
+        if off.max() > 0.35:
+            k = int(moving[int(np.argmax(off > 0.35))]) + 1
+            raise DataFormatError(
+                f"{where(k)}: the position moves at {np.degrees(hd[np.argmax(off > 0.35)]):.0f} deg "
+                f"but theta = {np.degrees(ref.theta[k]):.0f} deg (tolerance 20 deg): pose and "
+                "heading are inconsistent (reversing or mislabelled columns?)")

@@ -92,12 +92,10 @@ def is_tumftm(path: str | Path) -> bool:
 
 def load_tumftm(path: str | Path) -> Track:
     """Load a TUMFTM track CSV; malformed files raise :class:`DataFormatError` naming the problem."""
+    from tsmpc.textfile import read_text
+
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise DataFormatError(f"{p}: cannot read track: {err}") from None
-    lines = text.splitlines()
+    lines = read_text(p, "track (TUMFTM CSV)").splitlines()
     if not lines or lines[0].replace(" ", "").strip() != TUMFTM_HEADER.replace(" ", ""):
         raise DataFormatError(f"{p}: not a TUMFTM track: the first line must be '{TUMFTM_HEADER}'")
     rows = []
@@ -119,7 +117,14 @@ def load_tumftm(path: str | Path) -> Track:
         raise DataFormatError(f"{p}: NaN or inf on data row {bad + 1}")
     if np.allclose(a[0, :2], a[-1, :2]):
         a = a[:-1]  # a repeated first point: the loop closes implicitly
-    return Track(p.stem, a[:, 0], a[:, 1], a[:, 2], a[:, 3])
+    try:
+        track = Track(p.stem, a[:, 0], a[:, 1], a[:, 2], a[:, 3])
+        from tsmpc.planning.planner import check_waypoints
+
+        check_waypoints(track.centre, closed=True)
+    except DataFormatError as err:
+        raise DataFormatError(f"{p}: {err}") from None
+    return track
 
 
 def plan_track(track: Track, settings: PlannerSettings, dt: float = 0.1, laps: int = 1,

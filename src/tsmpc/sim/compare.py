@@ -63,6 +63,7 @@ def load_scenario(
     paper = _is_paper_format(Path(reference))
     win = window if window is not None else (PAPER_RUN_WINDOW if (paper and use_paper_window) else None)
     ref = load_reference(reference, window=win)
+    check_trackable(ref, cfg, str(reference))
     return Scenario(Path(reference).stem, ref, paper_friction_profile(),
                     meta={"reference": str(reference), "window": list(win) if win else None,
                           "paper_reference": paper})
@@ -70,12 +71,27 @@ def load_scenario(
 
 def _is_paper_format(path: Path) -> bool:
     """A planned CSV starts with its ``t,x,y,...`` header; the paper's file is 6 numeric rows."""
-    try:
-        with path.open(encoding="utf-8") as fh:
-            first = fh.readline().strip()
-    except OSError:
-        return False
+    from tsmpc.textfile import first_line
+
+    first = first_line(path, "reference")  # an unreadable file is reported here, naming it
     return not first.lower().startswith(("t,", "#"))
+
+
+def check_trackable(ref: Any, cfg: Config, source: str) -> None:
+    """A reference the closed loop can track: more samples than the horizon N (look-ahead),
+    moving (v_d > 0). Raises :class:`DataFormatError` naming ``source``."""
+    from tsmpc.errors import DataFormatError
+
+    n_min = cfg.mpc.N + 2
+    n = int(ref.duration / cfg.rates.Tc + 1e-9) + 1  # samples at T_c (the simulator resamples)
+    if n < n_min:
+        raise DataFormatError(f"{source}: {n} samples at Tc = {cfg.rates.Tc:g} s; tracking needs at "
+                              f"least N + 2 = {n_min} (the MPC looks N = {cfg.mpc.N} steps ahead): "
+                              "use a longer reference or a wider --window")
+    if ref.v.min() <= 0.0:
+        k = int(ref.v.argmin())
+        raise DataFormatError(f"{source}: sample {k + 1} of the tracked window has v_d = "
+                              f"{ref.v[k]:g} m/s; a tracked reference must move (v_d > 0)")
 
 
 def _scenario_summary(cfg: Config, sc: Scenario, max_steps: int | None) -> dict[str, Any]:
@@ -105,16 +121,17 @@ def compare(
     oracle: bool = False,
     max_steps: int | None = None,
     progress_factory: ProgressFactory | None = None,
+    designs: tuple[Any, Any] | None = None,
 ) -> CompareResult:
     """Run ``methods`` on ``scenario`` and write metrics, tables, time series and figures.
 
     Every method runs from the same seed (same noise sequence). Nothing is written when
-    ``out_dir`` is None. Files are written atomically.
+    ``out_dir`` is None. Files are written atomically. ``designs``: the (kinematic, dynamic)
+    LMI designs of ``cfg`` when the caller has them (default: the design cache).
     """
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
-    kd = load_or_design_kinematic(cfg)
-    dd = load_or_design_dynamic(cfg)
+    kd, dd = designs or (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
     logs: dict[str, RunLog] = {}
     for method in methods:
         k_total = len(scenario.reference) - cfg.mpc.N

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from tsmpc.config import Config, TyreParams, VehicleParams
 from tsmpc.control.cascade import Cascade, Command, Measurement, Method, build_outer_controller
-from tsmpc.errors import NonFiniteError
+from tsmpc.errors import ConfigError, NonFiniteError
 from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.planning.reference import Reference
 from tsmpc.scenarios import FrictionProfile, SensorNoise, paper_friction_profile
@@ -170,7 +170,7 @@ def simulate(
     ref, N, Tc, Td, n_in = cascade.reference, cfg.mpc.N, cfg.rates.Tc, cfg.rates.Td, cascade.n_inner
     K = len(ref) - N
     if K < 1:
-        raise ValueError(f"reference has {len(ref)} samples: needs more than N = {N} for look-ahead")
+        raise ConfigError(f"reference has {len(ref)} samples: needs more than N = {N} for look-ahead")
     K = K if max_steps is None else min(K, int(max_steps))
     plant = plant if plant is not None else default_plant(cfg, scenario)
     x = _start_state(ref, scenario.initial_error)

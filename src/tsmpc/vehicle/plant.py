@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tsmpc.config import TyreModel, TyreParams, VehicleParams
-from tsmpc.errors import NonFiniteError
+from tsmpc.errors import ConfigError, NonFiniteError
 
 __all__ = ["INPUT_NAMES", "STATE_NAMES", "Plant", "PlantConstants", "VehiclePlant"]
 
@@ -68,7 +68,7 @@ class Plant:
         jit: bool | None = None,
     ) -> None:
         if not (h > 0 and math.isfinite(h)):
-            raise ValueError(f"h must be a positive finite step, got {h}")
+            raise ConfigError(f"h must be a positive finite step, got {h}")
         self.vehicle = vehicle
         self.tyre = tyre
         self.h = float(h)
@@ -153,7 +153,7 @@ class Plant:
         xs = tuple(np.asarray(x, dtype=float).reshape(-1).tolist())
         us = tuple(np.asarray(u, dtype=float).reshape(-1).tolist())
         if len(xs) != 6 or len(us) != 2:
-            raise ValueError(f"plant: state must have 6 entries and input 2, got {len(xs)}, {len(us)}")
+            raise ConfigError(f"plant: state must have 6 entries and input 2, got {len(xs)}, {len(us)}")
         mu = float(mu_road)
         if not all(map(_isfinite, xs)):
             raise NonFiniteError(f"plant: non-finite state {xs}")
