@@ -204,3 +204,14 @@ def test_offset_start_makes_the_methods_differ(cfg: Config, paper_reference_path
     assert sc.initial_error == (2.0, 0.2)
     x = {m: compute_metrics(simulate(c, m, sc, max_steps=200))["rmse"]["x"] for m in (Method.FZN, Method.REF)}
     assert x[Method.FZN] > 1.2 * x[Method.REF]
+
+
+def test_sweep_base_config_accepts_a_preset(tmp_path: Path) -> None:
+    from tsmpc.sweep import base_config, load_sweep
+
+    base = 'preset = "paper"\n[lqr]\nspeed_time_constant = 0.7\n'
+    (tmp_path / "base.toml").write_text(base, encoding="utf-8")
+    (tmp_path / "s.toml").write_text('name = "p"\nbase_config = "base.toml"\n[grid]\nmethod = ["ref"]\n',
+                                     encoding="utf-8")
+    c = base_config(load_sweep(tmp_path / "s.toml"))
+    assert c.lqr.speed_feedback is False and c.lqr.speed_time_constant == 0.7

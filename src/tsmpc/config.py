@@ -41,6 +41,7 @@ __all__ = [
     "format_validation_error",
     "load_config",
     "replace",
+    "resolve_preset",
 ]
 
 PositiveFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
@@ -443,10 +444,18 @@ def load_config(path: str | Path | None = None, preset: str | None = None) -> Co
         data = tomllib.loads(read_text(p, "config file (TOML)", ConfigError))
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{p}: invalid TOML: {err}") from None
+    return validate(Config, resolve_preset(data, preset, source=str(p)), source=str(p))
+
+
+def resolve_preset(data: dict[str, Any], preset: str | None = None, source: str = "config") -> dict[str, Any]:
+    """Config data with its top-level ``preset`` key (or ``preset``, which wins) expanded: the
+    preset's values, overridden by the data's own fields. Raises :class:`ConfigError` for an
+    unknown preset."""
+    data = dict(data)
     name = data.pop("preset", None)
     if preset is None and name is not None:
         if not isinstance(name, str) or name not in PRESETS:
-            raise ConfigError(f"{p}: preset: unknown preset {name!r}; allowed: {', '.join(PRESETS)}")
+            raise ConfigError(f"{source}: preset: unknown preset {name!r}; allowed: {', '.join(PRESETS)}")
         preset = name
     base = _preset_dict(preset) if preset is not None else {}
-    return validate(Config, _merge(base, data), source=str(p))
+    return _merge(base, data)

@@ -43,7 +43,7 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from tsmpc.config import Config, validate
+from tsmpc.config import Config, resolve_preset, validate
 from tsmpc.errors import ConfigError
 from tsmpc.robustness import ROBUSTNESS_SCENARIOS
 from tsmpc.sim.log import atomic_write_bytes, atomic_write_text
@@ -303,7 +303,7 @@ def base_config(spec: SweepSpec, source: str = "sweep") -> Config:
             raise ConfigError(f"{source}: base_config: {err}") from None
         except tomllib.TOMLDecodeError as err:
             raise ConfigError(f"{source}: base_config: invalid TOML in {path}: {err}") from None
-    merged = _merge(data, spec.config)
+    merged = resolve_preset(_merge(data, spec.config), source=f"{source}: config")  # preset = "paper"
     return validate(Config, merged, source=f"{source}: config")
 
 

@@ -65,9 +65,6 @@ def _execute(
     from tsmpc.sim.simulator import Method
 
     limit_blas_threads()
-    from tsmpc import kernels
-
-    kernels.warmup()  # compile/load before the progress bars (the first run prints a status line)
     console = Console()
     if not console.is_terminal:  # piped to a file or CI log: do not squeeze the tables to 80 columns
         console = Console(width=140)
@@ -105,6 +102,9 @@ def _execute(
             if oracle:
                 cfg = replace(cfg, lqr=replace(cfg.lqr, oracle=True, friction_compensation=False))
             designs = design_status(cfg)
+            from tsmpc import kernels
+
+            kernels.warmup()  # compile/load before the progress bars (the first run says so)
             with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
                           TextColumn("{task.completed}/{task.total} MPC steps"),
                           TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:

@@ -140,7 +140,7 @@ class TSLQR:
             self.reset()
             for k in range(3):
                 est = SimpleNamespace(x=(9.0 + k, 0.01, 0.1), F_fr=120.0, F_fr_raw=90.0)
-                c = self.step(est, 10.0, 0.12)
+                c = self._step(est, 10.0, 0.12)  # not step(): callers may wrap it
                 out.append((c.F_xR, c.delta, c.saturated))
         self._kern = kern
         self.reset()
@@ -214,6 +214,9 @@ class TSLQR:
     def step(self, estimate: Any, v_ref: float, omega_ref: float) -> InnerCommand:
         """One inner step from the estimate (``.x`` = [v̂, α̂, ω̂], ``.F_fr``, ``.F_fr_raw``) and
         the outer-loop references; returns the plant input for the next T_d."""
+        return self._step(estimate, v_ref, omega_ref)
+
+    def _step(self, estimate: Any, v_ref: float, omega_ref: float) -> InnerCommand:
         v, al, om = (float(c) for c in estimate.x)
         if not (math.isfinite(v) and math.isfinite(al) and math.isfinite(om)):
             # Never command from a corrupted estimate: hold the last input.
