@@ -43,3 +43,19 @@ def test_a_simulating_process_gets_one_blas_thread(env: dict, expected: str, mon
     if out.stdout.strip() == "0":
         pytest.skip("no BLAS library visible to threadpoolctl")
     assert out.stdout.strip() == expected
+
+
+def test_simulate_limits_blas_to_one_thread(cfg, monkeypatch) -> None:
+    from tsmpc import blas
+    from tsmpc.sim.compare import load_scenario
+    from tsmpc.sim.simulator import simulate
+
+    monkeypatch.delenv("TSMPC_BLAS_THREADS", raising=False)
+    monkeypatch.setattr(blas, "_APPLIED", None)  # as in a fresh process
+    calls = []
+    real = blas.limit_blas_threads
+    monkeypatch.setattr(blas, "limit_blas_threads", lambda *a: calls.append(a) or real(*a))
+    simulate(cfg, "REF", load_scenario(cfg), max_steps=2)
+    assert calls and blas._APPLIED == 1
+    info = [i for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
+    assert all(i["num_threads"] == 1 for i in info)
