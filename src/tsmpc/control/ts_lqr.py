@@ -118,13 +118,17 @@ class TSLQR:
             self._kern = kernels.load("lqr")
         if self._kern is not None:
             p = vehicle
-            self._kargs = (self.K, np.array(self._zlo), np.array(self._zhi),
-                           np.array(self._bits, dtype=np.bool_),
-                           np.array([p.mass, p.inertia, p.cornering_stiffness, p.a, p.b,
-                                     p.mu_nominal * p.g, p.drag_factor], dtype=float),
-                           self.bandwidth, self._a, self.Td, float(self._lo[0]), float(self._hi[0]),
-                           float(self._lo[1]), float(self._hi[1]), bool(settings.speed_feedback),
-                           float(settings.speed_time_constant))
+            try:
+                self._kargs = (np.ascontiguousarray(self.K), np.array(self._zlo), np.array(self._zhi),
+                               np.array(self._bits, dtype=np.bool_),
+                               np.array([p.mass, p.inertia, p.cornering_stiffness, p.a, p.b,
+                                         p.mu_nominal * p.g, p.drag_factor], dtype=float),
+                               self.bandwidth, self._a, self.Td, float(self._lo[0]), float(self._hi[0]),
+                               float(self._lo[1]), float(self._hi[1]), bool(settings.speed_feedback),
+                               float(settings.speed_time_constant))
+            except (AttributeError, TypeError):  # parameters the kernel does not know: numpy
+                self._kern = None
+        if self._kern is not None:
             if not self._kernel_agrees():
                 self._kern = None  # the law changed on the numpy side only: numpy it is
         self.reset()

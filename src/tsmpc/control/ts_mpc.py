@@ -252,6 +252,8 @@ class TSMPC:
         self._mode_id = {SchedulingMode.FZN: 0, SchedulingMode.REF: 1, SchedulingMode.ITER: 2}[self.mode]
         self._du = du
         self._dummy = np.zeros(N)
+        # C-ordered copies for the kernel (one compiled signature whatever the caller passed)
+        self._Pc, self._Sc = np.ascontiguousarray(self.P), np.ascontiguousarray(self.S)
         self.reset()
 
     def reset(self) -> None:
@@ -414,7 +416,7 @@ class TSMPC:
             code, U, du, X, cost, n_clip = self._kern.fast_step(
                 self._mode_id, x0, up, v_d, w_d, dummy if omega is None else omega, omega is not None,
                 dummy if e_th is None else e_th, e_th is not None, self._lo, self._hi, self.model.Tc,
-                self._q, self.P, self._r, self.S, self._du, self._umin, self._umax,
+                self._q, self._Pc, self._r, self._Sc, self._du, self._umin, self._umax,
                 self.settings.terminal_constraint, n_iter, self.settings.iter_tol)
             if code == 0:
                 res = MPCResult(u=U[0].copy(), x_pred=X, u_pred=U, du=du, cost=cost,

@@ -83,8 +83,12 @@ class Plant:
 
             self._kern = kernels.load("plant")
             if self._kern is not None:
-                self._cst = self._kern.pack(self)
-                if not self._kernel_agrees():
+                try:
+                    self._cst = self._kern.pack(self)
+                    agrees = self._kernel_agrees()
+                except (AttributeError, TypeError, ValueError):  # parameters it does not know
+                    agrees = False
+                if not agrees:
                     self._kern = None  # the model changed without the kernel: numpy only
 
     # ------------------------------------------------------------------ model
