@@ -209,8 +209,8 @@ def test_mhe_kernel_equals_the_dense_qp_on_random_windows(cfg: Config) -> None:
         box = dyn.premise_box
         p = cfg.vehicle
         mk.euler_matrices(us, xs, n, np.asarray(box.lower), np.asarray(box.upper), p.mass, p.inertia,
-                          p.cornering_stiffness, p.a, p.b, p.mu_nominal * p.g, p.drag_factor,
-                          cfg.rates.Td, Ak, Bk)
+                          p.cornering_stiffness, p.cornering_stiffness, p.a, p.b, p.mu_nominal * p.g,
+                          p.drag_factor, cfg.rates.Td, Ak, Bk)
         np.testing.assert_allclose(Ak, A, rtol=1e-14, atol=1e-15)
         np.testing.assert_allclose(Bk, B, rtol=1e-14, atol=1e-15)
 

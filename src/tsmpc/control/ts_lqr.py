@@ -121,7 +121,8 @@ class TSLQR:
             try:
                 self._kargs = (np.ascontiguousarray(self.K), np.array(self._zlo), np.array(self._zhi),
                                np.array(self._bits, dtype=np.bool_),
-                               np.array([p.mass, p.inertia, p.cornering_stiffness, p.a, p.b,
+                               np.array([p.mass, p.inertia, getattr(p, "C_f", p.cornering_stiffness),
+                                         getattr(p, "C_r", p.cornering_stiffness), p.a, p.b,
                                          p.mu_nominal * p.g, p.drag_factor], dtype=float),
                                self.bandwidth, self._a, self.Td, float(self._lo[0]), float(self._hi[0]),
                                float(self._lo[1]), float(self._hi[1]), bool(settings.speed_feedback),

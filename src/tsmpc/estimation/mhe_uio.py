@@ -133,11 +133,13 @@ class MHEUIO:
             n = settings.N
             p, box = getattr(model, "params", vehicle), model.premise_box
             try:
-                phys = (float(p.mass), float(p.inertia), float(p.cornering_stiffness), float(p.a),
+                cf = getattr(p, "C_f", p.cornering_stiffness)  # per axle where known
+                cr = getattr(p, "C_r", p.cornering_stiffness)
+                phys = (float(p.mass), float(p.inertia), float(cf), float(cr), float(p.a),
                         float(p.b), float(p.mu_nominal * p.g), float(p.drag_factor))
                 euler = getattr(model, "method", None) == Discretization.EULER
             except (AttributeError, TypeError):
-                phys, euler = (1.0,) * 7, False
+                phys, euler = (1.0,) * 8, False
             self._kargs = (
                 self._q, self._r, self._p, F_PRIOR_WEIGHT, self._xmin, self._xmax,
                 np.asarray(box.lower, dtype=float), np.asarray(box.upper, dtype=float),
@@ -160,7 +162,7 @@ class MHEUIO:
             U = np.column_stack([np.zeros(3), z[:, 0]])
             Ak, Bk = np.empty((3, 3, 3)), np.empty((3, 3, 2))
             k = self._kargs
-            self._kern.euler_matrices(U, z[:, [1, 2, 0]], 3, k[6], k[7], *k[8:16], Ak, Bk)
+            self._kern.euler_matrices(U, z[:, [1, 2, 0]], 3, k[6], k[7], *k[8:17], Ak, Bk)
             return bool(np.allclose(Ak, A, rtol=1e-12, atol=1e-14)
                         and np.allclose(Bk, B, rtol=1e-12, atol=1e-14))
         except Exception:  # any mismatch of shapes or attributes: do not trust the kernel's model

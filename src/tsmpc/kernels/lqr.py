@@ -44,22 +44,22 @@ def _plant_filter(delta, v, zlo, zhi, prm, lam, Aa):
     """Continuous plant + filter matrix (5, 5) at (δ, v) clipped into the box; B_a = λ [0; I]."""
     delta = min(max(delta, zlo[0]), zhi[0])
     v = min(max(v, zlo[1]), zhi[1])
-    M, I, C, a, b, mug, kd = prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6]
+    M, I, Cf, Cr, a, b, mug, kd = prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7]
     sd, cd = math.sin(delta), math.cos(delta)
     for i in range(5):
         for j in range(5):
             Aa[i, j] = 0.0
     Aa[0, 0] = -mug / v - kd * v / M
-    Aa[0, 1] = C * sd / M
-    Aa[0, 2] = C * a * sd / (M * v)
-    Aa[1, 1] = -C * (1.0 + cd) / (M * v)
-    Aa[1, 2] = C * (b - a * cd) / (M * v**2) - 1.0
-    Aa[2, 1] = C * (b - a * cd) / I
-    Aa[2, 2] = -C * (a**2 * cd + b**2) / (I * v)
+    Aa[0, 1] = Cf * sd / M
+    Aa[0, 2] = Cf * a * sd / (M * v)
+    Aa[1, 1] = -(Cr + Cf * cd) / (M * v)
+    Aa[1, 2] = (Cr * b - Cf * a * cd) / (M * v**2) - 1.0
+    Aa[2, 1] = (Cr * b - Cf * a * cd) / I
+    Aa[2, 2] = -(Cf * a**2 * cd + Cr * b**2) / (I * v)
     Aa[0, 3] = 1.0 / M
-    Aa[0, 4] = -C * sd / M
-    Aa[1, 4] = C * cd / (M * v)
-    Aa[2, 4] = C * a * cd / I
+    Aa[0, 4] = -Cf * sd / M
+    Aa[1, 4] = Cf * cd / (M * v)
+    Aa[2, 4] = Cf * a * cd / I
     Aa[3, 3] = -lam
     Aa[4, 4] = -lam
 
@@ -180,6 +180,6 @@ def warm() -> None:
     Kv[:, 0, 0] = -100.0
     Kv[:, 1, 2] = -0.1
     bits = np.array([[(i >> j) & 1 for j in range(3)] for i in range(8)], dtype=np.bool_)
-    prm = np.array([683.0, 560.0, 25000.0, 0.758, 1.036, 4.9, 0.4])
+    prm = np.array([683.0, 560.0, 25000.0, 25000.0, 0.758, 1.036, 4.9, 0.4])
     lqr_step(np.zeros(6), 10.0, 0.0, 0.0, 0.0, 10.0, 0.0, Kv, np.array([-0.4, 2.0, -0.1]),
              np.array([0.4, 20.0, 0.1]), bits, prm, 10.0, 0.9, 0.01, -2000.0, 10000.0, -0.4, 0.4, True, 0.3)

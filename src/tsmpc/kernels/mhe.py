@@ -29,28 +29,28 @@ __all__ = ["warm", "window_step"]
 
 
 @njit(cache=True, fastmath=False)
-def euler_matrices(U, XS, n, lo, hi, M, I, C, a, b, mug, kd, Td, A, B):
+def euler_matrices(U, XS, n, lo, hi, M, I, Cf, Cr, a, b, mug, kd, Td, A, B):
     """A_d (n, 3, 3), B_d (n, 3, 2) at ϑ_k = (δ_k, v̂_k, α̂_k) clipped into the box (as
-    ``DynamicTS.matrices`` with Euler)."""
+    ``DynamicTS.matrices`` with Euler; per-axle stiffness C_f, C_r, the paper's C_f = C_r = C)."""
     for k in range(n):
         d = min(max(U[k, 1], lo[0]), hi[0])
         v = min(max(XS[k, 0], lo[1]), hi[1])
         sd, cd = math.sin(d), math.cos(d)
         A[k, 0, 0] = 1.0 + Td * (-mug / v - kd * v / M)
-        A[k, 0, 1] = Td * (C * sd / M)
-        A[k, 0, 2] = Td * (C * a * sd / (M * v))
+        A[k, 0, 1] = Td * (Cf * sd / M)
+        A[k, 0, 2] = Td * (Cf * a * sd / (M * v))
         A[k, 1, 0] = 0.0
-        A[k, 1, 1] = 1.0 + Td * (-C * (1.0 + cd) / (M * v))
-        A[k, 1, 2] = Td * (C * (b - a * cd) / (M * v**2) - 1.0)
+        A[k, 1, 1] = 1.0 + Td * (-(Cr + Cf * cd) / (M * v))
+        A[k, 1, 2] = Td * ((Cr * b - Cf * a * cd) / (M * v**2) - 1.0)
         A[k, 2, 0] = 0.0
-        A[k, 2, 1] = Td * (C * (b - a * cd) / I)
-        A[k, 2, 2] = 1.0 + Td * (-C * (a**2 * cd + b**2) / (I * v))
+        A[k, 2, 1] = Td * ((Cr * b - Cf * a * cd) / I)
+        A[k, 2, 2] = 1.0 + Td * (-(Cf * a**2 * cd + Cr * b**2) / (I * v))
         B[k, 0, 0] = Td * (1.0 / M)
-        B[k, 0, 1] = Td * (-C * sd / M)
+        B[k, 0, 1] = Td * (-Cf * sd / M)
         B[k, 1, 0] = 0.0
-        B[k, 1, 1] = Td * (C * cd / (M * v))
+        B[k, 1, 1] = Td * (Cf * cd / (M * v))
         B[k, 2, 0] = 0.0
-        B[k, 2, 1] = Td * (C * a * cd / I)
+        B[k, 2, 1] = Td * (Cf * a * cd / I)
 
 
 @njit(cache=True, fastmath=False)
@@ -205,7 +205,7 @@ def banded_solve(Y, W, U, A, B, n, arrival, F_prior, q, r, p, pF, X):
 
 @njit(cache=True, fastmath=False)
 def window_step(Y, W, U, XS, n, x, F, u, ok, full, arrival, q, r, p, pF, xmin, xmax, lo, hi,
-                M, I, C, a, b, mug, kd, Td, eval_model, A, B, X):
+                M, I, Cf, Cr, a, b, mug, kd, Td, eval_model, A, B, X):
     """One MHE step after the window update (everything ``MHEUIO.step`` does from the model
     evaluation on). Writes XS[n−1], XS[n] (prediction) and, on success, the smoothed window.
 
@@ -214,7 +214,7 @@ def window_step(Y, W, U, XS, n, x, F, u, ok, full, arrival, q, r, p, pF, xmin, x
     (XS[n] holds the prediction); 3 = non-finite prediction (FAILED)."""
     XS[n - 1, 0], XS[n - 1, 1], XS[n - 1, 2] = x[0], x[1], x[2]
     if eval_model:
-        euler_matrices(U, XS, n, lo, hi, M, I, C, a, b, mug, kd, Td, A, B)
+        euler_matrices(U, XS, n, lo, hi, M, I, Cf, Cr, a, b, mug, kd, Td, A, B)
     k = n - 1
     pred = np.empty(3)
     for i in range(3):
@@ -250,5 +250,5 @@ def warm() -> None:
     XS = np.ones((n + 1, 3)) * 5.0
     o3 = np.ones(3)
     window_step(Y, W, U, XS, n, o3 * 5.0, 0.0, np.zeros(2), True, False, o3, o3, np.ones(2), o3, 1e-10,
-                -o3 * 100, o3 * 100, -o3, o3 * 20, 683.0, 560.0, 25000.0, 0.7, 1.0, 4.9, 0.4, 0.01, True,
-                np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3)))
+                -o3 * 100, o3 * 100, -o3, o3 * 20, 683.0, 560.0, 25000.0, 25000.0, 0.7, 1.0, 4.9, 0.4,
+                0.01, True, np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3)))

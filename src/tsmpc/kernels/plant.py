@@ -12,7 +12,7 @@ from numba import njit
 __all__ = ["pack", "rk4_block", "warm"]
 
 # Layout of the constants vector (see pack()).
-_M, _I, _A, _B, _C, _KD, _VF, _VE, _MG, _FZF, _FZR, _CC, _EE, _MUT0, _SCALE, _LIN = range(16)
+_M, _I, _A, _B, _CF, _KD, _VF, _VE, _MG, _FZF, _FZR, _CC, _EE, _MUT0, _SCALE, _LIN, _CR = range(17)
 
 
 def pack(plant) -> np.ndarray:
@@ -20,20 +20,23 @@ def pack(plant) -> np.ndarray:
     p, t, k = plant.vehicle, plant.tyre, plant.constants
     fzf, fzr = p.static_loads
     scale = t.mu_tyre / t.mu_dry if t.scale_grip_with_road else 0.0
-    return np.array([p.mass, p.inertia, p.a, p.b, p.cornering_stiffness, p.drag_factor, k.v_floor,
+    # Per-axle cornering stiffness where the parameters have it (C_f, C_r), else the paper's one C.
+    cf = getattr(p, "C_f", p.cornering_stiffness)
+    cr = getattr(p, "C_r", p.cornering_stiffness)
+    return np.array([p.mass, p.inertia, p.a, p.b, cf, p.drag_factor, k.v_floor,
                      k.v_eps, p.mass * p.g, fzf, fzr, t.shape_c, t.curvature_e, t.mu_tyre, scale,
-                     1.0 if plant._linear else 0.0])
+                     1.0 if plant._linear else 0.0, cr])
 
 
 @njit(cache=True, fastmath=False, inline="always")
 def _rhs(cst, th, v, al, om, F, d, mu, cosd):
-    M, I, a, b, C = cst[_M], cst[_I], cst[_A], cst[_B], cst[_C]
+    M, I, a, b, Cf, Cr = cst[_M], cst[_I], cst[_A], cst[_B], cst[_CF], cst[_CR]
     v_floor = cst[_VF]
     ve = v if v > v_floor else v_floor
     sa, ca = math.sin(al), math.cos(al)
     if cst[_LIN] != 0.0:
-        fyf = C * (d - al - a * om / ve)
-        fyr = C * (b * om / ve - al)
+        fyf = Cf * (d - al - a * om / ve)
+        fyr = Cr * (b * om / ve - al)
     else:
         vx, vy = ve * ca, ve * sa
         scale = cst[_SCALE]
@@ -41,9 +44,9 @@ def _rhs(cst, th, v, al, om, F, d, mu, cosd):
         Df, Dr = mu_t * cst[_FZF], mu_t * cst[_FZR]
         cc, ee = cst[_CC], cst[_EE]
         if Df > 0.0:
-            bs = C / (cc * Df) * (math.atan2(vy + a * om, vx) - d)
+            bs = Cf / (cc * Df) * (math.atan2(vy + a * om, vx) - d)
             fyf = -Df * math.sin(cc * math.atan(bs - ee * (bs - math.atan(bs))))
-            bs = C / (cc * Dr) * math.atan2(vy - b * om, vx)
+            bs = Cr / (cc * Dr) * math.atan2(vy - b * om, vx)
             fyr = -Dr * math.sin(cc * math.atan(bs - ee * (bs - math.atan(bs))))
         else:
             fyf = 0.0
@@ -92,5 +95,5 @@ def rk4_block(x, F, d, mu, n, h, cst):
 def warm() -> None:
     """Compile (or load from the cache) the signature the plant uses."""
     cst = np.array([683.0, 560.0, 0.7, 1.0, 25000.0, 0.4, 0.5, 0.05, 6700.0, 3800.0, 2900.0, 1.3, -1.0,
-                    0.9, 0.0, 0.0])
+                    0.9, 0.0, 0.0, 25000.0])
     rk4_block(np.array([0.0, 0.0, 0.0, 10.0, 0.0, 0.0]), 100.0, 0.01, 0.9, 2, 0.001, cst)
