@@ -185,7 +185,8 @@ _OPT_WINDOW = typer.Option(None, "--window", help="1-based FIRST,LAST: columns o
 _OPT_SEED = typer.Option(None, "--seed", help="Seed of the sensor noise, >= 0 (default: config).")
 _OPT_CONFIG = typer.Option(None, "--config", help="TOML config file.")
 _OPT_NO_PLOTS = typer.Option(False, "--no-plots", help="Skip the figures.")
-_OPT_ORACLE = typer.Option(False, "--oracle", help="Ablation: true state, no friction compensation.")
+_OPT_ORACLE = typer.Option(False, "--oracle", help="Ablation: the inner loop gets the true state, "
+                           "no friction compensation.")
 _OPT_DURATION = typer.Option(None, "--duration", help="Track only the first S s (finite, >= 0.1).")
 _OPT_SCENARIO = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP)
 _OPT_PRESET = typer.Option(None, "--preset", help=_PRESET_HELP)
