@@ -52,11 +52,12 @@ def load_scenario(
     """The comparison scenario: the built-in circuit (``reference=None``), a paper-format file
     (the paper-run window of columns 5…1316 unless ``window`` says otherwise) or a planned CSV;
     the paper's time-based friction profile applies in every case."""
-    from tsmpc.planning.circuit import builtin_circuit
     from tsmpc.planning.paper_format import PAPER_RUN_WINDOW, load_reference
     from tsmpc.scenarios import paper_friction_profile
 
     if reference is None:
+        from tsmpc.planning.circuit import builtin_circuit  # (imports the planner: scipy.interpolate)
+
         ref = builtin_circuit(dt=cfg.rates.Tc)
         return Scenario("builtin-circuit", ref, paper_friction_profile(),
                         meta={"reference": "builtin-circuit", "paper_reference": False})
