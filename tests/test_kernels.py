@@ -320,3 +320,22 @@ def test_lqr_kernel_equals_the_numpy_step(cfg: Config, changes: dict) -> None:
         n_sat += cb.saturated
         x = plant.step(x, (cb.F_xR, cb.delta), 0.9, cfg.rates.plant_per_inner)
     assert n_sat > 0
+
+
+def test_mhe_kernel_with_zoh_matrices_evaluated_by_numpy(cfg: Config) -> None:
+    """ZOH discretisation: numpy evaluates the window's matrices, the kernel solves."""
+    from tsmpc.estimation.mhe_uio import MHEUIO
+    from tsmpc.models.dynamic import Discretization, DynamicTS
+
+    dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, cfg.rates.Td, method=Discretization.ZOH)
+    a = MHEUIO(cfg.mhe, dyn, cfg.vehicle, cfg.rates.Td, np.array([8.0, 0.0, 0.0]), jit=True)
+    b = MHEUIO(cfg.mhe, dyn, cfg.vehicle, cfg.rates.Td, np.array([8.0, 0.0, 0.0]), jit=False)
+    assert a._kern is not None and a._kargs[-1] is False
+    rng = np.random.default_rng(4)
+    for k in range(120):
+        y = np.array([8.0 + 0.02 * k, 0.2 * np.sin(0.05 * k)]) + rng.normal(0, 0.005, 2)
+        u = np.array([900.0 + 50 * np.sin(0.1 * k), 0.04 * np.sin(0.05 * k)])
+        ea, eb = a.step(y, u), b.step(y, u)
+        assert ea.status == eb.status
+        np.testing.assert_allclose(ea.x, eb.x, rtol=0, atol=1e-8)
+        assert abs(ea.F_fr - eb.F_fr) <= F_TOL
