@@ -133,3 +133,36 @@ def test_interrupted_run_exits_non_zero_and_marks_the_folder(
     assert marker["status"] == "interrupted" and marker["signal"] == signal.Signals(sig).name
     # Either complete outputs or a marked partial run: here the run stopped early, so marked.
     assert not (out / "metrics.json").exists()
+
+
+def test_interrupted_sweep_keeps_its_records_and_resumes(tmp_path: Path) -> None:
+    """SIGINT mid-sweep: exit 130, the records written so far stay, PARTIAL marks the folder,
+    and --resume runs only what is missing."""
+    sweep = tmp_path / "s.toml"
+    sweep.write_text('name = "t"\nduration_s = 2.0\n[grid]\nmethod = ["ref", "fzn"]\n'
+                     'seed = [1, 2, 3, 4, 5, 6, 7, 8]\n')
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "tsmpc", "sweep", str(sweep), "--dry-run", "--no-plots",
+           "--workers", "1", "--out", str(out)]
+    proc = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while len(list((out / "runs").glob("*.json"))) < 2:
+            assert proc.poll() is None, proc.communicate()[0]
+            assert time.monotonic() < deadline, "no record appeared"
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        text, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, text
+    assert "Traceback" not in text and "--resume" in text
+    assert json.loads((out / PARTIAL_MARKER).read_text())["status"] == "interrupted"
+    kept = {p.name: p.read_text() for p in (out / "runs").glob("*.json")}
+    assert 2 <= len(kept) < 16
+    done = subprocess.run([*cmd, "--resume"], env=_env(), capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert not (out / PARTIAL_MARKER).exists()
+    after = {p.name: p.read_text() for p in (out / "runs").glob("*.json")}
+    assert len(after) == 16 and all(after[k] == v for k, v in kept.items())

@@ -99,9 +99,11 @@ def _execute(
             if overwrite:
                 _remove_previous_outputs(out)
             mark_partial(out, "running", methods=[m.value for m in methods])
-            if oracle:
-                cfg = replace(cfg, lqr=replace(cfg.lqr, oracle=True, friction_compensation=False))
-            designs = design_status(cfg)
+            try:
+                designs = design_status(cfg)
+            except TsmpcError as err:  # e.g. an infeasible LMI for these weights and boxes
+                (out / PARTIAL_MARKER).unlink(missing_ok=True)
+                fail(f"LMI design failed: {err}", code=1)
             from tsmpc import kernels
 
             kernels.warmup()  # compile/load before the progress bars (the first run says so)
