@@ -37,7 +37,7 @@ def _parse_window(text: str | None) -> tuple[int, int] | None:
 
 #: Files a compare/run writes into --out (figures: FIGURES names as .png and .pdf).
 _OUTPUT_FILES = ("metrics.json", "rmse.csv", "rmse.md", "rmse.tex", "config.toml", "versions.json",
-                 "timeseries.npz", "timeseries.mat", PARTIAL_MARKER)
+                 "timeseries.npz", "timeseries.mat", "report.html", PARTIAL_MARKER)
 
 
 def _remove_previous_outputs(out: Path) -> None:
@@ -47,7 +47,8 @@ def _remove_previous_outputs(out: Path) -> None:
 
     for p in out.iterdir():
         if p.is_file() and (p.name in _OUTPUT_FILES
-                            or (p.suffix in (".png", ".pdf") and p.stem in FIGURES)):
+                            or (p.suffix in (".png", ".pdf") and p.stem in FIGURES)
+                            or (p.suffix in (".gif", ".mp4") and p.stem.startswith("animation_"))):
             p.unlink()
 
 

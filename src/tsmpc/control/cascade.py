@@ -160,7 +160,8 @@ class Cascade:
         method: outer-loop method (FZN, REF, ITER: TS-MPC scheduling; NL: NL-MPC).
         reference: the reference to track; resampled to T_c if needed. Call ``step`` with
             ``t`` = time since the reference's first sample: the MPC tracks sample ``t / T_c``.
-        kinematic_design, dynamic_design: LMI designs; loaded from the design cache if None.
+        kinematic_design: kinematic LMI design; loaded from the design cache if None.
+        dynamic_design: dynamic LMI design; loaded from the design cache if None.
         x0: initial state [X, Y, θ, v, α, ω] (MHE start, first MPC input, pose fallback);
             None = taken from the first measurement (α = 0).
         max_age_s: a measurement whose ``stamp`` is older than this is rejected [s]

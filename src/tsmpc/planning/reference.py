@@ -78,7 +78,7 @@ class Reference:
 
     @property
     def duration(self) -> float:
-        """t[-1] − t[0] [s]."""
+        """``t[-1] − t[0]`` [s]."""
         return float(self.t[-1] - self.t[0])
 
     @staticmethod

@@ -161,7 +161,8 @@ def compare(
 def write_outputs(
     cfg: Config, metrics: dict[str, Any], logs: dict[str, RunLog], out: Path, *, plots: bool
 ) -> list[Path]:
-    """metrics.json, rmse.{csv,md,tex}, timeseries.{npz,mat}, config.toml, versions.json, figures."""
+    """metrics.json, rmse.{csv,md,tex}, timeseries.{npz,mat}, config.toml, versions.json, figures,
+    and last report.html (one self-contained page of all of it)."""
     from tsmpc.report.tables import rmse_csv, rmse_latex, rmse_markdown
 
     out.mkdir(parents=True, exist_ok=True)
@@ -184,5 +185,8 @@ def write_outputs(
     if plots:
         from tsmpc.report.figures import save_all
 
-        files += save_all(logs, out)
+        files += save_all(logs, out, cfg)
+    from tsmpc.report.html import write_report
+
+    files.append(write_report(out, metrics, files))
     return files

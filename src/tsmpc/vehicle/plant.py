@@ -221,7 +221,10 @@ class VehiclePlant:
     protocol): owns the state, integrates :class:`Plant` with RK4 steps of h over each ``dt``.
 
     Args:
-        vehicle, tyre, h, constants: as for :class:`Plant`.
+        vehicle: as for :class:`Plant`.
+        tyre: as for :class:`Plant`.
+        h: as for :class:`Plant`.
+        constants: as for :class:`Plant`.
     """
 
     def __init__(
