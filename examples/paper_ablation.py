@@ -33,8 +33,10 @@ def ablation_rows() -> list[tuple[str, Config, bool, str]]:
         ("paper preset", paper, False,
          "TS-LQR (LMI) + static reference gain N̄, compensation with the paper's one-step UIO F̂"),
         ("+ speed-error feedback", fb, False, "adds M (v_ref − v̂)/τ, τ = 0.3 s"),
-        ("+ MHE-window friction estimate (= default)", Config(), False,
-         "compensates the MHE's window fit of F_fr instead of the one-step formula"),
+        ("+ MHE-window friction estimate", replace(fb, lqr=replace(fb.lqr, friction_estimate="window")),
+         False, "compensates the MHE's window fit of F_fr instead of the one-step formula"),
+        ("+ slip-aware outer loop, tangent heading (= default)", Config(), False,
+         "MPC errors of the velocity pose θ + α̂ against the path tangent θ_d + ω_d T_c/2"),
         ("oracle (default, true state, no compensation)", Config(), True,
          "inner loop gets the plant state; F̂_fr not added"),
     ]

@@ -258,6 +258,12 @@ class MPCSettings(_Frozen):
     iter_max: int = Field(5, ge=1, le=50, description="ITER: maximum QPs per step")
     soft_penalty: PositiveFloat = Field(1e4, description="exact penalty of soft constraints")
     terminal_constraint: bool = Field(True, description="impose x_N' S x_N <= 1")
+    slip_aware: bool = Field(
+        True, description="beyond the paper: errors of the velocity pose θ + α̂ (MHE) feed the MPC"
+    )
+    tangent_heading: bool = Field(
+        True, description="beyond the paper: θ_d + ω_d(k+1) T_c / 2, the path tangent at sample k"
+    )
 
     @model_validator(mode="after")
     def _check(self) -> MPCSettings:
@@ -352,6 +358,9 @@ class Config(_Frozen):
     noise: NoiseSettings = NoiseSettings()
     planner: PlannerSettings = PlannerSettings()
     seed: int = Field(0, ge=0, description="seed of every random draw of a run")
+    divergence_bound_m: PositiveFloat = Field(
+        5.0, description="|e_y| [m] beyond which a run is diverged (when the track width is unknown)"
+    )
 
     @classmethod
     def preset(cls, name: str) -> Config:
@@ -379,8 +388,10 @@ PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
     # The cascade as published (paper Sec. 3.2, 4): TS-LQR from the LMI design with the static
     # reference gain, friction compensation with the paper's UIO formula (P-disturb_estimation),
-    # no speed-error feedback. The weights are the paper's already in ``Config()``.
-    "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio"}},
+    # no speed-error feedback, the body-frame kinematic error model against the reference heading
+    # as given (no slip-aware loop, no tangent heading). The weights are the paper's already.
+    "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio"},
+              "mpc": {"slip_aware": False, "tangent_heading": False}},
 }
 
 

@@ -56,6 +56,7 @@ def _execute(
     methods_text: str, reference: Path | None, window: str | None, out: Path, seed: int | None,
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
     overwrite: bool = False, preset: str | None = None,
+    laps: int = 1, dt: float | None = None, strict_box: bool = False,
 ) -> None:
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -71,6 +72,7 @@ def _execute(
         console = Console(width=140)
     # Every input is checked before any work: options, config, reference, output folder.
     finite("--duration", duration, lo=0.1)
+    finite("--dt", dt, lo=1e-4)
     if seed is not None and seed < 0:
         fail(ConfigError(f"--seed = {seed}: must be an integer >= 0"))
     cfg = load_config_or_exit(config, preset)
@@ -83,7 +85,7 @@ def _execute(
     if not methods:
         fail(ConfigError("--methods is empty"))
     try:
-        scenario = load_scenario(cfg, reference, _parse_window(window))
+        scenario = load_scenario(cfg, reference, _parse_window(window), laps=laps, dt=dt)
     except (TsmpcError, OSError) as err:
         fail(err)
     if robustness != "nominal":
@@ -93,7 +95,9 @@ def _execute(
             cfg, scenario = apply_robustness(robustness, cfg, scenario, until_s=duration)
         except ValueError as err:
             fail(err)
+    fit = _fit_envelope(cfg, scenario, strict_box)  # a refusal is an input error: before --out
     check_out_dir(out, overwrite=overwrite)
+    cfg = _certify_envelope(console, fit)
     max_steps = None if duration is None else max(1, round(duration / cfg.rates.Tc))
     with handle_interrupts():
         try:
@@ -138,6 +142,33 @@ def _execute(
         raise typer.Exit(1)
 
 
+def _fit_envelope(cfg: Any, scenario: Any, strict: bool) -> Any:
+    """The reference's ranges against the designs' boxes (SPEC §13): widened, or refused
+    (``--strict-box``, a steering angle beyond the actuator) with exit 2 before any work."""
+    from tsmpc.envelope import fit_envelope
+
+    try:
+        return fit_envelope(cfg, scenario.reference, strict=strict)
+    except TsmpcError as err:
+        fail(err)
+
+
+def _certify_envelope(console: Any, fit: Any) -> Any:
+    """The widened config once its designs are solved and certified (cached); one line says so.
+    No certified design for the range: exit 2 before simulating, with the reason."""
+    from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
+
+    if fit.widened:
+        console.print(fit.message, markup=False, highlight=False)
+        try:
+            load_or_design_kinematic(fit.config)
+            load_or_design_dynamic(fit.config)
+        except TsmpcError as err:
+            fail(ConfigError(f"no certified design covers the reference ({fit.ranges.describe()}): "
+                             f"{err}"))
+    return fit.config
+
+
 def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
     from rich.markup import escape
     from rich.table import Table
@@ -150,6 +181,9 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
     for col in ("approach", "x [m]", "y [m]", "θ [rad]", "v [m/s]", "ω [rad/s]"):
         t.add_column(escape(col), justify="right" if col != "approach" else "left")
     for label, vals in rmse_rows(metrics, paper):
+        if label.endswith("(diverged)"):  # never RMSEs as if the run had completed
+            t.add_row(label, *(["diverged"] + ["—"] * (len(vals) - 1)), style="bold red")
+            continue
         style = "dim" if label.endswith("(paper)") else None
         t.add_row(label, *(f"{v:.3f}" for v in vals), style=style)
     console.print(t)
@@ -159,6 +193,10 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
         tt.add_column(escape(col), justify="right", no_wrap=col == "events")
     for name, m in metrics["methods"].items():
         ev = "\n".join(f"{k}={v}" for k, v in m["events"].items() if v) or "-"
+        if m.get("status") == "diverged":  # timings of a run cut short are not comparable
+            tt.add_row(name, *(["—"] * 7), f"{m['max_abs_lateral_m']:.3f}", "—", "—", ev,
+                       style="bold red")
+            continue
         ratio = m.get("mpc_ms_ratio_to_REF")
         tt.add_row(name, f"{m['mpc_ms']['median']:.3f}", f"{m['mpc_ms']['p95']:.3f}",
                    f"{m['mpc_ms']['p99']:.3f}", f"{m['mpc_ms']['max']:.2f}",
@@ -168,14 +206,22 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
                    f"{m['realtime_factor']:.1f}", ev)
     console.print(tt)
     for name, m in metrics["methods"].items():
+        if m.get("max_abs_lateral_per_lap_m"):
+            laps = ", ".join(f"{v:.3f}" for v in m["max_abs_lateral_per_lap_m"])
+            console.print(f"{name}: max |e_y| per lap [m]: {laps}", markup=False)
         if m["termination"] != "completed":
-            console.print(f"[red]{name}: {m['termination']}[/red]")
+            console.print(f"[red]{name}: {escape(m['termination'])}[/red]")
 
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
                   "nan_bursts, mass_stiffness_mismatch, offset_start (see tsmpc.robustness).")
 _PRESET_HELP = ("Named configuration under --config: 'default' (our best cascade) or 'paper' (the cascade "
                 "as published: no speed-error feedback, the paper's UIO friction estimate).")
+_STRICT_HELP = ("Refuse a reference that leaves the designs' scheduling boxes (default: widen the boxes "
+                "by a margin and re-solve and re-certify the designs, cached).")
+_DT_HELP = ("Column period [s] of a paper-format file (default: measured from the data; a value the "
+            "data contradict is refused).")
+_LAPS_HELP = "Laps of a closed track (a planned track CSV); the look-ahead wraps around the lap."
 _REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..1316 is used unless "
              "--window says otherwise) or a planned CSV (t,x,y,theta,v,omega,kappa). "
              "Default: the built-in paper-like circuit.")
@@ -193,6 +239,9 @@ _OPT_ORACLE = typer.Option(False, "--oracle", help="Ablation: the inner loop get
 _OPT_DURATION = typer.Option(None, "--duration", help="Track only the first S s (finite, >= 0.1).")
 _OPT_SCENARIO = typer.Option("nominal", "--scenario", help=_SCENARIO_HELP)
 _OPT_PRESET = typer.Option(None, "--preset", help=_PRESET_HELP)
+_OPT_LAPS = typer.Option(1, "--laps", min=1, help=_LAPS_HELP)
+_OPT_DT = typer.Option(None, "--dt", help=_DT_HELP)
+_OPT_STRICT = typer.Option(False, "--strict-box", help=_STRICT_HELP)
 _OPT_OVERWRITE = typer.Option(False, "--overwrite", help="Write into a non-empty --out folder, "
                               "replacing tsmpc's outputs of an earlier run (other files are kept).")
 
@@ -211,10 +260,13 @@ def compare_cmd(
     robustness: str = _OPT_SCENARIO,
     overwrite: bool = _OPT_OVERWRITE,
     preset: str | None = _OPT_PRESET,
+    laps: int = _OPT_LAPS,
+    dt: float | None = _OPT_DT,
+    strict_box: bool = _OPT_STRICT,
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
     _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
-             overwrite, preset)
+             overwrite, preset, laps, dt, strict_box)
 
 
 @app.command("run")
@@ -231,9 +283,12 @@ def run_cmd(
     robustness: str = _OPT_SCENARIO,
     overwrite: bool = _OPT_OVERWRITE,
     preset: str | None = _OPT_PRESET,
+    laps: int = _OPT_LAPS,
+    dt: float | None = _OPT_DT,
+    strict_box: bool = _OPT_STRICT,
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
     if "," in method:
         fail(ConfigError("--method takes one method; use `tsmpc compare --methods` for several"))
     _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
-             overwrite, preset)
+             overwrite, preset, laps, dt, strict_box)

@@ -104,18 +104,22 @@ def plan(
                "a_brake_max": "--a-brake", "v_start": "--v-start"}.get(str(e["loc"][0]), e["loc"][0])
         fail(ConfigError(f"{opt} = {e.get('input')!r}: {e['msg']}"))
     check_out_file(out, overwrite=overwrite)
+    meta: dict[str, object] = {}
     try:
         if is_tumftm(source):
             track = load_tumftm(source)
             ref = plan_path(track.centre, settings, closed=True if closed is None else closed, dt=dt,
                             laps=laps, tail_s=tail)
+            # The narrowest half-width: beyond it the car has left the road somewhere on the lap.
+            half = float(min(track.w_left.min(), track.w_right.min()))
+            meta = {"source": source.name, "half_width_m": f"{half:.3f}"}
         else:
             wp, cap = _read_waypoints(source)
             ref = plan_path(wp, settings, closed=bool(closed), dt=dt, laps=laps, tail_s=tail, v_cap=cap)
         if fmt is OutputFormat.paper:
             save_paper_format(ref, out)
         else:
-            ref.to_csv(out)
+            ref.to_csv(out, meta)
     except TsmpcError as err:
         msg = str(err)
         fail(msg if msg.startswith(str(source)) else f"{source}: {msg}")
@@ -123,6 +127,24 @@ def plan(
         fail(f"--out {out}: cannot write ({err.strerror or err})")
     typer.echo(f"{out}: {len(ref)} samples, {ref.duration:.1f} s, max v {ref.v.max():.2f} m/s, "
                f"max |omega| {abs(ref.omega).max():.3f} rad/s")
+    _warn_envelope(ref)
+
+
+def _warn_envelope(ref: object) -> None:
+    """Warn when the plan leaves the default design box (SPEC §13): runs will widen it."""
+    from tsmpc.config import Config
+    from tsmpc.envelope import reference_ranges, shortfalls
+
+    cfg = Config()
+    short = shortfalls(cfg, reference_ranges(ref, cfg))  # type: ignore[arg-type]
+    if short:
+        by_what: dict[str, list[str]] = {}
+        for sf in short:
+            by_what.setdefault(sf.what, []).append(f"{sf.field} {sf.have:g}")
+        items = "; ".join(f"{w} > {', '.join(f)}" for w, f in by_what.items())
+        typer.secho(f"warning: the plan exceeds the default design box ({items}): compare/run "
+                    "widen the boxes and re-certify the designs (--strict-box refuses)",
+                    err=True, fg=typer.colors.YELLOW)
 
 
 @app.command("show-reference")

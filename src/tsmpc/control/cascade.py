@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tsmpc.config import Config, SchedulingMode
+from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import ConfigError
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
@@ -193,6 +194,7 @@ class Cascade:
                          bandwidth=cfg.dynamic_lmi.filter_bandwidth)
         self.mhe = MHEUIO(cfg.mhe, dyn, cfg.vehicle, self.Td)
         self.max_age_s = self.Tc if max_age_s is None else float(max_age_s)
+        self._slip_gate = SlipGate(self.Tc, cfg.noise.position * cfg.noise.scale)
         self.reset(x0)
 
     # -------------------------------------------------------------------------- state
@@ -202,6 +204,7 @@ class Cascade:
         self._x0 = None if x0 is None else np.asarray(x0, dtype=float).reshape(6).copy()
         self.mhe.reset(None if self._x0 is None else self._x0[3:6].copy())
         self.lqr.reset()
+        self._slip_gate.reset()
         if hasattr(self.mpc, "reset"):
             self.mpc.reset()
         self._calls = 0
@@ -282,9 +285,21 @@ class Cascade:
             ref = self.reference
             kk = min(k, len(ref) - 1)
             p = self._pose
-            e_meas = np.array(pose_to_errors(p[0], p[1], p[2], ref.x[kk], ref.y[kk], ref.theta[kk]))
+            window = ref.window(k, self.cfg.mpc.N + 1)
+            mpc_cfg = self.cfg.mpc
+            if mpc_cfg.slip_aware or mpc_cfg.tangent_heading:  # beyond the paper: slip_aware.py
+                last = self._last
+                a_hat = float(last.estimate.x[1]) if mpc_cfg.slip_aware and last is not None else 0.0
+                if mpc_cfg.slip_aware:  # α̂ bounded by the measured course over ground
+                    a_hat = self._slip_gate(p, a_hat)
+                dth = float(window.omega[1]) * self.Tc if mpc_cfg.tangent_heading else 0.0
+                e_meas = outer_loop_errors(p, np.array([ref.x[kk], ref.y[kk], ref.theta[kk]]),
+                                           a_hat, dth)
+            else:
+                e_meas = np.array(pose_to_errors(p[0], p[1], p[2], ref.x[kk], ref.y[kk],
+                                                 ref.theta[kk]))
             t0 = time.perf_counter()
-            plan = self.mpc.step(e_meas, self._u_prev, ref.window(k, self.cfg.mpc.N + 1))
+            plan = self.mpc.step(e_meas, self._u_prev, window)
             t_mpc = time.perf_counter() - t0
             self._u_prev = np.asarray(plan.u, dtype=float)
             self._plan = plan

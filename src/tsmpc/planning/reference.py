@@ -14,7 +14,9 @@ from numpy.typing import NDArray
 
 from tsmpc.errors import DataFormatError
 
-__all__ = ["CSV_HEADER", "POSE_TOLERANCE_M", "Reference", "check_consistency", "check_window"]
+__all__ = [
+    "CSV_HEADER", "POSE_TOLERANCE_M", "Reference", "check_consistency", "check_window", "read_csv_meta",
+]
 
 #: Largest mismatch [m] accepted between a step of the position and v_d·T (plus 10 % of v_d·T).
 POSE_TOLERANCE_M = 0.05
@@ -130,6 +132,16 @@ class Reference:
             y[i] = py + v * np.sin(th[i]) * dt
         return Reference(t, x, y, th, self.v[ji], self.omega[ji], self.kappa[ji], closed=False)
 
+    def repeat(self, laps: int) -> Reference:
+        """``laps`` consecutive laps of a closed reference (itself closed: the look-ahead past
+        the last lap wraps into the next one)."""
+        if laps < 1 or (laps > 1 and not self.closed):
+            raise DataFormatError(f"laps = {laps}: must be ≥ 1, and > 1 only for a closed lap")
+        if laps == 1:
+            return self
+        w = self.window(0, laps * len(self))
+        return Reference(w.t, w.x, w.y, w.theta, w.v, w.omega, w.kappa, closed=True)
+
     def resample(self, dt: float) -> Reference:
         """Resample to step ``dt`` (linear interpolation of every signal; θ is unwrapped so this
         is continuous)."""
@@ -140,20 +152,27 @@ class Reference:
         return Reference(t, *(np.interp(t, self.t, getattr(self, s)) for s in _SIGNALS[1:]),
                          closed=self.closed)
 
-    def to_csv(self, path: str | Path) -> None:
-        """Write ``t,x,y,theta,v,omega,kappa`` rows (atomically)."""
+    def to_csv(self, path: str | Path, meta: dict[str, object] | None = None) -> None:
+        """Write ``t,x,y,theta,v,omega,kappa`` rows (atomically).
+
+        A ``# key=value;...`` line after the header carries ``closed`` and any ``meta`` (e.g. the
+        track's ``half_width_m``): what the samples alone cannot say."""
         from tsmpc.sim.log import atomic_write_text
 
         data = np.stack([getattr(self, s) for s in _SIGNALS], axis=1)
+        info = {"closed": str(self.closed).lower(), **(meta or {})}
         # repr: the shortest text that reads back to the same double (full precision, any size).
-        lines = [CSV_HEADER] + [",".join(repr(float(v)) for v in row) for row in data]
+        lines = [CSV_HEADER, "# " + ";".join(f"{k}={v}" for k, v in info.items())]
+        lines += [",".join(repr(float(v)) for v in row) for row in data]
         atomic_write_text(path, "\n".join(lines) + "\n")
 
     @classmethod
-    def from_csv(cls, path: str | Path, closed: bool = False, *, text: str | None = None) -> Reference:
-        """Read a CSV written by :meth:`to_csv` (header ``t,x,y,theta,v,omega,kappa``); values
-        must be finite, speeds ≥ 0 and the pose consistent with v and ω (:func:`check_consistency`).
-        ``text``: the file's content when the caller has read it already."""
+    def from_csv(cls, path: str | Path, closed: bool | None = None, *,
+                 text: str | None = None) -> Reference:
+        """Read a CSV written by :meth:`to_csv` (header ``t,x,y,theta,v,omega,kappa``; ``#`` lines
+        are metadata); values must be finite, speeds ≥ 0 and the pose consistent with v and ω
+        (:func:`check_consistency`). ``closed`` None: as the file says (open when it does not
+        say). ``text``: the file's content when the caller has read it already."""
         from tsmpc.textfile import read_text
 
         p = Path(path)
@@ -162,21 +181,47 @@ class Reference:
         lines = [ln for ln in text.splitlines() if ln.strip()]
         if not lines or lines[0].replace(" ", "") != CSV_HEADER:
             raise DataFormatError(f"{p}: expected the header '{CSV_HEADER}'")
+        meta = _parse_meta(lines[1:])
+        rows = [ln for ln in lines[1:] if not ln.lstrip().startswith("#")]
+        first = 1 + len(lines) - len(rows)  # line number of the first data row (1-based)
         try:
-            data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+            data = np.array([[float(v) for v in ln.split(",")] for ln in rows])
         except ValueError as err:
             raise DataFormatError(f"{p}: non-numeric value ({err})") from None
         if data.ndim != 2 or data.shape[1] != 7:
             raise DataFormatError(f"{p}: expected 7 columns per row (t,x,y,theta,v,omega,kappa)")
         if not np.all(np.isfinite(data)):
             r, c = np.argwhere(~np.isfinite(data))[0]
-            raise DataFormatError(f"{p}: line {r + 2}: {_SIGNALS[c]} is {data[r, c]} (must be finite)")
+            raise DataFormatError(f"{p}: line {r + first}: {_SIGNALS[c]} is {data[r, c]} (must be finite)")
+        if closed is None:
+            closed = meta.get("closed", "false").strip().lower() == "true"
         try:
             ref = cls(*data.T, closed=closed)
         except DataFormatError as err:
             raise DataFormatError(f"{p}: {err}") from None
-        check_consistency(ref, str(p), first_sample=2, what="line")
+        check_consistency(ref, str(p), first_sample=first, what="line")
         return ref
+
+
+def _parse_meta(lines: list[str]) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for ln in lines:
+        if ln.lstrip().startswith("#"):
+            for item in ln.lstrip()[1:].split(";"):
+                if "=" in item:
+                    k, v = item.split("=", 1)
+                    out[k.strip()] = v.strip()
+    return out
+
+
+def read_csv_meta(path: str | Path) -> dict[str, str]:
+    """The ``# key=value`` metadata of a planned CSV (empty for files without any)."""
+    try:
+        with Path(path).open(encoding="utf-8") as fh:
+            lines = [fh.readline() for _ in range(4)]
+    except (OSError, UnicodeDecodeError):
+        return {}
+    return _parse_meta(lines[1:])
 
 
 def check_window(

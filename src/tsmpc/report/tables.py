@@ -2,23 +2,42 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from tsmpc.sim.metrics import PAPER_TABLE5, RMSE_KEYS
 
-__all__ = ["rmse_csv", "rmse_latex", "rmse_markdown", "rmse_rows", "timing_rows"]
+__all__ = ["is_diverged", "rmse_csv", "rmse_latex", "rmse_markdown", "rmse_rows", "timing_rows"]
 
 _HEAD = ("approach", "x [m]", "y [m]", "theta [rad]", "v [m/s]", "omega [rad/s]")
 
 
+def is_diverged(m: dict[str, Any]) -> bool:
+    """A method's metrics entry describes a run that ended early (left the road, plant blew up)."""
+    status = m.get("status")
+    if status is None:  # metrics written before the status field: any early stop diverged
+        return m.get("termination", "completed") != "completed"
+    return bool(status == "diverged")
+
+
 def rmse_rows(metrics: dict[str, Any], with_paper: bool) -> list[tuple[str, list[float]]]:
-    """Rows (label, [x, y, θ, v, ω]): ours, and the paper's beside each when requested."""
+    """Rows (label, [x, y, θ, v, ω]): ours, and the paper's beside each when requested.
+
+    A diverged run is never shown as if it had completed: its label says ``(diverged)`` and its
+    values are NaN (printed as a dash); no paper row is put beside it."""
     rows: list[tuple[str, list[float]]] = []
     for name, m in metrics["methods"].items():
+        if is_diverged(m):
+            rows.append((f"{name} (diverged)", [float("nan")] * len(RMSE_KEYS)))
+            continue
         rows.append((name, [m["rmse"][k] for k in RMSE_KEYS]))
         if with_paper and name in PAPER_TABLE5:
             rows.append((f"{name} (paper)", [PAPER_TABLE5[name][k] for k in RMSE_KEYS]))
     return rows
+
+
+def _fmt(v: float, dash: str = "—") -> str:
+    return dash if math.isnan(v) else f"{v:.3f}"
 
 
 def rmse_csv(metrics: dict[str, Any], with_paper: bool) -> str:
@@ -32,7 +51,7 @@ def rmse_csv(metrics: dict[str, Any], with_paper: bool) -> str:
 def rmse_markdown(metrics: dict[str, Any], with_paper: bool) -> str:
     """Markdown table, 3 decimals like the paper."""
     out = ["| " + " | ".join(_HEAD) + " |", "|" + "---|" * len(_HEAD)]
-    out += [f"| {lab} | " + " | ".join(f"{v:.3f}" for v in vals) + " |"
+    out += [f"| {lab} | " + " | ".join(_fmt(v) for v in vals) + " |"
             for lab, vals in rmse_rows(metrics, with_paper)]
     return "\n".join(out) + "\n"
 
@@ -44,7 +63,7 @@ def rmse_latex(metrics: dict[str, Any], with_paper: bool) -> str:
         r"approach & $x$ [m] & $y$ [m] & $\theta$ [rad] & $v$ [m/s] & $\omega$ [rad/s] \\",
         r"\midrule",
     ]
-    out += [f"{lab} & " + " & ".join(f"{v:.3f}" for v in vals) + r" \\"
+    out += [f"{lab} & " + " & ".join(_fmt(v, "--") for v in vals) + r" \\"
             for lab, vals in rmse_rows(metrics, with_paper)]
     out += [r"\bottomrule", r"\end{tabular}"]
     return "\n".join(out) + "\n"

@@ -15,7 +15,7 @@ from typing import Any
 from tsmpc.config import Config
 from tsmpc.sim.log import RunLog, atomic_write_text, save_logs_mat, save_logs_npz
 from tsmpc.sim.metrics import compute_metrics
-from tsmpc.sim.simulator import Method, Scenario, simulate
+from tsmpc.sim.simulator import Method, Scenario, simulate, tracked_steps
 
 __all__ = ["CompareResult", "compare", "load_scenario", "versions"]
 
@@ -48,11 +48,20 @@ def load_scenario(
     window: tuple[int, int] | None = None,
     *,
     use_paper_window: bool = True,
+    laps: int = 1,
+    dt: float | None = None,
 ) -> Scenario:
     """The comparison scenario: the built-in circuit (``reference=None``), a paper-format file
     (the paper-run window of columns 5…1316 unless ``window`` says otherwise) or a planned CSV;
-    the paper's time-based friction profile applies in every case."""
-    from tsmpc.planning.paper_format import PAPER_RUN_WINDOW, load_reference
+    the paper's time-based friction profile applies in every case. ``laps`` > 1 repeats a closed
+    lap (a planned track). A paper-format file's column period is measured (``dt`` given: checked
+    against the data); the default window is the paper run's time span at that period, and the
+    paper's Table 5 rows go beside ours only for the paper's own run (``paper_reference``)."""
+    from tsmpc.planning.paper_format import (
+        is_paper_run,
+        load_reference,
+        paper_window,
+    )
     from tsmpc.scenarios import paper_friction_profile
 
     if reference is None:
@@ -61,13 +70,37 @@ def load_scenario(
         ref = builtin_circuit(dt=cfg.rates.Tc)
         return Scenario("builtin-circuit", ref, paper_friction_profile(),
                         meta={"reference": "builtin-circuit", "paper_reference": False})
+    from tsmpc.planning.reference import read_csv_meta
+
     paper = _is_paper_format(Path(reference))
-    win = window if window is not None else (PAPER_RUN_WINDOW if (paper and use_paper_window) else None)
-    ref = load_reference(reference, window=win)
+    if paper:  # measure the column period on the whole file, then take the window in it
+        full = load_reference(reference, window=None, dt=dt)
+        win = window if window is not None else (paper_window(full.dt) if use_paper_window
+                                                 else None)
+        ref = full if win is None else load_reference(reference, window=win, dt=full.dt)
+        paper_run = is_paper_run(full, win, cfg.rates.Tc)
+    else:
+        win, paper_run = window, False
+        ref = load_reference(reference, window=win)
     check_trackable(ref, cfg, str(reference))
-    return Scenario(Path(reference).stem, ref, paper_friction_profile(),
+    if laps != 1:
+        if not ref.closed:
+            from tsmpc.errors import DataFormatError
+
+            raise DataFormatError(f"{reference}: --laps {laps} needs a closed lap (a track planned "
+                                  "with `tsmpc plan TRACK --out FILE`, no --tail)")
+        ref = ref.repeat(laps)
+    info = {} if paper else read_csv_meta(reference)
+    try:  # a planned track carries its half-width: leaving it is diverging
+        bound: float | None = float(info["half_width_m"])
+    except (KeyError, ValueError):
+        bound = None
+    bound = bound if bound is not None and bound > 0 else None
+    return Scenario(Path(reference).stem, ref, paper_friction_profile(), divergence_bound_m=bound,
                     meta={"reference": str(reference), "window": list(win) if win else None,
-                          "paper_reference": paper})
+                          "paper_reference": paper_run, "paper_format": paper,
+                          "column_period_s": ref.dt, "divergence_bound_m": bound
+                          or cfg.divergence_bound_m, "closed": ref.closed, "laps": laps})
 
 
 def _is_paper_format(path: Path) -> bool:
@@ -101,8 +134,8 @@ def _scenario_summary(cfg: Config, sc: Scenario, max_steps: int | None) -> dict[
         "name": sc.name,
         "samples": len(ref),
         "duration_s": float(ref.duration),
-        "tracked_steps": (len(ref) - cfg.mpc.N) if max_steps is None
-        else min(len(ref) - cfg.mpc.N, max_steps),
+        "tracked_steps": tracked_steps(ref, cfg.mpc.N) if max_steps is None
+        else min(tracked_steps(ref, cfg.mpc.N), max_steps),
         "Tc": cfg.rates.Tc, "Td": cfg.rates.Td, "h": cfg.rates.h,
         "tyre": cfg.tyre.model.value,
         "noise_scale": cfg.noise.scale,
@@ -128,14 +161,16 @@ def compare(
 
     Every method runs from the same seed (same noise sequence). Nothing is written when
     ``out_dir`` is None. Files are written atomically. ``designs``: the (kinematic, dynamic)
-    LMI designs of ``cfg`` when the caller has them (default: the design cache).
+    LMI designs of ``cfg`` when the caller has them (default: the design cache). A run that stops
+    early (|e_y| beyond the scenario's bound, non-finite plant) has ``status`` ``"diverged"``;
+    ``metrics["diverged"]`` lists those methods.
     """
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
     kd, dd = designs or (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
     logs: dict[str, RunLog] = {}
     for method in methods:
-        k_total = len(scenario.reference) - cfg.mpc.N
+        k_total = tracked_steps(scenario.reference, cfg.mpc.N)
         if max_steps is not None:
             k_total = min(k_total, max_steps)
         prog = progress_factory(method.value, k_total) if progress_factory else None
@@ -148,10 +183,21 @@ def compare(
         "oracle": oracle,
         "designs": {"kinematic_S": kd.S.tolist(), "kinematic_P": kd.P.tolist()},
     }
+    laps = int(scenario.meta.get("laps", 1) or 1)
+    if scenario.reference.closed and laps > 1:
+        lap_len = len(scenario.reference) // laps
+        for name, log in logs.items():
+            e = abs(log.errors[:, 1])
+            metrics["methods"][name]["max_abs_lateral_per_lap_m"] = [
+                float(e[i:i + lap_len].max()) for i in range(0, e.size, lap_len)]
+    for m in metrics["methods"].values():  # any early stop (|e_y| bound, plant blew up) diverged
+        m["status"] = "completed" if m["termination"] == "completed" else "diverged"
+    metrics["diverged"] = [n for n, m in metrics["methods"].items() if m["status"] == "diverged"]
     ref_m = metrics["methods"].get("REF")
     if ref_m:
         for m in metrics["methods"].values():
-            m["mpc_ms_ratio_to_REF"] = m["mpc_ms"]["median"] / ref_m["mpc_ms"]["median"]
+            den = ref_m["mpc_ms"]["median"]  # 0 or NaN when REF stopped before its first solve
+            m["mpc_ms_ratio_to_REF"] = m["mpc_ms"]["median"] / den if den > 0 else float("nan")
     files: list[Path] = []
     if out_dir is not None:
         files = write_outputs(cfg, metrics, logs, Path(out_dir), plots=plots)

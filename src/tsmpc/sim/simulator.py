@@ -30,7 +30,8 @@ from tsmpc.sim.log import RunLog
 from tsmpc.sim.plant import Plant
 from tsmpc.vehicle.plant import VehiclePlant
 
-__all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "default_plant", "simulate"]
+__all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "default_plant", "simulate",
+           "tracked_steps"]
 
 ProgressFn = Callable[[int, int], None]
 
@@ -53,7 +54,8 @@ class Scenario:
         initial_error: (lateral offset [m], heading offset [rad]) of the start pose.
         plant_vehicle, plant_tyre: plant-only parameters (model mismatch); None = the config's.
         sensor_fault: measurement corruption (dropouts, NaN bursts); None = healthy sensors.
-        divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track width).
+        divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track's
+            half-width); None = ``cfg.divergence_bound_m``.
         meta: free-form facts written to metrics.json (source file, window, ...).
     """
 
@@ -133,6 +135,12 @@ class _Recorder:
             mhe_status=self.mhe_status[i], **facts)
 
 
+def tracked_steps(ref: Reference, N: int) -> int:
+    """Outer steps a run tracks: a closed lap to its end (its look-ahead wraps into the next lap,
+    see :meth:`Reference.window`); an open reference keeps its last N samples as look-ahead."""
+    return len(ref) if ref.closed else len(ref) - N
+
+
 def _start_state(ref: Reference, initial_error: tuple[float, float]) -> NDArray[np.float64]:
     """Start pose on the reference, optionally offset laterally and in heading."""
     th0 = float(ref.theta[0])
@@ -158,7 +166,8 @@ def simulate(
     the ablation where the TS-LQR gets the true [v, α, ω] and no friction compensation (the MHE
     still runs and is logged). Designs come from the cache when None; ``progress(k, K)`` is
     called after each outer step; ``max_steps`` shortens the run. A non-finite plant state or
-    |e_y| beyond ``scenario.divergence_bound_m`` ends the run early (``termination`` says why);
+    |e_y| beyond ``scenario.divergence_bound_m`` (None: ``cfg.divergence_bound_m``) ends the run
+    early (``termination`` says why); closed laps are tracked to their end (:func:`tracked_steps`);
     controller and estimator failures are counted in ``events``, never raised. The process uses
     one BLAS thread unless ``TSMPC_BLAS_THREADS`` says otherwise (:mod:`tsmpc.blas`)."""
     from tsmpc.blas import limit_blas_threads
@@ -168,7 +177,7 @@ def simulate(
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=kinematic_design,
                       dynamic_design=dynamic_design)
     ref, N, Tc, Td, n_in = cascade.reference, cfg.mpc.N, cfg.rates.Tc, cfg.rates.Td, cascade.n_inner
-    K = len(ref) - N
+    K = tracked_steps(ref, N)
     if K < 1:
         raise ConfigError(f"reference has {len(ref)} samples: needs more than N = {N} for look-ahead")
     K = K if max_steps is None else min(K, int(max_steps))
@@ -177,7 +186,10 @@ def simulate(
     plant.reset(x)
     cascade.reset(x)
     rec = _Recorder(ref, K, n_in, N, Tc, Td)
-    noise, fault, bound = SensorNoise(cfg.noise, cfg.seed), scenario.sensor_fault, scenario.divergence_bound_m
+    noise, fault = SensorNoise(cfg.noise, cfg.seed), scenario.sensor_fault
+    # Leaving the road is a result (diverged), not a number: the track's half-width when the
+    # scenario knows it, else the configured default.
+    bound = scenario.divergence_bound_m or cfg.divergence_bound_m
     termination, done, rows, s_travel, t_start = "completed", K, 0, 0.0, time.perf_counter()
     for m in range(K * n_in):
         k, j = divmod(m, n_in)

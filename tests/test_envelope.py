@@ -1,0 +1,70 @@
+"""Operating envelope (issue 15): a reference beyond the designs' scheduling boxes widens them (and
+the designs are re-solved and re-certified) or, with --strict-box, is refused naming the range."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from tsmpc.cli import app
+from tsmpc.config import Config, PlannerSettings
+from tsmpc.envelope import EnvelopeError, fit_envelope, reference_ranges
+from tsmpc.planning.planner import plan_path
+from tsmpc.planning.reference import Reference
+
+
+def _oval(v_max: float, a_lat: float) -> Reference:
+    t = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    pts = np.stack([300 * np.cos(t), 120 * np.sin(t)], axis=1)
+    return plan_path(pts, PlannerSettings(v_max=v_max, a_lat_max=a_lat), closed=True, dt=0.1)
+
+
+def test_default_plan_fits_the_default_boxes() -> None:
+    fit = fit_envelope(Config(), _oval(14.7, 3.0))
+    assert fit.widened == () and fit.config == Config() and fit.message == ""
+
+
+def test_fast_plan_widens_every_bound_it_exceeds_and_the_designs_certify() -> None:
+    from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
+
+    ref = _oval(25.0, 6.0)
+    r = reference_ranges(ref, Config())
+    assert 24.0 < r.v_max <= 25.0 + 1e-6 and r.a_lat_max <= 6.0 * 1.01
+    fit = fit_envelope(Config(), ref)
+    c = fit.config
+    for hi in (c.kinematic_box.v_d[1], c.dynamic_box.v[1], c.mpc.u_max[0], c.mhe.x_max[0],
+               c.kinematic_lmi.u_bar[0]):
+        assert hi >= 1.1 * r.v_max
+    assert "widened" in fit.message and "kinematic_box.v_d" in fit.message
+    assert fit_envelope(c, ref).widened == ()  # idempotent: the widened config covers it
+    kd, dd = load_or_design_kinematic(c), load_or_design_dynamic(c)
+    assert all(cert.holds for cert in kd.certificates + dd.certificates)
+
+
+def test_strict_box_refuses_naming_range_field_and_option() -> None:
+    with pytest.raises(EnvelopeError, match=r"v_d up to 25.0 m/s exceeds kinematic_box.v_d = 18.*"
+                       r"--strict-box"):
+        fit_envelope(Config(), _oval(25.0, 6.0), strict=True)
+
+
+def test_cli_strict_box_exits_2_before_simulating(tmp_path: Path) -> None:
+    f = tmp_path / "fast.csv"
+    _oval(25.0, 6.0).to_csv(f)
+    res = CliRunner().invoke(app, ["run", "--reference", str(f), "--strict-box", "--out",
+                                   str(tmp_path / "o")])
+    assert res.exit_code == 2 and "--strict-box" in res.output
+    assert not (tmp_path / "o").exists()
+
+
+def test_plan_warns_beyond_the_default_box(tmp_path: Path, tracks_dir: Path) -> None:
+    res = CliRunner().invoke(app, ["plan", str(tracks_dir / "Monza.csv"), "--v-max", "25",
+                                   "--a-lat", "6", "--out", str(tmp_path / "m.csv")])
+    assert res.exit_code == 0
+    assert "warning: the plan exceeds the default design box" in res.output
+    assert "kinematic_box.v_d 18" in res.output
+    ok = CliRunner().invoke(app, ["plan", str(tracks_dir / "Monza.csv"), "--out",
+                                  str(tmp_path / "d.csv")])
+    assert "warning" not in ok.output
