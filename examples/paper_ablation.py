@@ -11,6 +11,7 @@ bundled). Every row is a full REF run of the paper window (≈ 6–10 s of CPU e
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +46,8 @@ def ablation_rows() -> list[tuple[str, Config, bool, str]]:
 def run_row(cfg: Config, oracle: bool, reference: Path) -> dict:
     """Metrics of one REF run on the paper window, plus the force-command roughness."""
     sc = load_scenario(cfg, reference)
-    log = simulate(cfg, Method.REF, sc, oracle=oracle)
+    steps = int(os.environ.get("TSMPC_EXAMPLE_STEPS", "0")) or None  # shortened runs (tests)
+    log = simulate(cfg, Method.REF, sc, oracle=oracle, max_steps=steps)
     m = compute_metrics(log)
     m["dF_std"] = float(np.std(np.diff(log.command[:, 0])))  # N per T_d
     m["F_err_rms"] = float(np.sqrt(np.mean((log.F_fr_hat - log.F_fr_true) ** 2)))

@@ -70,17 +70,29 @@ def test_nan_and_stale_samples_are_rejected_and_counted(cfg: Config, ref) -> Non
     assert cas.step(0.02, _meas(x, stamp=0.02)).estimate.status != EstimatorStatus.REJECTED
 
 
-def test_step_never_raises_it_holds_and_counts(cfg: Config, ref) -> None:
+def test_step_never_raises_blocks_fall_back_and_count(cfg: Config, ref) -> None:
     cas = Cascade(cfg, Method.REF, ref, x0=_start(ref))
-    first = cas.step(0.0, _meas(_start(ref)))
+    x = _start(ref)
+    first = cas.step(0.0, _meas(x))
 
     def boom(*_a, **_k):
         raise np.linalg.LinAlgError("Singular matrix")
 
     cas.mhe.step = boom  # type: ignore[method-assign]
-    cmd = cas.step(0.01, _meas(_start(ref)))
-    assert cmd.held and (cmd.F_xR, cmd.delta) == (first.F_xR, first.delta)
-    assert cas.events["step_errors"] == 1 and "LinAlgError" in (cas.last_error or "")
+    cmd = cas.step(0.01, _meas(x))  # the LQR still runs on the last estimate
+    assert cmd.estimate.status == EstimatorStatus.FAILED and not cmd.held
+    np.testing.assert_array_equal(cmd.estimate.x, first.estimate.x)
+    assert cas.events["step_errors"] == 1 and cas.events["mhe_failed"] == 1
+    assert "LinAlgError" in (cas.last_error or "")
+    cas.mpc.step = boom  # type: ignore[method-assign]
+    for m in range(2, 11):  # reaches the next MPC call (m = 10): shifted previous plan
+        cmd = cas.step(m * 0.01, _meas(x))
+    assert cmd.plan is not None and cmd.plan.status == MPCStatus.FALLBACK
+    assert np.isfinite(cmd.F_xR) and np.isfinite(cmd.delta)
+    cas.lqr.step = boom  # type: ignore[method-assign]
+    held = cas.step(0.11, _meas(x))  # nothing left to fall back on: hold the last command
+    assert held.held and (held.F_xR, held.delta) == (cmd.F_xR, cmd.delta)
+    assert cas.events["step_errors"] == 13  # 11 MHE calls, 1 MPC call, 1 LQR call
 
 
 def test_measured_applied_input_reaches_the_mhe(cfg: Config, ref) -> None:

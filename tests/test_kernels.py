@@ -339,3 +339,33 @@ def test_mhe_kernel_with_zoh_matrices_evaluated_by_numpy(cfg: Config) -> None:
         assert ea.status == eb.status
         np.testing.assert_allclose(ea.x, eb.x, rtol=0, atol=1e-8)
         assert abs(ea.F_fr - eb.F_fr) <= F_TOL
+
+
+def test_kernels_follow_per_axle_cornering_stiffness(cfg: Config) -> None:
+    """C_f ≠ C_r (issue 14's vehicle parameters): every kernel stays on and equals numpy."""
+    from tsmpc.control.ts_lqr import TSLQR
+    from tsmpc.estimation.mhe_uio import MHEUIO
+    from tsmpc.models.dynamic import DynamicTS
+    from tsmpc.synthesis.cache import load_or_design_dynamic
+    from tsmpc.vehicle.plant import Plant
+
+    veh = replace(cfg.vehicle, cornering_stiffness_front=31000.0, cornering_stiffness_rear=21000.0)
+    Td = cfg.rates.Td
+    dyn = DynamicTS(cfg.dynamic_box, veh, Td)
+    K = load_or_design_dynamic(cfg).K
+    pa, pb = Plant(veh, cfg.tyre, cfg.rates.h, jit=True), Plant(veh, cfg.tyre, cfg.rates.h, jit=False)
+    ma, mb = (MHEUIO(cfg.mhe, dyn, veh, Td, np.array([9.0, 0.0, 0.0]), jit=j) for j in (True, False))
+    la, lb = (TSLQR(K, dyn, veh, cfg.lqr, Td, jit=j) for j in (True, False))
+    assert pa._kern is not None and ma._kern is not None and ma._kargs[-1] and la._kern is not None
+    x = np.array([0.0, 0.0, 0.0, 9.0, 0.0, 0.0])
+    u = np.zeros(2)
+    for k in range(300):
+        y = x[[3, 5]].copy()
+        ea, eb = ma.step(y, u), mb.step(y, u)
+        np.testing.assert_allclose(ea.x, eb.x, rtol=0, atol=1e-8)
+        ca, cb = la.step(eb, 9.0, 0.2 * np.sin(0.02 * k)), lb.step(eb, 9.0, 0.2 * np.sin(0.02 * k))
+        assert ca.F_xR == pytest.approx(cb.F_xR, rel=1e-10, abs=1e-10)
+        assert ca.delta == pytest.approx(cb.delta, rel=1e-10, abs=1e-12)
+        u = np.array([cb.F_xR, cb.delta])
+        xa, x = pa.step(x, u, 0.9, 10), pb.step(x, u, 0.9, 10)
+        np.testing.assert_allclose(xa, x, rtol=1e-12, atol=1e-10)

@@ -16,7 +16,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from tsmpc.errors import ConfigError
 
@@ -31,6 +31,7 @@ __all__ = [
     "LQRSettings",
     "MHESettings",
     "MPCSettings",
+    "Method",
     "NoiseSettings",
     "PlannerSettings",
     "Rates",
@@ -74,12 +75,42 @@ class TyreModel(StrEnum):
     PACEJKA = "pacejka"  #: magic formula with small-slip stiffness C_x and peak μ_tyre F_z
 
 
-class SchedulingMode(StrEnum):
-    """How the TS-MPC schedules its models along the horizon (SPEC §7)."""
+class Method(StrEnum):
+    """The outer loop's method: the TS-MPC with one of its scheduling modes (SPEC §7), or the
+    NL-MPC baseline. One concept for runs (``tsmpc compare --methods``, logs, metrics keys) and
+    for the TS-MPC's scheduling (``mpc.mode``). Parsing is case-insensitive ("ref" = "REF")."""
 
-    FZN = "fzn"  #: frozen: current scheduling values for the whole horizon
-    REF = "ref"  #: planner references along the horizon (the paper's choice)
-    ITER = "iter"  #: previous optimal prediction, re-solved until the schedule converges
+    FZN = "FZN"  #: TS-MPC, frozen: current scheduling values for the whole horizon
+    REF = "REF"  #: TS-MPC, planner references along the horizon (the paper's choice)
+    ITER = "ITER"  #: TS-MPC, previous optimal prediction, re-solved until the schedule converges
+    NL = "NL"  #: nonlinear MPC baseline (CasADi + IPOPT)
+
+    @classmethod
+    def _missing_(cls, value: object) -> Method | None:
+        if isinstance(value, str):
+            up = value.strip().upper()
+            for m in cls:
+                if m.value == up:
+                    return m
+        return None
+
+    @classmethod
+    def parse(cls, text: str) -> Method:
+        """Case-insensitive parse; the error lists the allowed values."""
+        try:
+            return cls(text)
+        except ValueError:
+            allowed = ", ".join(m.value.lower() for m in cls)
+            raise ConfigError(f"unknown method {text!r}; allowed: {allowed}") from None
+
+    @property
+    def is_ts_mpc(self) -> bool:
+        """True for the TS-MPC scheduling modes (FZN, REF, ITER)."""
+        return self is not Method.NL
+
+
+#: The TS-MPC's scheduling modes are the methods FZN, REF and ITER (former name, kept).
+SchedulingMode = Method
 
 
 class FrictionEstimate(StrEnum):
@@ -97,7 +128,13 @@ class VehicleParams(_Frozen):
     mass: PositiveFloat = Field(683.0, le=1e5, description="vehicle mass M [kg]")
     inertia: PositiveFloat = Field(560.94, description="yaw inertia I [kg m^2]")
     cornering_stiffness: PositiveFloat = Field(
-        25000.0, description="cornering stiffness C_x of each axle [N/rad]"
+        25000.0, description="cornering stiffness C_x of each axle [N/rad] (paper: both axles)"
+    )
+    cornering_stiffness_front: PositiveFloat | None = Field(
+        None, description="front-axle cornering stiffness C_f [N/rad]; None = cornering_stiffness"
+    )
+    cornering_stiffness_rear: PositiveFloat | None = Field(
+        None, description="rear-axle cornering stiffness C_r [N/rad]; None = cornering_stiffness"
     )
     frontal_area: PositiveFloat = Field(1.91, description="frontal area A_r [m^2]")
     air_density: PositiveFloat = Field(1.184, description="air density rho [kg/m^3]")
@@ -109,6 +146,46 @@ class VehicleParams(_Frozen):
     def wheelbase(self) -> float:
         """a + b [m]."""
         return self.a + self.b
+
+    @property
+    def C_f(self) -> float:
+        """Front-axle cornering stiffness [N/rad]."""
+        c = self.cornering_stiffness_front
+        return self.cornering_stiffness if c is None else c
+
+    @property
+    def C_r(self) -> float:
+        """Rear-axle cornering stiffness [N/rad]."""
+        c = self.cornering_stiffness_rear
+        return self.cornering_stiffness if c is None else c
+
+    def with_stiffness_scaled(self, factor: float) -> VehicleParams:
+        """A copy with every cornering stiffness (both axles) multiplied by ``factor``."""
+        def sc(c: float | None) -> float | None:
+            return None if c is None else c * factor
+
+        return replace(self, cornering_stiffness=self.cornering_stiffness * factor,
+                       cornering_stiffness_front=sc(self.cornering_stiffness_front),
+                       cornering_stiffness_rear=sc(self.cornering_stiffness_rear))
+
+    @classmethod
+    def from_commonroad(cls, params: Any, *, mu_nominal: float = 0.5) -> VehicleParams:
+        """The single-track equivalent of a CommonRoad parameter set (``vehiclemodels``'
+        ``parameters_vehicleN()``, or any object with the same attributes).
+
+        CommonRoad's single-track model writes each lateral force as μ C_S F_z × slip with the
+        normalised stiffness C_S = −p_ky1 / p_dy1 and μ = p_dy1 (its ``vehicle_dynamics_st``), so
+        the axle stiffnesses at the static loads are C_f = −p_ky1 M g b / (a + b) and
+        C_r = −p_ky1 M g a / (a + b). CommonRoad has no aerodynamic drag (C_d = 0); μ_o is the
+        control models' nominal resistance, as for tsmpc's own plant.
+        """
+        a, b, m, g = float(params.a), float(params.b), float(params.m), 9.81
+        mu_cs = -float(params.tire.p_ky1)  # μ C_S, the same for both axles in CommonRoad's ST
+        return cls(a=a, b=b, mass=m, inertia=float(params.I_z), g=g,
+                   cornering_stiffness=0.5 * mu_cs * m * g,
+                   cornering_stiffness_front=mu_cs * m * g * b / (a + b),
+                   cornering_stiffness_rear=mu_cs * m * g * a / (a + b),
+                   drag_coefficient=0.0, mu_nominal=mu_nominal)
 
     @property
     def drag_factor(self) -> float:
@@ -253,7 +330,7 @@ class MPCSettings(_Frozen):
     du_max: tuple[PositiveFloat, PositiveFloat] = Field(
         (5.0, 0.3), description="|Δv|, |Δω| per step"
     )
-    mode: SchedulingMode = Field(SchedulingMode.REF, description="scheduling mode")
+    mode: Method = Field(Method.REF, description="TS-MPC scheduling mode: fzn, ref or iter")
     iter_tol: PositiveFloat = Field(1e-3, description="ITER: schedule change tolerance")
     iter_max: int = Field(5, ge=1, le=50, description="ITER: maximum QPs per step")
     soft_penalty: PositiveFloat = Field(1e4, description="exact penalty of soft constraints")
@@ -264,6 +341,13 @@ class MPCSettings(_Frozen):
     tangent_heading: bool = Field(
         True, description="beyond the paper: θ_d + ω_d(k+1) T_c / 2, the path tangent at sample k"
     )
+
+    @field_validator("mode")
+    @classmethod
+    def _ts_mode(cls, v: Method) -> Method:
+        if not v.is_ts_mpc:
+            raise ValueError("the TS-MPC scheduling mode is fzn, ref or iter (nl is a method)")
+        return v
 
     @model_validator(mode="after")
     def _check(self) -> MPCSettings:
@@ -280,6 +364,13 @@ class LQRSettings(_Frozen):
     force_min: FiniteFloat = Field(-2000.0, description="F_xR lower saturation [N]")
     force_max: FiniteFloat = Field(10000.0, description="F_xR upper saturation [N]")
     delta_max: PositiveFloat = Field(math.radians(25.0), description="|δ| saturation [rad]")
+    force_min_per_kg: float | None = Field(
+        None, le=0.0, allow_inf_nan=False,
+        description="F_xR lower saturation per kg of vehicle mass [N/kg = m/s^2]; "
+        "overrides force_min when set (limits that scale with the mass)")
+    force_max_per_kg: float | None = Field(
+        None, gt=0.0, allow_inf_nan=False,
+        description="F_xR upper saturation per kg of vehicle mass [N/kg]; overrides force_max")
     friction_compensation: bool = Field(True, description="add F̂_fr to the force command")
     friction_estimate: FrictionEstimate = Field(
         FrictionEstimate.WINDOW, description="compensated F̂_fr: MHE window fit or the paper's UIO formula"
@@ -300,6 +391,15 @@ class LQRSettings(_Frozen):
     def _check(self) -> LQRSettings:
         _interval(self.force_min, self.force_max, "force_min/force_max")
         return self
+
+    def force_limits(self, vehicle: VehicleParams) -> tuple[float, float]:
+        """(F_min, F_max) [N] for ``vehicle``: the per-kg limits × its mass where set."""
+        lo = self.force_min if self.force_min_per_kg is None else self.force_min_per_kg * vehicle.mass
+        hi = self.force_max if self.force_max_per_kg is None else self.force_max_per_kg * vehicle.mass
+        if not lo < hi:
+            raise ConfigError(f"lqr: force limits for a {vehicle.mass:g} kg vehicle give "
+                              f"F_min = {lo:g} N >= F_max = {hi:g} N")
+        return lo, hi
 
 
 class MHESettings(_Frozen):
@@ -377,7 +477,8 @@ class Config(_Frozen):
         """Serialise to TOML; :func:`load_config` reads it back to an equal object."""
         import tomli_w
 
-        return tomli_w.dumps(self.to_dict())
+        # TOML has no null: unset optional fields are omitted (they load back as None)
+        return tomli_w.dumps(self.model_dump(mode="json", exclude_none=True))
 
 
 T = TypeVar("T", bound=BaseModel)

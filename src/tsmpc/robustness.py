@@ -23,6 +23,7 @@ from tsmpc.errors import ConfigError
 from tsmpc.planning.reference import Reference
 from tsmpc.scenarios import PatchFriction, SurfacePatch
 from tsmpc.sim.simulator import Scenario
+from tsmpc.vehicle.actuators import Actuators, ForceLag, SteeringServo
 
 __all__ = [
     "ROBUSTNESS_SCENARIOS",
@@ -43,6 +44,8 @@ ROBUSTNESS_SCENARIOS: dict[str, str] = {
     "sensor_dropout": "every 5 s all measurements freeze for 0.2 s (last value held)",
     "nan_bursts": "every 7 s all measurements are NaN for 50 ms",
     "mass_stiffness_mismatch": "plant mass +20 % and cornering stiffness −20 % (controllers unchanged)",
+    "actuator_lag": "steering servo (50 ms lag, 0.4 rad/s) and 50 ms drive-force lag; the applied "
+    "steering angle is measured and given to the MHE (the delivered force is not)",
     "offset_start": "start 2 m left of the path with a 0.2 rad (11.5°) heading error: the e_θ premise "
     "leaves its ±5° box and the outer-loop methods schedule the transient differently",
 }
@@ -143,8 +146,11 @@ def apply_robustness(
         return RobustnessCase(cfg, dc_replace(sc, sensor_fault=NaNBurstFault()))
     if name == "mass_stiffness_mismatch":
         base = scenario.plant_vehicle or cfg.vehicle
-        veh = replace(base, mass=base.mass * 1.2, cornering_stiffness=base.cornering_stiffness * 0.8)
+        veh = replace(base.with_stiffness_scaled(0.8), mass=base.mass * 1.2)
         return RobustnessCase(cfg, dc_replace(sc, plant_vehicle=veh))
+    if name == "actuator_lag":
+        act = Actuators(SteeringServo(0.05, 0.4), ForceLag(0.05))
+        return RobustnessCase(cfg, dc_replace(sc, actuators=act, measured_steering=True))
     if name == "offset_start":
         return RobustnessCase(cfg, dc_replace(sc, initial_error=(2.0, 0.2)))
     return RobustnessCase(cfg, sc)

@@ -45,8 +45,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from tsmpc.config import Config, resolve_preset, validate
 from tsmpc.errors import ConfigError
+from tsmpc.io import atomic_write_bytes, atomic_write_text
 from tsmpc.robustness import ROBUSTNESS_SCENARIOS
-from tsmpc.sim.log import atomic_write_bytes, atomic_write_text
+from tsmpc.sweep_axes import _CHOICE_AXES, _FLOAT_AXES, AXES
 
 __all__ = [
     "AXES",
@@ -73,10 +74,6 @@ FRICTIONS: dict[str, str] = {
 }
 _FRICTION_MU = {"dry": 0.9, "earth": 0.68, "wet": 0.6}
 _METHODS = ("FZN", "REF", "ITER", "NL")
-_FLOAT_AXES = ("noise_scale", "mass_scale", "inertia_scale", "cornering_scale", "speed_scale")
-_CHOICE_AXES = ("method", "friction", "scenario", "track", "seed")
-#: Every axis a sweep may vary.
-AXES = ("method", "friction", "scenario", *_FLOAT_AXES, "track", "seed")
 #: Allowed (exclusive lower, inclusive upper) bounds of the numeric axes.
 AXIS_LIMITS: dict[str, tuple[float, float]] = {
     "noise_scale": (0.0, 1000.0), "mass_scale": (0.0, 10.0), "inertia_scale": (0.0, 10.0),
@@ -460,8 +457,8 @@ def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
     if (p.mass_scale, p.inertia_scale, p.cornering_scale) != (1.0, 1.0, 1.0):
         v = cfg.vehicle
         sc = dc_replace(sc, plant_vehicle=replace(
-            v, mass=v.mass * p.mass_scale, inertia=v.inertia * p.inertia_scale,
-            cornering_stiffness=v.cornering_stiffness * p.cornering_scale))
+            v.with_stiffness_scaled(p.cornering_scale), mass=v.mass * p.mass_scale,
+            inertia=v.inertia * p.inertia_scale))
     cfg, sc = apply_robustness(p.scenario, cfg, sc, until_s=task.duration_s)
     kd, dd = task.designs or (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
     max_steps = None if task.duration_s is None else max(1, round(task.duration_s / Tc))
@@ -480,13 +477,15 @@ def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
 
 # -- execution -----------------------------------------------------------------------------
 ProgressFn = Callable[[int, int, dict[str, Any]], None]
+#: Writes the summary plots of a sweep table into a folder; returns the files (report layer).
+PlotFn = Callable[[Any, Path, tuple[str, ...]], list[Path]]
 
 
 def run_sweep(
     spec: SweepSpec, out: str | Path, *, scheduler: str | None = None, workers: int = 2,
     resume: bool = False, run_fn: Callable[[RunTask], dict[str, Any]] = run_task,
-    progress: ProgressFn | None = None, plots: bool = True, connect_timeout: float = 5.0,
-    design_fn: Callable[[Config], tuple[Any, Any]] | None = None,
+    progress: ProgressFn | None = None, plots: bool = True, plotter: PlotFn | None = None,
+    connect_timeout: float = 5.0, design_fn: Callable[[Config], tuple[Any, Any]] | None = None,
 ) -> SweepResult:
     """Run every task of ``spec`` on Dask and write the records, the aggregate and the plots.
 
@@ -499,6 +498,10 @@ def run_sweep(
             already holds records is refused (nothing is overwritten).
         run_fn: the task function (default: simulate; :func:`dry_run` for plumbing checks).
         progress: called as ``progress(done, total, record)`` after each record is written.
+        plots: write the summary plots.
+        plotter: writes them as ``plotter(table, out, AXES)``; None = the report layer's
+            :func:`tsmpc.report.sweep_plots.save_sweep_plots`, imported only then (this module
+            imports no plotting code at import time).
         connect_timeout: seconds to wait for ``scheduler`` before giving up (ConfigError).
         design_fn: loads or solves the LMI designs of the base config (e.g. with a status line).
     """
@@ -565,9 +568,9 @@ def run_sweep(
     table = aggregate(out, [t.id for t in tasks])
     files = _write_table(table, out)
     if plots and len(table):
-        from tsmpc.report.sweep_plots import save_sweep_plots
-
-        files += save_sweep_plots(table, out)
+        if plotter is None:
+            from tsmpc.report.sweep_plots import save_sweep_plots as plotter
+        files += plotter(table, out, AXES)
     return SweepResult(out, len(tasks), len(written), skipped, failed, duplicates, table, files)
 
 

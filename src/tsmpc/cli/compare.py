@@ -57,6 +57,7 @@ def _execute(
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
     overwrite: bool = False, preset: str | None = None,
     laps: int = 1, dt: float | None = None, strict_box: bool = False,
+    plant: str = "tsmpc", cr_vehicle: int = 2,
 ) -> None:
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -95,6 +96,7 @@ def _execute(
             cfg, scenario = apply_robustness(robustness, cfg, scenario, until_s=duration)
         except ValueError as err:
             fail(err)
+    cfg, scenario, plant_factory = _plant_setup(plant, cr_vehicle, cfg, scenario)
     fit = _fit_envelope(cfg, scenario, strict_box)  # a refusal is an input error: before --out
     check_out_dir(out, overwrite=overwrite)
     cfg = _certify_envelope(console, fit)
@@ -126,7 +128,8 @@ def _execute(
 
                 try:
                     result = compare(cfg, scenario, methods, out, plots=not no_plots, oracle=oracle,
-                                     max_steps=max_steps, progress_factory=factory, designs=designs)
+                                     max_steps=max_steps, progress_factory=factory, designs=designs,
+                                     plant_factory=plant_factory)
                 except TsmpcError as err:
                     fail(err, code=1)
             (out / PARTIAL_MARKER).unlink(missing_ok=True)
@@ -140,6 +143,29 @@ def _execute(
     bad = [n for n, m in result.metrics["methods"].items() if m["termination"] != "completed"]
     if bad:
         raise typer.Exit(1)
+
+
+def _plant_setup(plant: str, cr_vehicle: int, cfg: Any, scenario: Any) -> tuple[Any, Any, Any]:
+    """(config, scenario, plant factory) for ``--plant``: tsmpc's own, or a CommonRoad model
+    with vehicle ``--cr-vehicle`` (controllers set up for it, the servo's steering angle measured)."""
+    from dataclasses import replace as dc_replace
+
+    name = plant.strip().lower()
+    if name == "tsmpc":
+        return cfg, scenario, None
+    from tsmpc.vehicle.commonroad import COMMONROAD_MODELS, CommonRoadPlant, commonroad_config
+
+    if name not in COMMONROAD_MODELS:
+        fail(ConfigError(f"unknown --plant {plant!r}; allowed: tsmpc, {', '.join(COMMONROAD_MODELS)}"))
+    try:
+        cfg = commonroad_config(cfg, cr_vehicle)
+        CommonRoadPlant(cr_vehicle, h=cfg.rates.h)  # fail here, before any work, if unusable
+    except TsmpcError as err:
+        fail(err)
+    meta = {**scenario.meta, "plant": name, "cr_vehicle": cr_vehicle}
+    sc = dc_replace(scenario, measured_steering=True, meta=meta)
+    model = COMMONROAD_MODELS[name]
+    return cfg, sc, lambda: CommonRoadPlant(cr_vehicle, model=model, h=cfg.rates.h)
 
 
 def _fit_envelope(cfg: Any, scenario: Any, strict: bool) -> Any:
@@ -214,7 +240,11 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
 
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
-                  "nan_bursts, mass_stiffness_mismatch, offset_start (see tsmpc.robustness).")
+                  "nan_bursts, mass_stiffness_mismatch, offset_start, actuator_lag (see "
+                  "tsmpc.robustness).")
+_PLANT_HELP = ("Plant: tsmpc (the built-in nonlinear single-track), commonroad-st or commonroad-mb "
+               "(CommonRoad's single-track / multi-body model behind a steering servo; needs the "
+               "[commonroad] extra).")
 _PRESET_HELP = ("Named configuration under --config: 'default' (our best cascade) or 'paper' (the cascade "
                 "as published: no speed-error feedback, the paper's UIO friction estimate).")
 _STRICT_HELP = ("Refuse a reference that leaves the designs' scheduling boxes (default: widen the boxes "
@@ -242,6 +272,8 @@ _OPT_PRESET = typer.Option(None, "--preset", help=_PRESET_HELP)
 _OPT_LAPS = typer.Option(1, "--laps", min=1, help=_LAPS_HELP)
 _OPT_DT = typer.Option(None, "--dt", help=_DT_HELP)
 _OPT_STRICT = typer.Option(False, "--strict-box", help=_STRICT_HELP)
+_OPT_PLANT = typer.Option("tsmpc", "--plant", help=_PLANT_HELP)
+_OPT_CR_VEHICLE = typer.Option(2, "--cr-vehicle", help="CommonRoad parameter set (1, 2, 3).")
 _OPT_OVERWRITE = typer.Option(False, "--overwrite", help="Write into a non-empty --out folder, "
                               "replacing tsmpc's outputs of an earlier run (other files are kept).")
 
@@ -263,10 +295,12 @@ def compare_cmd(
     laps: int = _OPT_LAPS,
     dt: float | None = _OPT_DT,
     strict_box: bool = _OPT_STRICT,
+    plant: str = _OPT_PLANT,
+    cr_vehicle: int = _OPT_CR_VEHICLE,
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
     _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
-             overwrite, preset, laps, dt, strict_box)
+             overwrite, preset, laps, dt, strict_box, plant, cr_vehicle)
 
 
 @app.command("run")
@@ -286,9 +320,11 @@ def run_cmd(
     laps: int = _OPT_LAPS,
     dt: float | None = _OPT_DT,
     strict_box: bool = _OPT_STRICT,
+    plant: str = _OPT_PLANT,
+    cr_vehicle: int = _OPT_CR_VEHICLE,
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
     if "," in method:
         fail(ConfigError("--method takes one method; use `tsmpc compare --methods` for several"))
     _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
-             overwrite, preset, laps, dt, strict_box)
+             overwrite, preset, laps, dt, strict_box, plant, cr_vehicle)

@@ -10,8 +10,10 @@ runs every T_c/T_d calls on the measured pose, and the MHE-UIO and the TS-LQR ru
         vehicle.apply(cmd.F_xR, cmd.delta)
 
 ``step`` never raises: a NaN or stale sample is rejected (the pose holds its last good value, the
-MHE predicts), MPC and MHE failures fall back inside the blocks, and anything unexpected holds
-the previous command. Every such event is counted in :attr:`Cascade.events`.
+MHE predicts), MPC and MHE failures fall back inside the blocks; an exception escaping a block
+falls back at this level (MPC: the shifted previous plan; MHE: the last estimate, status FAILED),
+and anything else holds the previous command. Every such event is counted in
+:attr:`Cascade.events` (``step_errors`` for exceptions, :attr:`Cascade.last_error` says which).
 
 The cascade does no logging (STYLE §3): each :class:`Command` carries what a logger needs (the
 estimate, the MPC result when the MPC ran at that call, the block timings).
@@ -22,16 +24,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from enum import StrEnum
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tsmpc.config import Config, SchedulingMode
+from tsmpc.config import Config, Method
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
-from tsmpc.control.ts_mpc import MPCResult, MPCStatus
-from tsmpc.errors import ConfigError
+from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.planning.reference import Reference
@@ -48,24 +48,6 @@ EVENT_NAMES = (
     "inner_saturated",  # TS-LQR steps with an active saturation
     "pose_rejected",  # MPC steps that used the last good pose (NaN or stale pose)
 )
-
-
-class Method(StrEnum):
-    """Outer-loop method: the TS-MPC with one of its scheduling modes, or the NL-MPC baseline."""
-
-    FZN = "FZN"
-    REF = "REF"
-    ITER = "ITER"
-    NL = "NL"
-
-    @classmethod
-    def parse(cls, text: str) -> Method:
-        """Case-insensitive parse; the error lists the allowed values."""
-        try:
-            return cls(text.strip().upper())
-        except ValueError:
-            allowed = ", ".join(m.value.lower() for m in cls)
-            raise ConfigError(f"unknown method {text!r}; allowed: {allowed}") from None
 
 
 @dataclass(frozen=True)
@@ -146,7 +128,7 @@ def build_outer_controller(cfg: Config, method: Method, P: np.ndarray, S: np.nda
         return NLMPC(cfg.mpc, model, P, S)
     from tsmpc.control.ts_mpc import TSMPC
 
-    return TSMPC(cfg.mpc, model, P, S, mode=SchedulingMode(method.value.lower()))
+    return TSMPC(cfg.mpc, model, P, S, mode=method)
 
 
 def _finite(*xs: float) -> bool:
@@ -198,6 +180,11 @@ class Cascade:
         self.reset(x0)
 
     # -------------------------------------------------------------------------- state
+    @property
+    def dt(self) -> float:
+        """Call period T_d [s] (the runtime protocol's name)."""
+        return self.Td
+
     def reset(self, x0: ArrayLike | None = None) -> None:
         """Start over (blocks cleared, counters zeroed) from state ``x0`` (6,) or, if None, from
         the first measurement."""
@@ -205,8 +192,7 @@ class Cascade:
         self.mhe.reset(None if self._x0 is None else self._x0[3:6].copy())
         self.lqr.reset()
         self._slip_gate.reset()
-        if hasattr(self.mpc, "reset"):
-            self.mpc.reset()
+        self.mpc.reset()
         self._calls = 0
         self._pose = None if self._x0 is None else self._x0[:3].copy()
         self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
@@ -245,12 +231,15 @@ class Cascade:
         try:
             cmd = self._step(float(t), measurement)
         except Exception as err:  # the contract: a guidance step never raises
-            self._events["step_errors"] += 1
-            self.last_error = f"{type(err).__name__}: {err}"
+            self._caught(err)
             cmd = self._hold()
         self._calls += 1
         self._last = cmd
         return cmd
+
+    def _caught(self, err: Exception) -> None:
+        self._events["step_errors"] += 1
+        self.last_error = f"{type(err).__name__}: {err}"
 
     def _hold(self) -> Command:
         """The previous command again (a zero command before the first)."""
@@ -299,7 +288,11 @@ class Cascade:
                 e_meas = np.array(pose_to_errors(p[0], p[1], p[2], ref.x[kk], ref.y[kk],
                                                  ref.theta[kk]))
             t0 = time.perf_counter()
-            plan = self.mpc.step(e_meas, self._u_prev, window)
+            try:
+                plan = self.mpc.step(e_meas, self._u_prev, window)
+            except Exception as err:  # a solver bug must not stop the car: shifted plan
+                self._caught(err)
+                plan = shifted_plan(self._plan, e_meas, self._u_prev, self.cfg.mpc.N, t0, 0, 0, 0)
             t_mpc = time.perf_counter() - t0
             self._u_prev = np.asarray(plan.u, dtype=float)
             self._plan = plan
@@ -313,7 +306,14 @@ class Cascade:
             u_mhe = np.array([self._u_applied[0] if m.force is None else float(m.force),
                               self._u_applied[1] if m.steering is None else float(m.steering)])
         t1 = time.perf_counter()
-        est = self.mhe.step(y, u_mhe)
+        try:
+            est = self.mhe.step(y, u_mhe)
+        except Exception as err:  # e.g. a LinAlgError: keep the last estimate, flagged FAILED
+            self._caught(err)
+            last = self.last_estimate
+            x_hat = last.x.copy() if last is not None else np.array([v, 0.0, om])
+            est = Estimate(x_hat, last.F_fr if last is not None else 0.0, 0.0,
+                           EstimatorStatus.FAILED, time.perf_counter() - t1)
         t2 = time.perf_counter()
         inner = est if m.state is None else _oracle_estimate(m.state)
         out = self.lqr.step(inner, v_ref, w_ref)

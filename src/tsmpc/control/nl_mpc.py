@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import MPCSettings
-from tsmpc.control.ts_mpc import MPCResult, MPCStatus
+from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.models.kinematic import KinematicTS
 
 __all__ = ["NLMPC"]
@@ -53,6 +53,11 @@ class NLMPC:
         self._hard = self._build(soft=False)
         self._soft = self._build(soft=True)
         self.reset()
+
+    @property
+    def dt(self) -> float:
+        """Sample time T_c [s] (the runtime protocol's name)."""
+        return self.model.Tc
 
     def reset(self) -> None:
         """Forget the warm start."""
@@ -179,18 +184,7 @@ class NLMPC:
         return self._fallback(x0, up, t0, iters)
 
     def _fallback(self, x0: NDArray[np.float64], up: NDArray[np.float64], t0: float, iters: int) -> MPCResult:
-        N = self.N
-        prev = self._prev
-        if prev is not None:
-            U = np.vstack([prev.u_pred[1:], prev.u_pred[-1:]])
-            X = np.vstack([prev.x_pred[1:], prev.x_pred[-1:]])
-        else:
-            U = np.tile(up, (N, 1))
-            X = np.tile(np.nan_to_num(x0), (N + 1, 1))
-        du = np.diff(np.vstack([up, U]), axis=0)
-        res = MPCResult(u=U[0].copy(), x_pred=X, u_pred=U, du=du, cost=float("nan"),
-                        status=MPCStatus.FALLBACK, iterations=2, qp_iterations=iters,
-                        solve_time_s=time.perf_counter() - t0, n_clipped=0)
+        res = shifted_plan(self._prev, x0, up, self.N, t0, 2, iters, 0)
         self._prev = res
         self._lam_x = self._lam_g = None
         return res

@@ -101,8 +101,9 @@ class TSLQR:
         self.Td = float(Td)
         self.bandwidth = float(bandwidth)
         self._a = math.exp(-bandwidth * self.Td)
-        self._lo = np.array([settings.force_min, -settings.delta_max])
-        self._hi = np.array([settings.force_max, settings.delta_max])
+        f_lo, f_hi = settings.force_limits(vehicle)
+        self._lo = np.array([f_lo, -settings.delta_max])
+        self._hi = np.array([f_hi, settings.delta_max])
         # The step runs every T_d on 2-vectors: plain floats beat numpy's per-call cost, so the
         # premise box and vertex bits are unpacked once here.
         box = model.premise_box
@@ -151,6 +152,11 @@ class TSLQR:
         self.reset()
         a, b = np.array(out[:3], dtype=float), np.array(out[3:], dtype=float)
         return bool(np.allclose(a, b, rtol=1e-9, atol=1e-12))
+
+    @property
+    def dt(self) -> float:
+        """Sample time T_d [s] (the runtime protocol's name)."""
+        return self.Td
 
     def reset(self) -> None:
         """Filter states at rest, integrator cleared."""

@@ -26,6 +26,7 @@ previous plan is returned: status FALLBACK. Nothing raises inside :meth:`TSMPC.s
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass
@@ -39,9 +40,17 @@ from scipy.linalg.lapack import dpotrs as _potrs
 
 from tsmpc.config import MPCSettings, SchedulingMode
 from tsmpc.control.qp import QPStatus, solve_daqp, solve_qcqp_clarabel
+from tsmpc.errors import ConfigError
 from tsmpc.models.kinematic import KinematicTS, sinc
 
-__all__ = ["TSMPC", "CondensedQP", "MPCResult", "MPCStatus", "condense"]
+__all__ = [
+    "TSMPC",
+    "CondensedQP",
+    "MPCResult",
+    "MPCStatus",
+    "condense",
+    "shifted_plan",
+]
 
 
 #: Terminal-ellipsoid tolerance of the cutting-plane loop (relative to the level 1).
@@ -170,42 +179,49 @@ def condense(
     return CondensedQP(H=H, f=f, c0=c0, G=G, x_aff=x_aff)
 
 
-_LAG: dict[int, NDArray[np.float64]] = {}
-_TRI: dict[int, NDArray[np.float64]] = {}
-
-
+# Constant matrices of a horizon, built once per N and shared read-only (explicit caches).
+@functools.lru_cache(maxsize=32)
 def _tri(N: int) -> NDArray[np.float64]:
     """(N, N) lower-triangular ones (cached)."""
-    m = _TRI.get(N)
-    if m is None:
-        m = np.tri(N)
-        m.setflags(write=False)
-        _TRI[N] = m
+    m = np.tri(N)
+    m.setflags(write=False)
     return m
-_THETA_H: dict[tuple[int, float, float], NDArray[np.float64]] = {}
 
 
+@functools.lru_cache(maxsize=32)
 def _theta_hessian(N: int, Tc: float, q_theta: float) -> NDArray[np.float64]:
     """q_θ T_c² ΛᵀΛ, the e_θ rows' share of the Δω Hessian block (cached)."""
-    key = (N, Tc, q_theta)
-    m = _THETA_H.get(key)
-    if m is None:
-        lag = _lag(N)
-        m = q_theta * Tc * Tc * (lag.T @ lag)
-        m.setflags(write=False)
-        _THETA_H[key] = m
+    lag = _lag(N)
+    m = q_theta * Tc * Tc * (lag.T @ lag)
+    m.setflags(write=False)
     return m
 
 
+@functools.lru_cache(maxsize=32)
 def _lag(N: int) -> NDArray[np.float64]:
     """(N, N) matrix of n − j for row n−1, column j, j < n (0 elsewhere); cached per N."""
-    m = _LAG.get(N)
-    if m is None:
-        n = np.arange(1, N + 1)[:, None] - np.arange(N)[None, :]
-        m = np.where(n > 0, n, 0).astype(float)
-        m.setflags(write=False)
-        _LAG[N] = m
+    n = np.arange(1, N + 1)[:, None] - np.arange(N)[None, :]
+    m = np.where(n > 0, n, 0).astype(float)
+    m.setflags(write=False)
     return m
+
+
+def shifted_plan(
+    prev: MPCResult | None, x0: NDArray[np.float64], up: NDArray[np.float64], N: int, t0: float,
+    iterations: int, qp_iterations: int, n_clipped: int,
+) -> MPCResult:
+    """The fallback of every outer MPC: the previous plan shifted by one step (or u_prev held
+    when there is none), status FALLBACK; ``t0`` is the step's start (perf_counter)."""
+    if prev is not None:
+        U = np.vstack([prev.u_pred[1:], prev.u_pred[-1:]])
+        X = np.vstack([prev.x_pred[1:], prev.x_pred[-1:]])
+    else:
+        U = np.tile(up, (N, 1))
+        X = np.tile(np.nan_to_num(x0), (N + 1, 1))
+    du = np.diff(np.vstack([up, U]), axis=0)
+    return MPCResult(u=U[0].copy(), x_pred=X, u_pred=U, du=du, cost=float("nan"),
+                     status=MPCStatus.FALLBACK, iterations=iterations, qp_iterations=qp_iterations,
+                     solve_time_s=time.perf_counter() - t0, n_clipped=n_clipped)
 
 
 class TSMPC:
@@ -228,6 +244,8 @@ class TSMPC:
         self.settings = settings
         self.model = model
         self.mode = SchedulingMode(mode or settings.mode)
+        if not self.mode.is_ts_mpc:
+            raise ConfigError(f"TSMPC: {self.mode} is not a TS-MPC scheduling mode (fzn, ref, iter)")
         self.P = np.asarray(P, dtype=float)
         self.S = np.asarray(S, dtype=float)
         N = self.N = settings.N
@@ -255,6 +273,11 @@ class TSMPC:
         # C-ordered copies for the kernel (one compiled signature whatever the caller passed)
         self._Pc, self._Sc = np.ascontiguousarray(self.P), np.ascontiguousarray(self.S)
         self.reset()
+
+    @property
+    def dt(self) -> float:
+        """Sample time T_c [s] (the runtime protocol's name)."""
+        return self.model.Tc
 
     def reset(self) -> None:
         """Forget the previous plan (start-up)."""
@@ -464,17 +487,6 @@ class TSMPC:
         n_clip: int,
     ) -> MPCResult:
         """The previous plan shifted by one step (or hold u_prev when there is none)."""
-        N = self.N
-        prev = self._prev
-        if prev is not None:
-            U = np.vstack([prev.u_pred[1:], prev.u_pred[-1:]])
-            X = np.vstack([prev.x_pred[1:], prev.x_pred[-1:]])
-        else:
-            U = np.tile(up, (N, 1))
-            X = np.tile(np.nan_to_num(x0), (N + 1, 1))
-        du = np.diff(np.vstack([up, U]), axis=0)
-        res = MPCResult(u=U[0].copy(), x_pred=X, u_pred=U, du=du, cost=float("nan"),
-                        status=MPCStatus.FALLBACK, iterations=n_qp, qp_iterations=n_it,
-                        solve_time_s=time.perf_counter() - t0, n_clipped=n_clip)
+        res = shifted_plan(self._prev, x0, up, self.N, t0, n_qp, n_it, n_clip)
         self._prev = res
         return res

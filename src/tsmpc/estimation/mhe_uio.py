@@ -168,6 +168,11 @@ class MHEUIO:
         except Exception:  # any mismatch of shapes or attributes: do not trust the kernel's model
             return False
 
+    @property
+    def dt(self) -> float:
+        """Sample time T_d [s] (the runtime protocol's name)."""
+        return self.Td
+
     def reset(self, x0: NDArray[np.float64] | None = None) -> None:
         """Empty the window; start from ``x0`` (or rest) with F̂ = 0."""
         self._x = np.zeros(3) if x0 is None else np.asarray(x0, dtype=float).copy()

@@ -57,20 +57,22 @@ def continuous_matrices(
     """Continuous A (..., 3, 3) and B (..., 3, 2) at speed v > 0 and steering δ."""
     v, delta = np.broadcast_arrays(np.asarray(v, float), np.asarray(delta, float))
     sd, cd = np.sin(delta), np.cos(delta)
-    M, I, C, a, b = p.mass, p.inertia, p.cornering_stiffness, p.a, p.b
+    # Linear tyres F_yF = C_f (δ − α − aω/v), F_yR = C_r (bω/v − α) in the single-track
+    # equations, small slip (paper eq. "dynamic model"; C_f = C_r = C in the paper).
+    M, I, Cf, Cr, a, b = p.mass, p.inertia, p.C_f, p.C_r, p.a, p.b
     A = np.zeros((*v.shape, 3, 3))
     B = np.zeros((*v.shape, 3, 2))
     A[..., 0, 0] = -p.mu_nominal * p.g / v - p.drag_factor * v / M
-    A[..., 0, 1] = C * sd / M
-    A[..., 0, 2] = C * a * sd / (M * v)
-    A[..., 1, 1] = -C * (1.0 + cd) / (M * v)
-    A[..., 1, 2] = C * (b - a * cd) / (M * v**2) - 1.0
-    A[..., 2, 1] = C * (b - a * cd) / I
-    A[..., 2, 2] = -C * (a**2 * cd + b**2) / (I * v)
+    A[..., 0, 1] = Cf * sd / M
+    A[..., 0, 2] = Cf * a * sd / (M * v)
+    A[..., 1, 1] = -(Cr + Cf * cd) / (M * v)
+    A[..., 1, 2] = (Cr * b - Cf * a * cd) / (M * v**2) - 1.0
+    A[..., 2, 1] = (Cr * b - Cf * a * cd) / I
+    A[..., 2, 2] = -(Cf * a**2 * cd + Cr * b**2) / (I * v)
     B[..., 0, 0] = 1.0 / M
-    B[..., 0, 1] = -C * sd / M
-    B[..., 1, 1] = C * cd / (M * v)
-    B[..., 2, 1] = C * a * cd / I
+    B[..., 0, 1] = -Cf * sd / M
+    B[..., 1, 1] = Cf * cd / (M * v)
+    B[..., 2, 1] = Cf * a * cd / I
     return A, B
 
 

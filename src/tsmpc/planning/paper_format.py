@@ -123,7 +123,7 @@ def _parse_paper(text: str, p: Path, window: tuple[int, int] | None, dt: float |
 
 def save_paper_format(ref: Reference, path: str | Path) -> None:
     """Write the 6-row paper format (θ wrapped to ±π; α_d = 0), atomically."""
-    from tsmpc.sim.log import atomic_write_text
+    from tsmpc.io import atomic_write_text
 
     th = (ref.theta + np.pi) % (2 * np.pi) - np.pi
     rows = [ref.x, ref.y, th, ref.v, np.zeros(len(ref)), ref.omega]

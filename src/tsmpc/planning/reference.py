@@ -157,7 +157,7 @@ class Reference:
 
         A ``# key=value;...`` line after the header carries ``closed`` and any ``meta`` (e.g. the
         track's ``half_width_m``): what the samples alone cannot say."""
-        from tsmpc.sim.log import atomic_write_text
+        from tsmpc.io import atomic_write_text
 
         data = np.stack([getattr(self, s) for s in _SIGNALS], axis=1)
         info = {"closed": str(self.closed).lower(), **(meta or {})}

@@ -4,6 +4,7 @@ status, and the distribution of MPC solve times per method."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +14,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from tsmpc.sweep import AXES
+from tsmpc.sweep_axes import AXES
 
 __all__ = ["colour_axis", "save_sweep_plots"]
 
@@ -140,11 +141,12 @@ def _timing_figure(table: Any) -> Any:
     return fig
 
 
-def save_sweep_plots(table: Any, out: str | Path) -> list[Path]:
-    """Write ``by_<axis>.png`` for every axis with more than one value and ``solve_times.png``."""
+def save_sweep_plots(table: Any, out: str | Path, axes: Sequence[str] = AXES) -> list[Path]:
+    """Write ``by_<axis>.png`` for every axis of ``axes`` with more than one value, and
+    ``solve_times.png``."""
     out = Path(out)
     files = []
-    for axis in AXES:
+    for axis in axes:
         if axis in table and table[axis].nunique(dropna=True) > 1:
             fig = _axis_figure(table, axis)
             path = out / f"by_{axis}.png"

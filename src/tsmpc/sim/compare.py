@@ -15,11 +15,14 @@ from typing import Any
 from tsmpc.config import Config
 from tsmpc.sim.log import RunLog, atomic_write_text, save_logs_mat, save_logs_npz
 from tsmpc.sim.metrics import compute_metrics
+from tsmpc.sim.plant import Plant
 from tsmpc.sim.simulator import Method, Scenario, simulate, tracked_steps
 
 __all__ = ["CompareResult", "compare", "load_scenario", "versions"]
 
 ProgressFactory = Callable[[str, int], Callable[[int, int], None]]
+#: Draws the figures of a comparison into a folder; returns the files (the report layer's).
+FigureFn = Callable[[dict[str, RunLog], Path, Config], list[Path]]
 
 
 @dataclass(frozen=True)
@@ -155,15 +158,19 @@ def compare(
     oracle: bool = False,
     max_steps: int | None = None,
     progress_factory: ProgressFactory | None = None,
+    plant_factory: Callable[[], Plant] | None = None,
+    figures: FigureFn | None = None,
     designs: tuple[Any, Any] | None = None,
 ) -> CompareResult:
     """Run ``methods`` on ``scenario`` and write metrics, tables, time series and figures.
 
-    Every method runs from the same seed (same noise sequence). Nothing is written when
-    ``out_dir`` is None. Files are written atomically. ``designs``: the (kinematic, dynamic)
-    LMI designs of ``cfg`` when the caller has them (default: the design cache). A run that stops
-    early (|e_y| beyond the scenario's bound, non-finite plant) has ``status`` ``"diverged"``;
-    ``metrics["diverged"]`` lists those methods.
+    Every method runs from the same seed (same noise sequence) on a fresh plant from
+    ``plant_factory`` (None: tsmpc's own plant). Nothing is written when ``out_dir`` is None.
+    Files are written atomically. Figures (``plots``) are drawn by ``figures(logs, out_dir, cfg)``;
+    None = the report layer's :func:`tsmpc.report.figures.save_all`, imported only then.
+    ``designs``: the (kinematic, dynamic) LMI designs of ``cfg`` when the caller has them
+    (default: the design cache). A run that stops early (|e_y| beyond the scenario's bound,
+    non-finite plant) has ``status`` ``"diverged"``; ``metrics["diverged"]`` lists those methods.
     """
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
@@ -174,8 +181,10 @@ def compare(
         if max_steps is not None:
             k_total = min(k_total, max_steps)
         prog = progress_factory(method.value, k_total) if progress_factory else None
-        logs[method.value] = simulate(cfg, method, scenario, oracle=oracle, kinematic_design=kd,
-                                      dynamic_design=dd, progress=prog, max_steps=max_steps)
+        plant = plant_factory() if plant_factory is not None else None
+        logs[method.value] = simulate(cfg, method, scenario, oracle=oracle, plant=plant,
+                                      kinematic_design=kd, dynamic_design=dd, progress=prog,
+                                      max_steps=max_steps)
     metrics: dict[str, Any] = {
         "methods": {name: compute_metrics(log) for name, log in logs.items()},
         "scenario": _scenario_summary(cfg, scenario, max_steps),
@@ -200,12 +209,13 @@ def compare(
             m["mpc_ms_ratio_to_REF"] = m["mpc_ms"]["median"] / den if den > 0 else float("nan")
     files: list[Path] = []
     if out_dir is not None:
-        files = write_outputs(cfg, metrics, logs, Path(out_dir), plots=plots)
+        files = write_outputs(cfg, metrics, logs, Path(out_dir), plots=plots, figures=figures)
     return CompareResult(metrics, logs, tuple(files))
 
 
 def write_outputs(
-    cfg: Config, metrics: dict[str, Any], logs: dict[str, RunLog], out: Path, *, plots: bool
+    cfg: Config, metrics: dict[str, Any], logs: dict[str, RunLog], out: Path, *, plots: bool,
+    figures: FigureFn | None = None,
 ) -> list[Path]:
     """metrics.json, rmse.{csv,md,tex}, timeseries.{npz,mat}, config.toml, versions.json, figures,
     and last report.html (one self-contained page of all of it)."""
@@ -229,9 +239,9 @@ def write_outputs(
     save_logs_mat(logs, out / "timeseries.mat")
     files += [out / "timeseries.npz", out / "timeseries.mat"]
     if plots:
-        from tsmpc.report.figures import save_all
-
-        files += save_all(logs, out, cfg)
+        if figures is None:
+            from tsmpc.report.figures import save_all as figures
+        files += figures(logs, out, cfg)
     from tsmpc.report.html import write_report
 
     files.append(write_report(out, metrics, files))

@@ -7,8 +7,6 @@ sampled every T_c (length K), inner-loop signals every T_d (length K · T_c/T_d)
 from __future__ import annotations
 
 import io
-import os
-import tempfile
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -16,37 +14,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+# The atomic writers live in tsmpc.io (below synthesis, planning and sim); re-exported here.
+from tsmpc.io import atomic_write_bytes, atomic_write_text
+
 __all__ = ["RunLog", "atomic_write_bytes", "atomic_write_text", "save_logs_mat", "save_logs_npz"]
-
-
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically (temporary file in the same folder + rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        # mkstemp creates 0600; a data file gets the mode open() would give it (0666 & ~umask).
-        os.fchmod(fd, 0o666 & ~_umask())
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _umask() -> int:
-    # os.umask can only be read by setting it; set it back at once.
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write UTF-8 ``text`` to ``path`` atomically."""
-    atomic_write_bytes(path, text.encode("utf-8"))
 
 
 @dataclass(frozen=True)

@@ -6,14 +6,31 @@ Tracking errors are sampled every T_c: vehicle-frame e_x, e_y, e_θ, and v_d −
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
+from tsmpc.errors import DataFormatError
+from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.sim.log import RunLog
 
-__all__ = ["PAPER_TABLE5", "RMSE_KEYS", "compute_metrics", "timing_stats", "tracking_errors"]
+__all__ = [
+    "PAPER_TABLE5",
+    "RMSE_KEYS",
+    "ControlEffort",
+    "ErrorStats",
+    "RunMetrics",
+    "Timing",
+    "TrackingMetrics",
+    "compute_metrics",
+    "errors_from_arrays",
+    "run_metrics",
+    "timing_stats",
+    "tracking_errors",
+    "tracking_metrics",
+]
 
 RMSE_KEYS = ("x", "y", "theta", "v", "omega")
 
@@ -44,6 +61,132 @@ def timing_stats(seconds: ArrayLike) -> dict[str, float]:
     }
 
 
+@dataclass(frozen=True)
+class ErrorStats:
+    """One statistic of the tracking errors, the paper's Table 5 columns (SI units)."""
+
+    x: float  #: longitudinal error e_x [m]
+    y: float  #: lateral error e_y [m]
+    theta: float  #: heading error e_θ [rad]
+    v: float  #: speed error v_d − v [m/s]
+    omega: float  #: yaw-rate error ω_d − ω [rad/s]
+
+    def as_dict(self) -> dict[str, float]:
+        return {k: getattr(self, k) for k in RMSE_KEYS}
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Per-call wall times of a block [ms]."""
+
+    median: float
+    p95: float
+    p99: float
+    max: float
+    mean: float
+
+    @classmethod
+    def of(cls, seconds: ArrayLike) -> Timing:
+        return cls(**timing_stats(seconds))
+
+    def as_dict(self) -> dict[str, float]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True)
+class ControlEffort:
+    """RMS of the plant inputs and of the outer loop's moves."""
+
+    F_xR_rms_N: float
+    delta_rms_rad: float
+    dv_ref_rms: float
+    domega_ref_rms: float
+
+
+@dataclass(frozen=True)
+class TrackingMetrics:
+    """Tracking quality from the true state and the reference alone (any simulator's arrays)."""
+
+    rmse: ErrorStats
+    mean: ErrorStats
+    max_abs_lateral_m: float
+
+
+@dataclass(frozen=True)
+class RunMetrics:
+    """Every metric of one run (:func:`run_metrics`); ``to_dict()`` is its metrics.json entry."""
+
+    tracking: TrackingMetrics
+    mpc_ms: Timing
+    mhe_ms: Timing
+    lqr_ms: Timing
+    mpc_iterations_mean: float
+    mpc_iterations_max: int
+    friction_rmse_N: float  #: F̂_fr − F_fr(true) [N] (NaN when the plant has no such force)
+    slip_rmse_rad: float  #: α̂ − α
+    speed_estimate_rmse: float  #: v̂ − v [m/s]
+    control_effort: ControlEffort
+    simulated_s: float
+    outer_steps: int
+    inner_steps: int
+    wall_s: float
+    realtime_factor: float
+    termination: str
+    events: dict[str, int]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The metrics.json entry of one method (schema of issue 7, names kept stable)."""
+        tr = self.tracking
+        return {
+            "rmse": tr.rmse.as_dict(),
+            "mean": tr.mean.as_dict(),
+            "max_abs_lateral_m": tr.max_abs_lateral_m,
+            "mpc_ms": self.mpc_ms.as_dict(),
+            "mhe_ms": self.mhe_ms.as_dict(),
+            "lqr_ms": self.lqr_ms.as_dict(),
+            "mpc_iterations": {"mean": self.mpc_iterations_mean, "max": self.mpc_iterations_max},
+            "friction_rmse_N": self.friction_rmse_N,
+            "slip_rmse_rad": self.slip_rmse_rad,
+            "speed_estimate_rmse": self.speed_estimate_rmse,
+            "control_effort": {f.name: getattr(self.control_effort, f.name)
+                               for f in fields(self.control_effort)},
+            "simulated_s": self.simulated_s,
+            "outer_steps": self.outer_steps,
+            "inner_steps": self.inner_steps,
+            "wall_s": self.wall_s,
+            "realtime_factor": self.realtime_factor,
+            "termination": self.termination,
+            "events": dict(self.events),
+        }
+
+
+def _tracking(err: dict[str, NDArray[np.float64]]) -> TrackingMetrics:
+    n = err["y"].size
+    return TrackingMetrics(
+        rmse=ErrorStats(**{k: _rms(v) for k, v in err.items()}),
+        mean=ErrorStats(**{k: float(np.mean(v)) if v.size else float("nan") for k, v in err.items()}),
+        max_abs_lateral_m=float(np.max(np.abs(err["y"]))) if n else float("nan"),
+    )
+
+
+def errors_from_arrays(state: ArrayLike, ref: ArrayLike) -> dict[str, NDArray[np.float64]]:
+    """Per-sample errors like :func:`tracking_errors`, from plain arrays: the true state (K, 6)
+    ``[X, Y, θ, v, α, ω]`` and the reference (K, 5) ``[x_d, y_d, θ_d, v_d, ω_d]`` at the same
+    instants (every T_c)."""
+    x = np.asarray(state, dtype=float).reshape(-1, 6)
+    r = np.asarray(ref, dtype=float).reshape(-1, 5)
+    if x.shape[0] != r.shape[0]:
+        raise DataFormatError(f"state has {x.shape[0]} rows but the reference {r.shape[0]}")
+    e = pose_to_errors(x[:, 0], x[:, 1], x[:, 2], r[:, 0], r[:, 1], r[:, 2]).reshape(-1, 3)
+    return {"x": e[:, 0], "y": e[:, 1], "theta": e[:, 2], "v": r[:, 3] - x[:, 3],
+            "omega": r[:, 4] - x[:, 5]}
+
+
+def tracking_metrics(state: ArrayLike, ref: ArrayLike) -> TrackingMetrics:
+    """RMSE, mean and max |e_y| from plain arrays (see :func:`errors_from_arrays`)."""
+    return _tracking(errors_from_arrays(state, ref))
+
+
 def tracking_errors(log: RunLog) -> dict[str, np.ndarray]:
     """Per-sample errors (K,) keyed like the RMSE table: e_x, e_y, e_θ, v_d − v, ω_d − ω."""
     return {
@@ -55,35 +198,38 @@ def tracking_errors(log: RunLog) -> dict[str, np.ndarray]:
     }
 
 
-def compute_metrics(log: RunLog) -> dict[str, Any]:
-    """The metrics.json entry of one method (schema of issue 7, names kept stable)."""
+def run_metrics(log: RunLog) -> RunMetrics:
+    """Every metric of one run, typed."""
     err = tracking_errors(log)
     n = log.n_outer
     du = np.diff(log.u_c, axis=0) if n > 1 else np.zeros((0, 2))
     sim_s = log.simulated_s
-    return {
-        "rmse": {k: _rms(v) for k, v in err.items()},
-        "mean": {k: float(np.mean(v)) if v.size else float("nan") for k, v in err.items()},
-        "max_abs_lateral_m": float(np.max(np.abs(err["y"]))) if n else float("nan"),
-        "mpc_ms": timing_stats(log.mpc_time_s),
-        "mhe_ms": timing_stats(log.mhe_time_s),
-        "lqr_ms": timing_stats(log.lqr_time_s),
-        "mpc_iterations": {"mean": float(np.mean(log.mpc_iterations)) if n else float("nan"),
-                           "max": int(np.max(log.mpc_iterations)) if n else 0},
-        "friction_rmse_N": _rms(log.F_fr_hat - log.F_fr_true),
-        "slip_rmse_rad": _rms(log.estimate[:, 1] - log.state[:, 4]),
-        "speed_estimate_rmse": _rms(log.estimate[:, 0] - log.state[:, 3]),
-        "control_effort": {
-            "F_xR_rms_N": _rms(log.command[:, 0]),
-            "delta_rms_rad": _rms(log.command[:, 1]),
-            "dv_ref_rms": _rms(du[:, 0]) if du.size else 0.0,
-            "domega_ref_rms": _rms(du[:, 1]) if du.size else 0.0,
-        },
-        "simulated_s": sim_s,
-        "outer_steps": n,
-        "inner_steps": int(log.t_inner.size),
-        "wall_s": log.wall_s,
-        "realtime_factor": sim_s / log.wall_s if log.wall_s > 0 else float("inf"),
-        "termination": log.termination,
-        "events": dict(log.events),
-    }
+    return RunMetrics(
+        tracking=_tracking(err),
+        mpc_ms=Timing.of(log.mpc_time_s),
+        mhe_ms=Timing.of(log.mhe_time_s),
+        lqr_ms=Timing.of(log.lqr_time_s),
+        mpc_iterations_mean=float(np.mean(log.mpc_iterations)) if n else float("nan"),
+        mpc_iterations_max=int(np.max(log.mpc_iterations)) if n else 0,
+        friction_rmse_N=_rms(log.F_fr_hat - log.F_fr_true),
+        slip_rmse_rad=_rms(log.estimate[:, 1] - log.state[:, 4]),
+        speed_estimate_rmse=_rms(log.estimate[:, 0] - log.state[:, 3]),
+        control_effort=ControlEffort(
+            F_xR_rms_N=_rms(log.command[:, 0]),
+            delta_rms_rad=_rms(log.command[:, 1]),
+            dv_ref_rms=_rms(du[:, 0]) if du.size else 0.0,
+            domega_ref_rms=_rms(du[:, 1]) if du.size else 0.0,
+        ),
+        simulated_s=sim_s,
+        outer_steps=n,
+        inner_steps=int(log.t_inner.size),
+        wall_s=log.wall_s,
+        realtime_factor=sim_s / log.wall_s if log.wall_s > 0 else float("inf"),
+        termination=log.termination,
+        events=dict(log.events),
+    )
+
+
+def compute_metrics(log: RunLog) -> dict[str, Any]:
+    """The metrics.json entry of one method (``run_metrics(log).to_dict()``)."""
+    return run_metrics(log).to_dict()

@@ -28,6 +28,7 @@ from tsmpc.planning.reference import Reference
 from tsmpc.scenarios import FrictionProfile, SensorNoise, paper_friction_profile
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.plant import Plant
+from tsmpc.vehicle.actuators import Actuators
 from tsmpc.vehicle.plant import VehiclePlant
 
 __all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "default_plant", "simulate",
@@ -53,6 +54,10 @@ class Scenario:
         friction: μ(road) as a function of time and travelled distance.
         initial_error: (lateral offset [m], heading offset [rad]) of the start pose.
         plant_vehicle, plant_tyre: plant-only parameters (model mismatch); None = the config's.
+        actuators: steering servo / force lag in front of the default plant; None = ideal.
+        measured_steering, measured_force: the platform measures the steering angle / drive
+            force the vehicle really received (the plant's ``applied_input``) and gives it to the
+            cascade (the MHE then uses it instead of the command).
         sensor_fault: measurement corruption (dropouts, NaN bursts); None = healthy sensors.
         divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track's
             half-width); None = ``cfg.divergence_bound_m``.
@@ -65,6 +70,9 @@ class Scenario:
     initial_error: tuple[float, float] = (0.0, 0.0)
     plant_vehicle: VehicleParams | None = None
     plant_tyre: TyreParams | None = None
+    actuators: Actuators | None = None
+    measured_steering: bool = False
+    measured_force: bool = False
     sensor_fault: SensorFault | None = None
     divergence_bound_m: float | None = None
     meta: dict[str, Any] = field(default_factory=dict)
@@ -150,9 +158,23 @@ def _start_state(ref: Reference, initial_error: tuple[float, float]) -> NDArray[
 
 
 def default_plant(cfg: Config, scenario: Scenario) -> Plant:
-    """tsmpc's nonlinear plant with the scenario's plant parameters (the config's if None)."""
-    return VehiclePlant(scenario.plant_vehicle or cfg.vehicle, scenario.plant_tyre or cfg.tyre,
-                        cfg.rates.h)
+    """tsmpc's nonlinear plant with the scenario's plant parameters (the config's if None),
+    behind the scenario's actuators if any."""
+    plant = VehiclePlant(scenario.plant_vehicle or cfg.vehicle, scenario.plant_tyre or cfg.tyre,
+                         cfg.rates.h)
+    return plant if scenario.actuators is None else scenario.actuators.wrap(
+        plant, substeps=cfg.rates.plant_per_inner)
+
+
+def _measurement(y: NDArray[np.float64], x: NDArray[np.float64], plant: Plant, oracle: bool,
+                 sc: Scenario) -> Measurement:
+    """The sensor sample the cascade gets: noisy [X, Y, θ, v, ω], plus the applied steering /
+    force where the platform measures them, plus the true [v, α, ω] in the oracle ablation."""
+    u = plant.applied_input if (sc.measured_steering or sc.measured_force) else None
+    return Measurement.from_array(y, state=x[3:6].copy() if oracle else None,
+                                  force=float(u[0]) if u is not None and sc.measured_force else None,
+                                  steering=float(u[1]) if u is not None and sc.measured_steering
+                                  else None)
 
 
 def simulate(
@@ -160,16 +182,15 @@ def simulate(
     plant: Plant | None = None, kinematic_design: Any = None, dynamic_design: Any = None,
     progress: ProgressFn | None = None, max_steps: int | None = None,
 ) -> RunLog:
-    """Run ``method`` on ``scenario``: ``plant`` ↔ :class:`~tsmpc.control.cascade.Cascade` every
-    T_d, everything logged. ``plant`` = any :class:`~tsmpc.sim.plant.Plant` (None: tsmpc's own
-    with the scenario's parameters, :func:`default_plant`). ``oracle`` (or ``cfg.lqr.oracle``):
-    the ablation where the TS-LQR gets the true [v, α, ω] and no friction compensation (the MHE
-    still runs and is logged). Designs come from the cache when None; ``progress(k, K)`` is
-    called after each outer step; ``max_steps`` shortens the run. A non-finite plant state or
-    |e_y| beyond ``scenario.divergence_bound_m`` (None: ``cfg.divergence_bound_m``) ends the run
-    early (``termination`` says why); closed laps are tracked to their end (:func:`tracked_steps`);
-    controller and estimator failures are counted in ``events``, never raised. The process uses
-    one BLAS thread unless ``TSMPC_BLAS_THREADS`` says otherwise (:mod:`tsmpc.blas`)."""
+    """Run ``method`` on ``scenario``: ``plant`` (any :class:`~tsmpc.sim.plant.Plant`; None:
+    :func:`default_plant`) ↔ :class:`~tsmpc.control.cascade.Cascade` every T_d, all logged.
+    ``oracle`` (or ``cfg.lqr.oracle``): the TS-LQR gets the true [v, α, ω] and no friction
+    compensation (the MHE still runs). Designs: the cache's when None; ``progress(k, K)`` after
+    each outer step; ``max_steps`` shortens the run. A non-finite plant state or |e_y| beyond
+    ``scenario.divergence_bound_m`` (the track's half-width; None: the config's) ends the run
+    (``termination`` says why); closed laps run to their end (:func:`tracked_steps`); block
+    failures are counted in ``events``, never raised. One BLAS thread unless
+    ``TSMPC_BLAS_THREADS`` says otherwise (:mod:`tsmpc.blas`)."""
     from tsmpc.blas import limit_blas_threads
 
     limit_blas_threads()
@@ -187,9 +208,7 @@ def simulate(
     cascade.reset(x)
     rec = _Recorder(ref, K, n_in, N, Tc, Td)
     noise, fault = SensorNoise(cfg.noise, cfg.seed), scenario.sensor_fault
-    # Leaving the road is a result (diverged), not a number: the track's half-width when the
-    # scenario knows it, else the configured default.
-    bound = scenario.divergence_bound_m or cfg.divergence_bound_m
+    bound = scenario.divergence_bound_m or cfg.divergence_bound_m  # off the road: diverged
     termination, done, rows, s_travel, t_start = "completed", K, 0, 0.0, time.perf_counter()
     for m in range(K * n_in):
         k, j = divmod(m, n_in)
@@ -201,7 +220,7 @@ def simulate(
             termination = f"diverged: |e_y| = {abs(e_y):.2f} m > {bound:g} m at t = {k * Tc:.1f} s"
             done = k + 1
             break
-        cmd = cascade.step(t, Measurement.from_array(y, state=x[3:6].copy() if oracle else None))
+        cmd = cascade.step(t, _measurement(y, x, plant, oracle, scenario))
         if cmd.plan is not None:
             rec.plan(k, cmd)
         mu = float(scenario.friction.mu(t, s_travel))

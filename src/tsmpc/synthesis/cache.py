@@ -21,7 +21,7 @@ import numpy as np
 
 from tsmpc.config import Config
 from tsmpc.errors import TsmpcError
-from tsmpc.sim.log import atomic_write_text
+from tsmpc.io import atomic_write_text
 from tsmpc.synthesis.certificates import Certificate, check
 from tsmpc.synthesis.dynamic import DynamicDesign, certify_grid, design_dynamic
 from tsmpc.synthesis.kinematic import KinematicDesign, certify_kinematic, design_kinematic
@@ -61,7 +61,10 @@ def dynamic_key(cfg: Config) -> str:
     """Hash of every input of the dynamic design."""
     return _hash("dynamic", {"box": cfg.dynamic_box.model_dump(mode="json"),
                              "lmi": cfg.dynamic_lmi.model_dump(mode="json"),
-                             "vehicle": cfg.vehicle.model_dump(mode="json"), "Td": cfg.rates.Td})
+                             # unset optional fields (per-axle stiffness) are left out, so the
+                             # keys of existing designs do not change
+                             "vehicle": cfg.vehicle.model_dump(mode="json", exclude_none=True),
+                             "Td": cfg.rates.Td})
 
 
 def design_to_dict(design: KinematicDesign | DynamicDesign) -> dict[str, Any]:

@@ -97,7 +97,7 @@ class Plant:
         this function is evaluated 4 times per 1 ms step)."""
         p, t, k = self.vehicle, self.tyre, self.constants
         M, I, g, a, b = p.mass, p.inertia, p.g, p.a, p.b
-        C, kd = p.cornering_stiffness, p.drag_factor
+        Cf, Cr, kd = p.C_f, p.C_r, p.drag_factor
         v_floor, v_eps = k.v_floor, k.v_eps
         Mg = M * g
         fzf, fzr = self._fz
@@ -111,16 +111,16 @@ class Plant:
             ve = v if v > v_floor else v_floor
             sa, ca = sin(al), cos(al)
             if linear:
-                fyf = C * (d - al - a * om / ve)
-                fyr = C * (b * om / ve - al)
+                fyf = Cf * (d - al - a * om / ve)
+                fyr = Cr * (b * om / ve - al)
             else:
                 vx, vy = ve * ca, ve * sa
                 mu_t = mu * scale if scale else mu_t0
                 Df, Dr = mu_t * fzf, mu_t * fzr
                 if Df > 0.0:
-                    bs = C / (cc * Df) * (atan2(vy + a * om, vx) - d)
+                    bs = Cf / (cc * Df) * (atan2(vy + a * om, vx) - d)
                     fyf = -Df * sin(cc * atan(bs - ee * (bs - atan(bs))))
-                    bs = C / (cc * Dr) * atan2(vy - b * om, vx)
+                    bs = Cr / (cc * Dr) * atan2(vy - b * om, vx)
                     fyr = -Dr * sin(cc * atan(bs - ee * (bs - atan(bs))))
                 else:
                     fyf = fyr = 0.0

@@ -1,0 +1,18 @@
+"""The cascade in your own loop (the README's "Use your own vehicle"): call it every T_d with
+what your sensors measure and apply what it returns. tsmpc's plant stands in for the vehicle."""
+
+from tsmpc.config import Config
+from tsmpc.control.cascade import Cascade, Measurement
+from tsmpc.planning.circuit import builtin_circuit
+from tsmpc.vehicle.plant import VehiclePlant
+
+cfg = Config()
+reference = builtin_circuit(dt=cfg.rates.Tc)
+cascade = Cascade(cfg, "ref", reference)  # LMI designs from the cache
+car = VehiclePlant(cfg.vehicle, cfg.tyre, cfg.rates.h)  # stands in for your vehicle
+car.reset([reference.x[0], reference.y[0], reference.theta[0], reference.v[0], 0.0, 0.0])
+for i in range(500):  # 5 s at T_d = 10 ms
+    X, Y, theta, v, _, omega = car.state  # your sensors: pose, speed, yaw rate
+    cmd = cascade.step(i * cfg.rates.Td, Measurement((X, Y, theta), v, omega))
+    car.step([cmd.F_xR, cmd.delta], cfg.rates.Td, mu_road=0.9)  # your actuators
+print(cascade.events, cascade.last_plan.status, cascade.last_estimate.x)
