@@ -3,15 +3,17 @@
 Scheduling + build + solve (everything a vehicle waits for), along the paper's reference
 (../shared/data/paper/planner_references_100ms.csv, columns 5…1316) when present, else the
 built-in circuit; start from a 2 m / 0.1 rad error. Prints median/p95/p99/max [ms], QP
-iterations and the NL/method ratio measured in the same run.
+iterations and the NL/method ratio measured in the same run, for the compiled fast path
+(``results``) and the numpy condensed path (``results_numpy``, the kernels' oracle).
 
-Usage: python benchmarks/mpc_step.py [--json] [--steps 1272] [--no-nl]
+Usage: python benchmarks/mpc_step.py [--json] [--steps 1272] [--no-nl] [--no-numpy]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -60,20 +62,32 @@ def main() -> None:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--steps", type=int, default=1272)
     ap.add_argument("--no-nl", action="store_true", help="skip the NL-MPC baseline")
+    ap.add_argument("--no-numpy", action="store_true", help="skip the numpy (no kernels) pass")
     args = ap.parse_args()
     cfg = Config()
     d = load_or_design_kinematic(cfg)
     model = KinematicTS(cfg.kinematic_box, cfg.rates.Tc)
     ref, src = _reference()
-    res = {}
-    for mode in (SchedulingMode.FZN, SchedulingMode.REF, SchedulingMode.ITER):
+    res, res_np = {}, {}
+    modes = (SchedulingMode.FZN, SchedulingMode.REF, SchedulingMode.ITER)
+    for mode in modes:
         res[mode.value.upper()] = run(TSMPC(cfg.mpc, model, d.P, d.S, mode=mode), ref, args.steps,
                                       cfg.mpc.N, cfg.rates.Tc)
     if not args.no_nl:
         res["NL"] = run(NLMPC(cfg.mpc, model, d.P, d.S), ref, args.steps, cfg.mpc.N, cfg.rates.Tc)
-    out = {"unit": "ms per MPC step", "reference": src, "results": res}
+    if not args.no_numpy:
+        for mode in modes:
+            res_np[mode.value.upper()] = run(TSMPC(cfg.mpc, model, d.P, d.S, mode=mode, jit=False), ref,
+                                             args.steps, cfg.mpc.N, cfg.rates.Tc)
+    out = {"unit": "ms per MPC step", "reference": src, "results": res,
+           "load_average": os.getloadavg()}
+    if res_np:
+        out["results_numpy"] = res_np
+        out["speedup_vs_numpy"] = {k: v["median"] / res[k]["median"] for k, v in res_np.items()}
     if "NL" in res:
         out["nl_ratio"] = {k: res["NL"]["median"] / v["median"] for k, v in res.items() if k != "NL"}
+        if res_np:
+            out["nl_ratio_numpy"] = {k: res["NL"]["median"] / v["median"] for k, v in res_np.items()}
     if args.json:
         print(json.dumps(out, indent=2))
         return
@@ -83,6 +97,12 @@ def main() -> None:
         ratio = out.get("nl_ratio", {}).get(k, float("nan"))
         print(f"{k:8s} {s['median']:8.3f} {s['p95']:8.3f} {s['p99']:8.3f} {s['max']:8.3f} "
               f"{s['mean_iterations']:6.2f} {ratio:6.1f}")
+    for k, s in res_np.items():
+        ratio = out.get("nl_ratio_numpy", {}).get(k, float("nan"))
+        print(f"{k + ' np':8s} {s['median']:8.3f} {s['p95']:8.3f} {s['p99']:8.3f} {s['max']:8.3f} "
+              f"{s['mean_iterations']:6.2f} {ratio:6.1f}   (numpy path; kernel speed-up "
+              f"{out['speedup_vs_numpy'][k]:.1f}x)")
+    print(f"load average {out['load_average'][0]:.1f}")
 
 
 if __name__ == "__main__":

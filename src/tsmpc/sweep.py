@@ -410,6 +410,10 @@ def _record(
 def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
     from dataclasses import replace as dc_replace
 
+    from tsmpc.blas import limit_blas_threads
+
+    limit_blas_threads()  # a Dask worker per core: one BLAS thread each (tsmpc.blas)
+
     from tsmpc.config import replace
     from tsmpc.planning.circuit import builtin_circuit
     from tsmpc.planning.reference import Reference
@@ -530,6 +534,10 @@ def run_sweep(
                 # with the tasks — remote workers need no shared disk and solve nothing.
                 cfg = base_config(spec)
                 designs = design_fn(cfg) if design_fn is not None else _designs(cfg)
+                if scheduler is None:  # local workers share this machine's kernel cache: fill it once
+                    from tsmpc import kernels
+
+                    kernels.warmup()
                 pending = [RunTask(t.id, t.params, t.config, t.duration_s, t.max_lateral_m, t.root,
                                    designs) for t in pending]
             futures = {client.submit(run_fn, t, key=f"tsmpc-run-{t.id}", retries=spec.retries,

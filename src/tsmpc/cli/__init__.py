@@ -38,7 +38,7 @@ def _main(
 
 def _register() -> None:
     # Each module adds its commands to ``app``; heavy imports stay inside the command bodies.
-    from tsmpc.cli import animate, compare, demo, design, plan, sweep  # noqa: F401
+    from tsmpc.cli import animate, compare, demo, design, plan, sweep, warmup  # noqa: F401
 
 
 _register()

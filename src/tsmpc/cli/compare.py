@@ -62,10 +62,12 @@ def _execute(
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+    from tsmpc.blas import limit_blas_threads
     from tsmpc.config import replace
     from tsmpc.sim.compare import compare, load_scenario
     from tsmpc.sim.simulator import Method
 
+    limit_blas_threads()
     console = Console()
     if not console.is_terminal:  # piped to a file or CI log: do not squeeze the tables to 80 columns
         console = Console(width=140)
@@ -109,6 +111,9 @@ def _execute(
             except TsmpcError as err:  # e.g. an infeasible LMI for these weights and boxes
                 (out / PARTIAL_MARKER).unlink(missing_ok=True)
                 fail(f"LMI design failed: {err}", code=1)
+            from tsmpc import kernels
+
+            kernels.warmup()  # compile/load before the progress bars (the first run says so)
             with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
                           TextColumn("{task.completed}/{task.total} MPC steps"),
                           TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:

@@ -84,11 +84,13 @@ class TSLQR:
         settings: saturations, compensation switch.
         Td: sample time [s].
         bandwidth: Apkarian filter λ [rad/s] (must match the design).
+        jit: run :meth:`step` as one compiled call (:mod:`tsmpc.kernels.lqr`, the same law); None =
+            unless ``TSMPC_NO_JIT`` is set; False = numpy only (the tests' oracle).
     """
 
     def __init__(
         self, gains: NDArray[np.float64], model: DynamicTS, vehicle: VehicleParams, settings: LQRSettings,
-        Td: float, bandwidth: float = 10.0,
+        Td: float, bandwidth: float = 10.0, jit: bool | None = None,
     ) -> None:
         self.K = np.asarray(gains, dtype=float)
         if self.K.shape != (model.n_vertices, 2, 6):
@@ -108,7 +110,48 @@ class TSLQR:
         self._zlo = tuple(float(v) for v in box.lower)
         self._zhi = tuple(float(v) for v in box.upper)
         self._bits = tuple(tuple(bool(b) for b in row) for row in box.vertex_bits)
+        # Controller state [f_F, f_δ, ζ, started, applied_F, applied_δ], shared by both paths.
+        self._s = np.zeros(6)
+        self._kern = None
+        if jit is None or jit:
+            from tsmpc import kernels
+
+            self._kern = kernels.load("lqr")
+        if self._kern is not None:
+            p = vehicle
+            try:
+                self._kargs = (np.ascontiguousarray(self.K), np.array(self._zlo), np.array(self._zhi),
+                               np.array(self._bits, dtype=np.bool_),
+                               np.array([p.mass, p.inertia, getattr(p, "C_f", p.cornering_stiffness),
+                                         getattr(p, "C_r", p.cornering_stiffness), p.a, p.b,
+                                         p.mu_nominal * p.g, p.drag_factor], dtype=float),
+                               self.bandwidth, self._a, self.Td, float(self._lo[0]), float(self._hi[0]),
+                               float(self._lo[1]), float(self._hi[1]), bool(settings.speed_feedback),
+                               float(settings.speed_time_constant))
+            except (AttributeError, TypeError):  # parameters the kernel does not know: numpy
+                self._kern = None
+        if self._kern is not None:
+            if not self._kernel_agrees():
+                self._kern = None  # the law changed on the numpy side only: numpy it is
         self.reset()
+
+    def _kernel_agrees(self) -> bool:
+        """The compiled step reproduces the numpy step on a short probe sequence (guards against a
+        law edited on one side only)."""
+        from types import SimpleNamespace
+
+        kern, out = self._kern, []
+        for use in (None, kern):
+            self._kern = use
+            self.reset()
+            for k in range(3):
+                est = SimpleNamespace(x=(9.0 + k, 0.01, 0.1), F_fr=120.0, F_fr_raw=90.0)
+                c = self._step(est, 10.0, 0.12)  # not step(): callers may wrap it
+                out.append((c.F_xR, c.delta, c.saturated))
+        self._kern = kern
+        self.reset()
+        a, b = np.array(out[:3], dtype=float), np.array(out[3:], dtype=float)
+        return bool(np.allclose(a, b, rtol=1e-9, atol=1e-12))
 
     @property
     def dt(self) -> float:
@@ -117,10 +160,40 @@ class TSLQR:
 
     def reset(self) -> None:
         """Filter states at rest, integrator cleared."""
-        self._f = np.zeros(2)
-        self._zeta = 0.0
-        self._applied = np.zeros(2)
-        self._started = False
+        self._s[:] = 0.0
+
+    # The controller state as named views of the state vector (the numpy step's variables).
+    @property
+    def _f(self) -> NDArray[np.float64]:
+        return self._s[0:2]
+
+    @_f.setter
+    def _f(self, value: Any) -> None:
+        self._s[0:2] = value
+
+    @property
+    def _zeta(self) -> float:
+        return float(self._s[2])
+
+    @_zeta.setter
+    def _zeta(self, value: float) -> None:
+        self._s[2] = value
+
+    @property
+    def _started(self) -> bool:
+        return bool(self._s[3])
+
+    @_started.setter
+    def _started(self, value: bool) -> None:
+        self._s[3] = 1.0 if value else 0.0
+
+    @property
+    def _applied(self) -> NDArray[np.float64]:
+        return self._s[4:6]
+
+    @_applied.setter
+    def _applied(self, value: Any) -> None:
+        self._s[4:6] = value
 
     @property
     def applied_input(self) -> NDArray[np.float64]:
@@ -152,11 +225,25 @@ class TSLQR:
     def step(self, estimate: Any, v_ref: float, omega_ref: float) -> InnerCommand:
         """One inner step from the estimate (``.x`` = [v̂, α̂, ω̂], ``.F_fr``, ``.F_fr_raw``) and
         the outer-loop references; returns the plant input for the next T_d."""
+        return self._step(estimate, v_ref, omega_ref)
+
+    def _step(self, estimate: Any, v_ref: float, omega_ref: float) -> InnerCommand:
         v, al, om = (float(c) for c in estimate.x)
         if not (math.isfinite(v) and math.isfinite(al) and math.isfinite(om)):
             # Never command from a corrupted estimate: hold the last input.
             return InnerCommand(float(self._applied[0]), float(self._applied[1]), True, 0.0)
         st = self.settings
+        if self._kern is not None:
+            comp = 0.0
+            if st.friction_compensation:
+                F_hat = float(estimate.F_fr if st.friction_estimate == FrictionEstimate.WINDOW
+                              else estimate.F_fr_raw)
+                comp = F_hat if math.isfinite(F_hat) else 0.0
+            o0, o1, sat, ok = self._kern.lqr_step(self._s, v, al, om, comp, float(v_ref),
+                                                  float(omega_ref), *self._kargs)
+            if ok:
+                return InnerCommand(o0, o1, sat, comp)
+            # singular reference gain: the numpy step below decides (and may raise)
         Fmin, dmin = float(self._lo[0]), float(self._lo[1])
         Fmax, dmax = float(self._hi[0]), float(self._hi[1])
         r = np.array([v_ref, omega_ref])
@@ -178,7 +265,7 @@ class TSLQR:
         if st.speed_feedback:  # feedback on the speed error (beyond the paper)
             F_add = self.vehicle.mass * (v_ref - v) / st.speed_time_constant
         comp = 0.0
-        if st.friction_compensation:
+        if st.friction_compensation:  # (the oracle ablation's estimate carries F̂ = 0)
             F_hat = float(estimate.F_fr if st.friction_estimate == FrictionEstimate.WINDOW
                           else estimate.F_fr_raw)
             comp = F_hat if math.isfinite(F_hat) else 0.0

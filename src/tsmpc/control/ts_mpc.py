@@ -233,11 +233,13 @@ class TSMPC:
         P: terminal cost (3, 3).
         S: terminal set matrix (3, 3), χ = {x : xᵀSx ≤ 1}.
         mode: scheduling mode; defaults to ``settings.mode``.
+        jit: use the compiled Riccati fast path (:mod:`tsmpc.kernels.mpc`); None = unless
+            ``TSMPC_NO_JIT`` is set. False runs the numpy condensed path only (the tests' oracle).
     """
 
     def __init__(
         self, settings: MPCSettings, model: KinematicTS, P: NDArray[np.float64], S: NDArray[np.float64],
-        mode: SchedulingMode | None = None,
+        mode: SchedulingMode | None = None, jit: bool | None = None,
     ) -> None:
         self.settings = settings
         self.model = model
@@ -260,6 +262,16 @@ class TSMPC:
         self._term = np.array([N - 1, 2 * N - 1, 3 * N - 1])
         self._lo = np.asarray(model.premise_box.lower)
         self._hi = np.asarray(model.premise_box.upper)
+        self._kern = None
+        if jit is None or jit:
+            from tsmpc import kernels
+
+            self._kern = kernels.load("mpc")
+        self._mode_id = {SchedulingMode.FZN: 0, SchedulingMode.REF: 1, SchedulingMode.ITER: 2}[self.mode]
+        self._du = du
+        self._dummy = np.zeros(N)
+        # C-ordered copies for the kernel (one compiled signature whatever the caller passed)
+        self._Pc, self._Sc = np.ascontiguousarray(self.P), np.ascontiguousarray(self.S)
         self.reset()
 
     @property
@@ -420,6 +432,21 @@ class TSMPC:
                 omega[:-1] = prev.u_pred[1:, 1]
                 omega[-1] = prev.u_pred[-1, 1]
         n_iter = self.settings.iter_max if self.mode == SchedulingMode.ITER else 1
+        if self._kern is not None:
+            # Fast path: Riccati recursion of every scheduling iteration, compiled; accepted when
+            # its answer satisfies every constraint, else the condensed QP path below decides.
+            dummy = self._dummy
+            code, U, du, X, cost, n_clip = self._kern.fast_step(
+                self._mode_id, x0, up, v_d, w_d, dummy if omega is None else omega, omega is not None,
+                dummy if e_th is None else e_th, e_th is not None, self._lo, self._hi, self.model.Tc,
+                self._q, self._Pc, self._r, self._Sc, self._du, self._umin, self._umax,
+                self.settings.terminal_constraint, n_iter, self.settings.iter_tol)
+            if code == 0:
+                res = MPCResult(u=U[0].copy(), x_pred=X, u_pred=U, du=du, cost=cost,
+                                status=MPCStatus.OPTIMAL, iterations=0, qp_iterations=0,
+                                solve_time_s=time.perf_counter() - t0, n_clipped=n_clip)
+                self._prev = res
+                return res
         n_qp = n_it = n_clip = 0
         z = None
         for _ in range(n_iter):

@@ -26,6 +26,7 @@ when it satisfies the bounds, else DAQP (fresh solve); no cvxpy in the loop.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from enum import StrEnum
@@ -39,7 +40,7 @@ from scipy.linalg.lapack import dpotrs as _potrs
 from tsmpc.config import MHESettings, VehicleParams
 from tsmpc.control.qp import QPStatus, solve_daqp
 from tsmpc.errors import ConfigError
-from tsmpc.models.dynamic import DynamicTS
+from tsmpc.models.dynamic import Discretization, DynamicTS
 
 __all__ = ["MHEUIO", "Estimate", "EstimatorStatus", "WindowQP"]
 
@@ -88,29 +89,7 @@ class WindowQP:
     hi: NDArray[np.float64]
 
 
-_BELOW: dict[int, NDArray[np.float64]] = {}
 _EYE3 = np.eye(3)
-
-
-def _below(n: int) -> NDArray[np.float64]:
-    """(3(n+1), 3n) block mask of j < k (x_k depends on the noise w_j of earlier steps); cached."""
-    m = _BELOW.get(n)
-    if m is None:
-        m = np.kron((np.arange(n)[None, :] < np.arange(n + 1)[:, None]).astype(float), np.ones((3, 3)))
-        m.setflags(write=False)
-        _BELOW[n] = m
-    return m
-
-
-def _prefix_products(A: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``Q_k = A_k ⋯ A_0`` for every k: an inclusive scan over the first axis in ⌈log₂ n⌉ batched
-    products (Hillis–Steele)."""
-    Q = A.copy()
-    d, n = 1, A.shape[0]
-    while d < n:
-        Q[d:] = Q[d:] @ Q[:-d]
-        d *= 2
-    return Q
 
 
 class MHEUIO:
@@ -122,11 +101,14 @@ class MHEUIO:
         vehicle: vehicle parameters (mass for the UIO gain).
         Td: sample time [s] (must equal ``model.Td``).
         x0: initial state guess [v, α, ω].
+        jit: solve the window by the compiled block-tridiagonal kernel (:mod:`tsmpc.kernels.mhe`);
+            None = unless ``TSMPC_NO_JIT`` is set. False: the dense QP only (the tests' oracle).
+            The dense QP also remains the path whenever a state bound is active.
     """
 
     def __init__(
         self, settings: MHESettings, model: DynamicTS, vehicle: VehicleParams, Td: float,
-        x0: NDArray[np.float64] | None = None,
+        x0: NDArray[np.float64] | None = None, jit: bool | None = None,
     ) -> None:
         if abs(model.Td - Td) > 1e-12:
             raise ConfigError(f"MHEUIO: Td = {Td} differs from the model's Td = {model.Td}")
@@ -142,7 +124,49 @@ class MHEUIO:
         self._xmax = np.asarray(settings.x_max, dtype=float)
         self._sqrt_r = np.sqrt(self._r)
         self._tiles: dict[tuple[str, int], Any] = {}
+        self._kern = None
+        if jit is None or jit:
+            from tsmpc import kernels
+
+            self._kern = kernels.load("mhe")
+        if self._kern is not None:
+            n = settings.N
+            p, box = getattr(model, "params", vehicle), model.premise_box
+            try:
+                cf = getattr(p, "C_f", p.cornering_stiffness)  # per axle where known
+                cr = getattr(p, "C_r", p.cornering_stiffness)
+                phys = (float(p.mass), float(p.inertia), float(cf), float(cr), float(p.a),
+                        float(p.b), float(p.mu_nominal * p.g), float(p.drag_factor))
+                euler = getattr(model, "method", None) == Discretization.EULER
+            except (AttributeError, TypeError):
+                phys, euler = (1.0,) * 8, False
+            self._kargs = (
+                self._q, self._r, self._p, F_PRIOR_WEIGHT, self._xmin, self._xmax,
+                np.asarray(box.lower, dtype=float), np.asarray(box.upper, dtype=float),
+                *phys, self.Td, euler,
+            )
+            self._Ab, self._Bb, self._Xb = np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3))
+            if self._kargs[-1] and not self._kernel_model_agrees():
+                # The model is not the one the kernel evaluates: numpy evaluates it, the kernel solves.
+                self._kargs = (*self._kargs[:-1], False)
         self.reset(x0)
+
+    def _kernel_model_agrees(self) -> bool:
+        """The kernel's Euler matrices equal ``model.matrices`` at a few premise points (guards
+        against a model edited on one side only)."""
+        try:
+            lo, hi = (np.asarray(b, dtype=float) for b in (self.model.premise_box.lower,
+                                                             self.model.premise_box.upper))
+            z = lo + (hi - lo) * np.array([[0.1, 0.2, 0.3], [0.9, 0.5, 0.7], [0.5, -0.2, 1.3]])
+            A, B = self.model.matrices(z)
+            U = np.column_stack([np.zeros(3), z[:, 0]])
+            Ak, Bk = np.empty((3, 3, 3)), np.empty((3, 3, 2))
+            k = self._kargs
+            self._kern.euler_matrices(U, z[:, [1, 2, 0]], 3, k[6], k[7], *k[8:17], Ak, Bk)
+            return bool(np.allclose(Ak, A, rtol=1e-12, atol=1e-14)
+                        and np.allclose(Bk, B, rtol=1e-12, atol=1e-14))
+        except Exception:  # any mismatch of shapes or attributes: do not trust the kernel's model
+            return False
 
     @property
     def dt(self) -> float:
@@ -188,22 +212,21 @@ class MHEUIO:
             matrices = self.model.matrices(np.stack([us[:, 1], xs[:n, 0], xs[:n, 1]], axis=-1))
         A, B = matrices  # (n, 3, 3), (n, 3, 2)
         Bu = (B @ us[:, :, None])[:, :, 0]
-        # Transitions Γ[k, j] = A_{k−1}⋯A_{j+1} = P_k P_{j+1}⁻¹ with P_k = A_{k−1}⋯A_0 by a log-depth
-        # scan (the A_k are near I, so P_k is well conditioned and the inverse is harmless).
-        Pk = np.empty((n + 1, 3, 3))
-        Pk[0] = _EYE3
-        Pk[1:] = _prefix_products(A)
-        Pinv = np.linalg.inv(Pk[1:])
-        # Rows (k, a), columns (j, c): one 2-D product gives every Γ[k, j] in the w-block layout.
-        M = np.empty((3 * (n + 1), nz))
-        Gm = M[:, 4:]
-        np.matmul(Pk.reshape(-1, 3), Pinv.transpose(1, 0, 2).reshape(3, -1), out=Gm)
-        Gm *= _below(n)
-        M[:, :3] = Pk.reshape(-1, 3)
-        M[:, 3] = Gm @ -B[:, :, 0].reshape(-1)  # the unknown input F enters as E_d = −B_d[:, :1]
-        c = Gm @ Bu.reshape(-1)
+        # States as a map of z by forward recursion, x_{k+1} = A_k x_k + B_k u_k + E_k F + w_k: row
+        # block k+1 = A_k · row block k, plus E_k in the F column and I in the w_k columns. No
+        # product is inverted (at low speed or with stiff tyres the A_k contract strongly and
+        # A_{k−1}⋯A_0 is numerically singular, see issue 14 item 6).
+        M = np.zeros((3 * (n + 1), nz))
         M3 = M.reshape(n + 1, 3, nz)
-        c3 = c.reshape(n + 1, 3)
+        M3[0, :, :3] = _EYE3
+        c3 = np.zeros((n + 1, 3))
+        for k in range(n):
+            w = 4 + 3 * k  # columns used so far: x_0, F, w_0 … w_{k−1}
+            np.matmul(A[k], M3[k, :, :w], out=M3[k + 1, :, :w])
+            M3[k + 1, :, 3] -= B[k, :, 0]  # the unknown input F enters as E_d = −B_d[:, :1]
+            M3[k + 1, :, w:w + 3] = _EYE3
+            c3[k + 1] = A[k] @ c3[k] + Bu[k]
+        c = c3.reshape(-1)
         # Measurement rows: v and ω (state rows 0 and 2) of every sample, weighted.
         sw = np.sqrt(weights)[:, None] * self._sqrt_r  # (n+1, 2)
         Cm2 = (M3[:, 0::2, :] * sw[:, :, None]).reshape(-1, nz)
@@ -269,8 +292,8 @@ class MHEUIO:
         y = np.asarray(y, dtype=float).reshape(2)
         u = np.asarray(u, dtype=float).reshape(2)
         first = self._ny == 0
-        ok = bool(np.isfinite(y[0]) and np.isfinite(y[1]))
-        if not (np.isfinite(u[0]) and np.isfinite(u[1])):
+        ok = math.isfinite(y[0]) and math.isfinite(y[1])  # on floats: numpy's scalar test is slow
+        if not (math.isfinite(u[0]) and math.isfinite(u[1])):
             # A non-finite input is a caller bug upstream; never poison the window with it.
             u = np.zeros(2)
             ok = False
@@ -286,28 +309,85 @@ class MHEUIO:
             self._XS[0, 0], self._XS[0, 2] = y[0], y[1]
             self._x = np.clip(self._XS[0], self._xmin, self._xmax)
             return Estimate(self._x.copy(), self._F, 0.0, status, time.perf_counter() - t0)
-        # Model along the window at the current scheduling; its last interval (from the previous
-        # estimate, with this input) is also the one-step prediction.
         us, xs = self._U[:n], self._XS[: n + 1]
-        xs[n - 1] = self._x
-        A, B = self.model.matrices(np.stack([us[:, 1], xs[:n, 0], xs[:n, 1]], axis=-1))
-        pred = A[-1] @ self._x + B[-1] @ u
-        x_pred = pred - B[-1, :, 0] * self._F  # E_d = −B_d[:, :1]
-        F_raw = float((pred[0] - y[0]) * self.vehicle.mass / self.Td) if ok else 0.0
-        xs[n] = x_pred
-        if ok:
-            xs[n, 0], xs[n, 2] = y[0], y[1]
-        if n < 2 or not ok:
+        full = n == self.settings.N
+        try:
+            if self._kern is not None:  # compiled: no numpy warnings, non-finite results flagged
+                return self._step_kernel(y, u, ok, n, full, t0)
+            with np.errstate(all="ignore"):  # overflow is detected below, not warned about
+                return self._step_dense(y, u, ok, n, full, us, xs, None, t0)
+        except (np.linalg.LinAlgError, ValueError, ArithmeticError) as err:
+            # A linear-algebra failure is a failed estimate, never an exception in the loop.
+            return self._failed(float("nan"), t0, f"{type(err).__name__}")
+
+    def _failed(self, F_raw: float, t0: float, why: str = "") -> Estimate:
+        """FAILED: keep the last estimate (the prediction may be unusable)."""
+        self._n_failed += 1
+        x = self._x if np.all(np.isfinite(self._x)) else np.clip(np.nan_to_num(self._x), self._xmin,
+                                                                   self._xmax)
+        self._x = x
+        F_raw = F_raw if np.isfinite(F_raw) else 0.0
+        return Estimate(self._x.copy(), self._F, F_raw, EstimatorStatus.FAILED, time.perf_counter() - t0)
+
+    def _step_kernel(self, y: NDArray[np.float64], u: NDArray[np.float64], ok: bool, n: int, full: bool,
+                     t0: float) -> Estimate:
+        """The compiled window step (model, prediction, banded solve, bounds check)."""
+        A, B = self._Ab[:n], self._Bb[:n]
+        us, xs = self._U[:n], self._XS[: n + 1]
+        eval_model = self._kargs[-1]
+        if not eval_model:  # ZOH: numpy evaluates the matrices, the kernel does the rest
+            xs[n - 1] = self._x
+            A[:], B[:] = self.model.matrices(np.stack([us[:, 1], xs[:n, 0], xs[:n, 1]], axis=-1))
+        code, F, pred_v = self._kern.window_step(
+            self._Y[: n + 1], self._W[: n + 1], us, xs, n, self._x, self._F, u, ok, full, self._arrival,
+            *self._kargs[:-1], eval_model, A, B, self._Xb[: n + 1])
+        F_raw = float((pred_v - y[0]) * self.vehicle.mass / self.Td) if ok else 0.0
+        if code == 3 or not math.isfinite(F_raw):
+            return self._failed(F_raw, t0)
+        if code == 2:
             self._x = np.clip(xs[n], self._xmin, self._xmax)
             status = EstimatorStatus.REJECTED if not ok else EstimatorStatus.WARMUP
             return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)
+        if code == 1:  # a state bound is active (or a pivot failed): the dense QP decides
+            with np.errstate(all="ignore"):
+                return self._step_dense(y, u, ok, n, full, us, xs, (A.copy(), B.copy()), t0, F_raw)
+        self._x = xs[n].copy()
+        self._F = float(F)
+        status = EstimatorStatus.OK if full else EstimatorStatus.WARMUP
+        return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)
 
+    def _step_dense(self, y: NDArray[np.float64], u: NDArray[np.float64], ok: bool, n: int, full: bool,
+                    us: NDArray[np.float64], xs: NDArray[np.float64],
+                    matrices: tuple[NDArray[np.float64], NDArray[np.float64]] | None, t0: float,
+                    F_raw: float | None = None) -> Estimate:
+        """The numpy window step: dense QP (Cholesky, DAQP when a bound is active). With
+        ``matrices`` given, the prediction is already in ``xs[n]`` (kernel hand-over)."""
+        if matrices is None:
+            # Model along the window at the current scheduling; its last interval (from the
+            # previous estimate, with this input) is also the one-step prediction.
+            xs[n - 1] = self._x
+            A, B = self.model.matrices(np.stack([us[:, 1], xs[:n, 0], xs[:n, 1]], axis=-1))
+            pred = A[-1] @ self._x + B[-1] @ u
+            x_pred = pred - B[-1, :, 0] * self._F  # E_d = −B_d[:, :1]
+            F_raw = float((pred[0] - y[0]) * self.vehicle.mass / self.Td) if ok else 0.0
+            if not (np.all(np.isfinite(x_pred)) and np.isfinite(F_raw)):
+                return self._failed(F_raw, t0)
+            xs[n] = x_pred
+            if ok:
+                xs[n, 0], xs[n, 2] = y[0], y[1]
+            if n < 2 or not ok:
+                self._x = np.clip(xs[n], self._xmin, self._xmax)
+                status = EstimatorStatus.REJECTED if not ok else EstimatorStatus.WARMUP
+                return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)
+        else:
+            A, B = matrices
+            x_pred = A[-1] @ self._x + B[-1] @ u - B[-1, :, 0] * self._F
+        assert F_raw is not None
         # Arrival prior: the previous solution's estimate of the window's first sample.
-        full = n == self.settings.N
         qp = self.build(self._Y[: n + 1], us, self._W[: n + 1], xs, xs[0] if full else self._arrival,
                         self._F, matrices=(A, B))
         z = self._solve(qp)
-        if z is None:
+        if z is None or not np.all(np.isfinite(z)):
             self._n_failed += 1
             self._x = np.clip(x_pred, self._xmin, self._xmax)
             return Estimate(self._x.copy(), self._F, F_raw, EstimatorStatus.FAILED,

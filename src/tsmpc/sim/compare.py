@@ -60,7 +60,6 @@ def load_scenario(
     lap (a planned track). A paper-format file's column period is measured (``dt`` given: checked
     against the data); the default window is the paper run's time span at that period, and the
     paper's Table 5 rows go beside ours only for the paper's own run (``paper_reference``)."""
-    from tsmpc.planning.circuit import builtin_circuit
     from tsmpc.planning.paper_format import (
         is_paper_run,
         load_reference,
@@ -69,6 +68,8 @@ def load_scenario(
     from tsmpc.scenarios import paper_friction_profile
 
     if reference is None:
+        from tsmpc.planning.circuit import builtin_circuit  # (imports the planner: scipy.interpolate)
+
         ref = builtin_circuit(dt=cfg.rates.Tc)
         return Scenario("builtin-circuit", ref, paper_friction_profile(),
                         meta={"reference": "builtin-circuit", "paper_reference": False})

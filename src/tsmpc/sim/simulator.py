@@ -189,7 +189,11 @@ def simulate(
     each outer step; ``max_steps`` shortens the run. A non-finite plant state or |e_y| beyond
     ``scenario.divergence_bound_m`` (the track's half-width; None: the config's) ends the run
     (``termination`` says why); closed laps run to their end (:func:`tracked_steps`); block
-    failures are counted in ``events``, never raised."""
+    failures are counted in ``events``, never raised. One BLAS thread unless
+    ``TSMPC_BLAS_THREADS`` says otherwise (:mod:`tsmpc.blas`)."""
+    from tsmpc.blas import limit_blas_threads
+
+    limit_blas_threads()
     oracle = oracle or cfg.lqr.oracle
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=kinematic_design,
                       dynamic_design=dynamic_design)

@@ -52,6 +52,8 @@ class Plant:
         tyre: tyre model of the plant.
         h: RK4 step [s].
         constants: low-speed regularisation.
+        jit: integrate :meth:`step` by the compiled block (:mod:`tsmpc.kernels.plant`, the same
+            arithmetic); None = unless ``TSMPC_NO_JIT`` is set; False = the float closure only.
     """
 
     n_x = 6
@@ -63,6 +65,7 @@ class Plant:
         tyre: TyreParams,
         h: float = 0.001,
         constants: PlantConstants = PlantConstants(),
+        jit: bool | None = None,
     ) -> None:
         if not (h > 0 and math.isfinite(h)):
             raise ConfigError(f"h must be a positive finite step, got {h}")
@@ -74,6 +77,19 @@ class Plant:
         self._fz = (fzf, fzr)
         self._linear = tyre.model == TyreModel.LINEAR
         self._rhs = self._make_rhs()
+        self._kern = None
+        if jit is None or jit:
+            from tsmpc import kernels
+
+            self._kern = kernels.load("plant")
+            if self._kern is not None:
+                try:
+                    self._cst = self._kern.pack(self)
+                    agrees = self._kernel_agrees()
+                except (AttributeError, TypeError, ValueError):  # parameters it does not know
+                    agrees = False
+                if not agrees:
+                    self._kern = None  # the model changed without the kernel: numpy only
 
     # ------------------------------------------------------------------ model
     def _make_rhs(self):
@@ -116,6 +132,17 @@ class Plant:
 
         return rhs
 
+    def _kernel_agrees(self) -> bool:
+        """The compiled block reproduces the float closure on two probe states (guards against a
+        model edited on one side only)."""
+        for xp in ((0.0, 0.0, 0.3, 8.0, 0.02, 0.1), (1.0, -2.0, -1.0, 0.3, -0.05, -0.4)):
+            x = np.array(xp)
+            ref = self._step_floats(x, (1500.0, 0.05), 0.7, 3)  # not step(): callers may wrap it
+            out, ok = self._kern.rk4_block(x, 1500.0, 0.05, 0.7, 3, self.h, self._cst)
+            if not ok or np.abs(out - ref).max() > 1e-10 * (1.0 + np.abs(ref).max()):
+                return False
+        return True
+
     def derivatives(self, x: ArrayLike, u: ArrayLike, mu_road: float) -> NDArray[np.float64]:
         """ẋ (6,) at state x (6,), input u = [F_xR, δ] and road friction μ(road)."""
         xs, (F, d), mu = self._checked(x, u, mu_road)
@@ -144,6 +171,23 @@ class Plant:
         Raises :class:`NonFiniteError` on NaN/inf state or input, or if the integration itself
         produces a non-finite state.
         """
+        if self._kern is not None and type(x) is np.ndarray and x.shape == (6,) and x.dtype == np.float64:
+            try:
+                F, d = u
+                F, d, mu = float(F), float(d), float(mu_road)
+            except (TypeError, ValueError):
+                pass  # the checked path below names the problem
+            else:
+                out, ok = self._kern.rk4_block(x, F, d, mu, int(n_steps), self.h, self._cst)
+                if ok:
+                    return out
+                # non-finite: the checked path below raises with the exact message
+        return self._step_floats(x, u, mu_road, n_steps)
+
+    def _step_floats(
+        self, x: ArrayLike, u: ArrayLike, mu_road: float, n_steps: int
+    ) -> NDArray[np.float64]:
+        """The float-closure RK4 of :meth:`step` (the kernel's oracle)."""
         (X, Y, th, v, al, om), (F, d), mu = self._checked(x, u, mu_road)
         h = self.h
         h2 = 0.5 * h

@@ -1,0 +1,254 @@
+"""MHE-UIO window solve in O(N): block-tridiagonal elimination bordered by the window-constant
+friction force (paper eq. "MHE"; :mod:`tsmpc.estimation.mhe_uio`).
+
+In the state variables ``x_0 … x_n`` and F (``w_k = x_{k+1} − A_k x_k − B_k u_k − E_k F``) the
+window cost ::
+
+    ‖x_0 − x̄_0‖²_P + p_F (F − F̄)² + Σ_k ‖x_{k+1} − A_k x_k − b_k − e_k F‖²_Q + Σ_k ρ_k ‖y_k − C x_k‖²_R
+
+has a block-tridiagonal Hessian T in x (3×3 blocks ``D_k``, ``O_k = −A_kᵀQ``) with one dense
+border column h (F couples to every x_k). Block Cholesky of T for the two right-hand sides
+(g, h), then the Schur complement on F::
+
+    F = (g_F − hᵀT⁻¹g) / (h_FF − hᵀT⁻¹h),   x = T⁻¹g − (T⁻¹h) F.
+
+The denominator is ≥ p_F > 0, so the system is never singular while T's pivots are positive
+(checked: a non-positive pivot hands the step to the dense path). The model matrices along the
+window are evaluated here as well (Euler; the caller provides them for ZOH); nothing is inverted
+but the 3×3 Cholesky pivots.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["warm", "window_step"]
+
+
+@njit(cache=True, fastmath=False)
+def euler_matrices(U, XS, n, lo, hi, M, I, Cf, Cr, a, b, mug, kd, Td, A, B):
+    """A_d (n, 3, 3), B_d (n, 3, 2) at ϑ_k = (δ_k, v̂_k, α̂_k) clipped into the box (as
+    ``DynamicTS.matrices`` with Euler; per-axle stiffness C_f, C_r, the paper's C_f = C_r = C)."""
+    for k in range(n):
+        d = min(max(U[k, 1], lo[0]), hi[0])
+        v = min(max(XS[k, 0], lo[1]), hi[1])
+        sd, cd = math.sin(d), math.cos(d)
+        A[k, 0, 0] = 1.0 + Td * (-mug / v - kd * v / M)
+        A[k, 0, 1] = Td * (Cf * sd / M)
+        A[k, 0, 2] = Td * (Cf * a * sd / (M * v))
+        A[k, 1, 0] = 0.0
+        A[k, 1, 1] = 1.0 + Td * (-(Cr + Cf * cd) / (M * v))
+        A[k, 1, 2] = Td * ((Cr * b - Cf * a * cd) / (M * v**2) - 1.0)
+        A[k, 2, 0] = 0.0
+        A[k, 2, 1] = Td * ((Cr * b - Cf * a * cd) / I)
+        A[k, 2, 2] = 1.0 + Td * (-(Cf * a**2 * cd + Cr * b**2) / (I * v))
+        B[k, 0, 0] = Td * (1.0 / M)
+        B[k, 0, 1] = Td * (-Cf * sd / M)
+        B[k, 1, 0] = 0.0
+        B[k, 1, 1] = Td * (Cf * cd / (M * v))
+        B[k, 2, 0] = 0.0
+        B[k, 2, 1] = Td * (Cf * a * cd / I)
+
+
+@njit(cache=True, fastmath=False)
+def _chol3(D, L):
+    """Lower Cholesky factor of the symmetric 3×3 D into L; False if a pivot is not positive."""
+    l00 = D[0, 0]
+    if not l00 > 0.0:
+        return False
+    l00 = math.sqrt(l00)
+    l10 = D[1, 0] / l00
+    l20 = D[2, 0] / l00
+    t = D[1, 1] - l10 * l10
+    if not t > 0.0:
+        return False
+    l11 = math.sqrt(t)
+    l21 = (D[2, 1] - l20 * l10) / l11
+    t = D[2, 2] - l20 * l20 - l21 * l21
+    if not t > 0.0:
+        return False
+    L[0, 0], L[1, 0], L[2, 0] = l00, l10, l20
+    L[0, 1], L[1, 1], L[2, 1] = 0.0, l11, l21
+    L[0, 2], L[1, 2], L[2, 2] = 0.0, 0.0, math.sqrt(t)
+    return True
+
+
+@njit(cache=True, fastmath=False)
+def banded_solve(Y, W, U, A, B, n, arrival, F_prior, q, r, p, pF, X):
+    """Unconstrained window minimiser: states X (n+1, 3) in place; returns F (NaN on a
+    non-positive pivot)."""
+    m = n + 1
+    L = np.empty((m, 3, 3))
+    Yk = np.empty((m, 3, 3))  # L_k⁻¹ O_k
+    V = np.empty((m, 3, 2))  # L_k⁻¹ ĝ_k for the two right-hand sides (g, h)
+    D = np.empty((3, 3))
+    G = np.empty((3, 2))  # right-hand sides of block k
+    hFF = pF
+    gF = pF * F_prior
+    for k in range(m):
+        # Diagonal block and right-hand sides of x_k.
+        for i in range(3):
+            for j in range(3):
+                D[i, j] = 0.0
+            G[i, 0] = 0.0
+            G[i, 1] = 0.0
+        if k == 0:
+            for i in range(3):
+                D[i, i] += p[i]
+                G[i, 0] += p[i] * arrival[i]
+        wk = W[k]
+        D[0, 0] += wk * r[0]
+        D[2, 2] += wk * r[1]
+        G[0, 0] += wk * r[0] * Y[k, 0]
+        G[2, 0] += wk * r[1] * Y[k, 1]
+        if k > 0:  # stage k−1: Q (x_k − A x_{k−1} − b − e F)
+            kk = k - 1
+            for i in range(3):
+                D[i, i] += q[i]
+                bi = B[kk, i, 0] * U[kk, 0] + B[kk, i, 1] * U[kk, 1]
+                G[i, 0] += q[i] * bi
+                G[i, 1] += q[i] * B[kk, i, 0]  # −Q e_{k−1}, e = −B[:, 0]
+        if k < n:  # stage k: −Aᵀ Q (x_{k+1} − A x_k − b − e F)
+            for i in range(3):
+                for j in range(3):
+                    acc = 0.0
+                    for l in range(3):
+                        acc += A[k, l, i] * q[l] * A[k, l, j]
+                    D[i, j] += acc
+                acc_b = 0.0
+                acc_e = 0.0
+                for l in range(3):
+                    bl = B[k, l, 0] * U[k, 0] + B[k, l, 1] * U[k, 1]
+                    acc_b += A[k, l, i] * q[l] * bl
+                    acc_e += A[k, l, i] * q[l] * (-B[k, l, 0])
+                G[i, 0] -= acc_b
+                G[i, 1] += acc_e
+            for l in range(3):
+                e = -B[k, l, 0]
+                bl = B[k, l, 0] * U[k, 0] + B[k, l, 1] * U[k, 1]
+                hFF += e * q[l] * e
+                gF -= e * q[l] * bl
+        # Elimination of the previous block: D̃_k = D_k − Y_{k−1}ᵀY_{k−1}, ĝ_k = g_k − Y_{k−1}ᵀV_{k−1}.
+        if k > 0:
+            for i in range(3):
+                for j in range(3):
+                    acc = 0.0
+                    for l in range(3):
+                        acc += Yk[k - 1, l, i] * Yk[k - 1, l, j]
+                    D[i, j] -= acc
+                for c in range(2):
+                    acc = 0.0
+                    for l in range(3):
+                        acc += Yk[k - 1, l, i] * V[k - 1, l, c]
+                    G[i, c] -= acc
+        if not _chol3(D, L[k]):
+            return np.nan
+        Lk = L[k]
+        # V_k = L_k⁻¹ G (forward substitution), Y_k = L_k⁻¹ O_k with O_k = −A_kᵀ Q.
+        for c in range(2):
+            v0 = G[0, c] / Lk[0, 0]
+            v1 = (G[1, c] - Lk[1, 0] * v0) / Lk[1, 1]
+            v2 = (G[2, c] - Lk[2, 0] * v0 - Lk[2, 1] * v1) / Lk[2, 2]
+            V[k, 0, c], V[k, 1, c], V[k, 2, c] = v0, v1, v2
+        if k < n:
+            for j in range(3):
+                o0 = -A[k, j, 0] * q[j]
+                o1 = -A[k, j, 1] * q[j]
+                o2 = -A[k, j, 2] * q[j]
+                # column j of O_k is (−A_kᵀQ)[:, j] = −A_k[j, :] q_j
+                y0 = o0 / Lk[0, 0]
+                y1 = (o1 - Lk[1, 0] * y0) / Lk[1, 1]
+                y2 = (o2 - Lk[2, 0] * y0 - Lk[2, 1] * y1) / Lk[2, 2]
+                Yk[k, 0, j], Yk[k, 1, j], Yk[k, 2, j] = y0, y1, y2
+    # Back substitution: L_kᵀ x_k = V_k − Y_k x_{k+1}, both right-hand sides.
+    Xg = np.empty((m, 3, 2))
+    for k in range(n, -1, -1):
+        Lk = L[k]
+        for c in range(2):
+            t0, t1, t2 = V[k, 0, c], V[k, 1, c], V[k, 2, c]
+            if k < n:
+                for j in range(3):
+                    xj = Xg[k + 1, j, c]
+                    t0 -= Yk[k, 0, j] * xj
+                    t1 -= Yk[k, 1, j] * xj
+                    t2 -= Yk[k, 2, j] * xj
+            x2 = t2 / Lk[2, 2]
+            x1 = (t1 - Lk[2, 1] * x2) / Lk[1, 1]
+            x0 = (t0 - Lk[1, 0] * x1 - Lk[2, 0] * x2) / Lk[0, 0]
+            Xg[k, 0, c], Xg[k, 1, c], Xg[k, 2, c] = x0, x1, x2
+    # Border: the second right-hand side was h (H[x_k, F] = A_kᵀQe_k − Qe_{k−1}), so Xg[:, :, 1] =
+    # T⁻¹h; the Schur complement needs hᵀT⁻¹g and hᵀT⁻¹h.
+    hg = 0.0
+    hh = 0.0
+    for k in range(m):
+        for i in range(3):
+            hk = 0.0
+            if k > 0:
+                hk += q[i] * B[k - 1, i, 0]
+            if k < n:
+                for l in range(3):
+                    hk += A[k, l, i] * q[l] * (-B[k, l, 0])
+            hg += hk * Xg[k, i, 0]
+            hh += hk * Xg[k, i, 1]
+    den = hFF - hh  # the Schur complement, ≥ p_F in exact arithmetic
+    if not den > 0.0:
+        return np.nan
+    F = (gF - hg) / den
+    for k in range(m):
+        for i in range(3):
+            X[k, i] = Xg[k, i, 0] - Xg[k, i, 1] * F
+    return F
+
+
+@njit(cache=True, fastmath=False)
+def window_step(Y, W, U, XS, n, x, F, u, ok, full, arrival, q, r, p, pF, xmin, xmax, lo, hi,
+                M, I, Cf, Cr, a, b, mug, kd, Td, eval_model, A, B, X):
+    """One MHE step after the window update (everything ``MHEUIO.step`` does from the model
+    evaluation on). Writes XS[n−1], XS[n] (prediction) and, on success, the smoothed window.
+
+    Returns (code, F̂, pred_v): 0 = solved, within bounds; 1 = bounds active or a pivot failed
+    (the caller runs the dense QP with the matrices in A, B); 2 = warm-up or rejected sample
+    (XS[n] holds the prediction); 3 = non-finite prediction (FAILED)."""
+    XS[n - 1, 0], XS[n - 1, 1], XS[n - 1, 2] = x[0], x[1], x[2]
+    if eval_model:
+        euler_matrices(U, XS, n, lo, hi, M, I, Cf, Cr, a, b, mug, kd, Td, A, B)
+    k = n - 1
+    pred = np.empty(3)
+    for i in range(3):
+        pred[i] = A[k, i, 0] * x[0] + A[k, i, 1] * x[1] + A[k, i, 2] * x[2] \
+            + B[k, i, 0] * u[0] + B[k, i, 1] * u[1]
+    for i in range(3):
+        XS[n, i] = pred[i] - B[k, i, 0] * F
+    if not (math.isfinite(XS[n, 0]) and math.isfinite(XS[n, 1]) and math.isfinite(XS[n, 2])):
+        return 3, F, pred[0]
+    if ok:
+        XS[n, 0], XS[n, 2] = Y[n, 0], Y[n, 1]
+    if n < 2 or not ok:
+        return 2, F, pred[0]
+    arr = XS[0].copy() if full else arrival
+    Fn = banded_solve(Y, W, U, A, B, n, arr, F, q, r, p, pF, X)
+    if not math.isfinite(Fn):
+        return 1, F, pred[0]
+    for k in range(n + 1):
+        for i in range(3):
+            v = X[k, i]
+            if not (v >= xmin[i] - 1e-9 and v <= xmax[i] + 1e-9):  # also catches NaN
+                return 1, F, pred[0]
+    for k in range(n + 1):
+        for i in range(3):
+            XS[k, i] = X[k, i]
+    return 0, Fn, pred[0]
+
+
+def warm() -> None:
+    """Compile (or load from the cache) the signatures the estimator uses."""
+    n = 3
+    Y, W, U = np.zeros((n + 1, 2)), np.ones(n + 1), np.zeros((n, 2))
+    XS = np.ones((n + 1, 3)) * 5.0
+    o3 = np.ones(3)
+    window_step(Y, W, U, XS, n, o3 * 5.0, 0.0, np.zeros(2), True, False, o3, o3, np.ones(2), o3, 1e-10,
+                -o3 * 100, o3 * 100, -o3, o3 * 20, 683.0, 560.0, 25000.0, 25000.0, 0.7, 1.0, 4.9, 0.4,
+                0.01, True, np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3)))
