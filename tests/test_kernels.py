@@ -369,3 +369,29 @@ def test_kernels_follow_per_axle_cornering_stiffness(cfg: Config) -> None:
         u = np.array([cb.F_xR, cb.delta])
         xa, x = pa.step(x, u, 0.9, 10), pb.step(x, u, 0.9, 10)
         np.testing.assert_allclose(xa, x, rtol=1e-12, atol=1e-10)
+
+
+@pytest.mark.parametrize("method", ["FZN", "REF", "ITER"])
+def test_no_kernel_compiles_inside_a_timed_step(cfg: Config, method: str) -> None:
+    """After ``kernels.load`` (which warms every signature), a closed-loop run adds no new
+    specialisation to the step kernels: numba types read-only arrays apart, and a signature
+    compiled lazily costs ≈ 1 s inside the first timed MPC/MHE step of a fresh install."""
+    from numba.core.registry import CPUDispatcher
+
+    from tsmpc.sim.compare import load_scenario
+    from tsmpc.sim.simulator import simulate
+
+    mods = {m: kernels.load(m) for m in ("mpc", "mhe", "lqr", "plant")}
+    if mods["mpc"] is None:
+        pytest.skip("kernels switched off")
+    steps = {("mpc", "fast_step"), ("mpc", "_schedule"), ("mhe", "window_step"), ("lqr", "lqr_step"),
+             ("lqr", "reference_gain"), ("plant", "rk4_block")}
+
+    def signatures() -> dict[tuple[str, str], int]:
+        return {(m, n): len(f.signatures) for m, mod in mods.items() for n, f in vars(mod).items()
+                if isinstance(f, CPUDispatcher) and (m, n) in steps}
+
+    before = signatures()
+    assert len(before) == len(steps), "a step kernel was renamed: update this test"
+    simulate(cfg, method, load_scenario(cfg, None), max_steps=5)
+    assert signatures() == before

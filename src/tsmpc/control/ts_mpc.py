@@ -260,8 +260,10 @@ class TSMPC:
         self._umin2, self._umax2 = self._umin[:, None], self._umax[:, None]
         self._L = np.kron(np.eye(2), np.tri(N))  # U = u_prev + L ΔU
         self._term = np.array([N - 1, 2 * N - 1, 3 * N - 1])
-        self._lo = np.asarray(model.premise_box.lower)
-        self._hi = np.asarray(model.premise_box.upper)
+        # Writable copies of the (read-only) box: numba compiles a separate specialisation for
+        # read-only arrays, which would otherwise happen inside the first timed step.
+        self._lo = np.array(model.premise_box.lower, dtype=float)
+        self._hi = np.array(model.premise_box.upper, dtype=float)
         self._kern = None
         if jit is None or jit:
             from tsmpc import kernels

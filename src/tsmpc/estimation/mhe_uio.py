@@ -142,7 +142,9 @@ class MHEUIO:
                 phys, euler = (1.0,) * 8, False
             self._kargs = (
                 self._q, self._r, self._p, F_PRIOR_WEIGHT, self._xmin, self._xmax,
-                np.asarray(box.lower, dtype=float), np.asarray(box.upper, dtype=float),
+                # Writable copies: numba types read-only arrays apart, and the kernels are compiled
+                # ahead of time for writable ones (a read-only box would compile inside a timed step).
+                np.array(box.lower, dtype=float), np.array(box.upper, dtype=float),
                 *phys, self.Td, euler,
             )
             self._Ab, self._Bb, self._Xb = np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3))
@@ -155,7 +157,7 @@ class MHEUIO:
         """The kernel's Euler matrices equal ``model.matrices`` at a few premise points (guards
         against a model edited on one side only)."""
         try:
-            lo, hi = (np.asarray(b, dtype=float) for b in (self.model.premise_box.lower,
+            lo, hi = (np.array(b, dtype=float) for b in (self.model.premise_box.lower,
                                                              self.model.premise_box.upper))
             z = lo + (hi - lo) * np.array([[0.1, 0.2, 0.3], [0.9, 0.5, 0.7], [0.5, -0.2, 1.3]])
             A, B = self.model.matrices(z)
