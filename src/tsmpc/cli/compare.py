@@ -53,12 +53,14 @@ def _remove_previous_outputs(out: Path) -> None:
 
 
 def _execute(
-    methods_text: str, reference: Path | None, window: str | None, out: Path, seed: int | None,
+    methods_text: str, *, reference: Path | None, window: str | None, out: Path, seed: int | None,
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
     overwrite: bool = False, preset: str | None = None,
     laps: int = 1, dt: float | None = None, strict_box: bool = False,
     plant: str = "tsmpc", cr_vehicle: int = 2,
 ) -> None:
+    """The body of ``compare`` and ``run``: the options arrive by name (the commands pass their
+    parameters, which carry the same names), so adding an option cannot shift the others."""
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
@@ -299,8 +301,8 @@ def compare_cmd(
     cr_vehicle: int = _OPT_CR_VEHICLE,
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
-    _execute(methods, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
-             overwrite, preset, laps, dt, strict_box, plant, cr_vehicle)
+    options = dict(locals())
+    _execute(options.pop("methods"), **options)
 
 
 @app.command("run")
@@ -324,7 +326,7 @@ def run_cmd(
     cr_vehicle: int = _OPT_CR_VEHICLE,
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
+    options = dict(locals())
     if "," in method:
         fail(ConfigError("--method takes one method; use `tsmpc compare --methods` for several"))
-    _execute(method, reference, window, out, seed, config, no_plots, oracle, duration, robustness,
-             overwrite, preset, laps, dt, strict_box, plant, cr_vehicle)
+    _execute(options.pop("method"), **options)
