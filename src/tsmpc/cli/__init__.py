@@ -34,6 +34,9 @@ def _main(
     ),
 ) -> None:
     """TS-MPC trajectory tracking for autonomous vehicles."""
+    from tsmpc.cli._common import safe_stdio
+
+    safe_stdio()
 
 
 def _register() -> None:
@@ -43,4 +46,39 @@ def _register() -> None:
 
 _register()
 
-__all__ = ["app"]
+
+def main() -> None:
+    """The ``tsmpc`` entry point: ``app`` with SIGINT/SIGTERM handled from the first moment (an
+    interrupt at any time exits 128 + signal, never 0 or 1) and a closed or full stdout reported
+    in one line (never a second error at interpreter exit)."""
+    import contextlib
+    import os
+    import sys
+
+    from tsmpc.cli import _common
+
+    _common.install_signal_handlers()
+    code: object = 0
+    try:
+        app()
+    except SystemExit as exc:
+        code = exc.code
+    except KeyboardInterrupt:
+        code = 130
+    sig = _common.pending_signal()
+    if sig is not None:
+        code = 128 + sig
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError):
+        with contextlib.suppress(Exception):
+            fd = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(fd, sys.stdout.fileno())
+        if code in (0, None):
+            with contextlib.suppress(Exception):
+                sys.stderr.write("error: cannot write to stdout (closed or full)\n")
+            code = 1
+    sys.exit(code)
+
+
+__all__ = ["app", "main"]

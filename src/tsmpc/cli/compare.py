@@ -10,13 +10,15 @@ import typer
 from tsmpc.cli import app
 from tsmpc.cli._common import (
     PARTIAL_MARKER,
-    Interrupted,
     check_interrupted,
+    check_laps,
     check_out_dir,
+    check_scenario_options,
+    deferred_interrupts,
     design_status,
     fail,
     finite,
-    handle_interrupts,
+    guarded_run,
     load_config_or_exit,
     mark_partial,
 )
@@ -62,6 +64,7 @@ def _execute(
     """The body of ``compare`` and ``run``: the options arrive by name (the commands pass their
     parameters, which carry the same names), so adding an option cannot shift the others."""
     from rich.console import Console
+    from rich.markup import escape
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from tsmpc.blas import limit_blas_threads
@@ -87,10 +90,13 @@ def _execute(
         fail(err)
     if not methods:
         fail(ConfigError("--methods is empty"))
+    check_laps(laps)
     try:
         scenario = load_scenario(cfg, reference, _parse_window(window), laps=laps, dt=dt)
     except (TsmpcError, OSError) as err:
         fail(err)
+    check_scenario_options(scenario, cfg, reference=reference, laps=laps, duration=duration,
+                           plant=plant)
     if robustness != "nominal":
         from tsmpc.robustness import apply_robustness
 
@@ -103,48 +109,57 @@ def _execute(
     check_out_dir(out, overwrite=overwrite)
     cfg = _certify_envelope(console, fit)
     max_steps = None if duration is None else max(1, round(duration / cfg.rates.Tc))
-    with handle_interrupts():
-        try:
-            if overwrite:
-                _remove_previous_outputs(out)
-            mark_partial(out, "running", methods=[m.value for m in methods])
-            try:
-                designs = design_status(cfg)
-            except TsmpcError as err:  # e.g. an infeasible LMI for these weights and boxes
-                (out / PARTIAL_MARKER).unlink(missing_ok=True)
-                fail(f"LMI design failed: {err}", code=1)
-            from tsmpc import kernels
+    # Every ending that is not success is one line, a non-zero exit and PARTIAL saying why
+    # (interrupted, a failed design: exit 2, a failed write, an unexpected error).
+    with guarded_run(out):
+        if overwrite:
+            _remove_previous_outputs(out)
+        mark_partial(out, "running", methods=[m.value for m in methods])
+        designs = design_status(cfg)  # no design for this config: DesignFailed (exit 2)
+        from tsmpc import kernels
 
-            kernels.warmup()  # compile/load before the progress bars (the first run says so)
-            with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
-                          TextColumn("{task.completed}/{task.total} MPC steps"),
-                          TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
+        kernels.warmup()  # compile/load before the progress bars (the first run says so)
+        with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
+                      TextColumn("{task.completed}/{task.total} MPC steps"),
+                      TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
 
-                def factory(name: str, total: int) -> Any:
-                    task = progress.add_task(name, total=total)
+            def factory(name: str, total: int) -> Any:
+                task = progress.add_task(name, total=total)
 
-                    def update(k: int, _k_total: int) -> None:
-                        check_interrupted()  # a solver may have swallowed the signal
-                        progress.update(task, completed=k)
-                    return update
+                def update(k: int, _k_total: int) -> None:
+                    check_interrupted()  # a solver may have swallowed the signal
+                    progress.update(task, completed=k)
+                return update
 
-                try:
-                    result = compare(cfg, scenario, methods, out, plots=not no_plots, oracle=oracle,
-                                     max_steps=max_steps, progress_factory=factory, designs=designs,
-                                     plant_factory=plant_factory)
-                except TsmpcError as err:
-                    fail(err, code=1)
-            (out / PARTIAL_MARKER).unlink(missing_ok=True)
-        except Interrupted as sig:
-            mark_partial(out, "interrupted", signal=str(sig))
-            typer.secho(f"interrupted ({sig}): {out} holds a partial run (see {out / PARTIAL_MARKER})",
-                        err=True, fg=typer.colors.RED)
-            raise typer.Exit(sig.code) from None
-    _print_tables(console, result.metrics)
-    console.print(f"wrote {len(result.files)} files to [bold]{out}[/bold]")
+            # The loop's blocks call compiled code: a signal only sets a flag there, checked
+            # after every MPC step (check_interrupted in the progress callback).
+            with deferred_interrupts():
+                result = compare(cfg, scenario, methods, out, plots=not no_plots, oracle=oracle,
+                                 max_steps=max_steps, progress_factory=factory, designs=designs,
+                                 plant_factory=plant_factory)
+        _print_tables(console, result.metrics)
+        console.print(f"wrote {len(result.files)} files to [bold]{escape(str(out))}[/bold]")
+        sick = _unhealthy(result.metrics)
+        if sick:
+            mark_partial(out, "failed", reason="; ".join(sick))
+            fail("; ".join(sick), code=1)
+        check_interrupted()
+        (out / PARTIAL_MARKER).unlink(missing_ok=True)
     bad = [n for n, m in result.metrics["methods"].items() if m["termination"] != "completed"]
     if bad:
         raise typer.Exit(1)
+
+
+def _unhealthy(metrics: dict[str, Any]) -> list[str]:
+    """A method that completed but whose controller did not work (tsmpc.sim.health)."""
+    from tsmpc.sim.health import health_problem
+
+    out = []
+    for name, m in metrics["methods"].items():
+        problem = health_problem(m) if m["termination"] == "completed" else None
+        if problem:
+            out.append(f"{name}: {problem}")
+    return out
 
 
 def _plant_setup(plant: str, cr_vehicle: int, cfg: Any, scenario: Any) -> tuple[Any, Any, Any]:
@@ -191,7 +206,7 @@ def _certify_envelope(console: Any, fit: Any) -> Any:
         try:
             load_or_design_kinematic(fit.config)
             load_or_design_dynamic(fit.config)
-        except TsmpcError as err:
+        except Exception as err:  # noqa: BLE001 - the solver's own exceptions too (issue 24)
             fail(ConfigError(f"no certified design covers the reference ({fit.ranges.describe()}): "
                              f"{err}"))
     return fit.config
@@ -204,7 +219,7 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
     from tsmpc.report.tables import rmse_rows
 
     paper = bool(metrics["scenario"].get("paper_reference"))
-    t = Table(title=f"RMSE — {metrics['scenario']['name']}"
+    t = Table(title=f"RMSE — {escape(str(metrics['scenario']['name']))}"
               + (" (paper rows from Table 5)" if paper else ""))
     for col in ("approach", "x [m]", "y [m]", "θ [rad]", "v [m/s]", "ω [rad/s]"):
         t.add_column(escape(col), justify="right" if col != "approach" else "left")
