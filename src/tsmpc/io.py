@@ -8,7 +8,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "overwrite_in_place"]
+__all__ = ["atomic_savefig", "atomic_write_bytes", "atomic_write_text", "overwrite_in_place"]
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
@@ -39,6 +39,18 @@ def _umask() -> int:
 def atomic_write_text(path: str | Path, text: str) -> None:
     """Write UTF-8 ``text`` to ``path`` atomically."""
     atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def atomic_savefig(fig: object, path: str | Path, **kwargs: object) -> None:
+    """Save a matplotlib figure atomically: rendered in memory (format from the suffix), then
+    written by :func:`atomic_write_bytes` — an interrupt or a full disk leaves no partial or
+    temporary file."""
+    import io
+
+    path = Path(path)
+    buf = io.BytesIO()
+    fig.savefig(buf, format=path.suffix.lstrip(".").lower() or "png", **kwargs)  # type: ignore[attr-defined]
+    atomic_write_bytes(path, buf.getvalue())
 
 
 def overwrite_in_place(path: str | Path, data: bytes) -> None:

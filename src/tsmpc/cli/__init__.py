@@ -65,7 +65,7 @@ def main() -> None:
         code = exc.code
     except KeyboardInterrupt:
         code = 130
-    sig = _common.pending_signal()
+    sig = _common.first_signal()
     if sig is not None:
         code = 128 + sig
     try:

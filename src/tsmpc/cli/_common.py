@@ -65,6 +65,7 @@ __all__ = [
     "pending_signal",
     "refuse_ineffective",
     "safe_stdio",
+    "solve_design",
 ]
 
 #: Exit code of invalid input (configs, files, option values).
@@ -314,20 +315,27 @@ class Interrupted(KeyboardInterrupt):
 
 
 _pending: list[int] = []
+_seen: list[int] = []  # every signal of the process (the entry point's exit code)
 _defer = [0]  # depth of deferred_interrupts()
 _raised = [False]
 
 
 def _handler(signum: int, _frame: Any) -> None:
     _pending.append(signum)
+    _seen.append(signum)
     if _defer[0] == 0 and not _raised[0]:
         _raised[0] = True
         raise Interrupted(signum)
 
 
 def pending_signal() -> int | None:
-    """The first signal received since the handlers were installed, or None."""
+    """The first signal received inside the current :func:`handle_interrupts`, or None."""
     return _pending[0] if _pending else None
+
+
+def first_signal() -> int | None:
+    """The first signal this process received (for the entry point's exit code), or None."""
+    return _seen[0] if _seen else None
 
 
 def check_interrupted() -> None:
@@ -376,6 +384,7 @@ def handle_interrupts() -> Iterator[None]:
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+        _pending.clear()
 
 
 def _as_interrupt(err: BaseException) -> Interrupted | None:
@@ -425,7 +434,7 @@ def guarded_run(out: Path, *, what: str = "run", on_interrupt: str | None = None
             yield
         except typer.Exit:
             raise
-        except BaseException as err:  # noqa: BLE001 - every ending is reported, none escapes
+        except BaseException as err:
             sig = _as_interrupt(err)
             if sig is not None:
                 mark_partial(out, "interrupted", signal=str(sig))

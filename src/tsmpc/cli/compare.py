@@ -206,7 +206,7 @@ def _certify_envelope(console: Any, fit: Any) -> Any:
         try:
             load_or_design_kinematic(fit.config)
             load_or_design_dynamic(fit.config)
-        except Exception as err:  # noqa: BLE001 - the solver's own exceptions too (issue 24)
+        except Exception as err:
             fail(ConfigError(f"no certified design covers the reference ({fit.ranges.describe()}): "
                              f"{err}"))
     return fit.config

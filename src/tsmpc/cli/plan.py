@@ -156,6 +156,8 @@ def show_reference(
         else:
             ref = load_reference(file, window=win)
         png = save_reference_figure(ref, png_path, track=track, title=file.stem)
-    except (TsmpcError, OSError) as err:
+    except (TsmpcError, ValueError) as err:
         fail(err)
+    except OSError as err:
+        fail(f"--out {png_path}: cannot write ({err.strerror or err})", code=1)
     typer.echo(f"wrote {png}")

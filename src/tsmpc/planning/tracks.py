@@ -25,7 +25,8 @@ from tsmpc.planning.reference import Reference
 #: Largest width from the centre line to a border [m] (the widest circuits are ~20 m wide in all).
 MAX_WIDTH_M = 100.0
 
-__all__ = ["MAX_WIDTH_M", "TUMFTM_HEADER", "Track", "is_tumftm", "lateral_offset", "load_tumftm", "off_track", "plan_track"]
+__all__ = ["MAX_WIDTH_M", "TUMFTM_HEADER", "Track", "is_tumftm", "lateral_offset", "load_tumftm",
+           "off_track", "plan_track"]
 
 TUMFTM_HEADER = "# x_m,y_m,w_tr_right_m,w_tr_left_m"
 
