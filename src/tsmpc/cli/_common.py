@@ -47,6 +47,7 @@ __all__ = [
     "PARTIAL_MARKER",
     "DesignFailed",
     "Interrupted",
+    "check_environment",
     "check_interrupted",
     "check_laps",
     "check_out_dir",
@@ -118,6 +119,30 @@ def safe_stdio() -> None:
         if enc != "utf8" and hasattr(stream, "reconfigure"):
             with contextlib.suppress(Exception):
                 stream.reconfigure(errors="replace")
+
+
+def check_environment(*, kernels: bool = True) -> None:
+    """Before any work: the environment variables tsmpc reads name usable things, else exit 2
+    naming the variable — ``TSMPC_CACHE_DIR`` and ``NUMBA_CACHE_DIR`` writable folders (never
+    silently bypassed), ``TSMPC_BLAS_THREADS`` a number or ``default`` (above the core count it
+    is capped, with a warning: :mod:`tsmpc.blas`)."""
+    from tsmpc.blas import blas_threads_problem
+    from tsmpc.paths import folder_problem
+
+    env = os.environ.get("TSMPC_CACHE_DIR")
+    if env:
+        problem = folder_problem(Path(env))
+        if problem:
+            fail(ConfigError(f"TSMPC_CACHE_DIR {env}: {problem}; fix or unset it"))
+    problem = blas_threads_problem()
+    if problem:
+        fail(ConfigError(problem))
+    if kernels:
+        from tsmpc import kernels as k
+
+        problem = k.cache_problem()
+        if problem:
+            fail(ConfigError(problem))
 
 
 def check_laps(laps: int, option: str = "--laps") -> None:

@@ -10,6 +10,7 @@ import typer
 from tsmpc.cli import app
 from tsmpc.cli._common import (
     PARTIAL_MARKER,
+    check_environment,
     check_interrupted,
     check_laps,
     check_out_dir,
@@ -72,6 +73,7 @@ def _execute(
     from tsmpc.sim.compare import compare, load_scenario
     from tsmpc.sim.simulator import Method
 
+    check_environment()  # cache folders, BLAS threads: before any work
     limit_blas_threads()
     console = Console()
     if not console.is_terminal:  # piped to a file or CI log: do not squeeze the tables to 80 columns

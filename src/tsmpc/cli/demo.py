@@ -8,6 +8,7 @@ import typer
 
 from tsmpc.cli import app
 from tsmpc.cli._common import (
+    check_environment,
     check_interrupted,
     deferred_interrupts,
     finite,
@@ -30,6 +31,7 @@ def plant_demo(
 
     finite("--duration", duration, lo=0.0, hi=3600.0)
     cfg = load_config_or_exit(config)
+    check_environment()
     plant = Plant(cfg.vehicle, cfg.tyre, cfg.rates.h)
     x = np.array([0.0, 0.0, 0.0, 5.0, 0.0, 0.0])
     n = round(duration / cfg.rates.Td)

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from tsmpc.cli import app
-from tsmpc.cli._common import fail, load_config_or_exit, solve_design
+from tsmpc.cli._common import check_environment, fail, load_config_or_exit, solve_design
 
 
 @app.command("design")
@@ -26,6 +26,7 @@ def design(
     from tsmpc.synthesis.cache import design_to_dict, load_or_design_dynamic, load_or_design_kinematic
 
     cfg = load_config_or_exit(config)
+    check_environment(kernels=False)
     try:  # no design for this config (infeasible, solver failure): exit 2 naming the likely field
         t0 = time.perf_counter()
         kd = solve_design("kinematic", lambda c: load_or_design_kinematic(c, use_cache=not no_cache), cfg)

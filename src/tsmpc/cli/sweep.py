@@ -10,6 +10,7 @@ import typer
 from tsmpc.cli import app
 from tsmpc.cli._common import (
     PARTIAL_MARKER,
+    check_environment,
     check_out_dir,
     console,
     design_status,
@@ -53,6 +54,7 @@ def sweep_cmd(
     from tsmpc.sweep import dry_run as dry_fn
 
     con = console()
+    check_environment(kernels=not dry_run)
     finite("--connect-timeout", connect_timeout, lo=0.0, lo_open=True, hi=600.0)
     if workers > 64:
         fail(ConfigError(f"--workers = {workers}: at most 64 local worker processes"))

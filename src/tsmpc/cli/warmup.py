@@ -5,6 +5,7 @@ from __future__ import annotations
 import typer
 
 from tsmpc.cli import app
+from tsmpc.cli._common import check_environment, fail
 
 
 @app.command("warmup")
@@ -15,8 +16,9 @@ def warmup_cmd() -> None:
     if not kernels.enabled():
         typer.echo("kernels are switched off (TSMPC_NO_JIT is set): nothing to compile")
         return
+    check_environment()  # an unusable NUMBA_CACHE_DIR / cache folder: exit 2 naming it
     ok, seconds = kernels.warmup()
     if not ok:
-        typer.echo("compiled kernels unavailable: simulations use the numpy implementations", err=True)
-        raise typer.Exit(1)
+        fail(f"compiled kernels unavailable ({kernels.failure() or 'numba failed'}): simulations "
+             "use the numpy implementations", code=1)
     typer.echo(f"kernels ready in {seconds:.1f} s (cache: {kernels.numba_cache_dir()})")

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
@@ -41,9 +40,11 @@ FORMAT_VERSION = 2
 
 
 def cache_dir() -> Path:
-    """``$TSMPC_CACHE_DIR`` or ``~/.cache/tsmpc``."""
-    env = os.environ.get("TSMPC_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "tsmpc"
+    """``$TSMPC_CACHE_DIR`` or ``~/.cache/tsmpc`` (an empty HOME: an explicit private fallback,
+    :func:`tsmpc.paths.cache_root`)."""
+    from tsmpc.paths import cache_root
+
+    return cache_root()
 
 
 def _hash(kind: str, payload: dict[str, Any]) -> str:
@@ -114,12 +115,16 @@ def _load_or_design(cfg: Config, kind: str, directory: Path | None, use_cache: b
     key = kinematic_key(cfg) if kind == "kinematic" else dynamic_key(cfg)
     path = (directory or cache_dir()) / f"{kind}-{key[:32]}.json"
     if use_cache and path.exists():
-        try:
-            design = design_from_dict(json.loads(path.read_text()))
+        try:  # a regular file of bounded size only (a folder, a FIFO: re-solved, never blocks)
+            from tsmpc.textfile import read_text
+
+            design = design_from_dict(json.loads(read_text(path, "design cache entry",
+                                                           limit=64 * 1024 * 1024)))
             if design.inputs_hash == key:
                 _recheck(design, cfg)
                 return design
-        except (TsmpcError, KeyError, ValueError, TypeError, json.JSONDecodeError):
+        except (TsmpcError, KeyError, ValueError, TypeError, AttributeError, RecursionError,
+                OSError):
             pass  # unreadable or stale entry: re-solve and overwrite it
     if kind == "kinematic":
         design = design_kinematic(cfg.kinematic_box, cfg.kinematic_lmi, cfg.rates.Tc, inputs_hash=key)
@@ -129,8 +134,11 @@ def _load_or_design(cfg: Config, kind: str, directory: Path | None, use_cache: b
     if use_cache:
         try:
             atomic_write_text(path, json.dumps(design_to_dict(design)))
-        except OSError:
-            pass  # a read-only home must not stop a run; the design is still returned
+        except OSError as err:  # a read-only home must not stop a run; the design is still returned
+            import sys
+
+            print(f"tsmpc: cannot cache the {kind} design in {path} ({err.strerror or err}); it "
+                  "will be solved again next time", file=sys.stderr)
     return design
 
 
