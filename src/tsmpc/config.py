@@ -418,7 +418,13 @@ class MPCSettings(_Frozen):
         True, description="beyond the paper: errors of the velocity pose θ + α̂ (MHE) feed the MPC"
     )
     tangent_heading: StrictBool = Field(
-        True, description="beyond the paper: θ_d + ω_d(k+1) T_c / 2, the path tangent at sample k"
+        True, description="beyond the paper: the measured e_θ against the path's tangent at the "
+        "sample (θ_d moved forward by its measured lag, half the reference's own period)"
+    )
+    step_average_reference: StrictBool = Field(
+        True, description="beyond the paper: the reference inputs of each T_c step are that step's "
+        "averages from the path geometry, ω_d = Δθ_tangent / T_c and v_d = chord / T_c (the "
+        "paper's are the planner's samples, which describe the step *into* the sample)"
     )
 
     @field_validator("mode")
@@ -617,7 +623,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     # no speed-error feedback, the body-frame kinematic error model against the reference heading
     # as given (no slip-aware loop, no tangent heading). The weights are the paper's already.
     "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio"},
-              "mpc": {"slip_aware": False, "tangent_heading": False}},
+              "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False}},
 }
 
 

@@ -92,5 +92,5 @@ def explain_design_failure(kind: str, cfg: Config, err: BaseException) -> str:
                  f"the design's inputs are {inputs}")
     else:
         blame = f"the design's inputs ({inputs}) are the defaults"
-    return (f"no {kind} LMI design for this configuration ({type(err).__name__}: {reason}); "
+    return (f"no certified {kind} LMI design for this config ({type(err).__name__}: {reason}); "
             f"{blame}")

@@ -38,14 +38,13 @@ from typing import Any
 import typer
 
 from tsmpc.config import Config, load_config
-from tsmpc.errors import ConfigError, TsmpcError
+from tsmpc.errors import ConfigError, DesignError, TsmpcError
 
 __all__ = [
     "EXIT_FAILED",
     "EXIT_INVALID",
     "MAX_LAPS",
     "PARTIAL_MARKER",
-    "DesignFailed",
     "Interrupted",
     "check_environment",
     "check_interrupted",
@@ -448,7 +447,7 @@ def guarded_run(out: Path, *, what: str = "run", on_interrupt: str | None = None
     ends with one line on stderr, a non-zero exit and the PARTIAL marker saying why.
 
     * SIGINT/SIGTERM (or any error while one is pending): PARTIAL ``interrupted``, exit 128 + signal;
-    * :class:`DesignFailed` (no LMI design for this config): PARTIAL ``failed``, exit 2;
+    * :class:`~tsmpc.errors.DesignError` (no LMI design for this config): PARTIAL ``failed``, exit 2;
     * another :class:`TsmpcError`: PARTIAL ``failed``, exit 1;
     * ``OSError`` (disk full, name too long, stdout closed or full): PARTIAL ``failed``, exit 1;
     * any other exception: PARTIAL ``failed``, exit 1, the exception's one-line summary
@@ -470,7 +469,7 @@ def guarded_run(out: Path, *, what: str = "run", on_interrupt: str | None = None
                 raise typer.Exit(sig.code) from None
             if not isinstance(err, Exception):  # SystemExit, GeneratorExit: not ours to map
                 raise
-            if isinstance(err, DesignFailed):
+            if isinstance(err, DesignError):
                 mark_partial(out, "failed", reason=str(err))
                 fail(err, EXIT_INVALID)
             if isinstance(err, TsmpcError):
@@ -489,16 +488,11 @@ def guarded_run(out: Path, *, what: str = "run", on_interrupt: str | None = None
 
 
 # -- status while designs are solved -------------------------------------------------------
-class DesignFailed(TsmpcError, ValueError):
-    """No LMI design for this configuration: an input problem (exit 2), named by the field most
-    likely responsible (:func:`tsmpc.diagnose.explain_design_failure`)."""
-
-
 def solve_design(kind: str, fn: Callable[[Config], Any], cfg: Config) -> Any:
     """``fn(cfg)`` (a ``load_or_design_*``); any exception it raises — the solver's own
     (``cvxpy.error.SolverError``, ``ValueError: Problem data contains NaN or Inf``) or tsmpc's —
-    becomes :class:`DesignFailed` naming the likely field (a signal that broke it stays an
-    interrupt)."""
+    becomes :class:`~tsmpc.errors.DesignError` naming the likely field (a signal that broke it
+    stays an interrupt)."""
     from tsmpc.diagnose import explain_design_failure
 
     try:
@@ -507,39 +501,23 @@ def solve_design(kind: str, fn: Callable[[Config], Any], cfg: Config) -> Any:
         sig = pending_signal()
         if sig is not None:
             raise Interrupted(sig) from None
-        raise DesignFailed(explain_design_failure(kind, cfg, err)) from None
+        raise DesignError(explain_design_failure(kind, cfg, err)) from None
 
 
 def design_status(cfg: Config) -> tuple[Any, Any]:
-    """Load or solve the kinematic and dynamic LMI designs of ``cfg`` with a status line and
-    the elapsed time on stderr (a first run or changed design inputs solve for seconds to a
-    minute, depending on the machine and its load). A failed design raises
-    :class:`DesignFailed` naming the likely field."""
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+    """Load or solve the kinematic and dynamic LMI designs of ``cfg``, one status line on stderr
+    before ("solving…") and one after the certificates hold ("certified … margin …"). No design
+    for this config — whatever the solver raised — is a :class:`~tsmpc.errors.DesignError`
+    naming the field most likely responsible (:func:`tsmpc.diagnose.explain_design_failure`)."""
+    from rich.console import Console
 
-    from tsmpc.synthesis.cache import (
-        cache_dir,
-        dynamic_key,
-        kinematic_key,
-        load_or_design_dynamic,
-        load_or_design_kinematic,
-    )
+    from tsmpc.sim.experiment import solve_designs
 
-    con = console(stderr=True)
-    cached = {k: (cache_dir() / f"{k}-{key(cfg)[:32]}.json").is_file()
-              for k, key in (("kinematic", kinematic_key), ("dynamic", dynamic_key))}
-    out = []
-    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(),
-                  console=con, transient=True) as progress:
-        for name, fn in (("kinematic", load_or_design_kinematic), ("dynamic", load_or_design_dynamic)):
-            what = ("loading from the cache" if cached[name] else
-                    "solving and certifying (new inputs: seconds to a minute)")
-            if not con.is_terminal and not cached[name]:
-                con.print(f"LMI design: {name}: {what} ...")
-            task = progress.add_task(f"LMI design: {name}: {what}", total=None)
-            t0 = time.perf_counter()
-            out.append(solve_design(name, fn, cfg))
-            progress.remove_task(task)
-            if not cached[name]:
-                con.print(f"LMI design: {name} ready in {time.perf_counter() - t0:.1f} s")
-    return out[0], out[1]
+    console = Console(stderr=True, highlight=False, soft_wrap=True)
+    try:
+        return solve_designs(cfg, lambda text: console.print(text, markup=False))
+    except Exception:
+        sig = pending_signal()  # a signal that broke the solver stays an interrupt
+        if sig is not None:
+            raise Interrupted(sig) from None
+        raise

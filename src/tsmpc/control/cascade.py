@@ -197,6 +197,10 @@ class Cascade:
         self.n_inner = rates.inner_per_outer
         ref = reference if abs(reference.dt - self.Tc) <= 1e-9 else reference.resample(self.Tc)
         self.reference = ref
+        # the path's tangent at each sample, from the geometry (any sample period; slip_aware.py)
+        self._theta_tangent = ref.tangent_heading()
+        # what the MPC's steps see: the planner's samples (paper) or each T_c step's averages
+        self._mpc_reference = ref.step_averages() if cfg.mpc.step_average_reference else ref
         kd = kinematic_design or load_or_design_kinematic(cfg)
         dd = dynamic_design or load_or_design_dynamic(cfg)
         self.mpc = build_outer_controller(cfg, self.method, kd.P, kd.S)
@@ -390,16 +394,15 @@ class Cascade:
             ref = self.reference
             kk = min(k, len(ref) - 1)
             p = self._pose
-            window = ref.window(k, self.cfg.mpc.N + 1)
+            window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
             mpc_cfg = self.cfg.mpc
             if mpc_cfg.slip_aware or mpc_cfg.tangent_heading:  # beyond the paper: slip_aware.py
                 last = self._last
                 a_hat = float(last.estimate.x[1]) if mpc_cfg.slip_aware and last is not None else 0.0
                 if mpc_cfg.slip_aware:  # α̂ bounded by the measured course over ground
                     a_hat = self._slip_gate(p, a_hat)
-                dth = float(window.omega[1]) * self.Tc if mpc_cfg.tangent_heading else 0.0
-                e_meas = outer_loop_errors(p, np.array([ref.x[kk], ref.y[kk], ref.theta[kk]]),
-                                           a_hat, dth)
+                th_d = self._theta_tangent[kk] if mpc_cfg.tangent_heading else ref.theta[kk]
+                e_meas = outer_loop_errors(p, np.array([ref.x[kk], ref.y[kk], th_d]), a_hat)
             else:
                 e_meas = np.array(pose_to_errors(p[0], p[1], p[2], ref.x[kk], ref.y[kk],
                                                  ref.theta[kk]))

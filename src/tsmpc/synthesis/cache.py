@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import asdict, fields
+from dataclasses import replace as dc_replace
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +23,7 @@ from tsmpc.config import Config
 from tsmpc.errors import TsmpcError
 from tsmpc.io import atomic_write_text
 from tsmpc.synthesis.certificates import Certificate, check
-from tsmpc.synthesis.dynamic import DynamicDesign, certify_grid, design_dynamic
+from tsmpc.synthesis.dynamic import DynamicDesign, certify_dynamic, design_dynamic
 from tsmpc.synthesis.kinematic import KinematicDesign, certify_kinematic, design_kinematic
 
 __all__ = [
@@ -36,7 +37,7 @@ __all__ = [
 ]
 
 #: Bump when a formulation changes, so old cache entries are not reused.
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 
 
 def cache_dir() -> Path:
@@ -89,15 +90,16 @@ def design_from_dict(data: dict[str, Any]) -> KinematicDesign | DynamicDesign:
     for f in fields(cls):
         value = data[f.name]
         if f.name == "certificates":
-            value = tuple(Certificate(c["name"], float(c["margin"])) for c in value)
+            value = tuple(Certificate(c["name"], float(c["margin"]), float(c["relative"]))
+                          for c in value)
         elif isinstance(value, list):
             value = np.asarray(value, dtype=float)
         kwargs[f.name] = value
     return cls(**kwargs)
 
 
-def _recheck(design: KinematicDesign | DynamicDesign, cfg: Config) -> None:
-    """Recompute the certificates of a loaded design (raises on failure)."""
+def _recheck(design: KinematicDesign | DynamicDesign, cfg: Config) -> tuple[Certificate, ...]:
+    """Recompute the certificates of a loaded design on this machine (raises on failure)."""
     if isinstance(design, KinematicDesign):
         from tsmpc.models.kinematic import KinematicTS
 
@@ -106,9 +108,10 @@ def _recheck(design: KinematicDesign | DynamicDesign, cfg: Config) -> None:
                                   np.diag(cfg.kinematic_lmi.R), design.Y, design.K, design.Z,
                                   np.diag(np.square(cfg.kinematic_lmi.u_bar)), P=design.P, S=design.S)
     else:
-        _, _, certs = certify_grid(design.K, design.P, cfg.dynamic_box, cfg.vehicle, design.Td,
-                                   design.bandwidth, cfg.dynamic_lmi.grid_points)
+        _, _, certs = certify_dynamic(design.K, design.P, cfg.dynamic_box, cfg.vehicle,
+                                      cfg.dynamic_lmi, design.Td)
     check(certs, "cached design")
+    return tuple(certs)
 
 
 def _load_or_design(cfg: Config, kind: str, directory: Path | None, use_cache: bool) -> Any:
@@ -121,8 +124,8 @@ def _load_or_design(cfg: Config, kind: str, directory: Path | None, use_cache: b
             design = design_from_dict(json.loads(read_text(path, "design cache entry",
                                                            limit=64 * 1024 * 1024)))
             if design.inputs_hash == key:
-                _recheck(design, cfg)
-                return design
+                # the certificates reported are the ones recomputed here, not the stored ones
+                return dc_replace(design, certificates=_recheck(design, cfg))
         except (TsmpcError, KeyError, ValueError, TypeError, AttributeError, RecursionError,
                 OSError):
             pass  # unreadable or stale entry: re-solve and overwrite it
