@@ -308,7 +308,7 @@ class KinematicBox(_Frozen):
     v_d: tuple[PositiveFloat, PositiveFloat] = Field(
         (1.0, 18.0), description="v_d range [m/s], within (0, 200]")
     e_theta: tuple[FiniteFloat, FiniteFloat] = Field(
-        (-math.radians(5.0), math.radians(5.0)), description="e_θ range [rad], |e_θ| < π"
+        (-math.radians(5.0), math.radians(5.0)), description="e_θ range [rad], within (-π, π)"
     )
 
     @model_validator(mode="after")
@@ -510,7 +510,8 @@ class MHESettings(_Frozen):
         (0.0, -0.1, -1.4), description="[v, α, ω] lower bounds, within [-200, 200] m/s, [-π/2, π/2] "
         "rad, [-20, 20] rad/s")
     x_max: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(
-        (18.0, 0.1, 1.4), description="[v, α, ω] upper bounds (ranges as x_min)")
+        (18.0, 0.1, 1.4), description="[v, α, ω] upper bounds, within [-200, 200] m/s, [-π/2, π/2] "
+        "rad, [-20, 20] rad/s")
 
     @model_validator(mode="after")
     def _check(self) -> MHESettings:

@@ -83,9 +83,12 @@ NAME_MAX = 255
 
 
 def _bounded(text: str, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """``text`` cut to about ``limit`` characters: its start and its end (where a count of the
+    problems left out is) around a note of how much was left out."""
     if len(text) <= limit:
         return text
-    return f"{text[:limit]}… ({len(text) - limit} more characters)"
+    tail = min(300, limit // 4)
+    return f"{text[:limit - tail]} … ({len(text) - limit} characters left out) … {text[-tail:]}"
 
 
 def fail(err: Exception | str, code: int = EXIT_INVALID) -> None:

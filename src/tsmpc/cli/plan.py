@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import typer
 
 from tsmpc.cli import app
-from tsmpc.cli._common import check_laps, check_out_file, fail, finite
+from tsmpc.cli._common import check_laps, check_out_file, fail, finite, refuse_ineffective
 from tsmpc.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -147,6 +147,8 @@ def show_reference(
     png_path = out or file.with_suffix(".png")
     if out is not None and (out.is_dir() or str(out).endswith(("/", "\\"))):
         png_path = out / f"{file.stem}.png"
+    refuse_ineffective({"window": (is_tumftm(file), "a track is planned whole: --window picks "
+                                   "columns of a paper-format file or rows of a planned CSV")})
     check_out_file(png_path)
     track = None
     try:

@@ -41,7 +41,7 @@ def sweep_cmd(
     connect_timeout: float = typer.Option(
         5.0, "--connect-timeout", help="Seconds to wait for --scheduler before giving up."),
     max_runs: int = typer.Option(
-        10_000, "--max-runs", min=1, max=1_000_000,
+        10_000, "--max-runs", min=1, max=100_000,
         help="Refuse a sweep with more runs than this (grid points × random draws)."),
 ) -> None:
     """Run every point of a sweep as a Dask task; write one record per run, the aggregate table
