@@ -121,8 +121,16 @@ def read_head(path: str | Path, what: str, error: type[TsmpcError] = DataFormatE
 
 
 def first_line(path: str | Path, what: str, error: type[TsmpcError] = DataFormatError) -> str:
-    """The first line of a text file (same errors as :func:`read_text`)."""
-    return read_head(path, what, error).split("\n", 1)[0].strip()
+    """The first line of a text file (same errors as :func:`read_text`, for that line only)."""
+    p = Path(path)
+    head = read_bytes(p, what, error, limit=4096, head=True)
+    line = head.split(b"\n", 1)[0]
+    if b"\x00" not in line:
+        try:
+            return line.decode("utf-8").strip()
+        except UnicodeDecodeError:
+            pass
+    return _decode(head, p, what, error, partial=True).split("\n", 1)[0].strip()  # raises
 
 
 def number(text: str) -> float:

@@ -419,6 +419,8 @@ def _as_interrupt(err: BaseException) -> Interrupted | None:
     signal broke on its way (e.g. a ``SystemError`` from a library that got the exception)."""
     if isinstance(err, Interrupted):
         return err
+    if isinstance(err, KeyboardInterrupt):  # Python's own SIGINT handler was in place
+        return Interrupted(signal.SIGINT)
     sig = pending_signal()
     return Interrupted(sig) if sig is not None else None
 
