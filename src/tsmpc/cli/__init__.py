@@ -36,7 +36,7 @@ def _main(
     """TS-MPC trajectory tracking for autonomous vehicles."""
     from tsmpc.cli._common import safe_stdio
 
-    safe_stdio()
+    safe_stdio()  # a closed stdout is refused here, before any work (exit 2)
 
 
 def _register() -> None:
@@ -69,7 +69,8 @@ def main() -> None:
     if sig is not None:
         code = 128 + sig
     try:
-        sys.stdout.flush()
+        if sys.stdout is not None:
+            sys.stdout.flush()
     except (OSError, ValueError):
         with contextlib.suppress(Exception):
             fd = os.open(os.devnull, os.O_WRONLY)

@@ -115,7 +115,12 @@ def console(*, stderr: bool = False, width: int | None = None) -> Any:
 
 def safe_stdio() -> None:
     """A terminal that cannot encode a character gets a replacement character, never a
-    ``UnicodeEncodeError`` (``PYTHONIOENCODING=ascii``, a latin-1 terminal)."""
+    ``UnicodeEncodeError`` (``PYTHONIOENCODING=ascii``, a latin-1 terminal). A closed stdout
+    (``>&-``: Python then has no ``sys.stdout``) is refused before any work: every result line
+    would be lost without a word."""
+    if sys.stdout is None:
+        fail(ConfigError("stdout is closed: tsmpc's results could not be shown; redirect it to a "
+                         "file or to /dev/null"))
     for stream in (sys.stdout, sys.stderr):
         enc = (getattr(stream, "encoding", None) or "").lower().replace("-", "")
         if enc != "utf8" and hasattr(stream, "reconfigure"):
@@ -439,6 +444,8 @@ def _quiet_broken_stdout(err: OSError) -> None:
 
 def _output_problem(err: OSError) -> str:
     name = f" {err.filename}" if getattr(err, "filename", None) else ""
+    if not name:  # rich and print name no file: stdout (or a file whose name got lost)
+        name = " (to stdout or an output file)"
     what = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is exceeded",
             errno.EPIPE: "the output was closed (broken pipe)",
             errno.ENAMETOOLONG: "a file name is too long", errno.EROFS: "read-only file system",
@@ -472,7 +479,12 @@ def guarded_run(out: Path, *, what: str = "run", on_interrupt: str | None = None
                     typer.secho(_bounded(f"interrupted ({sig}): {hint}"), err=True,
                                 fg=typer.colors.RED)
                 raise typer.Exit(sig.code) from None
-            if not isinstance(err, Exception):  # SystemExit, GeneratorExit: not ours to map
+            if isinstance(err, SystemExit) and err.code not in (0, None):
+                # rich ends the program with SystemExit(1) when stdout is closed (broken pipe)
+                msg = f"{what} failed: the output was closed (broken pipe)"
+                mark_partial(out, "failed", reason=msg)
+                fail(f"{msg} ({out} is incomplete, see {out / PARTIAL_MARKER})", EXIT_FAILED)
+            if not isinstance(err, Exception):  # GeneratorExit, SystemExit(0): not ours to map
                 raise
             if isinstance(err, DesignError):
                 mark_partial(out, "failed", reason=str(err))
@@ -481,8 +493,8 @@ def guarded_run(out: Path, *, what: str = "run", on_interrupt: str | None = None
                 mark_partial(out, "failed", reason=str(err))
                 fail(err, EXIT_FAILED)
             if isinstance(err, OSError):
-                _quiet_broken_stdout(err)
                 msg = f"{what} failed: {_output_problem(err)}"
+                _quiet_broken_stdout(err)
                 mark_partial(out, "failed", reason=msg)
                 fail(f"{msg} ({out} is incomplete, see {out / PARTIAL_MARKER})", EXIT_FAILED)
             if os.environ.get("TSMPC_DEBUG"):

@@ -75,9 +75,9 @@ def _execute(
 
     check_environment()  # cache folders, BLAS threads: before any work
     limit_blas_threads()
-    console = Console()
+    console = Console(emoji=False)  # user strings are escaped where printed (markup)
     if not console.is_terminal:  # piped to a file or CI log: do not squeeze the tables to 80 columns
-        console = Console(width=140)
+        console = Console(width=140, emoji=False)
     # Every input is checked before any work: options, config, reference, envelope, output folder.
     finite("--duration", duration, lo=0.1)
     finite("--dt", dt, lo=1e-4)
