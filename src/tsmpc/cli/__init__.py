@@ -53,6 +53,7 @@ def main() -> None:
     in one line (never a second error at interpreter exit)."""
     import contextlib
     import os
+    import signal
     import sys
 
     from tsmpc.cli import _common
@@ -60,14 +61,25 @@ def main() -> None:
     _common.install_signal_handlers()
     code: object = 0
     try:
-        app()
+        try:
+            app()
+        finally:
+            # From here to the exit, signals are only recorded, then blocked (the interpreter's
+            # shutdown restores the default handlers: a signal then would kill the process
+            # without a word) and read as pending.
+            _common.record_signals_only()
     except SystemExit as exc:
         code = exc.code
     except KeyboardInterrupt:
         code = 130
-    sig = _common.first_signal()
+    pending: set[int] = set()
+    with contextlib.suppress(AttributeError, OSError, ValueError):
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+        pending = {int(s) for s in signal.sigpending()}
+    sig = _common.first_signal() or (min(pending) if pending else None)
     if sig is not None:
         code = 128 + sig
+        _common.late_interrupt(sig)
     try:
         if sys.stdout is not None:
             sys.stdout.flush()

@@ -60,9 +60,11 @@ __all__ = [
     "guarded_run",
     "handle_interrupts",
     "install_signal_handlers",
+    "late_interrupt",
     "load_config_or_exit",
     "mark_partial",
     "pending_signal",
+    "record_signals_only",
     "refuse_ineffective",
     "safe_stdio",
     "solve_design",
@@ -392,6 +394,11 @@ def deferred_interrupts() -> Iterator[None]:
     check_interrupted()
 
 
+def record_signals_only() -> None:
+    """From now on the handlers record signals and raise nothing (the entry point's last steps)."""
+    _raised[0] = True
+
+
 def install_signal_handlers() -> None:
     """SIGINT and SIGTERM are recorded (and raise :class:`Interrupted` outside deferred regions)
     for the rest of the process: the entry point calls this first, so an interrupt at any moment
@@ -453,6 +460,18 @@ def _output_problem(err: OSError) -> str:
     return f"cannot write{name}: {what}"
 
 
+_guarded_out: list[Path] = []
+
+
+def late_interrupt(signum: int) -> None:
+    """A signal that arrived after the guarded work had finished (its PARTIAL removed): the
+    process exits 128 + signal all the same, so the folder says so too — its files are complete
+    (the entry point calls this)."""
+    if _guarded_out and not (_guarded_out[-1] / PARTIAL_MARKER).exists():
+        mark_partial(_guarded_out[-1], "interrupted", signal=signal.Signals(signum).name,
+                     after="the run had finished when the signal arrived: its files are complete")
+
+
 @contextlib.contextmanager
 def guarded_run(out: Path, *, what: str = "run", on_interrupt: str | None = None) -> Iterator[None]:
     """The work that fills the output folder ``out``: every way it can end that is not success
@@ -465,6 +484,7 @@ def guarded_run(out: Path, *, what: str = "run", on_interrupt: str | None = None
     * any other exception: PARTIAL ``failed``, exit 1, the exception's one-line summary
       (``TSMPC_DEBUG=1`` re-raises it, with its traceback).
     """
+    _guarded_out.append(out)
     with handle_interrupts():
         try:
             yield
