@@ -178,3 +178,24 @@ def test_a_design_cache_entry_that_is_not_a_file_is_resolved_and_named(tmp_path:
         again = cache.load_or_design_kinematic(cfg)
         assert (again.S == design.S).all()
     del src
+
+
+def test_every_file_read_of_the_package_goes_through_the_safe_reader() -> None:
+    """The mechanism, not the cases: outside tsmpc.textfile (reads) and tsmpc.io (writes), no
+    module opens or reads a file itself — so no new input can bypass the regular-file check and
+    the size cap."""
+    import re
+
+    root = Path(__file__).resolve().parents[1] / "src" / "tsmpc"
+    pattern = re.compile(r"\.read_text\(|\.read_bytes\(|(?<![\w.])open\(|\.open\(|np\.load\(\s*[^i]"
+                         r"|json\.load\(|tomllib\.load\(|pickle\.load")
+    allowed = {"textfile.py", "io.py"}
+    offenders = []
+    for path in root.rglob("*.py"):
+        if path.name in allowed:
+            continue
+        for no, line in enumerate(path.read_text().splitlines(), start=1):
+            code = line.split("#", 1)[0]
+            if pattern.search(code) and "os.open(os.devnull" not in code:
+                offenders.append(f"{path.relative_to(root)}:{no}: {line.strip()}")
+    assert not offenders, "\n".join(offenders)
