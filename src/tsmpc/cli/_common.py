@@ -160,14 +160,10 @@ def check_laps(laps: int, option: str = "--laps") -> None:
         fail(ConfigError(f"{option} = {_bounded(str(laps), 40)}: must be 1 to {MAX_LAPS}"))
 
 
-def check_scenario_options(scenario: Any, cfg: Config, *, reference: Path | None, laps: int,
-                           duration: float | None, plant: str) -> None:
-    """``run``/``compare``: refuse the options the loaded scenario would ignore (issue 24)."""
-    from tsmpc.sim.simulator import tracked_steps
-
+def check_scenario_options(scenario: Any, *, reference: Path | None, laps: int, plant: str) -> None:
+    """``run``/``compare``: refuse the options the loaded scenario would ignore (issue 24).
+    (``--duration`` beyond the reference is an upper bound, not an ignored option: kept.)"""
     paper = bool(scenario.meta.get("paper_format"))
-    ref = scenario.reference
-    tracked = tracked_steps(ref, cfg.mpc.N) * cfg.rates.Tc if len(ref) > cfg.mpc.N else 0.0
     refuse_ineffective({
         "window": (reference is None, "the built-in circuit has no columns or rows to choose; "
                    "give a --reference"),
@@ -177,9 +173,6 @@ def check_scenario_options(scenario: Any, cfg: Config, *, reference: Path | None
                "carries its own time column; the built-in circuit is sampled at Tc)"),
         "cr_vehicle": (plant.strip().lower() == "tsmpc",
                        "it picks the vehicle of --plant commonroad-st or commonroad-mb"),
-        "duration": (duration is not None and tracked > 0 and duration > tracked + 1e-9,
-                     f"the reference is tracked for {tracked:.1f} s in all; --duration "
-                     f"{duration} would not shorten it"),
     })
 
 

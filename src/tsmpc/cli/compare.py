@@ -95,8 +95,7 @@ def _execute(
             seed=seed, plant=plant, cr_vehicle=cr_vehicle, strict_box=strict_box, oracle=oracle)
     except (TsmpcError, OSError) as err:
         fail(err)
-    check_scenario_options(exp.scenario, exp.config, reference=reference, laps=laps,
-                           duration=duration, plant=plant)
+    check_scenario_options(exp.scenario, reference=reference, laps=laps, plant=plant)
     check_out_dir(out, overwrite=overwrite)
     if exp.envelope.widened:
         console.print(exp.envelope.message, markup=False, highlight=False)
