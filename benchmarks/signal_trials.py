@@ -51,6 +51,7 @@ class Trial:
         return (self.returncode == 128 + self.signal and self.marker is not None
                 and self.marker.get("status") == "interrupted" and self.marker.get("signal") == name
                 and "Traceback" not in self.output and "SystemError" not in self.output
+                and "Exception ignored" not in self.output
                 and not self.leftovers)
 
 

@@ -109,7 +109,8 @@ def _execute(
         designs = design_status(exp.config)  # no design for this config: DesignError (exit 2)
         from tsmpc import kernels
 
-        kernels.warmup()  # compile/load before the progress bars (the first run says so)
+        with deferred_interrupts():  # numba/LLVM call back into Python: never raise in there
+            kernels.warmup()  # compile/load before the progress bars (the first run says so)
         with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
                       TextColumn("{task.completed}/{task.total} MPC steps"),
                       TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:

@@ -32,13 +32,14 @@ def plant_demo(
     finite("--duration", duration, lo=0.0, hi=3600.0)
     cfg = load_config_or_exit(config)
     check_environment()
-    plant = Plant(cfg.vehicle, cfg.tyre, cfg.rates.h)
     x = np.array([0.0, 0.0, 0.0, 5.0, 0.0, 0.0])
     n = round(duration / cfg.rates.Td)
-    t0 = time.perf_counter()
     try:
-        # The plant steps are compiled code: a signal sets a flag, checked after every step.
+        # The plant (its kernels loaded, its steps) is compiled code: a signal sets a flag,
+        # checked after every step.
         with handle_interrupts(), deferred_interrupts():
+            plant = Plant(cfg.vehicle, cfg.tyre, cfg.rates.h)
+            t0 = time.perf_counter()
             for k in range(n):
                 t = k * cfg.rates.Td
                 u = (9000.0 if t < 5.0 else 6500.0, 0.05 * np.sin(0.5 * t))

@@ -13,6 +13,7 @@ from tsmpc.cli._common import (
     check_environment,
     check_out_dir,
     console,
+    deferred_interrupts,
     design_status,
     fail,
     finite,
@@ -91,6 +92,11 @@ def sweep_cmd(
         hint = f"the records finished so far are in {out / 'runs'}; finish the sweep with --resume"
         with guarded_run(out, what="sweep", on_interrupt=hint):
             mark_partial(out, "running")
+            if not dry_run and scheduler is None:  # local workers share this machine's kernel cache
+                from tsmpc import kernels
+
+                with deferred_interrupts():  # numba/LLVM call back into Python: never raise there
+                    kernels.warmup()
             try:
                 res = run_sweep(spec, out, scheduler=scheduler, workers=workers, resume=resume,
                                 run_fn=dry_fn if dry_run else run_task, progress=on_record,

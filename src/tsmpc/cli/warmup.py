@@ -5,7 +5,7 @@ from __future__ import annotations
 import typer
 
 from tsmpc.cli import app
-from tsmpc.cli._common import check_environment, fail
+from tsmpc.cli._common import check_environment, deferred_interrupts, fail, handle_interrupts
 
 
 @app.command("warmup")
@@ -17,7 +17,12 @@ def warmup_cmd() -> None:
         typer.echo("kernels are switched off (TSMPC_NO_JIT is set): nothing to compile")
         return
     check_environment()  # an unusable NUMBA_CACHE_DIR / cache folder: exit 2 naming it
-    ok, seconds = kernels.warmup()
+    try:
+        with handle_interrupts(), deferred_interrupts():  # never raise inside numba/LLVM callbacks
+            ok, seconds = kernels.warmup()
+    except KeyboardInterrupt as sig:
+        typer.secho(f"interrupted ({sig})", err=True, fg=typer.colors.RED)
+        raise typer.Exit(getattr(sig, "code", 130)) from None
     if not ok:
         fail(f"compiled kernels unavailable ({kernels.failure() or 'numba failed'}): simulations "
              "use the numpy implementations", code=1)
