@@ -78,19 +78,17 @@ def suspect_fields(kind: str, cfg: Config) -> list[tuple[str, Any, Any]]:
 
 
 def explain_design_failure(kind: str, cfg: Config, err: BaseException) -> str:
-    """One line: which design failed, why (the solver's words, shortened) and the field most
-    likely responsible."""
+    """One line: which design failed and on which inputs, why (the solver's words, shortened to
+    1000 characters) and the field most likely responsible."""
     reason = " ".join(str(err).split()) or type(err).__name__
-    if len(reason) > 300:
-        reason = reason[:300] + "…"
+    if len(reason) > 1000:
+        reason = reason[:1000] + "…"
     suspects = suspect_fields(kind, cfg)
-    inputs = ", ".join(DESIGN_INPUTS[kind])
     if suspects:
         key, value, default = suspects[0]
         more = f" (also changed: {', '.join(k for k, _, _ in suspects[1:4])})" if len(suspects) > 1 else ""
-        blame = (f"most likely field: {key} = {value!r} (default {default!r}){more}; "
-                 f"the design's inputs are {inputs}")
+        blame = f"most likely field: {key} = {value!r} (default {default!r}){more}"
     else:
-        blame = f"the design's inputs ({inputs}) are the defaults"
-    return (f"no certified {kind} LMI design for this config ({type(err).__name__}: {reason}); "
-            f"{blame}")
+        blame = "the design's inputs are the defaults"
+    return (f"no certified {kind} LMI design for this config ({', '.join(DESIGN_INPUTS[kind])}): "
+            f"{type(err).__name__}: {reason}; {blame}")
