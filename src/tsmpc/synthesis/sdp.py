@@ -42,7 +42,7 @@ class SDPSolver(StrEnum):
 #: Solver options: Clarabel's defaults; SCS asked for far more accuracy than its default 1e-4.
 _OPTIONS: dict[SDPSolver, dict[str, Any]] = {
     SDPSolver.CLARABEL: {},
-    SDPSolver.SCS: {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
+    SDPSolver.SCS: {"eps_abs": 1e-6, "eps_rel": 1e-6, "max_iters": 100_000},
 }
 
 
