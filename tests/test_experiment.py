@@ -71,12 +71,13 @@ def test_a_config_without_a_certified_design_is_a_design_error(tmp_path: Path, m
 
     monkeypatch.setenv("TSMPC_CACHE_DIR", str(tmp_path / "cache"))
     cfg = Config()
-    # a 1 ms inner loop with the default weights: the SDP is badly conditioned there (documented)
-    bad = replace(cfg, rates=replace(cfg.rates, Td=0.001))
-    with pytest.raises(DesignError, match=r"no certified dynamic LMI design .*rates\.Td"):
+    # down to 0.2 m/s the 1/v terms leave no common Lyapunov matrix (SPEC §5's low-speed floor)
+    bad = replace(cfg, dynamic_box=replace(cfg.dynamic_box, v=(0.2, 20.0)))
+    with pytest.raises(DesignError, match=r"no certified dynamic LMI design .*dynamic_box.*"
+                       r"v = 0\.20 m/s is added.*narrow dynamic_box\.v"):
         experiment.solve_designs(bad)
     f = tmp_path / "bad.toml"
-    f.write_text("[rates]\nTd = 0.001\n", encoding="utf-8")
+    f.write_text("[dynamic_box]\nv = [0.2, 20.0]\n", encoding="utf-8")
     res = CliRunner().invoke(app, ["run", "--config", str(f), "--duration", "1", "--out",
                                    str(tmp_path / "o")])
     assert res.exit_code == 2 and "no certified dynamic LMI design" in res.output

@@ -131,7 +131,7 @@ def test_a_design_perturbed_by_1e_7_still_certifies(cfg: Config) -> None:
             certs = certify_kinematic(ts.A_vertices, ts.B, np.diag(c.kinematic_lmi.Q),
                                       np.diag(c.kinematic_lmi.R), bump(kd.Y), bump(kd.K), bump(kd.Z),
                                       np.diag(np.square(c.kinematic_lmi.u_bar)),
-                                      P=np.linalg.inv(bump(kd.Y)), S=None)
+                                      P=bump(kd.P), S=bump(kd.S))
             assert all(x.holds for x in certs), [x for x in certs if not x.holds]
             _, _, certs = certify_dynamic(bump(dd.K), bump(dd.P), c.dynamic_box, c.vehicle,
                                           c.dynamic_lmi, c.rates.Td)
