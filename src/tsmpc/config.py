@@ -467,8 +467,8 @@ class LQRSettings(_Frozen):
                 ("extrapolate_memberships", self.extrapolate_memberships),
                 ("initial_filter_state", self.initial_filter_state is not None)) if on]
             if bad:
-                raise ConfigError(f"lqr: {', '.join(bad)} apply(ies) to the as-run law only; "
-                                  "set lqr.law = \"as-run\" or leave them at their defaults")
+                raise ConfigError(f"lqr: {', '.join(bad)}: only for the as-run law (set "
+                                  "lqr.law = \"as-run\" or leave at the default)")
         return self
 
     def force_limits(self, vehicle: VehicleParams) -> tuple[float, float]:
