@@ -6,6 +6,7 @@ A docs generator calls :func:`generate` (runs, tables, figures) and :func:`updat
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 from collections.abc import Callable, Sequence
@@ -22,6 +23,7 @@ from tsmpc.sim.paper_explained import RowResult
 __all__ = [
     "ExplainedReport",
     "as_run_table",
+    "attribution_text",
     "estimator_forms_figure",
     "evidence_text",
     "generate",
@@ -147,6 +149,30 @@ def evidence_text(headroom: Any, stretch: Any, as_run: Sequence[RowResult],
             f"at {s0.transient.ey_peak_t_s:.1f} s; with the ζ entry × {s1.label.rsplit(' ', 1)[-1]} "
             f"({s1.what.split('steering row ', 1)[-1]}) it is {abs(s1.transient.ey_peak_m):.2f} m at "
             f"{s1.transient.ey_peak_t_s:.1f} s (published: ≈ 1.9 m at ≈ 4 s).")
+    return "\n".join(lines) + "\n"
+
+
+_COLUMN = {"x": ("x", "m"), "y": ("y", "m"), "theta": ("θ", "rad"), "v": ("v", "m/s"),
+           "omega": ("ω", "rad/s")}
+
+
+def attribution_text(walk: Sequence[RowResult], *, top: int = 2) -> str:
+    """Which quirk accounts for which column: for every column, the removals of the walk (from
+    ``paper-as-run`` to the paper preset) that change its RMSE most, with the values before and
+    after (a Markdown list)."""
+    steps = [r for r in walk if r.kind in ("as-run", "walk", "paper")]
+    lines = []
+    for key, (sym, unit) in _COLUMN.items():
+        deltas = []
+        for a, b in itertools.pairwise(steps):
+            if a.metrics["termination"] != "completed" or b.metrics["termination"] != "completed":
+                continue
+            va, vb = a.metrics["rmse"][key], b.metrics["rmse"][key]
+            deltas.append((abs(vb - va), b.label.lstrip("− ").replace(" (= paper preset)", ""), va, vb))
+        deltas.sort(reverse=True)
+        first, last = steps[0].metrics["rmse"][key], steps[-1].metrics["rmse"][key]
+        parts = [f"{name} ({_f(key, va)} → {_f(key, vb)})" for _, name, va, vb in deltas[:top]]
+        lines.append(f"* **{sym}** [{unit}] {_f(key, first)} → {_f(key, last)}: " + "; ".join(parts))
     return "\n".join(lines) + "\n"
 
 
@@ -280,6 +306,7 @@ def generate(reference: Path, img_dir: Path | None = None, *, max_steps: int | N
         "as-run": as_run_table(as_run),
         "evidence": evidence_text(headroom, stretch, as_run, sens),
         "walk": walk_table(rows),
+        "attribution": attribution_text(rows),
         "walk-paper-run": walk_table(rows, convention="rmse_paper_run"),
         "sensitivity": sensitivity_table(sens),
     }
