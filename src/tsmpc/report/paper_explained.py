@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -425,4 +426,6 @@ def _estimator_block(rows: Sequence[RowResult]) -> str:
         lines.append(f"| {noise} | {form} | {m['friction_rmse_N']:.0f} | {m['slip_rmse_rad']:.4f} "
                      f"| {m['speed_estimate_rmse']:.4f} | {m['mhe_ms']['median']:.3f} / "
                      f"{m['mhe_ms']['p99']:.3f} |")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    lines.append(f"\n(step times measured inside the runs, load average {load:.1f} on this machine)")
     return "\n".join(lines) + "\n"
