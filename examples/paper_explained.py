@@ -7,7 +7,7 @@ two MHE-UIO forms (README.md and docs/paper.md show this script's output).
 
 REFERENCE defaults to ../shared/data/paper/planner_references_100ms.csv (the paper's file, not
 bundled). ``--update-docs`` rewrites the marked blocks of README.md and docs/paper.md with the
-tables printed here. ≈ 20 full runs at 1–10 ms inner steps: a few minutes of CPU.
+tables printed here. ≈ 25 full runs at 1–10 ms inner steps: 10–15 minutes on two shared cores.
 """
 
 from __future__ import annotations
