@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tsmpc.config import Config, Method
+from tsmpc.config import Config, InnerLaw, Method, MHEForm
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
@@ -90,7 +90,9 @@ class Measurement:
         stamp: time the sample was taken [s] (same clock as ``t`` of ``step``); a sample older
             than the cascade's ``max_age_s`` is rejected as stale. None = fresh.
         state: ground-truth [v, α, ω] (simulation only: the *oracle* ablation). When given, the
-            TS-LQR uses it instead of the MHE's estimate and gets no friction compensation.
+            TS-LQR uses it instead of the MHE's estimate and gets no friction compensation —
+            or, with ``lqr.true_state_feedback`` (the published run's quirk), the compensation
+            as configured.
     """
 
     pose: tuple[float, float, float]
@@ -205,9 +207,20 @@ class Cascade:
         dd = dynamic_design or load_or_design_dynamic(cfg)
         self.mpc = build_outer_controller(cfg, self.method, kd.P, kd.S)
         dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, self.Td)
-        self.lqr = TSLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, self.Td,
-                         bandwidth=cfg.dynamic_lmi.filter_bandwidth)
-        self.mhe = MHEUIO(cfg.mhe, dyn, cfg.vehicle, self.Td)
+        if cfg.lqr.law == InnerLaw.AS_RUN:  # the published run's law (SPEC §14): a quirk
+            from tsmpc.control.paper_as_run import AsRunLQR
+
+            self.lqr = AsRunLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, self.Td,
+                                bandwidth=cfg.dynamic_lmi.filter_bandwidth)
+        else:
+            self.lqr = TSLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, self.Td,
+                             bandwidth=cfg.dynamic_lmi.filter_bandwidth)
+        if cfg.mhe.form == MHEForm.UIO:  # the paper's UIO form (numpy path)
+            from tsmpc.estimation.mhe_paper_uio import PaperUIOMHE
+
+            self.mhe = PaperUIOMHE(cfg.mhe, dyn, cfg.vehicle, self.Td)
+        else:
+            self.mhe = MHEUIO(cfg.mhe, dyn, cfg.vehicle, self.Td)
         self.max_age_s = self.Tc if max_age_s is None else float(max_age_s)
         self.max_time_jump_s = self.Tc if max_time_jump_s is None else float(max_time_jump_s)
         self._slip_gate = SlipGate(self.Tc, cfg.noise.position * cfg.noise.scale)
@@ -390,7 +403,10 @@ class Cascade:
         if self._calls % self.n_inner == 0:
             if not pose_ok:  # the MPC never sees NaN nor a jump: the dead-reckoned pose
                 ev["pose_rejected"] += 1
-            k = max(math.floor(t / self.Tc + 1e-6), 0)
+            if self.cfg.rates.inner_steps_per_outer is None:
+                k = max(math.floor(t / self.Tc + 1e-6), 0)
+            else:  # a fixed number of calls per reference sample (the published run's time base)
+                k = self._calls // self.n_inner
             ref = self.reference
             kk = min(k, len(ref) - 1)
             p = self._pose
@@ -435,7 +451,13 @@ class Cascade:
                            EstimatorStatus.FAILED, time.perf_counter() - t1)
         t2 = time.perf_counter()
         self._dead_reckon(est)
-        inner = est if m.state is None else _oracle_estimate(m.state)
+        if m.state is None:
+            inner = est
+        elif self.cfg.lqr.true_state_feedback:  # the published run: true state, F̂ as configured
+            inner = Estimate(np.asarray(m.state, dtype=float).reshape(3).copy(), est.F_fr,
+                             est.F_fr_raw, est.status, est.solve_time_s)
+        else:
+            inner = _oracle_estimate(m.state)
         out = self.lqr.step(inner, v_ref, w_ref)
         t3 = time.perf_counter()
         self._u_applied = np.array([out.F_xR, out.delta])

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from tsmpc.config import Config
+from tsmpc.config import Config, DynamicLMIFormulation
 from tsmpc.errors import TsmpcError
 from tsmpc.io import atomic_write_text
 from tsmpc.synthesis.certificates import Certificate, check
@@ -37,7 +37,7 @@ __all__ = [
 ]
 
 #: Bump when a formulation changes, so old cache entries are not reused.
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 
 
 def cache_dir() -> Path:
@@ -61,8 +61,11 @@ def kinematic_key(cfg: Config) -> str:
 
 def dynamic_key(cfg: Config) -> str:
     """Hash of every input of the dynamic design."""
+    lmi = cfg.dynamic_lmi.model_dump(mode="json")
+    if lmi.get("formulation") == "guaranteed-cost":  # ours: the keys of existing designs do not change
+        del lmi["formulation"]
     return _hash("dynamic", {"box": cfg.dynamic_box.model_dump(mode="json"),
-                             "lmi": cfg.dynamic_lmi.model_dump(mode="json"),
+                             "lmi": lmi,
                              # unset optional fields (per-axle stiffness) are left out, so the
                              # keys of existing designs do not change
                              "vehicle": cfg.vehicle.model_dump(mode="json", exclude_none=True),
@@ -155,5 +158,10 @@ def load_or_design_kinematic(
 def load_or_design_dynamic(
     cfg: Config, directory: Path | None = None, *, use_cache: bool = True
 ) -> DynamicDesign:
-    """The dynamic design of ``cfg``, from the cache when its inputs are unchanged."""
+    """The dynamic design of ``cfg``, from the cache when its inputs are unchanged (the published
+    run's feasibility design, :mod:`tsmpc.synthesis.paper_as_run`, when ``cfg`` selects it)."""
+    if cfg.dynamic_lmi.formulation == DynamicLMIFormulation.FEASIBILITY_EULER:
+        from tsmpc.synthesis.paper_as_run import load_or_design_feasibility
+
+        return load_or_design_feasibility(cfg, directory, use_cache=use_cache)  # type: ignore[return-value]
     return _load_or_design(cfg, "dynamic", directory, use_cache)

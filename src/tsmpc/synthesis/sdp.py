@@ -42,7 +42,7 @@ class SDPSolver(StrEnum):
 #: Solver options: Clarabel's defaults; SCS asked for far more accuracy than its default 1e-4.
 _OPTIONS: dict[SDPSolver, dict[str, Any]] = {
     SDPSolver.CLARABEL: {},
-    SDPSolver.SCS: {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
+    SDPSolver.SCS: {"eps_abs": 1e-6, "eps_rel": 1e-6, "max_iters": 100_000},
 }
 
 
@@ -78,19 +78,21 @@ def solve_with_margin(
     attempt: Callable[[float], T],
     certify: Callable[[T], list[Certificate]],
     what: str,
+    ladder: tuple[float, ...] = LADDER_DOWN,
 ) -> tuple[T, list[Certificate], float]:
     """Run ``attempt(margin)`` along the ladder until ``certify`` says every certificate holds.
 
     Returns (design, certificates, margin imposed). Raises :class:`Infeasible` (with the last
-    status) when no margin of :data:`LADDER_DOWN` is feasible, and ``CertificateError`` (from
-    :func:`~tsmpc.synthesis.certificates.check`, listing the first feasible answer's failures)
-    when feasible answers never certify at any margin of either ladder.
+    status) when no margin of ``ladder`` (default :data:`LADDER_DOWN`) is feasible, and
+    ``CertificateError`` (from :func:`~tsmpc.synthesis.certificates.check`, listing the first
+    feasible answer's failures) when feasible answers never certify at any margin of either
+    ladder.
     """
     from tsmpc.synthesis.certificates import check
 
     last: Infeasible | None = None
     failed: list[Certificate] | None = None  # certificates of the first feasible, failing answer
-    for t in LADDER_DOWN:
+    for t in ladder:
         try:
             design = attempt(t)
         except Infeasible as exc:
