@@ -107,6 +107,7 @@ RANGES = [
     ("lqr-per-kg-1e300", "[lqr]\nforce_max_per_kg = 1e300\n", "lqr.force_max_per_kg"),
     ("mhe-Q-1e300", "[mhe]\nQ = [1e300, 10.0, 2.0]\n", "mhe"),
     ("mhe-xmax-1e300", "[mhe]\nx_max = [1e300, 0.1, 1.4]\n", "x_min/x_max[0]"),
+    ("mhe-xmin-alpha-1e4", "[mhe]\nx_min = [0.0, -1e4, -1.4]\n", "x_min/x_max[1]"),
     ("noise-position-1e300", "[noise]\nposition = 1e300\n", "noise.position"),
     ("noise-v-1e300", "[noise]\nv = 1e300\n", "noise.v"),
     ("noise-omega-10", "[noise]\nomega = 10.0\n", "noise.omega"),

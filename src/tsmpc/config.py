@@ -535,12 +535,12 @@ class LQRSettings(_Frozen):
         "no anti-windup)")
     steering_bias_rad: FiniteFloat = Field(
         0.0, ge=-math.pi, le=math.pi,
-        description="as-run law: σ = δ + bias [rad] is fed back where the design expects δ (the "
-        "published run: 30° = 0.5236 rad; a quirk, not a recommendation)")
+        description="as-run law: σ = δ + bias [rad] is fed back where the design expects δ, within "
+        "[-π, π] (the published run: 30° = 0.5236 rad; a quirk, not a recommendation)")
     scheduling_speed_shift: FiniteFloat = Field(
         0.0, ge=-50.0, le=50.0,
-        description="as-run law: the gains are scheduled on v + shift [m/s] (the published run: "
-        "+2 m/s over the design interval [2, 18] m/s; a quirk, not a recommendation)")
+        description="as-run law: the gains are scheduled on v + shift [m/s], within [-50, 50] (the "
+        "published run: +2 m/s over the design interval [2, 18] m/s; a quirk, not a recommendation)")
     extrapolate_memberships: StrictBool = Field(
         False, description="as-run law: memberships are not clipped into the box, so scheduling "
         "values outside it extrapolate the vertex gains (a quirk of the published run, not a "
@@ -590,11 +590,10 @@ class MHESettings(_Frozen):
     P: tuple[FiniteFloat, ...] = Field((2.0, 2.0, 2.0), description="diag arrival-cost weight, "
                                        "entries in [1e-8, 1e8]")
     x_min: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(
-        (0.0, -0.1, -1.4), description="[v, α, ω] lower bounds, within [-200, 200] m/s, [-π/2, π/2] "
-        "rad, [-20, 20] rad/s")
+        (0.0, -0.1, -1.4), description="[v, α, ω] lower bounds, each within [-1000, 1000] (a "
+        "bound that wide is no bound: allowed, unlike 1e300)")
     x_max: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(
-        (18.0, 0.1, 1.4), description="[v, α, ω] upper bounds, within [-200, 200] m/s, [-π/2, π/2] "
-        "rad, [-20, 20] rad/s")
+        (18.0, 0.1, 1.4), description="[v, α, ω] upper bounds, each within [-1000, 1000]")
     form: MHEForm = Field(
         MHEForm.WINDOW, description="'window' (ours: window-constant friction force, compiled) or "
         "'uio' (the paper's form: friction eliminated through E_d; numpy path, slower)")
@@ -606,8 +605,8 @@ class MHESettings(_Frozen):
         _diag(self.P, "P", 3)
         for i in range(3):
             _interval(self.x_min[i], self.x_max[i], f"x_min/x_max[{i}]")
-        for i, (lim, unit) in enumerate(((V_LIMIT, "m/s"), (math.pi / 2, "rad"), (OMEGA_LIMIT, "rad/s"))):
-            _within((self.x_min[i], self.x_max[i]), f"x_min/x_max[{i}]", -lim, lim, unit)
+        for i, unit in enumerate(("m/s", "rad", "rad/s")):
+            _within((self.x_min[i], self.x_max[i]), f"x_min/x_max[{i}]", -1000.0, 1000.0, unit)
         return self
 
 
