@@ -205,3 +205,18 @@ def test_a_terminal_without_utf8_gets_replacement_characters(tmp_path: Path, enc
     assert "Traceback" not in err and "UnicodeEncodeError" not in err
     assert (out / "metrics.json").is_file() and not (out / PARTIAL_MARKER).exists()
     assert b"RMSE" in res.stdout
+
+
+@pytest.mark.timeout(180)
+@pytest.mark.parametrize("argv", [["design", "--json"], ["plan", "examples/waypoints.csv", "--out", "{T}"],
+                                  ["--version"], ["warmup"]])
+def test_any_command_with_stdout_on_a_full_disk_fails_in_one_line(tmp_path: Path, argv: list[str]) -> None:
+    """Commands without an output folder: the entry point's last net turns the failed write into
+    one line and exit 1 (never a traceback, never exit 0)."""
+    args = [a.replace("{T}", str(tmp_path / "r.csv")) for a in argv]
+    with open("/dev/full", "w") as full:
+        res = subprocess.run([sys.executable, "-m", "tsmpc", *args], stdout=full, stderr=subprocess.PIPE,
+                             text=True, env=_env(), timeout=150, cwd=ROOT)
+    assert res.returncode == 1, res.stderr
+    assert "Traceback" not in res.stderr and "Exception ignored" not in res.stderr
+    assert len([ln for ln in res.stderr.splitlines() if ln.startswith("error:")]) == 1, res.stderr

@@ -72,6 +72,16 @@ def main() -> None:
         code = exc.code
     except KeyboardInterrupt:
         code = 130
+    except Exception as exc:  # the last net: one line, never a traceback (TSMPC_DEBUG=1 shows it)
+        if os.environ.get("TSMPC_DEBUG"):
+            raise
+        if isinstance(exc, OSError):
+            what = f"cannot write{' ' + str(exc.filename) if exc.filename else ''}: {exc.strerror or exc}"
+        else:
+            what = f"internal error {type(exc).__name__}: {' '.join(str(exc).split())[:500]}"
+        with contextlib.suppress(Exception):
+            sys.stderr.write(f"error: {what}\n")
+        code = 1
     pending: set[int] = set()
     with contextlib.suppress(AttributeError, OSError, ValueError):
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
