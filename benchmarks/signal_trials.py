@@ -11,7 +11,7 @@ no longer kill the process mid-shutdown.
 
     python benchmarks/signal_trials.py --trials 100 --jobs 2
 
-tests/test_signals.py runs 24 trials of the same function in CI.
+tests/test_signals.py runs 20 trials of the same function in CI.
 """
 
 from __future__ import annotations
