@@ -286,9 +286,9 @@ def solve_unscaled(
     margin: float = 0.0,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], str, list[Certificate]]:
     """The published LMI posed as a MATLAB user would: physical units, no scaling, the paper's Q
-    and R as given, Y ⪰ 0 and the 8 vertex LMIs, no margin (``margin`` > 0 imposes the relative margin of the designs);
-    Clarabel's answer and its recomputed certificates, *not* checked (a study of
-    what the published solver may have returned; never used by a run). Returns (K, P, status,
+    and R as given, Y ⪰ 0 and the 8 vertex LMIs, no margin (``margin`` > 0 imposes the relative
+    margin of the designs). Clarabel's answer and its recomputed certificates, *not* checked (a
+    study of what the published solver may have returned; never used by a run). Returns (K, P, status,
     certificates). Raises :class:`SolverError` when Clarabel returns nothing."""
     A, B = vertex_models(box, vehicle, Td, settings.filter_bandwidth)
     ones_x, ones_u = np.ones(A.shape[-1]), np.ones(B.shape[-1])
