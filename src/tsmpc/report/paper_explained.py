@@ -178,15 +178,18 @@ def evidence_text(headroom: Any, stretch: Any, as_run: Sequence[RowResult],
             text = (f"* **{r.method} {r.metrics['termination']}** — on that stretch, with no solver "
                     f"failure ({fails}).")
             if onset is not None:
+                from tsmpc.config import Config
+
+                q = Config.preset("paper-as-run").mpc.Q
                 text += (f" Its lateral error follows REF's to within 0.1 m until {onset[0]:.1f} s, "
                          f"when |e_x| is {onset[1]:.1f} m: from there the NL-MPC, whose model "
                          "couples e_x and e_y through ω (ė_x = ω e_y − v + v_d cos e_θ, "
                          "ė_y = −ω e_x + v_d sin e_θ), plans to close the heavily weighted e_x "
-                         "(Q = 1.133) by cutting the curve at the price of the cheap e_y "
-                         "(Q = 0.067), on the premise that the car reaches v_ref = 18 m/s. The "
-                         "car does not, so every step re-plans the same cut and e_y accumulates. "
-                         "The TS-MPC schedules that coupling on ω_d (REF) or the current ω (FZN), "
-                         "fixed over the horizon, and cannot trade it.")
+                         f"(Q = {q[0]:g}) by cutting the curve at the price of the cheap e_y "
+                         f"(Q = {q[1]:g}), on the premise that the car reaches v_ref = "
+                         f"{h.v_ref_bound:g} m/s. The car does not, so every step re-plans the "
+                         "same cut and e_y accumulates. The TS-MPC schedules that coupling on ω_d "
+                         "(REF) or the current ω (FZN), fixed over the horizon, and cannot trade it.")
             lines.append(text)
     done = [r for r in counterfactual if r.metrics["termination"] == "completed"]
     if counterfactual:
