@@ -49,6 +49,11 @@ def _f(key: str, v: float) -> str:
     return f"{v:.4f}" if key in ("theta", "omega") else f"{v:.3f}"
 
 
+def _cell(text: str) -> str:
+    """``text`` safe inside a Markdown table cell (``|`` escaped)."""
+    return text.replace("|", "\\|")
+
+
 def _ratio(v: float, p: float) -> str:
     return f"{v / p:.2f}×" if p else "—"
 
@@ -223,35 +228,50 @@ def _spread(values: Sequence[float]) -> float:
     return 100.0 * (max(values) / max(min(values), 1e-12) - 1.0)
 
 
-def trends_text(sets: dict[str, Sequence[RowResult]]) -> str:
+def _trend_check(e: dict[str, dict[str, float]]) -> str:
+    """'REF ≤ FZN …; NL …' for the RMSE dicts ``e`` by method (FZN, REF and maybe NL)."""
+    fails = [_COLUMN[k][0] for k in RMSE_KEYS if e["REF"][k] > e["FZN"][k]]
+    out = "REF ≤ FZN in every column" if not fails else f"REF ≤ FZN except {', '.join(fails)}"
+    if "NL" in e:
+        low_y = e["NL"]["y"] < min(e["FZN"]["y"], e["REF"]["y"])
+        hi = [k for k in ("x", "v") if e["NL"][k] > max(e["FZN"][k], e["REF"][k])]
+        out += (f"; NL {'lowest' if low_y else 'not lowest'} in y, "
+                + ("highest in x and v" if len(hi) == 2 else
+                   f"highest in {hi[0]} only" if hi else "not highest in x or v"))
+    spread = ", ".join(f"{_COLUMN[k][0]} {_spread([v[k] for v in e.values()]):.1f} %"
+                       for k in RMSE_KEYS)
+    return f"{out} (spread between the methods: {spread})"
+
+
+def trends_text(sets: dict[str, Sequence[RowResult]], after_s: float = 10.0) -> str:
     """The paper's trends (REF ≤ FZN in every column; NL lowest in y, highest in x and v) checked
-    on each set of runs (FZN, REF, NL of one configuration; paper-run RMSE), one line per set, with
-    the spread between the methods (Table 5's is 3–7 % per column)."""
+    on each set of runs (FZN, REF, NL of one configuration; paper-run RMSE), with the spread
+    between the methods, and again over the run after the start-up (t ≥ ``after_s``, our RMSE
+    convention; when the runs kept their logs): one line per set, Table 5's last."""
     lines = []
     for name, rs in sets.items():
         by = {r.method: r for r in rs}
         if not {"FZN", "REF"} <= by.keys():
             continue
-        e = {m: r.metrics["rmse_paper_run"] for m, r in by.items()}
         ok = {m: r.metrics["termination"] == "completed" for m, r in by.items()}
         if not (ok["FZN"] and ok["REF"]):
             continue
-        fails = [_COLUMN[k][0] for k in RMSE_KEYS if e["REF"][k] > e["FZN"][k]]
-        ref_fzn = ("REF ≤ FZN in every column" if not fails
-                   else f"REF ≤ FZN except {', '.join(fails)}")
-        if "NL" not in by:
-            nl = ""
-        elif not ok["NL"]:
-            nl = "; NL diverged"
-        else:
-            low_y = e["NL"]["y"] < min(e["FZN"]["y"], e["REF"]["y"])
-            hi = [k for k in ("x", "v") if e["NL"][k] > max(e["FZN"][k], e["REF"][k])]
-            nl = (f"; NL {'lowest' if low_y else 'not lowest'} in y, "
-                  + ("highest in x and v" if len(hi) == 2 else
-                     f"highest in {hi[0]} only" if hi else "not highest in x or v"))
-        done = [v for m, v in e.items() if ok[m]]
-        spread = ", ".join(f"{_COLUMN[k][0]} {_spread([v[k] for v in done]):.0f} %" for k in RMSE_KEYS)
-        lines.append(f"* {name}: {ref_fzn}{nl} (spread between the methods: {spread}).")
+        done = {m: r for m, r in by.items() if ok[m]}
+        text = f"* {name}: {_trend_check({m: r.metrics['rmse_paper_run'] for m, r in done.items()})}"
+        if not ok.get("NL", True):
+            text += "; NL diverged"
+        logs = {m: r.log for m, r in done.items() if r.log is not None}
+        if len(logs) == len(done):
+            after = {}
+            for m, log in logs.items():
+                err = tracking_errors(log)
+                t = log.t_outer - log.t_outer[0]
+                keep = t >= after_s
+                after[m] = {k: float(np.sqrt(np.mean(err[k][keep] ** 2))) if keep.any()
+                            else float("nan") for k in RMSE_KEYS}
+            if all(np.isfinite(v).all() for e in after.values() for v in e.values()):
+                text += f". After the start-up (t ≥ {after_s:g} s): {_trend_check(after)}"
+        lines.append(text + ".")
     spread = ", ".join(f"{_COLUMN[k][0]} {_spread([v[k] for v in PAPER_TABLE5.values()]):.0f} %"
                        for k in RMSE_KEYS)
     lines.append(f"* Table 5: REF ≤ FZN in every column; NL lowest in y, highest in x and v "
@@ -273,7 +293,7 @@ def design_points_table(points: Sequence[Any]) -> str:
         e = r.metrics["rmse_paper_run"]
         cols = (" | ".join(_f(k, e[k]) for k in RMSE_KEYS) if p.certified
                 else " | ".join("—" for _ in RMSE_KEYS))
-        run = r.metrics["termination"]
+        run = _cell(r.metrics["termination"])
         if p.max_steps is not None:
             run = f"{run} (run limited to {p.max_steps} steps)"
         cert = ("hold" if p.certified else "**fail**") + f" ({p.worst_relative:.1e})"
@@ -292,7 +312,7 @@ def counterfactual_table(as_run: Sequence[RowResult], rows: Sequence[RowResult])
     for r in [*as_run, *rows]:
         label = "— (paper-as-run)" if r.kind == "as-run" else f"{r.label}: {r.what}"
         if r.metrics["termination"] != "completed":
-            lines.append(f"| {label} | {r.method} | {r.metrics['termination']} | — | — | — | — | — "
+            lines.append(f"| {label} | {r.method} | {_cell(r.metrics['termination'])} | — | — | — | — | — "
                          f"| — | {r.max_abs_longitudinal_m:.2f} |")
             continue
         e = r.metrics["rmse_paper_run"]
@@ -486,7 +506,7 @@ def generate(reference: Path, img_dir: Path | None = None, *, max_steps: int | N
     if progress is not None:
         progress("design points of the feasibility LMI")
     points = design_points(reference, as_run_ref, max_steps=max_steps)
-    cf = headroom_counterfactuals(reference, max_steps=max_steps, progress=progress)
+    cf = headroom_counterfactuals(reference, max_steps=max_steps, keep_logs=True, progress=progress)
     by_method = {r.method: r for r in as_run}
     onset = None
     if "NL" in by_method and by_method["NL"].log is not None and as_run_ref.log is not None:

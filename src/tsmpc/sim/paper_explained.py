@@ -408,7 +408,7 @@ def design_points(reference: Path, centre: RowResult | None = None, *,
 def headroom_counterfactuals(reference: Path, methods: Sequence[Method] = (Method.FZN, Method.REF,
                                                                            Method.NL), *,
                              v_bound: float = 22.0, speed_factor: float = 2.5,
-                             max_steps: int | None = None,
+                             max_steps: int | None = None, keep_logs: bool = False,
                              progress: Callable[[str], None] | None = None) -> list[RowResult]:
     """Two changes of ``paper-as-run`` that each remove the speed shortfall on the fastest
     stretch, with every method: the MPC's upper bound on v_ref raised to ``v_bound`` (a config
@@ -431,7 +431,7 @@ def headroom_counterfactuals(reference: Path, methods: Sequence[Method] = (Metho
         for method in methods:
             if progress is not None:
                 progress(f"{row.label} [{method.value}]")
-            out.append(run_row(row, sc, method=method, max_steps=max_steps,
+            out.append(run_row(row, sc, method=method, max_steps=max_steps, keep_log=keep_logs,
                                dynamic_design=design))
     return out
 
