@@ -208,7 +208,8 @@ def evidence_text(headroom: Any, stretch: Any, as_run: Sequence[RowResult],
                            for r in rs)
             parts.append(f"{label}: {xs}")
         lines.append(
-            "* **Test of that explanation** (table below): removing the shortfall either way — the "
+            "* **Test of that explanation** (the runs of “Testing the explanation” in docs/paper.md): "
+            "removing the shortfall either way — the "
             "MPC's bound raised, or the gains' speed entry scaled — gives RMSE_x (paper-run) "
             + "; ".join(parts) + f"; {len(done)} of {len(counterfactual)} runs complete.")
     if len(sens) > 1:
