@@ -220,7 +220,8 @@ def evidence_text(headroom: Any, stretch: Any, as_run: Sequence[RowResult],
             f"at {s0.transient.ey_peak_t_s:.1f} s; with the ζ entry × {s1.label.rsplit(' ', 1)[-1]} "
             f"({s1.what.split('steering row ', 1)[-1]}) it is {abs(s1.transient.ey_peak_m):.2f} m at "
             f"{s1.transient.ey_peak_t_s:.1f} s (published: ≈ 1.9 m at ≈ 4 s). Which point of the "
-            "feasible set the published solver returned is unknown (the design points below).")
+            "feasible set the published solver returned is unknown (the design points of “What the gains "
+            "decide” in docs/paper.md).")
     return "\n".join(lines) + "\n"
 
 
