@@ -26,6 +26,7 @@ __all__ = [
     "DynamicBox",
     "DynamicLMIFormulation",
     "DynamicLMISettings",
+    "FeasiblePoint",
     "FrictionEstimate",
     "InnerLaw",
     "KinematicBox",
@@ -171,6 +172,18 @@ class DynamicLMIFormulation(StrEnum):
     #: one common Lyapunov matrix over the 8 vertices, Euler at T_d
     #: (:mod:`tsmpc.synthesis.paper_as_run`)
     FEASIBILITY_EULER = "feasibility-euler"
+
+
+class FeasiblePoint(StrEnum):
+    """Which point of the feasibility LMI's solution set the design keeps (``feasibility-euler``
+    only; SPEC §14: a problem without objective has no unique answer)."""
+
+    #: the analytic centre of the LMIs (:mod:`tsmpc.synthesis.analytic_center`): what an
+    #: interior-point solver converges to without objective, the same in any units or scaling
+    ANALYTIC_CENTER = "analytic-center"
+    #: Clarabel's answer in the scaled coordinates of :mod:`tsmpc.synthesis.dynamic` (where the
+    #: solver stopped: depends on that scaling)
+    SOLVER = "solver"
 
 
 class MHEForm(StrEnum):
@@ -428,11 +441,19 @@ class DynamicLMISettings(_Frozen):
         DynamicLMIFormulation.GUARANTEED_COST,
         description="'guaranteed-cost' (ours) or 'feasibility-euler' (a quirk of the published run, "
         "not a recommendation: no objective, 8 vertex LMIs, Euler at T_d)")
+    feasible_point: FeasiblePoint = Field(
+        FeasiblePoint.SOLVER, description="feasibility-euler only: which point of the solution "
+        "set the design keeps: 'solver' (Clarabel's answer in the scaled coordinates) or "
+        "'analytic-center' (the LMIs' analytic centre, the same in any units)")
 
     @model_validator(mode="after")
     def _check(self) -> DynamicLMISettings:
         _diag(self.Q, "Q", 6)
         _diag(self.R, "R", 2)
+        if (self.feasible_point != FeasiblePoint.SOLVER
+                and self.formulation != DynamicLMIFormulation.FEASIBILITY_EULER):
+            raise ValueError("feasible_point: only for the 'feasibility-euler' formulation (the "
+                             "guaranteed-cost design has an objective)")
         return self
 
 
@@ -729,7 +750,10 @@ PRESETS: dict[str, dict[str, Any]] = {
         "vehicle": {"mu_nominal": 0.65},  # the controller models' nominal μ (M g μ = 4355.15 N)
         "rates": {"Td": 0.001, "inner_steps_per_outer": 101},  # inner loop + MHE at 1 ms, 101 steps
         "dynamic_box": {"v": (2.0, 18.0)},  # the design interval of the speed premise
-        "dynamic_lmi": {"formulation": "feasibility-euler"},  # feasibility LMI, 8 vertices, Euler
+        # feasibility LMI, 8 vertices, Euler; the point kept: the LMIs' analytic centre (the
+        # published solver's point is unknown; the centre is what an interior-point method
+        # converges to without objective, in any units)
+        "dynamic_lmi": {"formulation": "feasibility-euler", "feasible_point": "analytic-center"},
         "lqr": {"speed_feedback": False, "friction_estimate": "uio",
                 "friction_compensation": False,  # the force command was the clipped LQR output
                 "true_state_feedback": True,  # the inner law on the true states; MHE unused

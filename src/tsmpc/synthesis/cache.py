@@ -64,6 +64,8 @@ def dynamic_key(cfg: Config) -> str:
     lmi = cfg.dynamic_lmi.model_dump(mode="json")
     if lmi.get("formulation") == "guaranteed-cost":  # ours: the keys of existing designs do not change
         del lmi["formulation"]
+    if lmi.get("feasible_point") == "solver":  # the default: earlier keys do not change
+        del lmi["feasible_point"]
     return _hash("dynamic", {"box": cfg.dynamic_box.model_dump(mode="json"),
                              "lmi": lmi,
                              # unset optional fields (per-axle stiffness) are left out, so the
