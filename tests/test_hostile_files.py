@@ -194,11 +194,9 @@ def test_every_file_read_of_the_package_goes_through_the_safe_reader() -> None:
     pattern = re.compile(r"\.read_text\(|\.read_bytes\(|(?<![\w.])open\(|\.open\(|np\.load\(\s*[^i]"
                          r"|json\.load\(|tomllib\.load\(|pickle\.load")
     allowed = {"textfile.py", "io.py"}
-    # Known, reported: the as-run design cache of issue 22 (synthesis/ is the lead's to change).
-    known = {"synthesis/paper_as_run.py"}
     offenders = []
     for path in root.rglob("*.py"):
-        if path.name in allowed or str(path.relative_to(root)) in known:
+        if path.name in allowed:
             continue
         for no, line in enumerate(path.read_text().splitlines(), start=1):
             code = line.split("#", 1)[0]

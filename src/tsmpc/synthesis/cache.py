@@ -74,7 +74,7 @@ def dynamic_key(cfg: Config) -> str:
                              "Td": cfg.rates.Td})
 
 
-def design_to_dict(design: KinematicDesign | DynamicDesign) -> dict[str, Any]:
+def design_to_dict(design: Any) -> dict[str, Any]:
     """JSON-ready dict: arrays as nested lists, certificates as {name, margin, holds}."""
     out: dict[str, Any] = {"type": type(design).__name__}
     for f in fields(design):
@@ -88,9 +88,13 @@ def design_to_dict(design: KinematicDesign | DynamicDesign) -> dict[str, Any]:
     return out
 
 
-def design_from_dict(data: dict[str, Any]) -> KinematicDesign | DynamicDesign:
-    """Inverse of :func:`design_to_dict`."""
-    cls = {"KinematicDesign": KinematicDesign, "DynamicDesign": DynamicDesign}[data["type"]]
+def design_from_dict(data: dict[str, Any], cls: type | None = None) -> Any:
+    """Inverse of :func:`design_to_dict` (``cls``: the design class the record must be; None:
+    a kinematic or dynamic design, as the record says). Raises ValueError for another type."""
+    if cls is None:
+        cls = {"KinematicDesign": KinematicDesign, "DynamicDesign": DynamicDesign}[data["type"]]
+    elif data.get("type") != cls.__name__:
+        raise ValueError(f"not a {cls.__name__} record")
     kwargs: dict[str, Any] = {}
     for f in fields(cls):
         value = data[f.name]

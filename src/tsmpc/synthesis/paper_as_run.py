@@ -40,9 +40,8 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -346,35 +345,6 @@ def grid_report(
     return rho, dec
 
 
-# -- cache (the files of tsmpc.synthesis.cache, own record type) ------------------------------
-def _to_dict(d: FeasibilityDesign) -> dict[str, Any]:
-    out: dict[str, Any] = {"type": type(d).__name__}
-    for f in fields(d):
-        value = getattr(d, f.name)
-        if isinstance(value, np.ndarray):
-            out[f.name] = value.tolist()
-        elif f.name == "certificates":
-            out[f.name] = [{**asdict(c), "holds": c.holds} for c in value]
-        else:
-            out[f.name] = value
-    return out
-
-
-def _from_dict(data: dict[str, Any]) -> FeasibilityDesign:
-    if data.get("type") != FeasibilityDesign.__name__:
-        raise ValueError("not a feasibility design")
-    kw: dict[str, Any] = {}
-    for f in fields(FeasibilityDesign):
-        value = data[f.name]
-        if f.name == "certificates":
-            value = tuple(Certificate(c["name"], float(c["margin"]), float(c["relative"]))
-                          for c in value)
-        elif isinstance(value, list):
-            value = np.asarray(value, dtype=float)
-        kw[f.name] = value
-    return FeasibilityDesign(**kw)
-
-
 def load_or_design_feasibility(
     cfg: Config, directory: Path | None = None, *, use_cache: bool = True
 ) -> FeasibilityDesign:
@@ -382,25 +352,28 @@ def load_or_design_feasibility(
     :func:`tsmpc.synthesis.cache.dynamic_key`), solved and stored when missing. The vertex
     certificates are recomputed on load; a stale or tampered entry is re-solved."""
     from tsmpc.io import atomic_write_text
-    from tsmpc.synthesis.cache import cache_dir, dynamic_key
+    from tsmpc.synthesis.cache import cache_dir, design_from_dict, design_to_dict, dynamic_key
+    from tsmpc.textfile import read_text
 
     key = dynamic_key(cfg)
     path = (directory or cache_dir()) / f"dynamic-{key[:32]}.json"
     lmi = cfg.dynamic_lmi
     if use_cache and path.exists():
         try:
-            d = _from_dict(json.loads(path.read_text()))
+            # a regular file of bounded size only (a folder, a FIFO: re-solved, never blocks)
+            d = design_from_dict(json.loads(read_text(path, "design cache entry",
+                                                      limit=64 * 1024 * 1024)), FeasibilityDesign)
             if d.inputs_hash == key:
                 A, B = vertex_models(cfg.dynamic_box, cfg.vehicle, d.Td, d.bandwidth)
                 check(certify_vertices(A, B, lmi, d.K, d.P), "cached feasibility design")
                 return d
-        except (TsmpcError, KeyError, ValueError, TypeError, np.linalg.LinAlgError,
-                json.JSONDecodeError):
+        except (TsmpcError, KeyError, ValueError, TypeError, AttributeError, RecursionError, OSError,
+                np.linalg.LinAlgError):
             pass  # unreadable or stale entry: re-solve and overwrite it
     d = design_feasibility(cfg.dynamic_box, cfg.vehicle, lmi, cfg.rates.Td, inputs_hash=key)
     if use_cache:
         try:
-            atomic_write_text(path, json.dumps(_to_dict(d)))
+            atomic_write_text(path, json.dumps(design_to_dict(d)))
         except OSError:
             pass  # a read-only home must not stop a run
     return d
