@@ -9,7 +9,6 @@ from __future__ import annotations
 import itertools
 import math
 import os
-import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -294,18 +293,15 @@ def estimator_forms_figure(columns: dict[str, dict[str, RunLog]]) -> Any:
     return fig
 
 
-_BLOCK = "<!-- paper-explained:{name}:{end} -->"
-
-
 def update_block(text: str, name: str, body: str) -> str:
     """``text`` with the block between ``<!-- paper-explained:NAME:begin -->`` and
-    ``<!-- paper-explained:NAME:end -->`` replaced by ``body``. Raises ValueError when the markers
-    are missing (a generator must never append blindly)."""
-    begin, end = _BLOCK.format(name=name, end="begin"), _BLOCK.format(name=name, end="end")
-    pat = re.compile(re.escape(begin) + r".*?" + re.escape(end), re.S)
-    if not pat.search(text):
-        raise ValueError(f"markers of block {name!r} not found")
-    return pat.sub(lambda _m: f"{begin}\n{body.strip()}\n{end}", text, count=1)
+    ``<!-- paper-explained:NAME:end -->`` replaced by ``body`` (the docs' one marker scheme,
+    :func:`tsmpc.report.docs.update_block`). Raises ValueError when the markers are missing (a
+    generator must never append blindly)."""
+    from tsmpc.report.docs import BlockId
+    from tsmpc.report.docs import update_block as update
+
+    return update(text, BlockId("paper-explained", name), body)
 
 
 @dataclass(frozen=True)
