@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import re
+import textwrap
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
@@ -57,8 +58,11 @@ class BlockId:
 
 
 def _pattern(block: BlockId) -> re.Pattern[str]:
+    """Groups: the indentation of a block on its own lines, the newline after the begin marker
+    (absent: an inline block), the body."""
     begin, end = block.markers()
-    return re.compile(re.escape(begin) + r"(\n?)(.*?)\n?" + re.escape(end), re.S)
+    return re.compile(r"(?m)(^[ \t]*)?" + re.escape(begin) + r"(\n?)(.*?)\n?[ \t]*" + re.escape(end),
+                      re.S)
 
 
 def blocks_in(text: str) -> list[BlockId]:
@@ -71,7 +75,7 @@ def read_block(text: str, block: BlockId) -> str:
     m = _pattern(block).search(text)
     if m is None:
         raise ValueError(f"markers of block {block} not found")
-    return m.group(2)
+    return textwrap.dedent(m.group(3))
 
 
 def update_block(text: str, block: BlockId, body: str) -> str:
@@ -84,11 +88,13 @@ def update_block(text: str, block: BlockId, body: str) -> str:
         raise ValueError(f"markers of block {block} not found")
 
     def sub(m: re.Match[str]) -> str:
-        if m.group(1):  # a Markdown block
-            return f"{begin}\n{body.strip()}\n{end}"
+        indent = m.group(1) or ""
+        if m.group(2):  # a Markdown block (indented inside a list item: every line indented)
+            lines = "\n".join((indent + ln) if ln.strip() else "" for ln in body.strip().splitlines())
+            return f"{indent}{begin}\n{lines}\n{indent}{end}" if lines else f"{indent}{begin}\n{indent}{end}"
         if "\n" in body.strip():
             raise ValueError(f"block {block} is inline: its body must be one line")
-        return f"{begin}{body.strip()}{end}"
+        return f"{indent}{begin}{body.strip()}{end}"
 
     return pat.sub(sub, text)
 
