@@ -138,7 +138,7 @@ def _table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
 
 def _pct(a: float, b: float) -> str:
     """a relative to b, signed percent."""
-    return f"{100.0 * (a / b - 1.0):+.0f} %" if b else "—"
+    return f"{100.0 * (a / b - 1.0):+.0f} %".replace("-", "−") if b else "—"
 
 
 def _diverged_at(termination: str) -> str:
@@ -563,7 +563,7 @@ def offset_start(ctx: Context) -> Produced:
     out = ctx.scratch / "offset_start"
     res = _experiment(ctx, "paper reference, offset_start, four methods", Config(),
                       ["fzn", "ref", "iter", "nl"], reference=ctx.paper_reference,
-                      robustness="offset_start", out=out, plots=True)
+                      robustness="offset_start", out=None if ctx.quick else out, plots=not ctx.quick)
     ms = res.metrics["methods"]
     rows = []
     for n, m in ms.items():
