@@ -85,3 +85,40 @@ def test_published_numbers_match_a_fresh_run(paper_reference_path: Path, tracks_
     assert not problems, ("published numbers differ from a fresh run (regenerate with "
                           "`python docs/generate.py --only " + ",".join(ran) + "`):\n"
                           + "\n".join(problems))
+
+
+def _user_facing() -> dict[str, str]:
+    src = {str(p.relative_to(ROOT)): p.read_text(encoding="utf-8")
+           for p in (ROOT / "src" / "tsmpc").rglob("*.py")}
+    return {**TEXTS, **src}
+
+
+def test_user_facing_text_cites_the_paper_not_internal_files() -> None:
+    """Users have the paper, not the project's SPEC.md or STYLE.md (issue 23, friction 4)."""
+    bad = [f"{name}:{i + 1}" for name, text in _user_facing().items()
+           for i, line in enumerate(text.splitlines()) if re.search(r"\b(SPEC|STYLE) §", line)]
+    assert not bad, f"SPEC/STYLE section references in user-facing text: {bad}"
+
+
+def test_docstrings_document_one_attribute_per_line() -> None:
+    """``v_ref, omega_ref: ...`` renders as one attribute named "v_ref," of type "omega_ref" in
+    the API reference: every Attributes/Args entry names one field."""
+    import ast
+
+    bad = []
+    for name, text in _user_facing().items():
+        if not name.endswith(".py"):
+            continue
+        for node in ast.walk(ast.parse(text)):
+            if not isinstance(node, (ast.ClassDef, ast.FunctionDef, ast.Module)):
+                continue
+            doc = ast.get_docstring(node) or ""
+            section = None
+            for line in doc.splitlines():
+                if re.fullmatch(r"(Attributes|Args|Arguments|Parameters|Returns|Raises):", line.strip()):
+                    section = line.strip()
+                elif line and not line.startswith(" "):
+                    section = None
+                elif section in ("Attributes:", "Args:") and re.match(r"^\s{4}\w+(, \w+)+\s*[:(]", line):
+                    bad.append(f"{name}: {line.strip()}")
+    assert not bad, f"grouped entries in docstrings: {bad}"

@@ -188,7 +188,7 @@ _PLANT_HELP = ("Plant: tsmpc (the built-in nonlinear single-track), commonroad-s
                "[commonroad] extra).")
 _PRESET_HELP = ("Named configuration under --config: 'default' (our best cascade), 'paper' (the cascade "
                 "as published: no speed-error feedback, the paper's UIO friction estimate) or "
-                "'paper-as-run' (the published run's quirks, SPEC §14: not a recommendation).")
+                "'paper-as-run' (the published run's quirks: not a recommendation).")
 _STRICT_HELP = ("Refuse a reference that leaves the designs' scheduling boxes (default: widen the boxes "
                 "by a margin and re-solve and re-certify the designs, cached).")
 _DT_HELP = ("Column period [s] of a paper-format file (default: measured from the data; a value the "

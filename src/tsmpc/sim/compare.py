@@ -1,4 +1,4 @@
-"""The paper's comparison in one call (SPEC §10–11): run each method on one scenario, compute
+"""The paper's comparison in one call (the paper's comparison): run each method on one scenario, compute
 the metrics and write every output file. ``tsmpc compare`` and ``tsmpc run`` are shells over
 :func:`compare`."""
 
@@ -190,7 +190,7 @@ def compare(
         "scenario": _scenario_summary(cfg, scenario, max_steps),
         "versions": versions(),
         "oracle": oracle,
-        "paper_run_rmse": cfg.metrics.paper_run_rmse,  # tables show the SPEC §14 convention too
+        "paper_run_rmse": cfg.metrics.paper_run_rmse,  # tables show the published run's RMSE convention too
         "designs": {"kinematic_S": kd.S.tolist(), "kinematic_P": kd.P.tolist()},
     }
     laps = int(scenario.meta.get("laps", 1) or 1)

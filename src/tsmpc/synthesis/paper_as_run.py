@@ -1,4 +1,4 @@
-"""The dynamic TS-LMI-LQR as the published run solved it (SPEC §14): a quirk of that run, not a
+"""The dynamic TS-LMI-LQR as the published run solved it (the published run): a quirk of that run, not a
 recommendation (``dynamic_lmi.formulation = "feasibility-euler"``, the ``paper-as-run`` preset).
 
 Problem. The Apkarian-augmented model ``[v, α, ω, F_f, δ_f, ζ]`` of :mod:`tsmpc.models.dynamic`
@@ -7,12 +7,12 @@ discretised by **Euler** at ``T_d`` (the published run: 1 ms) at the **8 vertice
 vertex (the Schur form of ``(A_i + B K_i)ᵀ P (A_i + B K_i) − P + Q + K_iᵀ R K_i ≺ 0``,
 ``K_i = W_i Y⁻¹``, as in :mod:`tsmpc.synthesis.kinematic`) and **no objective**: a feasibility
 problem. Clarabel (interior point) returns a point deep inside the feasible set, so the answer is
-reproducible, but it is one point of many: the published gains are unknown (SPEC §14), and the
+reproducible, but it is one point of many: the published gains are unknown, and the
 gains this design returns are documented where they matter (the steering row's δ_f and ζ entries
 set the start-up transient of the ``paper-as-run`` preset).
 
 What is *not* certified, by construction of the published design: the interpolated loop between
-the vertices (the model is not affine in the premises, SPEC §6) and, with the as-run law's
+the vertices (the model is not affine in the premises, the paper's LMI designs) and, with the as-run law's
 unclipped memberships, anything outside the box. :func:`grid_report` measures the former on a
 dense grid (Euler model) and reports it; it does not reject the design. The numerical conditioning
 uses the state and input scaling of :mod:`tsmpc.synthesis.dynamic` (reused by import).
