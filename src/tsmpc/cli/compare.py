@@ -52,11 +52,12 @@ def _remove_previous_outputs(out: Path) -> None:
 
 
 def _execute(
-    methods_text: str, *, reference: Path | None, window: str | None, out: Path, seed: int | None,
+    methods_text: str, *, reference: Path | None, window: str | None, out: Path | None,
+    seed: int | None,
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
     overwrite: bool = False, preset: str | None = None,
     laps: int = 1, dt: float | None = None, strict_box: bool = False,
-    plant: str = "tsmpc", cr_vehicle: int = 2,
+    plant: str = "tsmpc", cr_vehicle: int = 2, command: str = "compare",
 ) -> None:
     """The body of ``compare`` and ``run``: a thin shell over :mod:`tsmpc.sim.experiment`
     (``prepare`` validates every input before any work, ``run`` solves the designs and runs).
@@ -89,6 +90,11 @@ def _execute(
             seed=seed, plant=plant, cr_vehicle=cr_vehicle, strict_box=strict_box, oracle=oracle)
     except (TsmpcError, OSError) as err:
         fail(err)
+    if out is None:  # a new folder: never another run's (issue 23)
+        from tsmpc.cli._outdir import claim_default_out
+
+        out = claim_default_out(command)
+        err_console.print(f"output folder: {out}", markup=False)
     check_out_dir(out, overwrite=overwrite)
     if exp.envelope.widened:
         console.print(exp.envelope.message, markup=False, highlight=False)
@@ -225,7 +231,8 @@ def compare_cmd(
     reference: Path | None = _OPT_REFERENCE,
     window: str | None = _OPT_WINDOW,
     methods: str = typer.Option("fzn,ref,iter,nl", "--methods", help="Comma-separated: fzn,ref,iter,nl."),
-    out: Path = typer.Option(Path("results/compare"), "--out", help="Output folder (new or empty)."),
+    out: Path | None = typer.Option(None, "--out", help="Output folder (new or empty; default: a new "
+                                    "folder results/compare, results/compare-2, …)."),
     seed: int | None = _OPT_SEED,
     config: Path | None = _OPT_CONFIG,
     no_plots: bool = _OPT_NO_PLOTS,
@@ -250,7 +257,8 @@ def run_cmd(
     method: str = typer.Option("ref", "--method", help="One of fzn, ref, iter, nl."),
     reference: Path | None = _OPT_REFERENCE,
     window: str | None = _OPT_WINDOW,
-    out: Path = typer.Option(Path("results/run"), "--out", help="Output folder (new or empty)."),
+    out: Path | None = typer.Option(None, "--out", help="Output folder (new or empty; default: a new "
+                                    "folder results/run, results/run-2, …)."),
     seed: int | None = _OPT_SEED,
     config: Path | None = _OPT_CONFIG,
     no_plots: bool = _OPT_NO_PLOTS,
@@ -269,4 +277,4 @@ def run_cmd(
     options = dict(locals())
     if "," in method:
         fail(ConfigError("--method takes one method; use `tsmpc compare --methods` for several"))
-    _execute(options.pop("method"), **options)
+    _execute(options.pop("method"), command="run", **options)

@@ -26,7 +26,8 @@ def sweep_cmd(
     scheduler: str | None = typer.Option(
         None, "--scheduler", help="Address of a running Dask scheduler (default: a LocalCluster)."),
     workers: int = typer.Option(2, "--workers", min=1, help="LocalCluster worker processes."),
-    out: Path = typer.Option(Path("results/sweep"), "--out", help="Output folder."),
+    out: Path | None = typer.Option(None, "--out", help="Output folder (default: a new folder "
+                                    "results/sweep, results/sweep-2, …; --resume needs it)."),
     resume: bool = typer.Option(False, "--resume", help="Skip runs whose record is already in --out."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Skip the summary plots."),
     dry_run: bool = typer.Option(
@@ -52,10 +53,16 @@ def sweep_cmd(
         spec = load_sweep(sweep_file)  # every problem is reported before any task starts
     except TsmpcError as err:
         fail(err)
+    if out is None:
+        if resume:
+            fail(ConfigError("--resume needs --out: the folder of the sweep to finish"))
+        from tsmpc.cli._outdir import claim_default_out
+
+        out = claim_default_out("sweep")
     if resume:
         check_out_dir(out, overwrite=True)  # records on disk are kept and skipped
     else:
-        check_out_dir(out, overwrite=False)
+        check_out_dir(out, overwrite=False, hint="pass --resume to finish the sweep in it")
     n = len(expand(spec))
     where = scheduler or f"a local cluster of {workers} worker processes"
     console.print(f"sweep [bold]{spec.name}[/bold]: {n} runs on {where} → {out}")

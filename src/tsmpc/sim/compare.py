@@ -214,6 +214,21 @@ def compare(
     return CompareResult(metrics, logs, tuple(files))
 
 
+def _config_toml(cfg: Config, methods: list[str]) -> str:
+    """The run's config as TOML; ``mpc.mode`` says which methods ran (each method runs with its
+    own scheduling mode, whatever the config's ``mpc.mode``)."""
+    lines = cfg.to_toml().splitlines()
+    if methods != [cfg.mpc.mode.value]:
+        section = ""
+        for i, line in enumerate(lines):
+            if line.startswith("["):
+                section = line
+            elif section == "[mpc]" and line.startswith("mode = "):
+                lines[i] = f"{line}  # this run: {', '.join(methods)} (each with its own mode, --methods)"
+                break
+    return "\n".join(lines) + "\n"
+
+
 def write_outputs(
     cfg: Config, metrics: dict[str, Any], logs: dict[str, RunLog], out: Path, *, plots: bool,
     figures: FigureFn | None = None,
@@ -229,7 +244,7 @@ def write_outputs(
         "rmse.csv": rmse_csv(metrics, with_paper),
         "rmse.md": rmse_markdown(metrics, with_paper),
         "rmse.tex": rmse_latex(metrics, with_paper),
-        "config.toml": cfg.to_toml(),
+        "config.toml": _config_toml(cfg, list(logs)),
         "versions.json": json.dumps(metrics["versions"], indent=2),
     }
     files = []
