@@ -56,6 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     ctx = Context(ROOT, img_dir=None if args.check else ROOT / "docs" / "img",
                   progress=lambda s: print(f"  running: {s}", file=sys.stderr, flush=True))
     problems: list[str] = []
+    produced: dict = {}
     t_all = time.perf_counter()
     for prod in PRODUCERS:
         if names and prod.name not in names:
@@ -68,23 +69,23 @@ def main(argv: list[str] | None = None) -> int:
             problems += check_files(texts, fresh, skip_columns=TIMING_COLUMNS, skip_lines=TIMING_LINES,
                                     rows_only=out.partial)
         else:
-            for b, body in out.blocks.items():
-                hit = False
-                for f, text in texts.items():
-                    if b in blocks_in(text):
-                        texts[f] = update_block(text, b, body)
-                        hit = True
-                if not hit:
+            produced.update(out.blocks)
+            for b in out.blocks:
+                if not any(b in blocks_in(text) for text in texts.values()):
                     problems.append(f"{b}: published nowhere (add its markers to a page)")
             for f in out.figures:
                 print(f"  wrote {os.path.relpath(f, ROOT)}", file=sys.stderr)
         print(f"[{prod.name}] {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
-    if not args.check:
+    if not args.check:  # the pages as they are now (edited meanwhile?), their blocks replaced
         for f in files:
-            rel = str(f.relative_to(ROOT))
-            if texts[rel] != f.read_text(encoding="utf-8"):
-                f.write_text(texts[rel], encoding="utf-8")
-                print(f"updated {rel}")
+            old = f.read_text(encoding="utf-8")
+            new = old
+            for b, body in produced.items():
+                if b in blocks_in(new):
+                    new = update_block(new, b, body)
+            if new != old:
+                f.write_text(new, encoding="utf-8")
+                print(f"updated {f.relative_to(ROOT)}")
     print(f"({time.perf_counter() - t_all:.0f} s)", file=sys.stderr)
     for p in problems:
         print(p)
