@@ -89,7 +89,7 @@ def test_published_numbers_match_a_fresh_run(paper_reference_path: Path, tracks_
 
 def _user_facing() -> dict[str, str]:
     src = {str(p.relative_to(ROOT)): p.read_text(encoding="utf-8")
-           for p in (ROOT / "src" / "tsmpc").rglob("*.py")}
+           for p in [*(ROOT / "src" / "tsmpc").rglob("*.py"), *(ROOT / "examples").glob("*.py")]}
     return {**TEXTS, **src}
 
 

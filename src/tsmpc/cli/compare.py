@@ -132,7 +132,8 @@ def _execute(
             (out / PARTIAL_MARKER).unlink(missing_ok=True)
         except Interrupted as sig:
             mark_partial(out, "interrupted", signal=str(sig))
-            typer.secho(f"interrupted ({sig}): {out} holds a partial run (see {out / PARTIAL_MARKER})",
+            typer.secho(f"interrupted ({sig}): {out} holds a partial run, the methods that had finished "
+                        f"are written (see {out / PARTIAL_MARKER})",
                         err=True, fg=typer.colors.RED)
             raise typer.Exit(sig.code) from None
     _print_tables(console, result.metrics)

@@ -57,6 +57,8 @@ class Context:
     img_dir: Path | None = None
     progress: Callable[[str], None] = lambda _s: None
     quick: bool = False  #: the CI subset: only the rows the drift test re-runs
+    max_steps: int | None = None  #: shortened runs (examples under test); never for the docs
+    reference: Path | None = None  #: the paper's reference file (default: ../shared/data)
     cache: dict[str, Any] = field(default_factory=dict)
     scratch: Path = field(default_factory=lambda: Path(tempfile.mkdtemp(prefix="tsmpc-docs-")))
 
@@ -66,7 +68,7 @@ class Context:
 
     @property
     def paper_reference(self) -> Path:
-        return self.shared / "paper" / "planner_references_100ms.csv"
+        return self.reference or self.shared / "paper" / "planner_references_100ms.csv"
 
     def track(self, name: str) -> Path:
         return self.shared / "tracks" / f"{name}.csv"
@@ -159,6 +161,8 @@ def _experiment(ctx: Context, key: str, cfg: Any, methods: Sequence[str], *, out
 
     def go() -> Any:
         ctx.progress(key)
+        if ctx.max_steps is not None:
+            kw["duration"] = ctx.max_steps * cfg.rates.Tc
         exp = experiment.prepare(cfg, list(methods), **kw)
         return experiment.run(exp, out, plots=plots)
 
@@ -171,7 +175,7 @@ def _simulate(ctx: Context, key: str, cfg: Any, scenario: Any, method: str = "re
 
     def go() -> Any:
         ctx.progress(key)
-        return simulate(cfg, method, scenario, oracle=oracle, plant=plant)
+        return simulate(cfg, method, scenario, oracle=oracle, plant=plant, max_steps=ctx.max_steps)
 
     return ctx.memo(key, go)
 
