@@ -614,9 +614,11 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 
 def _preset_dict(name: str) -> dict[str, Any]:
-    if name not in PRESETS:
+    """The overrides of preset ``name`` (case-insensitive, like method names: "Paper" = "paper")."""
+    key = name.strip().lower() if isinstance(name, str) else name
+    if key not in PRESETS:
         raise ConfigError(f"unknown preset {name!r}; allowed: {', '.join(PRESETS)}")
-    return {k: dict(v) for k, v in PRESETS[name].items()}
+    return {k: dict(v) for k, v in PRESETS[key].items()}
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -683,7 +685,7 @@ def resolve_preset(data: dict[str, Any], preset: str | None = None, source: str 
     data = dict(data)
     name = data.pop("preset", None)
     if preset is None and name is not None:
-        if not isinstance(name, str) or name not in PRESETS:
+        if not isinstance(name, str) or name.strip().lower() not in PRESETS:
             raise ConfigError(f"{source}: preset: unknown preset {name!r}; allowed: {', '.join(PRESETS)}")
         preset = name
     base = _preset_dict(preset) if preset is not None else {}

@@ -129,8 +129,8 @@ def errors_figure(logs: dict[str, RunLog]) -> Figure:
     """e_x, e_y, e_θ, v_d − v, ω_d − ω against time; for a run much longer than 10 s a second
     column zooms on its first 10 s (a start-up transient is invisible on a 127 s axis)."""
     labels = _ERROR_LABELS
-    first = next(iter(logs.values()))
-    t_end = float(first.t_outer[-1] - first.t_outer[0]) if first.n_outer else 0.0
+    t_end = max((float(log.t_outer[-1] - log.t_outer[0]) for log in logs.values() if log.n_outer),
+                default=0.0)
     zoom = t_end > 4 * _ZOOM_S
     fig, grid = plt.subplots(5, 2 if zoom else 1, figsize=(14 if zoom else 11, 10), squeeze=False,
                              sharex="col", gridspec_kw={"width_ratios": [3, 1.2]} if zoom else None)
