@@ -32,6 +32,19 @@ def markdown_files(root: Path) -> list[Path]:
     return [root / "README.md", *sorted((root / "docs").glob("*.md"))]
 
 
+def write_blocks(files: list[Path], blocks: dict) -> None:
+    """Replace ``blocks`` in the pages as they are now (they may have been edited meanwhile)."""
+    for f in files:
+        old = f.read_text(encoding="utf-8")
+        new = old
+        for b, body in blocks.items():
+            if b in blocks_in(new):
+                new = update_block(new, b, body)
+        if new != old:
+            f.write_text(new, encoding="utf-8")
+            print(f"updated {f.relative_to(ROOT)}", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", default="", help="comma-separated sections (default: all)")
@@ -56,36 +69,32 @@ def main(argv: list[str] | None = None) -> int:
     ctx = Context(ROOT, img_dir=None if args.check else ROOT / "docs" / "img",
                   progress=lambda s: print(f"  running: {s}", file=sys.stderr, flush=True))
     problems: list[str] = []
-    produced: dict = {}
     t_all = time.perf_counter()
     for prod in PRODUCERS:
         if names and prod.name not in names:
             continue
         t0 = time.perf_counter()
         print(f"[{prod.name}] {prod.about}", file=sys.stderr, flush=True)
-        out = prod.fn(ctx)
+        try:
+            out = prod.fn(ctx)
+        except Exception as err:  # one broken section must not lose the others' results
+            import traceback
+
+            traceback.print_exc()
+            problems.append(f"[{prod.name}] failed: {type(err).__name__}: {err}")
+            continue
         if args.check:
             fresh = {b: body for b, body in out.blocks.items() if b not in out.timing}
             problems += check_files(texts, fresh, skip_columns=TIMING_COLUMNS, skip_lines=TIMING_LINES,
                                     rows_only=out.partial)
         else:
-            produced.update(out.blocks)
             for b in out.blocks:
                 if not any(b in blocks_in(text) for text in texts.values()):
                     problems.append(f"{b}: published nowhere (add its markers to a page)")
+            write_blocks(files, out.blocks)  # after each section: a long run keeps what it made
             for f in out.figures:
                 print(f"  wrote {os.path.relpath(f, ROOT)}", file=sys.stderr)
         print(f"[{prod.name}] {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
-    if not args.check:  # the pages as they are now (edited meanwhile?), their blocks replaced
-        for f in files:
-            old = f.read_text(encoding="utf-8")
-            new = old
-            for b, body in produced.items():
-                if b in blocks_in(new):
-                    new = update_block(new, b, body)
-            if new != old:
-                f.write_text(new, encoding="utf-8")
-                print(f"updated {f.relative_to(ROOT)}")
     print(f"({time.perf_counter() - t_all:.0f} s)", file=sys.stderr)
     for p in problems:
         print(p)
