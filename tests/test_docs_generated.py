@@ -66,10 +66,11 @@ def test_the_docs_name_the_generator_not_retired_scripts() -> None:
 
 
 @pytest.mark.slow
-def test_published_numbers_match_a_fresh_run(paper_reference_path: Path, tracks_dir: Path) -> None:
+def test_published_numbers_match_a_fresh_run(paper_reference_path: Path, tracks_dir: Path,
+                                             tmp_path: Path) -> None:
     """The drift check of CI: the representative subset re-run (full runs, same seeds) and compared
     with every published copy of its blocks."""
-    ctx = Context(ROOT, img_dir=None, quick=True)
+    ctx = Context(ROOT, img_dir=None, quick=True, scratch=tmp_path)
     problems: list[str] = []
     ran = []
     for prod in PRODUCERS:
