@@ -491,10 +491,9 @@ def speed_mode(ctx: Context) -> Produced:
           f"* feed-forward at the reference (the old law): {rng('reference_scheduled')};\n"
           f"* static reference gain N̄ at the measured speed (paper preset): {rng('static_gain')};\n"
           f"* + speed-error feedback, τ = {tau:g} s (default): {rng('with_speed_feedback')}.\n")
-    if ctx.img_dir is not None or True:
-        dst = ctx.figure("speed_mode.png")
-        _speed_mode_figure(cfg, dd, dst)
-        p.figures.append(dst)
+    dst = ctx.figure("speed_mode.png")
+    _speed_mode_figure(cfg, dd, dst)
+    p.figures.append(dst)
     return p
 
 
@@ -714,8 +713,6 @@ def envelope(ctx: Context) -> Produced:
     plan = ("--v-max", "25", "--a-lat", "6")
     fast = _track_run(ctx, "Monza", plan=plan).metrics["methods"]["REF"]
     ev = fast["events"]
-    widened = _experiment(ctx, "Monza 25 m/s REF", Config(), ["ref"],
-                          reference=_plan(ctx, "Monza", *plan)).metrics["scenario"]
     cfg = Config()
     off = replace(cfg, mpc=replace(cfg.mpc, slip_aware=False, tangent_heading=False))
     m_off = _experiment(ctx, "Monza 25 m/s REF, slip-aware off", off, ["ref"],
@@ -727,7 +724,6 @@ def envelope(ctx: Context) -> Produced:
           f"{fast['rmse']['v']:.3f} m/s and {'no' if soft == 0 else soft} soft or fallback MPC "
           f"step{'' if soft == 1 else 's'}; with the boxes widened but without the slip-aware loop "
           f"and the tangent heading max |e_y| is {m_off['max_abs_lateral_m']:.2f} m")
-    del widened
     grip = _experiment(ctx, "Monza a_lat 10 REF", Config(), ["ref"],
                        reference=_plan(ctx, "Monza", "--v-max", "25", "--a-lat", "10"))
     g = grip.metrics["methods"]["REF"]
