@@ -71,8 +71,10 @@ def test_metrics_are_typed_and_computable_from_plain_arrays(cfg: Config) -> None
     m = run_metrics(log)
     d = m.to_dict()
     assert d == compute_metrics(log)  # the dict form is the typed result's
-    # ... and the numbers are the run's, recomputed here from the log's raw arrays:
-    rms = (lambda a: float(np.sqrt(np.mean(np.square(a)))))
+
+    def rms(a: np.ndarray) -> float:  # the numbers are the run's, recomputed from the raw arrays
+        return float(np.sqrt(np.mean(np.square(a))))
+
     e = log.errors
     expected = {"x": rms(e[:, 0]), "y": rms(e[:, 1]), "theta": rms(e[:, 2]),
                 "v": rms(log.ref[:, 3] - log.state_outer[:, 3]),

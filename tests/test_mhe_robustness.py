@@ -17,6 +17,7 @@ from tsmpc.estimation.mhe_uio import MHEUIO, EstimatorStatus
 from tsmpc.models.dynamic import DynamicTS
 from tsmpc.vehicle.plant import Plant
 
+
 def _vehicle2() -> VehicleParams:
     """CommonRoad vehicle 2 mapped by hand onto tsmpc's parameters: mass, yaw inertia, a, b; the
     single cornering stiffness is the mean of the axles' Pacejka small-slip stiffnesses

@@ -36,6 +36,7 @@ __all__ = [
     "Produced",
     "Producer",
     "load_average",
+    "precise",
     "producer_names",
 ]
 
@@ -120,10 +121,33 @@ def load_average() -> float:
 
 # -- formatting ------------------------------------------------------------------------------
 
+#: Extra decimals printed by :func:`_d` (the drift check renders fresh numbers more precisely, so
+#: a published number is compared with the fresh run's value, not with its rounding).
+_EXTRA_DIGITS = [0]
+
+
+@contextlib.contextmanager
+def precise(extra: int = 4) -> Iterator[None]:
+    """Within the block, producers print every number with ``extra`` more decimals (for
+    :func:`tsmpc.report.docs.drift`: the tolerance is then 2 % plus half a unit of the published
+    number's last digit, not of both numbers')."""
+    old = _EXTRA_DIGITS[0]
+    _EXTRA_DIGITS[0] = extra
+    try:
+        yield
+    finally:
+        _EXTRA_DIGITS[0] = old
+
+
+def _d(v: float, d: int) -> str:
+    """``v`` with ``d`` decimals (more inside :func:`precise`)."""
+    return f"{float(v):.{d + _EXTRA_DIGITS[0]}f}"
+
+
 def _f(v: float | None, d: int = 3) -> str:
     if v is None or not math.isfinite(float(v)):
         return "—"
-    return f"{float(v):.{d}f}"
+    return _d(v, d)
 
 
 def _rmse_cells(r: dict[str, float]) -> list[str]:
@@ -140,7 +164,7 @@ def _table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
 
 def _pct(a: float, b: float) -> str:
     """a relative to b, signed percent."""
-    return f"{100.0 * (a / b - 1.0):+.0f} %".replace("-", "−") if b else "—"
+    return ("+" if a >= b else "") + f"{_d(100.0 * (a / b - 1.0), 0)} %".replace("-", "−") if b else "—"
 
 
 def _diverged_at(termination: str) -> str:
@@ -231,25 +255,25 @@ def quickstart(ctx: Context) -> Produced:
     rows = []
     for name, m in run.metrics["methods"].items():
         rows.append([name, *_rmse_cells(m["rmse"]), _f(m["max_abs_lateral_m"]),
-                     _ms(m["mpc_ms"]["median"]), f"{m['realtime_factor']:.0f}×"])
+                     _ms(m["mpc_ms"]["median"]), f"{_d(m['realtime_factor'], 0)}×"])
     p.add("quickstart", "table", _table(
         ["approach", "x [m]", "y [m]", "θ [rad]", "v [m/s]", "ω [rad/s]", "max \\|e_y\\| [m]",
          "MPC median [ms]", "real-time factor"], rows))
-    p.add("quickstart", "command", f"load average {t['load']:.1f}: the whole command took "
-          f"{t['wall']:.1f} s of wall time, {t['cpu']:.1f} s of CPU", timing=True)
+    p.add("quickstart", "command", f"load average {_d(t['load'], 1)}: the whole command took "
+          f"{_d(t['wall'], 1)} s of wall time, {_d(t['cpu'], 1)} s of CPU", timing=True)
     cfg = Config()
     off = replace(cfg, mpc=replace(cfg.mpc, slip_aware=False, tangent_heading=False))
     m_off = compute_metrics(_simulate(ctx, "builtin REF, slip-aware and tangent heading off", off,
                                       load_scenario(off)))
     p.add("quickstart", "without-slip-aware", f"without them REF's RMSE y is "
-          f"{m_off['rmse']['y']:.3f} m and its max |e_y| {m_off['max_abs_lateral_m']:.2f} m")
+          f"{_d(m_off['rmse']['y'], 3)} m and its max |e_y| {_d(m_off['max_abs_lateral_m'], 2)} m")
     logs = run.logs
     if "FZN" in logs and "NL" in logs:
         k = min(logs["FZN"].n_outer, logs["NL"].n_outer)
         d = np.abs(logs["FZN"].errors[:k, 1] - logs["NL"].errors[:k, 1])
         i = int(np.argmax(d))
         p.add("quickstart", "differences", f"here FZN's lateral error differs from NL's by at most "
-              f"{1000 * d[i]:.1f} mm (at t = {logs['NL'].t_outer[i]:.0f} s)")
+              f"{_d(1000 * d[i], 1)} mm (at t = {_d(logs['NL'].t_outer[i], 0)} s)")
     for stem in ("friction", "differences", "control", "solve_time"):
         dst = ctx.figure(f"compare_{stem}.png")
         shutil.copyfile(out / f"{stem}.png", dst)
@@ -257,8 +281,8 @@ def quickstart(ctx: Context) -> Produced:
     # the friction figure's dip at the ice patch, explained with the run's numbers
     log = logs.get("REF") or next(iter(logs.values()))
     i = int(np.argmin(log.F_fr_true))
-    p.add("quickstart", "ice", f"{log.F_fr_true[i] / 1000:.1f} kN at t = {log.t_inner[i]:.1f} s "
-          f"(μ(road) = {log.mu_road[i]:.2f} against the models' μ_o = {run.config.vehicle.mu_nominal:g})")
+    p.add("quickstart", "ice", f"{_d(log.F_fr_true[i] / 1000, 1)} kN at t = {_d(log.t_inner[i], 1)} s "
+          f"(μ(road) = {_d(log.mu_road[i], 2)} against the models' μ_o = {run.config.vehicle.mu_nominal:g})")
     return p
 
 
@@ -282,7 +306,7 @@ def animation(ctx: Context) -> Produced:
     p.figures.append(short.gif)
     w, h = 800, 600
     p.add("animation", "timing", f"({res.frames} frames, {w} × {h}) renders in "
-          f"{full_s:.0f} s at load average {load_average():.1f}", timing=True)
+          f"{_d(full_s, 0)} s at load average {_d(load_average(), 1)}", timing=True)
     return p
 
 
@@ -301,8 +325,8 @@ def design_time(ctx: Context) -> Produced:
         t1 = time.perf_counter()
         load_or_design_dynamic(cfg, Path(tmp))
         t2 = time.perf_counter()
-    p.add("design", "time", f"measured {t2 - t0:.1f} s — kinematic {t1 - t0:.1f} s, dynamic "
-          f"{t2 - t1:.1f} s — on 2 cores at load average {load_average():.1f}", timing=True)
+    p.add("design", "time", f"measured {_d(t2 - t0, 1)} s — kinematic {_d(t1 - t0, 1)} s, dynamic "
+          f"{_d(t2 - t1, 1)} s — on 2 cores at load average {_d(load_average(), 1)}", timing=True)
     return p
 
 
@@ -316,7 +340,7 @@ def terminal_set(ctx: Context) -> Produced:
     paper = np.array([[0.465, 0, 0], [0, 23.813, 76.596], [0, 76.596, 257.251]])
     nz = paper != 0
     dev = np.abs(S[nz] / paper[nz] - 1.0) * 100.0
-    p.add("terminal-set", "deviation", f"{dev.min():.0f}–{dev.max():.0f} %")
+    p.add("terminal-set", "deviation", f"{_d(dev.min(), 0)}–{_d(dev.max(), 0)} %")
     return p
 
 
@@ -371,7 +395,7 @@ def ablation(ctx: Context) -> Produced:
             effort.append([label, steps, "—"])
             continue
         rows.append([label, *_rmse_cells(m["rmse"]), _f(m["max_abs_lateral_m"], 2)])
-        effort.append([label, steps, f"{m['dF_std']:.0f}"])
+        effort.append([label, steps, f"{_d(m['dF_std'], 0)}"])
     t5 = PAPER_TABLE5["REF"]
     rows.append(["REF, paper Table 5", *_rmse_cells(t5), "—"])
     # two narrow tables rather than one wide one: each fits a page at 1400 px
@@ -381,7 +405,7 @@ def ablation(ctx: Context) -> Produced:
     (_, _, log_paper), (_, _, log_fb), (_, _, log_win), _, _, (_, _, log_off) = runs
 
     def ratios(m: dict[str, Any]) -> str:
-        return ", ".join(f"{m['rmse'][k] / t5[k]:.2f}× ({_SYM[k]})" for k in RMSE_KEYS)
+        return ", ".join(f"{_d(m['rmse'][k] / t5[k], 2)}× ({_SYM[k]})" for k in RMSE_KEYS)
 
     def err_rms(log: Any, raw: bool) -> float:
         est = log.F_fr_raw if raw else log.F_fr_hat
@@ -393,21 +417,22 @@ def ablation(ctx: Context) -> Produced:
     k10 = min(round(10.0 / log_off.Tc), log_off.n_outer - 1)
     bullets = [
         f"* **paper preset**: {status}; against the paper's REF row it lands at {ratios(paper)}.",
-        f"* **+ speed-error feedback**: RMSE x {paper['rmse']['x']:.3f} → {fb['rmse']['x']:.3f} m "
-        f"(÷ {paper['rmse']['x'] / fb['rmse']['x']:.1f}), RMSE v {paper['rmse']['v']:.3f} → "
-        f"{fb['rmse']['v']:.3f} m/s (÷ {paper['rmse']['v'] / fb['rmse']['v']:.1f}).",
-        f"* **+ MHE-window friction estimate**: RMSE x {fb['rmse']['x']:.4f} → {win['rmse']['x']:.4f} m, "
-        f"RMSE v {fb['rmse']['v']:.3f} → {win['rmse']['v']:.3f} m/s; σ(ΔF_xR) {fb['dF_std']:.0f} → "
-        f"{win['dF_std']:.0f} N; RMS error of the friction estimate {err_rms(log_fb, True):.0f} N "
-        f"(one-step formula) → {err_rms(log_win, False):.0f} N (window).",
-        f"* **+ outer-loop mechanisms (= default)**: RMSE y {win['rmse']['y']:.3f} → "
-        f"{dflt['rmse']['y']:.3f} m, max \\|e_y\\| {win['max_abs_lateral_m']:.2f} → "
-        f"{dflt['max_abs_lateral_m']:.2f} m, RMSE θ {win['rmse']['theta']:.4f} → "
-        f"{dflt['rmse']['theta']:.4f} rad.",
-        f"* **oracle**: RMSE x {oracle['rmse']['x']:.3f} m against the default's "
-        f"{dflt['rmse']['x']:.3f} m.",
-        f"* **compensation off**: e_x is {log_off.errors[k10, 0]:.1f} m at t = "
-        f"{log_off.t_outer[k10] - log_off.t_outer[0]:.0f} s; the run "
+        f"* **+ speed-error feedback**: RMSE x {_d(paper['rmse']['x'], 3)} → {_d(fb['rmse']['x'], 3)} m "
+        f"(÷ {_d(paper['rmse']['x'] / fb['rmse']['x'], 1)}), RMSE v {_d(paper['rmse']['v'], 3)} → "
+        f"{_d(fb['rmse']['v'], 3)} m/s (÷ {_d(paper['rmse']['v'] / fb['rmse']['v'], 1)}).",
+        f"* **+ MHE-window friction estimate**: RMSE x {_d(fb['rmse']['x'], 4)} → "
+        f"{_d(win['rmse']['x'], 4)} m, "
+        f"RMSE v {_d(fb['rmse']['v'], 3)} → {_d(win['rmse']['v'], 3)} m/s; σ(ΔF_xR) {_d(fb['dF_std'], 0)} → "
+        f"{_d(win['dF_std'], 0)} N; RMS error of the friction estimate {_d(err_rms(log_fb, True), 0)} N "
+        f"(one-step formula) → {_d(err_rms(log_win, False), 0)} N (window).",
+        f"* **+ outer-loop mechanisms (= default)**: RMSE y {_d(win['rmse']['y'], 3)} → "
+        f"{_d(dflt['rmse']['y'], 3)} m, max \\|e_y\\| {_d(win['max_abs_lateral_m'], 2)} → "
+        f"{_d(dflt['max_abs_lateral_m'], 2)} m, RMSE θ {_d(win['rmse']['theta'], 4)} → "
+        f"{_d(dflt['rmse']['theta'], 4)} rad.",
+        f"* **oracle**: RMSE x {_d(oracle['rmse']['x'], 3)} m against the default's "
+        f"{_d(dflt['rmse']['x'], 3)} m.",
+        f"* **compensation off**: e_x is {_d(log_off.errors[k10, 0], 1)} m at t = "
+        f"{_d(log_off.t_outer[k10] - log_off.t_outer[0], 0)} s; the run "
         + ("completes." if log_off.termination == "completed"
            else f"ends {log_off.termination.split(':')[0]} at {_diverged_at(log_off.termination)}."),
     ]
@@ -425,11 +450,11 @@ def ablation(ctx: Context) -> Produced:
     a2, b2, _ = miss(log_fb)
     p.add("ablation", "speed-loop",
           f"On the paper run with the paper preset, v at the end of each T_c misses the command "
-          f"held over it by {a:.2f} m/s RMS; the MPC makes up for it by commanding v_ref {b:.2f} m/s "
+          f"held over it by {_d(a, 2)} m/s RMS; the MPC makes up for it by commanding v_ref {_d(b, 2)} m/s "
           f"RMS away from v_d — the outer loop closes the speed loop itself, through an input its "
-          f"model takes for the speed — and the car's own v stays within {c:.2f} m/s RMS of v_d at "
-          f"the price of RMSE_x {paper['rmse']['x']:.2f} m. With the speed-error feedback the miss "
-          f"drops to {a2:.2f} m/s RMS and the command's departure from v_d to {b2:.2f} m/s RMS.")
+          f"model takes for the speed — and the car's own v stays within {_d(c, 2)} m/s RMS of v_d at "
+          f"the price of RMSE_x {_d(paper['rmse']['x'], 2)} m. With the speed-error feedback the miss "
+          f"drops to {_d(a2, 2)} m/s RMS and the command's departure from v_d to {_d(b2, 2)} m/s RMS.")
     return p
 
 
@@ -477,20 +502,20 @@ def speed_mode(ctx: Context) -> Produced:
     for _key, idx in groups.items():
         s = modes[idx[0]]
         poles = ", ".join(f"{t:.2g}" for t in s.design_poles_tau)
-        rows.append([f"{', '.join(map(str, idx))}: (±{np.degrees(abs(s.delta)):.0f}°, {s.v:g}, "
-                     f"±{abs(s.alpha):g})", f"{s.design:.2f}", f"{s.reference_scheduled:.2f}",
-                     f"{s.static_gain:.2f}", f"{s.with_speed_feedback:.2f}", poles])
+        rows.append([f"{', '.join(map(str, idx))}: (±{_d(np.degrees(abs(s.delta)), 0)}°, {s.v:g}, "
+                     f"±{abs(s.alpha):g})", f"{_d(s.design, 2)}", f"{_d(s.reference_scheduled, 2)}",
+                     f"{_d(s.static_gain, 2)}", f"{_d(s.with_speed_feedback, 2)}", poles])
     p.add("speed-mode", "table", _table(
         ["vertex (δ, v, α)", "design model [s]", "feed-forward at the reference (old) [s]",
          "N̄ at the measured speed (paper preset) [s]", "+ speed-error feedback (default) [s]",
          "design closed-loop poles 1/\\|Re s\\| [s]"], rows))
     def rng(attr):
-        return (f"{min(getattr(s, attr) for s in modes):.2f}–"
-               f"{max(getattr(s, attr) for s in modes):.2f} s")
+        return (f"{_d(min(getattr(s, attr) for s in modes), 2)}–"
+               f"{_d(max(getattr(s, attr) for s in modes), 2)} s")
     gains = [-k[0, 0] / (1.0 - k[0, 3]) for k in dd.K]
     p.add("speed-mode", "summary",
           f"* design model: {rng('design')}; the LQR's own speed gain through the filter is "
-          f"{min(gains):.0f}–{max(gains):.0f} N per m/s (−K_v/(1 − K_F) over the vertices);\n"
+          f"{_d(min(gains), 0)}–{_d(max(gains), 0)} N per m/s (−K_v/(1 − K_F) over the vertices);\n"
           f"* feed-forward at the reference (the old law): {rng('reference_scheduled')};\n"
           f"* static reference gain N̄ at the measured speed (paper preset): {rng('static_gain')};\n"
           f"* + speed-error feedback, τ = {tau:g} s (default): {rng('with_speed_feedback')}.\n")
@@ -552,12 +577,12 @@ def four_methods(ctx: Context) -> Produced:
     p = Produced()
     res = _experiment(ctx, "paper reference, four methods", Config(), ["fzn", "ref", "iter", "nl"],
                       reference=ctx.paper_reference)
-    rows = [[n, *_rmse_cells(m["rmse"]), _ms(m["mpc_ms"]["median"]), f"{m['wall_s']:.1f}"]
+    rows = [[n, *_rmse_cells(m["rmse"]), _ms(m["mpc_ms"]["median"]), f"{_d(m['wall_s'], 1)}"]
             for n, m in res.metrics["methods"].items()]
     p.add("four-methods", "table", _table(["approach", "x", "y", "θ", "v", "ω", "MPC median [ms]",
                                            "run wall [s]"], rows))
     p.add("four-methods", "agreement", f"agree within {max(1, math.ceil(_agreement(res.metrics)))} %")
-    p.add("four-methods", "timing", f"measured at load average {load_average():.1f}", timing=True)
+    p.add("four-methods", "timing", f"measured at load average {_d(load_average(), 1)}", timing=True)
     return p
 
 
@@ -645,11 +670,11 @@ def commonroad(ctx: Context) -> Produced:
         if bad.any():
             speeds += [float(log.state[bad, 3].min()), float(log.state[bad, 3].max())]
     p.add("commonroad", "mhe", f"{min(fails)}–{max(fails)} failed steps"
-          + (f" (model prediction used) at {min(speeds):.1f}–{max(speeds):.1f} m/s" if speeds else ""))
+          + (f" (model prediction used) at {_d(min(speeds), 1)}–{_d(max(speeds), 1)} m/s" if speeds else ""))
     sim_s = logs[_CR_ROWS[2]].simulated_s
-    p.add("commonroad", "mb-cost", f"costs {walls[_CR_ROWS[2]] / sim_s:.2f} s of computation per "
-          f"simulated second (load average {load_average():.1f})", timing=True)
-    p.add("commonroad", "mb-max", f"{mb['max_abs_lateral_m']:.2f} m")
+    p.add("commonroad", "mb-cost", f"costs {_d(walls[_CR_ROWS[2]] / sim_s, 2)} s of computation per "
+          f"simulated second (load average {_d(load_average(), 1)})", timing=True)
+    p.add("commonroad", "mb-max", f"{_d(mb['max_abs_lateral_m'], 2)} m")
     return p
 
 
@@ -693,9 +718,9 @@ def race_tracks(ctx: Context) -> Produced:
         after = _track_run(ctx, track).metrics["methods"]["REF"]
         before = _track_run(ctx, track, before=True).metrics["methods"]["REF"]
         ev = after["events"]
-        rows.append([track, f"{before['max_abs_lateral_m']:.2f} / {before['rmse']['y']:.3f}",
-                     f"{after['max_abs_lateral_m']:.2f} / {after['rmse']['y']:.3f}",
-                     _f(after["rmse"]["x"]), f"{after['outer_steps'] * 0.1:.0f}",
+        rows.append([track, f"{_d(before['max_abs_lateral_m'], 2)} / {_d(before['rmse']['y'], 3)}",
+                     f"{_d(after['max_abs_lateral_m'], 2)} / {_d(after['rmse']['y'], 3)}",
+                     _f(after["rmse"]["x"]), f"{_d(after['outer_steps'] * 0.1, 0)}",
                      str(ev["mpc_soft"] + ev["mpc_fallback"])])
     p.add("race-tracks", "table", _table(
         ["track", "outer loop of the paper: max \\|e_y\\| / RMSE y [m]", "default", "RMSE x default [m]",
@@ -703,7 +728,7 @@ def race_tracks(ctx: Context) -> Produced:
     if ctx.quick:
         return p
     laps = _track_run(ctx, "Zandvoort", laps=3).metrics["methods"]["REF"]
-    p.add("race-tracks", "laps", ", ".join(f"{v:.3f}" for v in laps["max_abs_lateral_per_lap_m"])
+    p.add("race-tracks", "laps", ", ".join(f"{_d(v, 3)}" for v in laps["max_abs_lateral_per_lap_m"])
           + " m")
     return p
 
@@ -722,11 +747,11 @@ def envelope(ctx: Context) -> Produced:
                         reference=_plan(ctx, "Monza", *plan)).metrics["methods"]["REF"]
     soft = ev["mpc_soft"] + ev["mpc_fallback"]
     p.add("envelope", "fast",
-          f"the lap ({fast['outer_steps'] * 0.1:.0f} s) ends {fast['termination']} with max |e_y| "
-          f"{fast['max_abs_lateral_m']:.2f} m, RMSE y {fast['rmse']['y']:.3f} m, RMSE v "
-          f"{fast['rmse']['v']:.3f} m/s and {'no' if soft == 0 else soft} soft or fallback MPC "
+          f"the lap ({_d(fast['outer_steps'] * 0.1, 0)} s) ends {fast['termination']} with max |e_y| "
+          f"{_d(fast['max_abs_lateral_m'], 2)} m, RMSE y {_d(fast['rmse']['y'], 3)} m, RMSE v "
+          f"{_d(fast['rmse']['v'], 3)} m/s and {'no' if soft == 0 else soft} soft or fallback MPC "
           f"step{'' if soft == 1 else 's'}; with the boxes widened but without the slip-aware loop "
-          f"and the tangent heading max |e_y| is {m_off['max_abs_lateral_m']:.2f} m")
+          f"and the tangent heading max |e_y| is {_d(m_off['max_abs_lateral_m'], 2)} m")
     grip = _experiment(ctx, "Monza a_lat 10 REF", Config(), ["ref"],
                        reference=_plan(ctx, "Monza", "--v-max", "25", "--a-lat", "10"))
     g = grip.metrics["methods"]["REF"]
@@ -788,7 +813,7 @@ def robustness(ctx: Context) -> Produced:
     for track in TRACKS:
         path = str(ctx.track(track))
         rec = _sweep_task(ctx, f"sweep: {track} lap", track=path)
-        rows.append(row(f"{track} lap ({rec['metrics']['outer_steps'] * 0.1:.0f} s)", [rec]))
+        rows.append(row(f"{track} lap ({_d(rec['metrics']['outer_steps'] * 0.1, 0)} s)", [rec]))
     rows.append(row("sensor noise × 100 (stress)",
                     [_sweep_task(ctx, "sweep: noise x100", noise_scale=100.0)]))
     monza = str(ctx.track("Monza"))
@@ -830,12 +855,12 @@ def robustness(ctx: Context) -> Produced:
     v_err = log_slow.ref[:k40, 3] - log_slow.state_outer[:k40, 3]
     sat = float(np.mean(log_slow.saturated[: k40 * round(log_slow.Tc / log_slow.Td)]))
     p.add("robustness", "actuators",
-          f"y {unmeasured['rmse']['y']:.3f} m with the steering not measured. Measuring the "
-          f"delivered force and giving it to the MHE as well gives RMSE x {force['rmse']['x']:.3f} m, "
-          f"v {force['rmse']['v']:.3f} m/s, the inner loop saturated on "
+          f"y {_d(unmeasured['rmse']['y'], 3)} m with the steering not measured. Measuring the "
+          f"delivered force and giving it to the MHE as well gives RMSE x {_d(force['rmse']['x'], 3)} m, "
+          f"v {_d(force['rmse']['v'], 3)} m/s, the inner loop saturated on "
           f"{force['events']['inner_saturated']} steps. With a 0.1 s force lag the first 40 s have "
-          f"a v RMSE of {float(np.sqrt(np.mean(v_err ** 2))):.2f} m/s, the inner loop saturated "
-          f"{100 * sat:.0f} % of the time ({log_slow.termination})")
+          f"a v RMSE of {_d(float(np.sqrt(np.mean(v_err ** 2))), 2)} m/s, the inner loop saturated "
+          f"{_d(100 * sat, 0)} % of the time ({log_slow.termination})")
     return p
 
 
@@ -850,8 +875,8 @@ def sweep_example(ctx: Context) -> Produced:
 
     n = len(pd.read_csv(out / "aggregate.csv"))
     p.add("sweep-example", "count", f"{n} runs")
-    p.add("sweep-example", "timing", f"{t['wall']:.0f} s wall on 2 cores at load average "
-          f"{load_average():.1f}, kernels cached", timing=True)
+    p.add("sweep-example", "timing", f"{_d(t['wall'], 0)} s wall on 2 cores at load average "
+          f"{_d(load_average(), 1)}, kernels cached", timing=True)
     dst = ctx.figure("sweep_by_scenario.png")
     shutil.copyfile(out / "by_scenario.png", dst)
     p.figures.append(dst)
@@ -902,9 +927,9 @@ def benchmarks(ctx: Context) -> Produced:
     p.add("benchmarks", "blocks", _render_blocks(mpc, inner, plant, load), timing=True)
     p.add("benchmarks", "run", _render_run(casc), timing=True)
     s = step["results"]
-    p.add("benchmarks", "cascade-step", f"measured at load average {step['load_avg_1min']:.1f} on 2 "
-          f"cores: median {s['step']['median']:.3f} ms per call, overhead "
-          f"{s['overhead']['median']:.4f} ms = {100 * s['overhead_ratio_median']:.0f} %", timing=True)
+    p.add("benchmarks", "cascade-step", f"measured at load average {_d(step['load_avg_1min'], 1)} on 2 "
+          f"cores: median {_d(s['step']['median'], 3)} ms per call, overhead "
+          f"{_d(s['overhead']['median'], 4)} ms = {_d(100 * s['overhead_ratio_median'], 0)} %", timing=True)
     # compiling the kernels into an empty cache, then loading them
     with tempfile.TemporaryDirectory() as tmp:
         env = {"NUMBA_CACHE_DIR": tmp}
@@ -913,16 +938,16 @@ def benchmarks(ctx: Context) -> Produced:
             _cli(ctx, "warmup", env=env)
         with _timed_child() as again:
             _cli(ctx, "warmup", env=env)
-    p.add("benchmarks", "compile", f"{first['wall']:.1f} s wall at load average {load_average():.1f}; "
-          f"a later `tsmpc warmup` process, which only loads them: {again['wall']:.1f} s", timing=True)
+    p.add("benchmarks", "compile", f"{_d(first['wall'], 1)} s wall at load average {_d(load_average(), 1)}; "
+          f"a later `tsmpc warmup` process, which only loads them: {_d(again['wall'], 1)} s", timing=True)
     with _timed_child() as cmd:
         _cli(ctx, "compare", "--reference", str(ctx.paper_reference), "--methods", "ref", "--no-plots",
              "--out", str(ctx.scratch / "bench_compare"))
-    p.add("benchmarks", "command", f"{cmd['wall']:.1f} s wall ({cmd['cpu']:.1f} s CPU) at load average "
-          f"{load_average():.1f}", timing=True)
+    p.add("benchmarks", "command", f"{_d(cmd['wall'], 1)} s wall ({_d(cmd['cpu'], 1)} s CPU) at load average "
+          f"{_d(load_average(), 1)}", timing=True)
     sw = _bench(ctx, "sweep_scaling")
-    p.add("benchmarks", "sweep-scaling", f"measured a {sw['speedup_2_over_1']:.2f}× speed-up from 1 to "
-          f"2 workers ({sw['runs']} runs, load average {load_average():.1f})", timing=True)
+    p.add("benchmarks", "sweep-scaling", f"measured a {_d(sw['speedup_2_over_1'], 2)}× speed-up from 1 to "
+          f"2 workers ({sw['runs']} runs, load average {_d(load_average(), 1)})", timing=True)
     return p
 
 
@@ -931,7 +956,7 @@ def _med(d: dict[str, Any], key: str) -> float:
 
 
 def _speedup(a: float, b: float) -> str:
-    return f"{b / a:.0f}×" if math.isfinite(b) and a > 0 else "—"
+    return f"{_d(b / a, 0)}×" if math.isfinite(b) and a > 0 else "—"
 
 
 def _render_blocks(mpc: dict[str, Any], inner: dict[str, Any], plant: dict[str, Any], load: float) -> str:
@@ -941,11 +966,12 @@ def _render_blocks(mpc: dict[str, Any], inner: dict[str, Any], plant: dict[str, 
     rows = []
     for m in ("FZN", "REF", "ITER"):
         a, b = _med(r, m), num(rn, m)
-        rows.append([f"TS-MPC {m}", f"{a:.3f}", _f(b), _speedup(a, b)])
+        rows.append([f"TS-MPC {m}", f"{_d(a, 3)}", _f(b), _speedup(a, b)])
     if "NL" in r:
         nl, ref = _med(r, "NL"), _med(r, "REF")
-        extra = f" (numpy REF: {nl / num(rn, 'REF'):.1f}×)" if "REF" in rn else ""
-        rows.append(["NL-MPC (IPOPT, warm-started)", f"{nl:.2f}", "—", f"NL/REF {nl / ref:.0f}×{extra}"])
+        extra = f" (numpy REF: {_d(nl / num(rn, 'REF'), 1)}×)" if "REF" in rn else ""
+        rows.append(["NL-MPC (IPOPT, warm-started)", f"{_d(nl, 2)}", "—",
+                     f"NL/REF {_d(nl / ref, 0)}×{extra}"])
     ir, irn = inner["results"], inner.get("results_numpy", {})
     for key, label, d in (("mhe", "MHE-UIO", 3), ("lqr", "TS-LQR (static reference gain)", 4)):
         a, b = _med(ir, key), num(irn, key)
@@ -954,10 +980,10 @@ def _render_blocks(mpc: dict[str, Any], inner: dict[str, Any], plant: dict[str, 
     kinds = ("pacejka", "linear")
     a = [blk[k] for k in kinds]
     b = [blkn.get(k, float("nan")) for k in kinds]
-    rows.append(["plant block, 10 RK4 steps (Pacejka / linear)", " / ".join(f"{x:.4f}" for x in a),
+    rows.append(["plant block, 10 RK4 steps (Pacejka / linear)", " / ".join(f"{_d(x, 4)}" for x in a),
                  " / ".join(_f(x) for x in b),
                  " / ".join(_speedup(x, y) for x, y in zip(a, b, strict=True))])
-    return (f"Measured at load average {load:.1f} on the 2-core machine shared with other jobs "
+    return (f"Measured at load average {_d(load, 1)} on the 2-core machine shared with other jobs "
             "(`mpc_step.py`, `inner_step.py`, `plant_step.py`; the NL/REF ratio is measured in the "
             "same run; the paper reports 40–50×):\n\n"
             + _table(["block (median, ms)", "compiled", "numpy", "speed-up"], rows))
@@ -967,16 +993,16 @@ def _render_run(casc: dict[str, Any]) -> str:
     ref = casc["results"]["REF"]
     nump = casc.get("results_numpy", {}).get("REF")
     ms = ref["ms"]
-    part = ", ".join(f"{label} {ms[k]['median']:.4f} / {ms[k]['p99']:.4f}"
+    part = ", ".join(f"{label} {_d(ms[k]['median'], 4)} / {_d(ms[k]['p99'], 4)}"
                      for k, label in (("mpc", "MPC"), ("mhe", "MHE"), ("lqr", "TS-LQR"),
                                       ("plant_block", "plant block")))
     nl = casc["results"].get("NL")
-    return (f"Whole paper run ({ref['simulated_s']:.1f} s simulated, `cascade_run.py`): REF's loop "
-            f"takes {ref['loop_s']:.2f} s wall / {ref['simulate_cpu_s']:.2f} s CPU "
-            f"({ref['realtime_factor']:.0f}× real time"
-            + (f"; {nump['loop_s']:.1f} s with the numpy blocks" if nump else "")
+    return (f"Whole paper run ({_d(ref['simulated_s'], 1)} s simulated, `cascade_run.py`): REF's loop "
+            f"takes {_d(ref['loop_s'], 2)} s wall / {_d(ref['simulate_cpu_s'], 2)} s CPU "
+            f"({_d(ref['realtime_factor'], 0)}× real time"
+            + (f"; {_d(nump['loop_s'], 1)} s with the numpy blocks" if nump else "")
             + f"); inside the cascade (medians / p99, ms) {part}"
-            + (f"; NL's loop {nl['loop_s']:.1f} s" if nl else "") + ".")
+            + (f"; NL's loop {_d(nl['loop_s'], 1)} s" if nl else "") + ".")
 
 
 # -- the registry ------------------------------------------------------------------------------
