@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tsmpc.blas import limit_blas_threads
 from tsmpc.config import Config
 from tsmpc.sim.simulator import default_plant, simulate
 
@@ -70,6 +71,7 @@ def main() -> None:
     ap.add_argument("--no-numpy", action="store_true", help="skip the numpy (TSMPC_NO_JIT) pass")
     ap.add_argument("--steps", type=int, default=None, help="outer steps (default: the whole run)")
     args = ap.parse_args()
+    limit_blas_threads()  # one BLAS thread, as the CLI and every simulating process (tsmpc.blas)
     from tsmpc import kernels
     from tsmpc.sim.compare import load_scenario
 

@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from tsmpc.blas import limit_blas_threads
 from tsmpc.config import Config
 from tsmpc.control.cascade import Cascade, Measurement
 from tsmpc.planning.circuit import builtin_circuit
@@ -32,6 +33,7 @@ def main() -> None:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--steps", type=int, default=3000)
     args = ap.parse_args()
+    limit_blas_threads()  # one BLAS thread, as the CLI and every simulating process (tsmpc.blas)
     cfg = Config()
     ref = builtin_circuit(dt=cfg.rates.Tc)
     x = np.array([ref.x[0], ref.y[0], ref.theta[0], ref.v[0], 0.0, ref.omega[0]])

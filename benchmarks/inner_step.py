@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from tsmpc.blas import limit_blas_threads
 from tsmpc.config import Config
 from tsmpc.control.ts_lqr import TSLQR
 from tsmpc.estimation.mhe_uio import MHEUIO
@@ -64,6 +65,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=6000)
     ap.add_argument("--no-numpy", action="store_true", help="skip the numpy (no kernels) pass")
     args = ap.parse_args()
+    limit_blas_threads()  # one BLAS thread, as the CLI and every simulating process (tsmpc.blas)
     cfg = Config()
     measure(cfg, 200, True)  # untimed: kernels loaded, caches warm
     res = measure(cfg, args.steps, True)

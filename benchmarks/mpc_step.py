@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tsmpc.blas import limit_blas_threads
 from tsmpc.config import Config, SchedulingMode
 from tsmpc.control.nl_mpc import NLMPC
 from tsmpc.control.ts_mpc import TSMPC
@@ -64,6 +65,7 @@ def main() -> None:
     ap.add_argument("--no-nl", action="store_true", help="skip the NL-MPC baseline")
     ap.add_argument("--no-numpy", action="store_true", help="skip the numpy (no kernels) pass")
     args = ap.parse_args()
+    limit_blas_threads()  # one BLAS thread, as the CLI and every simulating process (tsmpc.blas)
     cfg = Config()
     d = load_or_design_kinematic(cfg)
     model = KinematicTS(cfg.kinematic_box, cfg.rates.Tc)

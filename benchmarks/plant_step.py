@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from tsmpc.blas import limit_blas_threads
 from tsmpc.config import Config, TyreModel, TyreParams
 from tsmpc.vehicle.plant import Plant
 
@@ -49,6 +50,7 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=20000, help="timed calls per case")
     ap.add_argument("--no-numpy", action="store_true", help="skip the numpy (float closure) pass")
     args = ap.parse_args()
+    limit_blas_threads()  # one BLAS thread, as the CLI and every simulating process (tsmpc.blas)
     measure(TyreModel.PACEJKA, 200, 10)  # untimed: kernels loaded
 
     def table(jit: bool) -> dict[str, dict[str, float]]:

@@ -13,6 +13,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from tsmpc.blas import limit_blas_threads
 from tsmpc.sweep import load_sweep, run_sweep
 
 SWEEP = """
@@ -50,6 +51,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--duration", type=float, default=15.0)
     args = ap.parse_args()
+    limit_blas_threads()  # one BLAS thread, as the CLI and every simulating process (tsmpc.blas)
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         seeds = list(range(1, args.seeds + 1))

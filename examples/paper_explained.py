@@ -1,4 +1,4 @@
-"""Table 5 explained: the paper as it was run (the `paper-as-run` preset, SPEC §14), each of its
+"""Table 5 explained: the paper as it was run (the `paper-as-run` preset), each of its
 quirks removed one at a time down to the `paper` preset, and the ablation on to the default —
 every row measured here; plus the start-up transient figure, the gain-sensitivity study, the
 points of the feasibility LMI, the speed-headroom counterfactuals, the paper's trends and the two
@@ -6,9 +6,10 @@ MHE-UIO forms (README.md and docs/paper.md show this script's output).
 
     python examples/paper_explained.py [REFERENCE] [--img-dir docs/img] [--update-docs]
 
-REFERENCE defaults to ../shared/data/paper/planner_references_100ms.csv (the paper's file, not
-bundled). ``--update-docs`` rewrites the marked blocks of README.md and docs/paper.md with the
-tables printed here. ≈ 35 full runs at 1–10 ms inner steps: 15–25 minutes on two shared cores.
+Runs from any folder. REFERENCE defaults to the paper's file in ../shared/data next to the
+repository (not bundled). ``--update-docs`` rewrites the marked blocks of README.md and
+docs/paper.md with the tables printed here (``python docs/generate.py --only paper-explained``
+does the same). ≈ 35 full runs at 1–10 ms inner steps: 15–25 minutes on two shared cores.
 """
 
 from __future__ import annotations
@@ -22,12 +23,13 @@ from pathlib import Path
 from tsmpc.report.paper_explained import generate, update_block
 
 ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT.parent / "shared" / "data" / "paper" / "planner_references_100ms.csv"
 DOCS = (ROOT / "README.md", ROOT / "docs" / "paper.md")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("reference", nargs="?", default="../shared/data/paper/planner_references_100ms.csv")
+    ap.add_argument("reference", nargs="?", type=Path, default=PAPER)
     ap.add_argument("--img-dir", type=Path, default=None, help="write the figures here (docs/img)")
     ap.add_argument("--update-docs", action="store_true",
                     help="rewrite the marked blocks of README.md and docs/paper.md")

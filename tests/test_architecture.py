@@ -69,8 +69,22 @@ def test_shared_fallback_holds_or_shifts() -> None:
 def test_metrics_are_typed_and_computable_from_plain_arrays(cfg: Config) -> None:
     log = simulate(cfg, Method.REF, load_scenario(cfg), max_steps=40)
     m = run_metrics(log)
-    assert m.to_dict() == compute_metrics(log)
-    assert m.tracking.rmse.y == compute_metrics(log)["rmse"]["y"]
+    d = m.to_dict()
+    assert d == compute_metrics(log)  # the dict form is the typed result's
+
+    def rms(a: np.ndarray) -> float:  # the numbers are the run's, recomputed from the raw arrays
+        return float(np.sqrt(np.mean(np.square(a))))
+
+    e = log.errors
+    expected = {"x": rms(e[:, 0]), "y": rms(e[:, 1]), "theta": rms(e[:, 2]),
+                "v": rms(log.ref[:, 3] - log.state_outer[:, 3]),
+                "omega": rms(log.ref[:, 4] - log.state_outer[:, 5])}
+    for k, v in expected.items():
+        assert d["rmse"][k] == pytest.approx(v, rel=1e-12, abs=1e-15), k
+        assert getattr(m.tracking.rmse, k) == d["rmse"][k]
+    assert d["max_abs_lateral_m"] == pytest.approx(float(np.max(np.abs(e[:, 1]))), rel=1e-12)
+    assert d["mpc_ms"]["median"] == pytest.approx(1e3 * float(np.median(log.mpc_time_s)), rel=1e-12)
+    assert d["outer_steps"] == log.n_outer == 40
     ref_e = tracking_errors(log)
     arr_e = errors_from_arrays(log.state_outer, log.ref)
     for k in ref_e:

@@ -40,8 +40,21 @@ def test_fast_plan_widens_every_bound_it_exceeds_and_the_designs_certify() -> No
         assert hi >= 1.1 * r.v_max
     assert "widened" in fit.message and "kinematic_box.v_d" in fit.message
     assert fit_envelope(c, ref).widened == ()  # idempotent: the widened config covers it
-    kd, dd = load_or_design_kinematic(c), load_or_design_dynamic(c)
-    assert all(cert.holds for cert in kd.certificates + dd.certificates)
+    load_or_design_kinematic(c)  # raises unless its certificates hold
+    dd = load_or_design_dynamic(c)
+    # Recomputed here with numpy, independently of the certificates the design carries: the
+    # interpolated inner loop's common Lyapunov function decreases on a grid of the widened box up
+    # to the plan's speed (measured max ratio 0.9986; the default box's design reaches 1.0197
+    # there: it does not cover this plan).
+    from tsmpc.synthesis.dynamic import _premise_box, augmented_models
+
+    b, pb = c.dynamic_box, _premise_box(c.dynamic_box)
+    g = np.stack(np.meshgrid(np.linspace(*b.delta, 5), np.linspace(2.0, r.v_max, 9),
+                             np.linspace(*b.alpha, 3), indexing="ij"), -1).reshape(-1, 3)
+    A, B = augmented_models(g, c.vehicle, c.rates.Td, dd.bandwidth)
+    Acl = A + B @ np.tensordot(pb.memberships(g), dd.K, axes=(1, 0))
+    ratio = max(np.linalg.eigvals(np.linalg.solve(dd.P, a.T @ dd.P @ a)).real.max() for a in Acl)
+    assert ratio < 1.0
 
 
 def test_strict_box_refuses_naming_range_field_and_option() -> None:

@@ -35,12 +35,13 @@ def test_the_readme_loop_is_examples_cascade_loop() -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("script", EXAMPLES, ids=lambda p: p.name)
-def test_example_script_runs(script: Path) -> None:
+def test_example_script_runs(script: Path, tmp_path: Path) -> None:
     if "commonroad" in script.name and importlib.util.find_spec("vehiclemodels") is None:
         pytest.skip("the [commonroad] extra is not installed")
     env = {**os.environ, "TSMPC_EXAMPLE_STEPS": "30",
            "PYTHONPATH": os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")])}
+    # from another folder: the examples find their data relative to themselves, not the cwd
     res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env,
-                         timeout=600, cwd=ROOT)
+                         timeout=600, cwd=tmp_path)
     assert res.returncode == 0, res.stderr[-2000:]
     assert res.stdout.strip(), "the example printed nothing"

@@ -17,13 +17,12 @@ from tsmpc.estimation.mhe_uio import MHEUIO, EstimatorStatus
 from tsmpc.models.dynamic import DynamicTS
 from tsmpc.vehicle.plant import Plant
 
-pytest.importorskip("vehiclemodels")
-
 
 def _vehicle2() -> VehicleParams:
     """CommonRoad vehicle 2 mapped by hand onto tsmpc's parameters: mass, yaw inertia, a, b; the
     single cornering stiffness is the mean of the axles' Pacejka small-slip stiffnesses
     C_S · μ · F_z (C_S = −p_ky1 / p_dy1 [1/rad], μ = p_dy1, static axle loads)."""
+    pytest.importorskip("vehiclemodels")  # only this car needs the [commonroad] extra
     from vehiclemodels.parameters_vehicle2 import parameters_vehicle2
 
     p = parameters_vehicle2()

@@ -29,15 +29,16 @@ def test_ref_beats_the_papers_ref_row_in_every_column(runs) -> None:
     m = compute_metrics(log)
     for k in RMSE_KEYS:
         assert m["rmse"][k] <= PAPER_TABLE5["REF"][k], (k, m["rmse"][k])
-    assert m["rmse"]["x"] <= 0.25  # the compensation removes the longitudinal bias
+    assert m["rmse"]["x"] <= 0.04  # the compensation removes the longitudinal bias (measured 0.019 m)
 
 
 def test_oracle_ablation_shows_the_longitudinal_bias(runs) -> None:
     """True state and no compensation: the car lags its reference (mean e_x > 0) where the
-    compensated run does not. Threshold: 5 cm is > 10 σ of the compensated run's mean."""
+    compensated run does not (measured mean e_x 0.085 m against 0.0015 m; RMSE x 0.091 m against
+    0.019 m)."""
     log, oracle = runs
     mean_ex = float(np.mean(log.errors[:, 0]))
     mean_ex_oracle = float(np.mean(oracle.errors[:, 0]))
-    assert abs(mean_ex) < 0.02
+    assert abs(mean_ex) < 0.005
     assert mean_ex_oracle > 0.05
-    assert compute_metrics(oracle)["rmse"]["x"] > 2 * compute_metrics(log)["rmse"]["x"]
+    assert compute_metrics(oracle)["rmse"]["x"] > 3 * compute_metrics(log)["rmse"]["x"]

@@ -175,7 +175,13 @@ def test_paper_preset_completes_the_paper_run(ablation: dict[str, dict]) -> None
     assert 0.5 * PAPER_REF["v"] <= r["v"] <= 2.0 * PAPER_REF["v"]
     for k, ref in PAPER_REF.items():
         assert r[k] <= 2.0 * ref, k
-    assert m["max_abs_lateral_m"] < 1.0
+    # and no column more than 1.5× what this preset measures (the README's ablation row:
+    # x 0.134, y 0.108, θ 0.0060, v 0.141, ω 0.0036, max |e_y| 0.45): the band above alone is
+    # 3.5–7× looser than the run
+    measured = {"x": 0.134, "y": 0.108, "theta": 0.0060, "v": 0.141, "omega": 0.0036}
+    for k, v in measured.items():
+        assert r[k] <= 1.5 * v, (k, r[k])
+    assert m["max_abs_lateral_m"] < 1.5 * 0.45
 
 
 @pytest.mark.slow

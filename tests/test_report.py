@@ -200,17 +200,40 @@ def test_sweep_plots_colour_by_a_second_axis(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_animate_writes_an_mp4_when_ffmpeg_is_present(run_dir: Path, tmp_path: Path) -> None:
-    import shutil
+def test_animate_writes_an_mp4_with_the_pip_installable_ffmpeg(run_dir: Path, tmp_path: Path) -> None:
+    """The [test] and [video] extras bring imageio-ffmpeg: CI always writes and checks an MP4."""
+    import os
 
-    from tsmpc.report.animation import animate_run
+    from tsmpc.report.animation import animate_run, ffmpeg_executable
 
+    if ffmpeg_executable() is None:
+        if os.environ.get("CI"):
+            pytest.fail("no ffmpeg in CI: install the [test] extra (imageio-ffmpeg)")
+        pytest.skip("no ffmpeg: pip install 'tsmpc[video]'")
     log = load_run(run_dir).logs["REF"]
     res = animate_run(log, tmp_path / "a.gif", duration_s=1.0, size_px=(321, 241))
-    assert res.frames == 10 and res.gif.is_file()
-    if shutil.which("ffmpeg") is None:
-        assert res.mp4 is None  # no ffmpeg: the GIF alone, no error
-        return
+    assert res.frames == 10 and res.gif == tmp_path / "a.gif" and res.gif.read_bytes()[:3] == b"GIF"
     assert res.mp4 == tmp_path / "a.mp4"
     assert res.mp4.read_bytes()[4:8] == b"ftyp"  # an MP4 container (odd sizes cropped to even)
+    only = animate_run(log, tmp_path / "b.mp4", duration_s=1.0, size_px=(320, 240))
+    assert only.gif is None and only.mp4 == tmp_path / "b.mp4" and only.frames == 10
+    assert only.mp4.read_bytes()[4:8] == b"ftyp" and not (tmp_path / "b.gif").exists()
     assert not list(tmp_path.glob(".*tmp*"))  # no temporary file left behind
+
+
+def test_an_mp4_without_ffmpeg_is_refused_never_a_gif_named_mp4(run_dir: Path, tmp_path: Path,
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    from tsmpc.errors import ConfigError
+    from tsmpc.report import animation
+
+    monkeypatch.setattr(animation, "ffmpeg_executable", lambda: None)
+    log = load_run(run_dir).logs["REF"]
+    with pytest.raises(ConfigError, match=r"a\.mp4: MP4 needs ffmpeg: pip install \"tsmpc\[video\]\""):
+        animation.animate_run(log, tmp_path / "a.mp4", duration_s=0.5)
+    assert not list(tmp_path.iterdir())  # refused before rendering: nothing written
+    res = animation.animate_run(log, tmp_path / "a.gif", duration_s=0.5, size_px=(320, 240))
+    assert res.gif == tmp_path / "a.gif" and res.mp4 is None  # the GIF alone, no error
+    with pytest.raises(ConfigError, match=r"must end in \.gif or \.mp4"):
+        animation.animate_run(log, tmp_path / "a.avi", duration_s=0.5)
+    out = CliRunner().invoke(app, ["animate", str(run_dir), "--out", str(tmp_path / "c.mp4")])
+    assert out.exit_code == 2 and "MP4 needs ffmpeg" in out.output and not (tmp_path / "c.mp4").exists()

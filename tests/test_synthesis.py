@@ -100,28 +100,22 @@ def test_dynamic_design_versus_per_vertex_dare(cfg: Config, dd) -> None:
 
 
 def test_dynamic_design_at_1ms_is_reported_not_returned_silently(cfg: Config) -> None:
-    """At T_d = 1 ms the SDP is badly conditioned: Clarabel fails or ends inaccurate with a failing
-    certificate (which one depends on the last bits of the model matrices). Either is an error
-    naming the sample time and the cause; a design that *is* returned must pass certificates
-    recomputed here, independently of the ones it carries."""
-    from tsmpc.synthesis.dynamic import certify_grid
-
-    try:
-        d = design_dynamic(cfg.dynamic_box, cfg.vehicle, cfg.dynamic_lmi, 0.001)
-    except CertificateError as err:
-        msg = str(err)
-        assert "Td=0.001" in msg and "violated" in msg
+    """At T_d = 1 ms the guaranteed-cost SDP is badly conditioned: Clarabel ends inaccurate with
+    failing certificates (measured: five guaranteed-cost certificates at v = 20 m/s miss the
+    -1e-6 relative margin), or on another machine's BLAS fails outright. Either way the design is
+    an error naming the sample time and the cause, never a returned design (docs: design
+    decisions)."""
+    with pytest.raises((CertificateError, SolverError)) as info:
+        design_dynamic(cfg.dynamic_box, cfg.vehicle, cfg.dynamic_lmi, 0.001)
+    msg = str(info.value)
+    assert "Td=0.001" in msg
+    if isinstance(info.value, CertificateError):
+        assert "violated" in msg
         # Every violated certificate is listed with its relative margin above the threshold.
         margins = [float(m) for m in re.findall(r"relative ([-+0-9.e]+)\)", msg)]
         assert margins and all(m > -1e-6 for m in margins)
-        return
-    except SolverError as err:
-        assert "Td=0.001" in str(err) and "Clarabel" in str(err)
-        return
-    _, _, certs = certify_grid(d.K, d.P, cfg.dynamic_box, cfg.vehicle, 0.001, d.bandwidth,
-                               cfg.dynamic_lmi.grid_points)
-    bad = [c.name for c in certs if not c.holds]
-    assert not bad, f"a design at 1 ms was returned although {bad} fail"
+    else:
+        assert "Clarabel" in msg
 
 
 def test_cache_roundtrip_and_tamper_detection(cfg: Config, tmp_path, kd) -> None:

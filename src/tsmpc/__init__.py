@@ -5,7 +5,7 @@ including a dynamic TS-MHE-UIO": kinematic TS-MPC (outer loop), gain-scheduled T
 with LMIs (inner loop), TS-MHE with an unknown-input observer for slip and friction force, a
 nonlinear MPC baseline, a planner and a nonlinear vehicle simulator.
 
-Sub-packages mirror the SPEC: :mod:`tsmpc.models`, :mod:`tsmpc.vehicle`, :mod:`tsmpc.synthesis`,
+Sub-packages mirror the paper's blocks: :mod:`tsmpc.models`, :mod:`tsmpc.vehicle`, :mod:`tsmpc.synthesis`,
 :mod:`tsmpc.control`, :mod:`tsmpc.estimation`, :mod:`tsmpc.planning`, :mod:`tsmpc.sim`,
 :mod:`tsmpc.report`. Importing ``tsmpc`` is cheap: heavy solvers load on first use.
 """

@@ -1,4 +1,4 @@
-"""Parameters and settings: vehicle (SPEC §2), rates (§1), tyres (§3), scheduling boxes (§4, §5),
+"""Parameters and settings: vehicle (paper Table 1), rates, tyres, scheduling boxes (the paper's TS models),
 controller, estimator, planner and noise settings; TOML loading and validation.
 
 Every object here is a frozen pydantic model that rejects unknown fields, so a typo in a TOML
@@ -103,14 +103,14 @@ def _within(values: tuple[float, ...], name: str, lo: float, hi: float, unit: st
 
 
 class TyreModel(StrEnum):
-    """Lateral tyre model of the plant (SPEC §3)."""
+    """Lateral tyre model of the plant."""
 
     LINEAR = "linear"  #: F_y = C_x · slip (small-angle slips): the plant equals the control model
     PACEJKA = "pacejka"  #: magic formula with small-slip stiffness C_x and peak μ_tyre F_z
 
 
 class Method(StrEnum):
-    """The outer loop's method: the TS-MPC with one of its scheduling modes (SPEC §7), or the
+    """The outer loop's method: the TS-MPC with one of its scheduling modes (the paper's TS-MPC), or the
     NL-MPC baseline. One concept for runs (``tsmpc compare --methods``, logs, metrics keys) and
     for the TS-MPC's scheduling (``mpc.mode``). Parsing is case-insensitive ("ref" = "REF")."""
 
@@ -148,14 +148,14 @@ SchedulingMode = Method
 
 
 class FrictionEstimate(StrEnum):
-    """Which friction-force estimate the inner loop compensates (SPEC §9)."""
+    """Which friction-force estimate the inner loop compensates (the paper's TS-MHE-UIO)."""
 
     WINDOW = "window"  #: window-constant unknown input of the MHE (ours: low noise)
     UIO = "uio"  #: the paper's one-step UIO formula F̂ = Θ(y − C(Ax̂ + Bu)) (σ ≈ 340 N)
 
 
 class InnerLaw(StrEnum):
-    """Which inner-loop law runs (SPEC §8, §14)."""
+    """Which inner-loop law runs (the paper's inner loop; the published run)."""
 
     STATIC_GAIN = "static-gain"  #: ours: TS-LQR + static reference gain N̄, exact filter, anti-windup
     #: a quirk of the published run, not a recommendation: the law as it ran (Euler filter at T_d,
@@ -164,7 +164,7 @@ class InnerLaw(StrEnum):
 
 
 class DynamicLMIFormulation(StrEnum):
-    """Formulation of the dynamic TS-LMI-LQR (SPEC §6, §14)."""
+    """Formulation of the dynamic TS-LMI-LQR (the paper's LMI designs; the published run)."""
 
     #: ours: guaranteed cost, interpolated gains imposed on a (δ, v) grid, ZOH, grid-certified
     GUARANTEED_COST = "guaranteed-cost"
@@ -176,7 +176,7 @@ class DynamicLMIFormulation(StrEnum):
 
 class FeasiblePoint(StrEnum):
     """Which point of the feasibility LMI's solution set the design keeps (``feasibility-euler``
-    only; SPEC §14: a problem without objective has no unique answer)."""
+    only: a problem without objective has no unique answer)."""
 
     #: the analytic centre of the LMIs (:mod:`tsmpc.synthesis.analytic_center`): what an
     #: interior-point solver converges to without objective, the same in any units or scaling
@@ -187,7 +187,7 @@ class FeasiblePoint(StrEnum):
 
 
 class MHEForm(StrEnum):
-    """How the MHE-UIO treats the unknown friction force (SPEC §9)."""
+    """How the MHE-UIO treats the unknown friction force (the paper's TS-MHE-UIO)."""
 
     #: ours: a window-constant unknown input fitted inside the MHE (compiled fast path)
     WINDOW = "window"
@@ -293,7 +293,7 @@ class VehicleParams(_Frozen):
 
 
 class TyreParams(_Frozen):
-    """Plant tyre model (SPEC §3). Pacejka: f = D sin(C atan(Bα − E(Bα − atan Bα))),
+    """Plant tyre model. Pacejka: f = D sin(C atan(Bα − E(Bα − atan Bα))),
     D = μ_tyre F_z and B = C_x / (C D) so that the small-slip stiffness equals C_x."""
 
     model: TyreModel = Field(TyreModel.PACEJKA, description="lateral tyre model of the plant")
@@ -311,7 +311,7 @@ class TyreParams(_Frozen):
 
 
 class Rates(_Frozen):
-    """Sample times (SPEC §1). T_c / T_d and T_d / h must be integers."""
+    """Sample times (the paper's cascade). T_c / T_d and T_d / h must be integers."""
 
     Tc: PositiveFloat = Field(0.1, ge=1e-3, le=1.0,
                               description="outer loop (MPC) sample time [s], 0.001 to 1")
@@ -323,7 +323,7 @@ class Rates(_Frozen):
         None, ge=1, le=100000,
         description="inner steps run per outer step, 1 to 100000; None = T_c/T_d. A quirk of the "
         "published run, not a recommendation: it ran 101 steps of 1 ms per 0.1 s outer step (the "
-        "plant advances 0.101 s while the reference advances 0.1 s: a 1 % time-base drift; SPEC §14)")
+        "plant advances 0.101 s while the reference advances 0.1 s: a 1 % time-base drift)")
 
     @model_validator(mode="after")
     def _integer_ratios(self) -> Rates:
@@ -351,7 +351,7 @@ class Rates(_Frozen):
 
 
 class KinematicBox(_Frozen):
-    """Scheduling box of the kinematic TS model (SPEC §4): ω, v_d, e_θ.
+    """Scheduling box of the kinematic TS model (the paper's kinematic model): ω, v_d, e_θ.
 
     The default is the box that reproduces the paper's published terminal set S; the paper's
     text box is :meth:`paper_text`.
@@ -383,7 +383,7 @@ class KinematicBox(_Frozen):
 
 
 class DynamicBox(_Frozen):
-    """Scheduling box of the dynamic TS model (SPEC §5): δ, v, α."""
+    """Scheduling box of the dynamic TS model (the paper's dynamic model): δ, v, α."""
 
     delta: tuple[FiniteFloat, FiniteFloat] = Field(
         (-math.radians(25.0), math.radians(25.0)), description="steering δ range [rad], within "
@@ -406,7 +406,7 @@ class DynamicBox(_Frozen):
 
 
 class KinematicLMISettings(_Frozen):
-    """Kinematic LQR-LMI and terminal set (SPEC §6)."""
+    """Kinematic LQR-LMI and terminal set (the paper's LMI designs)."""
 
     Q: tuple[FiniteFloat, ...] = Field((1.0, 1.5, 3.0), description="diag Q_TS, entries in [1e-8, 1e8]")
     R: tuple[FiniteFloat, ...] = Field((1.0, 3.0), description="diag R_TS, entries in [1e-8, 1e8]")
@@ -425,7 +425,7 @@ class KinematicLMISettings(_Frozen):
 
 
 class DynamicLMISettings(_Frozen):
-    """Dynamic TS-LMI-LQR on the Apkarian-augmented model (SPEC §6)."""
+    """Dynamic TS-LMI-LQR on the Apkarian-augmented model (the paper's LMI designs)."""
 
     Q: tuple[FiniteFloat, ...] = Field(
         (2500.0, 0.1, 0.1, 0.1, 1e5, 9e4),
@@ -458,7 +458,7 @@ class DynamicLMISettings(_Frozen):
 
 
 class MPCSettings(_Frozen):
-    """Kinematic TS-MPC and NL-MPC (SPEC §7, paper Table 2)."""
+    """Kinematic TS-MPC and NL-MPC (the paper's TS-MPC, paper Table 2)."""
 
     N: StrictInt = Field(40, ge=2, le=400, description="prediction horizon [steps], 2 to 400 "
                          "(N·Tc <= 60 s)")
@@ -514,7 +514,7 @@ class MPCSettings(_Frozen):
 
 
 class LQRSettings(_Frozen):
-    """Inner-loop TS-LQR (SPEC §8)."""
+    """Inner-loop TS-LQR (the paper's inner loop)."""
 
     force_min: FiniteFloat = Field(-2000.0, ge=-1e6, le=1e6,
                                    description="F_xR lower saturation [N], within [-1e6, 1e6]")
@@ -537,7 +537,7 @@ class LQRSettings(_Frozen):
         False, description="deprecated (old config files): same as simulate(oracle=True), the "
         "simulation's ablation with the true state and no compensation"
     )
-    # Beyond the paper (SPEC §13): proportional *feedback* on the speed error, not a feed-forward.
+    # Beyond the paper: proportional *feedback* on the speed error, not a feed-forward.
     speed_feedback: StrictBool = Field(
         True, description="speed-error feedback M (v_ref − v̂)/τ added to the force (beyond the paper)"
     )
@@ -545,7 +545,7 @@ class LQRSettings(_Frozen):
         0.3, ge=0.01, le=100.0,
         description="time constant τ [s] of the speed-error feedback M (v_ref − v̂)/τ, 0.01 to 100"
     )
-    # Quirks of the published run (SPEC §14), not recommendations: the ``paper-as-run`` preset.
+    # Quirks of the published run, not recommendations: the ``paper-as-run`` preset.
     true_state_feedback: StrictBool = Field(
         False, description="the inner law runs on the true plant state [v, α, ω] while the MHE is "
         "computed but unused; the compensation stays as configured (a quirk of the published run, "
@@ -600,7 +600,7 @@ class LQRSettings(_Frozen):
 
 
 class MHESettings(_Frozen):
-    """TS-MHE-UIO (SPEC §9)."""
+    """TS-MHE-UIO (the paper's TS-MHE-UIO)."""
 
     N: StrictInt = Field(30, ge=2, le=300, description="estimation horizon [inner steps], 2 to 300 "
                          "(N·Td <= 10 s)")
@@ -632,7 +632,7 @@ class MHESettings(_Frozen):
 
 
 class NoiseSettings(_Frozen):
-    """Zero-mean Gaussian sensor noise (SPEC §10), standard deviations before ``scale``."""
+    """Zero-mean Gaussian sensor noise (the paper's scenario), standard deviations before ``scale``."""
 
     v: NonNegFloat = Field(0.005, le=10.0, description="σ of v [m/s], 0 to 10 (also after scale)")
     omega: NonNegFloat = Field(1e-4, le=1.0, description="σ of ω [rad/s], 0 to 1 (also after scale)")
@@ -653,7 +653,7 @@ class NoiseSettings(_Frozen):
 
 
 class PlannerSettings(_Frozen):
-    """Speed-profile limits of the planner (SPEC §10)."""
+    """Speed-profile limits of the planner (the paper's scenario)."""
 
     v_max: PositiveFloat = Field(14.7, le=150.0, description="maximum speed [m/s], (0, 150]")
     a_lat_max: PositiveFloat = Field(3.0, le=50.0, description="lateral acceleration limit [m/s^2], "
@@ -667,12 +667,12 @@ class PlannerSettings(_Frozen):
 
 
 class MetricsSettings(_Frozen):
-    """What the tables of a comparison show (SPEC §11, §14). metrics.json always holds both RMSE
+    """What the tables of a comparison show (Table 5; the published run). metrics.json always holds both RMSE
     conventions."""
 
     paper_run_rmse: StrictBool = Field(
         False, description="also show each method's RMSE under the published run's convention "
-        "(SPEC §14: pose errors at the start of each outer step, first K − 10 steps; v, ω at its "
+        "(the published run: pose errors at the start of each outer step, first K − 10 steps; v, ω at its "
         "end, K + 20 entries with 20 zeros) beside ours in the tables")
 
 
@@ -716,7 +716,7 @@ class Config(_Frozen):
         """A named configuration (:data:`PRESETS`): ``"default"`` (our best cascade),
         ``"paper"`` (the cascade as published: no speed-error feedback, the paper's one-step
         UIO friction estimate compensated; every weight is the paper's in both) or
-        ``"paper-as-run"`` (the published run's simulation with its quirks, SPEC §14: never a
+        ``"paper-as-run"`` (the published run's simulation with its quirks, docs: Table 5 explained: never a
         recommendation)."""
         return validate(cls, _preset_dict(name), source=f"preset {name!r}")
 
@@ -734,7 +734,7 @@ class Config(_Frozen):
 
 T = TypeVar("T", bound=BaseModel)
 
-#: Named configurations: overrides of ``Config()`` (SPEC §13). Select with ``Config.preset(name)``,
+#: Named configurations: overrides of ``Config()`` (beyond the paper). Select with ``Config.preset(name)``,
 #: ``preset = "paper"`` at the top of a TOML file, or ``--preset paper`` on the command line.
 PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
@@ -744,7 +744,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     # as given (no slip-aware loop, no tangent heading). The weights are the paper's already.
     "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio"},
               "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False}},
-    # The paper as it was run (SPEC §14): the ``paper`` preset plus every quirk of the published
+    # The paper as it was run (the published run): the ``paper`` preset plus every quirk of the published
     # simulation, each its own switch. Quirks of that run, not recommendations; never the default.
     "paper-as-run": {
         "vehicle": {"mu_nominal": 0.65},  # the controller models' nominal μ (M g μ = 4355.15 N)
@@ -767,9 +767,11 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 
 def _preset_dict(name: str) -> dict[str, Any]:
-    if name not in PRESETS:
+    """The overrides of preset ``name`` (case-insensitive, like method names: "Paper" = "paper")."""
+    key = name.strip().lower() if isinstance(name, str) else name
+    if key not in PRESETS:
         raise ConfigError(f"unknown preset {name!r}; allowed: {', '.join(PRESETS)}")
-    return {k: dict(v) for k, v in PRESETS[name].items()}
+    return {k: dict(v) for k, v in PRESETS[key].items()}
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -862,7 +864,7 @@ def resolve_preset(data: dict[str, Any], preset: str | None = None, source: str 
     data = dict(data)
     name = data.pop("preset", None)
     if preset is None and name is not None:
-        if not isinstance(name, str) or name not in PRESETS:
+        if not isinstance(name, str) or name.strip().lower() not in PRESETS:
             raise ConfigError(f"{source}: preset: unknown preset {name!r}; allowed: {', '.join(PRESETS)}")
         preset = name
     base = _preset_dict(preset) if preset is not None else {}

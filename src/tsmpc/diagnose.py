@@ -1,8 +1,8 @@
 """Which configuration field a failed LMI design most likely blames (issue 24).
 
 A design that cannot be solved or certified for a valid configuration is an input problem: the
-CLI exits 2 and names the field most likely responsible. The designs depend on few inputs
-(SPEC §6): the kinematic design on ``kinematic_box``, ``kinematic_lmi`` and ``rates.Tc``; the
+CLI exits 2 and names the field most likely responsible. The designs depend on few inputs:
+the kinematic design on ``kinematic_box``, ``kinematic_lmi`` and ``rates.Tc``; the
 dynamic one on ``dynamic_box``, ``dynamic_lmi``, ``vehicle`` and ``rates.Td``. The defaults are
 designed and certified (the test suite does it), so the suspects are the inputs that differ from
 them, the one furthest from its default (relative change, log scale) first.
@@ -17,7 +17,7 @@ from tsmpc.config import Config
 
 __all__ = ["DESIGN_INPUTS", "explain_design_failure", "suspect_fields"]
 
-#: The config sections / fields each design depends on (SPEC §6).
+#: The config sections / fields each design depends on .
 DESIGN_INPUTS: dict[str, tuple[str, ...]] = {
     "kinematic": ("kinematic_box", "kinematic_lmi", "rates.Tc"),
     "dynamic": ("dynamic_box", "dynamic_lmi", "vehicle", "rates.Td"),

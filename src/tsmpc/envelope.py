@@ -1,8 +1,8 @@
 """Operating envelope: do the designs' scheduling boxes cover the reference a run follows?
-(SPEC §13 "Operating envelope"; issue 15.)
+(beyond the paper: the operating envelope; issue 15.)
 
 A TS design is certified on its scheduling box only; outside it the memberships are clipped and
-neither the exactness of the TS model (SPEC §4) nor the LMI certificates (SPEC §6) say anything.
+neither the exactness of the TS model nor the LMI certificates say anything.
 Before a run the reference's ranges are compared with every box and bound that must contain
 them:
 
@@ -22,7 +22,7 @@ reported: the tyres, not a box, limit it — a plan beyond their grip diverges a
 :func:`fit_envelope` widens what does not cover the reference by a margin (default 10 %) and
 returns the new config — its designs are then solved and certified once and cached like any other;
 ``strict=True`` refuses instead, naming the range and the option. Only *upper* speed bounds are
-widened: the low-speed floors of the boxes are the documented low-speed behaviour (SPEC §5).
+widened: the low-speed floors of the boxes are the documented low-speed behaviour (the paper's dynamic model).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Named robustness scenarios (issue 8; SPEC §10): conditions the controllers were not designed
+"""Named robustness scenarios (issue 8; the paper's scenario): conditions the controllers were not designed
 for, applied on top of any reference. Usable from configs, sweeps and the library::
 
     case = robustness_scenario("ice_patch", cfg, reference)      # a fresh scenario on a reference

@@ -1,4 +1,4 @@
-"""The stepping protocol every online block speaks (STYLE §3): a sample time ``dt`` [s] and
+"""The stepping protocol every online block speaks (blocks do not log): a sample time ``dt`` [s] and
 ``reset()``, and a ``step(...)`` that returns a typed, frozen result and never raises on bad
 data (failures are statuses in the result, counted by the caller).
 

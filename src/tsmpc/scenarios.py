@@ -1,4 +1,4 @@
-"""Scenarios (SPEC §10): road-friction profiles μ(road) by time or path distance, and the seeded
+"""Scenarios (the paper's scenario): road-friction profiles μ(road) by time or path distance, and the seeded
 sensor-noise model."""
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ class ConstantFriction:
 
 @dataclass(frozen=True)
 class PaperFriction:
-    """μ(road) of the paper's 127.2 s run, by time (SPEC §10).
+    """μ(road) of the paper's 127.2 s run, by time (the paper's scenario).
 
     Dry asphalt ``dry + ripple sin(0.5 t)``; linear ramp to dry earth 0.68 over 15–16 s, held to
     39 s, ramp back over 39–40 s; ice 0.1 for 70.0–70.1 s; ramp to wet asphalt 0.6 over
@@ -88,7 +88,7 @@ def _ramp(t: float, a: float, b: float, c: float, d: float, base: float, level: 
 
 
 def paper_friction_profile() -> PaperFriction:
-    """The paper scenario's friction profile (SPEC §10)."""
+    """The paper scenario's friction profile (the paper's scenario)."""
     return PaperFriction()
 
 
@@ -130,7 +130,7 @@ class PatchFriction:
 
 
 class SensorNoise:
-    """Zero-mean Gaussian noise of [X, Y, θ, v, ω], seeded (SPEC §10 defaults × scale)."""
+    """Zero-mean Gaussian noise of [X, Y, θ, v, ω], seeded (the paper's scenario defaults × scale)."""
 
     def __init__(self, settings: NoiseSettings, seed: int) -> None:
         s = settings

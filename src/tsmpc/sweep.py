@@ -75,7 +75,7 @@ __all__ = [
 
 #: Named friction profiles of the ``friction`` axis.
 FRICTIONS: dict[str, str] = {
-    "paper": "the paper run's μ(road) by time (SPEC §10)",
+    "paper": "the paper run's μ(road) by time (the paper's scenario)",
     "dry": "dry asphalt, μ = 0.9",
     "earth": "dry earth, μ = 0.68",
     "wet": "wet asphalt, μ = 0.6",

@@ -277,10 +277,11 @@ def _check_parents(path: Path, option: str) -> Path:
     return Path("/")
 
 
-def check_out_dir(out: Path, *, overwrite: bool, option: str = "--out") -> None:
+def check_out_dir(out: Path, *, overwrite: bool, option: str = "--out",
+                  hint: str = "pass --overwrite to replace tsmpc's outputs in it") -> None:
     """Before any work: ``out`` must be a folder we can create and write, and empty unless
     ``overwrite`` (then tsmpc's outputs of a previous run in it are removed, nothing else).
-    Exits with code 2 naming the problem."""
+    Exits with code 2 naming the problem and ``hint`` (an option the command has)."""
     _check_parents(out, option)
     if out.exists() and not out.is_dir():
         fail(ConfigError(f"{option} {out}: exists and is a file; give a folder"))
@@ -291,7 +292,7 @@ def check_out_dir(out: Path, *, overwrite: bool, option: str = "--out") -> None:
             fail(ConfigError(f"{option} {out}: cannot list the folder ({err.strerror or err})"))
         if entries and not overwrite:
             fail(ConfigError(f"{option} {out}: folder is not empty ({len(entries)} entries); choose "
-                             "another folder or pass --overwrite to replace tsmpc's outputs in it"))
+                             f"another folder or {hint}"))
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:

@@ -14,7 +14,8 @@ from tsmpc.cli._common import check_out_file, console, fail, refuse_ineffective
 def animate_cmd(
     run_dir: Path = typer.Argument(..., help="Output folder of tsmpc compare / tsmpc run."),
     method: str | None = typer.Option(None, "--method", help="Method (default: REF, else the first)."),
-    out: Path | None = typer.Option(None, "--out", help="GIF path (default: RUN_DIR/animation_M.gif)."),
+    out: Path | None = typer.Option(None, "--out", help="GIF path, or an MP4 path (needs ffmpeg: pip "
+                                    "install 'tsmpc[video]'); default: RUN_DIR/animation_M.gif."),
     track: Path | None = typer.Option(None, "--track", help="TUMFTM track file whose borders are drawn."),
     road_width: float | None = typer.Option(
         None, "--road-width", min=0.1, help="Draw borders at ± width/2 around the reference [m] (no --track)."
@@ -26,7 +27,8 @@ def animate_cmd(
     view: float = typer.Option(30.0, "--view", min=2.0, help="Width of the car-following view [m]."),
     width: int = typer.Option(800, "--width", min=200, max=4000, help="Frame width [px]."),
     height: int = typer.Option(600, "--height", min=150, max=4000, help="Frame height [px]."),
-    no_mp4: bool = typer.Option(False, "--no-mp4", help="Skip the MP4 even when ffmpeg is present."),
+    no_mp4: bool = typer.Option(False, "--no-mp4", help="With a GIF: skip the MP4 beside it even when "
+                                "ffmpeg is present."),
 ) -> None:
     """Animate a run: the car on its track with the MPC's predicted path, e_y and v below."""
     from tsmpc.errors import TsmpcError
@@ -53,5 +55,5 @@ def animate_cmd(
         fail(err)
     except OSError as err:  # disk full, a name too long: one line, no half-written file kept
         fail(f"animate failed: cannot write {err.filename or target}: {err.strerror or err}", code=1)
-    console().print(f"wrote {res.gif}" + (f" and {res.mp4}" if res.mp4 else "")
-                    + f": {res.frames} frames in {res.render_s:.1f} s")
+    files = [str(f) for f in (res.gif, res.mp4) if f is not None]
+    console().print(f"wrote {' and '.join(files)}" + f": {res.frames} frames in {res.render_s:.1f} s")

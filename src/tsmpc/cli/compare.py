@@ -56,11 +56,12 @@ def _remove_previous_outputs(out: Path) -> None:
 
 
 def _execute(
-    methods_text: str, *, reference: Path | None, window: str | None, out: Path, seed: int | None,
+    methods_text: str, *, reference: Path | None, window: str | None, out: Path | None,
+    seed: int | None,
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
     overwrite: bool = False, preset: str | None = None,
     laps: int = 1, dt: float | None = None, strict_box: bool = False,
-    plant: str = "tsmpc", cr_vehicle: int = 2,
+    plant: str = "tsmpc", cr_vehicle: int = 2, command: str = "compare",
 ) -> None:
     """The body of ``compare`` and ``run``: a thin shell over :mod:`tsmpc.sim.experiment`
     (``prepare`` validates every input before any work, ``run`` solves the designs and runs).
@@ -96,13 +97,20 @@ def _execute(
     except (TsmpcError, OSError) as err:
         fail(err)
     check_scenario_options(exp.scenario, reference=reference, laps=laps, plant=plant)
+    if out is None:  # a new folder: never another run's (issue 23)
+        from tsmpc.cli._outdir import claim_default_out
+
+        out = claim_default_out(command)
+        Console(stderr=True, highlight=False, soft_wrap=True).print(f"output folder: {out}",
+                                                                   markup=False)
     check_out_dir(out, overwrite=overwrite)
     if exp.envelope.widened:
         console.print(exp.envelope.message, markup=False, highlight=False)
 
     # Every ending that is not success is one line, a non-zero exit and PARTIAL saying why
     # (interrupted, no design for this config: exit 2, a failed write, an unexpected error).
-    with guarded_run(out):
+    with guarded_run(out, on_interrupt=f"{out} holds a partial run: the methods that had finished "
+                     f"are written (see {out / PARTIAL_MARKER})"):
         if overwrite:
             _remove_previous_outputs(out)
         mark_partial(out, "running", methods=[m.value for m in exp.methods])
@@ -205,7 +213,7 @@ _PLANT_HELP = ("Plant: tsmpc (the built-in nonlinear single-track), commonroad-s
                "[commonroad] extra).")
 _PRESET_HELP = ("Named configuration under --config: 'default' (our best cascade), 'paper' (the cascade "
                 "as published: no speed-error feedback, the paper's UIO friction estimate) or "
-                "'paper-as-run' (the published run's quirks, SPEC §14: not a recommendation).")
+                "'paper-as-run' (the published run's quirks: not a recommendation).")
 _STRICT_HELP = ("Refuse a reference that leaves the designs' scheduling boxes (default: widen the boxes "
                 "by a margin and re-solve and re-certify the designs, cached).")
 _DT_HELP = ("Column period [s] of a paper-format file (default: measured from the data; a value the "
@@ -242,7 +250,8 @@ def compare_cmd(
     reference: Path | None = _OPT_REFERENCE,
     window: str | None = _OPT_WINDOW,
     methods: str = typer.Option("fzn,ref,iter,nl", "--methods", help="Comma-separated: fzn,ref,iter,nl."),
-    out: Path = typer.Option(Path("results/compare"), "--out", help="Output folder (new or empty)."),
+    out: Path | None = typer.Option(None, "--out", help="Output folder (new or empty; default: a new "
+                                    "folder results/compare, results/compare-2, …)."),
     seed: int | None = _OPT_SEED,
     config: Path | None = _OPT_CONFIG,
     no_plots: bool = _OPT_NO_PLOTS,
@@ -267,7 +276,8 @@ def run_cmd(
     method: str = typer.Option("ref", "--method", help="One of fzn, ref, iter, nl."),
     reference: Path | None = _OPT_REFERENCE,
     window: str | None = _OPT_WINDOW,
-    out: Path = typer.Option(Path("results/run"), "--out", help="Output folder (new or empty)."),
+    out: Path | None = typer.Option(None, "--out", help="Output folder (new or empty; default: a new "
+                                    "folder results/run, results/run-2, …)."),
     seed: int | None = _OPT_SEED,
     config: Path | None = _OPT_CONFIG,
     no_plots: bool = _OPT_NO_PLOTS,
@@ -286,4 +296,4 @@ def run_cmd(
     options = dict(locals())
     if "," in method:
         fail(ConfigError("--method takes one method; use `tsmpc compare --methods` for several"))
-    _execute(options.pop("method"), **options)
+    _execute(options.pop("method"), command="run", **options)

@@ -1,4 +1,4 @@
-"""``tsmpc design``: solve (or load from the cache) the LMI designs and print them (SPEC §6)."""
+"""``tsmpc design``: solve (or load from the cache) the LMI designs and print them."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """``tsmpc plan`` (planner: track or waypoints → reference CSV) and ``tsmpc show-reference``
-(SPEC §10)."""
+(the paper's scenario)."""
 
 from __future__ import annotations
 
@@ -106,7 +106,7 @@ def plan(
 
 
 def _warn_envelope(ref: object) -> None:
-    """Warn when the plan leaves the default design box (SPEC §13): runs will widen it."""
+    """Warn when the plan leaves the default design box (beyond the paper): runs will widen it."""
     from tsmpc.config import Config
     from tsmpc.envelope import reference_ranges, shortfalls
 

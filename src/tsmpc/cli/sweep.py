@@ -30,7 +30,8 @@ def sweep_cmd(
     scheduler: str | None = typer.Option(
         None, "--scheduler", help="Address of a running Dask scheduler (default: a LocalCluster)."),
     workers: int = typer.Option(2, "--workers", min=1, help="LocalCluster worker processes."),
-    out: Path = typer.Option(Path("results/sweep"), "--out", help="Output folder."),
+    out: Path | None = typer.Option(None, "--out", help="Output folder (default: a new folder "
+                                    "results/sweep, results/sweep-2, …; --resume needs it)."),
     resume: bool = typer.Option(False, "--resume", help="Skip runs whose record is already in --out "
                                 "(unreadable records are set aside and re-run)."),
     retry_failed: bool | None = typer.Option(
@@ -69,13 +70,22 @@ def sweep_cmd(
         spec = load_sweep(sweep_file, max_runs=max_runs)  # every problem before any task starts
     except TsmpcError as err:
         fail(err)
+    if out is None and resume:
+        fail(ConfigError("--resume needs --out: the folder of the sweep to finish"))
     designs = None
     if not dry_run:  # one pair of designs serves every run: solved before anything is written
         try:
             designs = design_status(base_config(spec))
         except TsmpcError as err:
             fail(err)
-    check_out_dir(out, overwrite=resume)  # with --resume, records on disk are kept and skipped
+    if out is None:
+        from tsmpc.cli._outdir import claim_default_out
+
+        out = claim_default_out("sweep")
+    if resume:
+        check_out_dir(out, overwrite=True)  # records on disk are kept and skipped
+    else:
+        check_out_dir(out, overwrite=False, hint="pass --resume to finish the sweep in it")
     n = len(expand(spec))
     where = scheduler or f"a local cluster of {workers} worker processes"
     con.print(Text.assemble("sweep ", (spec.name, "bold"), f": {n} runs on {where} → {out}"))

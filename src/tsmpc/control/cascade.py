@@ -1,4 +1,4 @@
-"""The guidance system as one runtime object: outer MPC + MHE-UIO + TS-LQR (paper Fig. 1; SPEC §1).
+"""The guidance system as one runtime object: outer MPC + MHE-UIO + TS-LQR (paper Fig. 1).
 
 A vehicle stack calls :meth:`Cascade.step` every T_d with the latest sensor sample and applies the
 returned :class:`Command` until the next call. Inside, the outer kinematic MPC (TS-MPC or NL-MPC)
@@ -30,7 +30,7 @@ Garbage that is finite is rejected too (issue 24), each kind under its own count
 Between accepted poses the pose is dead-reckoned from the estimate (v̂, α̂, ω̂), so the MPC of a
 call without a usable pose sees where the car most likely is, not where it was.
 
-The cascade does no logging (STYLE §3): each :class:`Command` carries what a logger needs (the
+The cascade does no logging (blocks do not log): each :class:`Command` carries what a logger needs (the
 estimate, the MPC result when the MPC ran at that call, the block timings).
 """
 
@@ -118,11 +118,14 @@ class Command:
         F_xR: rear drive force [N] (after feed-forward, friction compensation, saturation).
         delta: front steering [rad].
         saturated: an inner-loop saturation was active.
-        v_ref, omega_ref: the outer loop's references in force [m/s, rad/s].
+        v_ref: the outer loop's speed reference in force [m/s].
+        omega_ref: the outer loop's yaw-rate reference in force [rad/s].
         estimate: the MHE-UIO's estimate at this call.
         plan: the MPC result when the MPC ran at this call, else None.
         errors_measured: the errors [e_x, e_y, e_θ] the MPC saw (None when it did not run).
-        mpc_time_s, mhe_time_s, lqr_time_s: wall time of each block at this call [s].
+        mpc_time_s: wall time of the MPC at this call (0 when it did not run) [s].
+        mhe_time_s: wall time of the MHE-UIO at this call [s].
+        lqr_time_s: wall time of the TS-LQR at this call [s].
         held: True when an unexpected error made the cascade hold its previous command.
     """
 
@@ -207,7 +210,7 @@ class Cascade:
         dd = dynamic_design or load_or_design_dynamic(cfg)
         self.mpc = build_outer_controller(cfg, self.method, kd.P, kd.S)
         dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, self.Td)
-        if cfg.lqr.law == InnerLaw.AS_RUN:  # the published run's law (SPEC §14): a quirk
+        if cfg.lqr.law == InnerLaw.AS_RUN:  # the published run's law: a quirk
             from tsmpc.control.paper_as_run import AsRunLQR
 
             self.lqr = AsRunLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, self.Td,

@@ -1,4 +1,4 @@
-"""NL-MPC baseline (SPEC §7): the TS-MPC problem with the nonlinear kinematic error model.
+"""NL-MPC baseline (the paper's TS-MPC): the TS-MPC problem with the nonlinear kinematic error model.
 
 Same cost, constraints, terminal cost P and terminal set S as :class:`~tsmpc.control.ts_mpc.TSMPC`,
 with the nonlinear Euler error model ``x⁺ = x + T_c f(x, u, v_d, ω_d)`` (paper eq. "error model").

@@ -1,4 +1,4 @@
-"""The inner law as the published run ran it (SPEC §14): a quirk of that run, not a recommendation
+"""The inner law as the published run ran it (the published run): a quirk of that run, not a recommendation
 (``lqr.law = "as-run"``, the ``paper-as-run`` preset). Ours is :mod:`tsmpc.control.ts_lqr`.
 
 Every T_d (the published run: 1 ms), with the Apkarian filter states ``F₁`` [N] and ``σ₁`` [rad]
@@ -15,9 +15,9 @@ Every T_d (the published run: 1 ms), with the Apkarian filter states ``F₁`` [N
     F_xR = sat(F₁ [+ M (v_ref − v)/τ] [+ F̂_fr]),   δ = sat(σ₁ − b)
     F_app = sat(F₁),   ζ ← ζ + T_d (ω_ref − ω)      (no anti-windup; no speed integral)
 
-The 5-state model ``A₅,c = [[A(v, δ), B(v, δ)], [0, −λI]]``, ``B₅,c = [0; λI]`` (SPEC §5) is
+The 5-state model ``A₅,c = [[A(v, δ), B(v, δ)], [0, −λI]]``, ``B₅,c = [0; λI]`` (the paper's dynamic model) is
 evaluated directly at the measured speed and the scheduled steering, neither shifted nor clipped
-(the shift is a property of the gain scheduling, SPEC §14); only a floor of
+(the shift is a property of the gain scheduling, the published run); only a floor of
 :data:`V_MODEL_FLOOR` guards its 1/v terms at standstill (the published run starts at 0.12 m/s).
 That reading is also the one under which the published F₁(0) = μ_o M g is the model's steady force
 at the start speed; scheduled like the gains (at v + 2 m/s), the model's rolling resistance would

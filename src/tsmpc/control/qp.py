@@ -1,4 +1,4 @@
-"""The narrow QP interface of the controllers and its two backends (SPEC §7, §9).
+"""The narrow QP interface of the controllers and its two backends (TS-MPC, MHE-UIO).
 
 * :func:`solve_daqp` — dense active-set QP (DAQP, MIT): the fast path, called fresh each step
   (with a time-varying Hessian a fresh solve beats updating a persistent workspace).

@@ -1,8 +1,8 @@
 """Slip-aware outer loop (beyond the paper; issue 15): the kinematic error model in the frame of
 the velocity, not of the body.
 
-The paper's kinematic error model (SPEC §4) takes the body heading θ as the direction of travel,
-but the car moves along θ + α (SPEC §3: Ẋ = v cos(θ+α), Ẏ = v sin(θ+α)). Differentiating the
+The paper's kinematic error model takes the body heading θ as the direction of travel,
+but the car moves along θ + α (the plant: Ẋ = v cos(θ+α), Ẏ = v sin(θ+α)). Differentiating the
 body-frame lateral error gives ė_y = −ω e_x + v_d sin e_θ − v sin α: the term −v sin α is missing
 from the model, so in a long corner the MPC needs a steady heading error e_θ ≈ α to hold e_y,
 and its heavy e_θ weight trades it for a lateral offset to the outside (0.5 m at 14.7 m/s).
@@ -65,7 +65,7 @@ def outer_loop_errors(
     :meth:`~tsmpc.planning.reference.Reference.tangent_heading`, in ``ref_pose`` directly).
 
     Why the tangent: under the planners' convention x(k) = x(k−1) + v(k) cos θ(k) T
-    (SPEC §10) θ_d(k) is the heading of the step *into* sample k; the path's tangent at (x_d, y_d)(k)
+    θ_d(k) is the heading of the step *into* sample k; the path's tangent at (x_d, y_d)(k)
     lies halfway to the next step's heading, θ_d(k) + ω_d(k+1) T / 2 with T the reference's *own*
     sample period. The kinematic model takes θ_d as the direction the reference point moves, so
     the raw heading is a bias of ω_d T / 2 on e_θ (0.011 rad at 0.22 rad/s and T = 0.1 s) that the

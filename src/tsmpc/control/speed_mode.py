@@ -2,7 +2,7 @@
 closed loop, per vertex of the dynamic design (README, "Why the paper's inner loop lags").
 
 The dynamic model writes the constant rolling resistance ``μ_o M g`` as ``−(μ_o g / v)·v`` inside
-``A11(ϑ)`` (SPEC §5: no affine term). At a frozen scheduling point that looks like a viscous
+``A11(ϑ)`` (the model has no affine term). At a frozen scheduling point that looks like a viscous
 damping of ``μ_o M g / v`` N per m/s (≈ 335 N s/m at 10 m/s), which the real car does not have
 (its resistance does not grow with v; only the drag does, ``2 d v``). So the speed mode depends on
 where the reference feed-forward is scheduled:

@@ -1,5 +1,5 @@
 """Inner loop: gain-scheduled TS-LQR on the Apkarian-augmented model with friction compensation
-(paper Sec. 3.2, Sec. 4; SPEC §6, §8).
+(paper Sec. 3.2, Sec. 4; the paper's LMI designs; the paper's inner loop).
 
 Law, every T_d, with ϑ = (δ_f, v̂, α̂) clipped into the box and r = [v_ref, ω_ref]::
 
@@ -27,7 +27,7 @@ compensated F̂_fr: the MHE's window fit (default) or the paper's one-step UIO f
 Anti-windup: the filter states are clamped to the saturation limits and ζ stops integrating
 while an input saturates.
 
-The law as the published run ran it (SPEC §14; ``lqr.law = "as-run"``, a quirk of that run) is
+The law as the published run ran it (the published run; ``lqr.law = "as-run"``, a quirk of that run) is
 :mod:`tsmpc.control.paper_as_run`.
 """
 
@@ -208,7 +208,7 @@ class TSLQR:
 
         N̄ = −[C (A + B K₅)⁻¹ B]⁻¹ on the continuous plant + filter model (5 states; equal to the
         discrete [C (I − A_d − B_d K₅)⁻¹ B_d]⁻¹ for Euler and ZOH): with u = N̄ r + K x the
-        steady state of the nominal loop has C x = r and ζ = 0 (SPEC §8)."""
+        steady state of the nominal loop has C x = r and ζ = 0 (the paper's inner loop)."""
         Aa, Ba = self._plant_filter(delta, v)
         X = np.linalg.solve(Aa + Ba @ K[:, :5], Ba)  # (A + B K₅)⁻¹ B
         return -np.linalg.inv(X[[0, 2], :])

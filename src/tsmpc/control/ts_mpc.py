@@ -1,4 +1,4 @@
-"""Kinematic TS-MPC (paper eq. "MPC"; SPEC §7): FZN, REF and ITER scheduling, one dense QP per step.
+"""Kinematic TS-MPC (paper eq. "MPC"): FZN, REF and ITER scheduling, one dense QP per step.
 
 Problem, for a given scheduling sequence ρ_0 … ρ_{N−1}::
 
@@ -225,7 +225,7 @@ def shifted_plan(
 
 
 class TSMPC:
-    """Kinematic TS-MPC with the terminal ingredients (P, S) of the LMI design (SPEC §6, §7).
+    """Kinematic TS-MPC with the terminal ingredients (P, S) of the LMI design (paper eq. "MPC").
 
     Args:
         settings: horizon, weights, bounds, scheduling mode, soft penalty.

@@ -1,4 +1,4 @@
-"""The paper's TS-MHE-UIO form (paper eqs. "MHE", "disturb_estimation"; SPEC §9): the friction force
+"""The paper's TS-MHE-UIO form (paper eqs. "MHE", "disturb_estimation"): the friction force
 is *eliminated* from the window model through E_d instead of being estimated inside it
 (``mhe.form = "uio"``; ours, the window-constant unknown input, is :mod:`tsmpc.estimation.mhe_uio`).
 
@@ -19,7 +19,7 @@ decouple with, so its transition is the plain model with the last friction estim
 solve, ``F̂ = Θ (y_k − C (A x̂_{k−1} + B u_{k−1}))`` from the window's smoothed x̂_{k−1} (P-disturb_
 estimation) is the estimate that reaches the controller (``Estimate.F_fr``); ``F_fr_raw`` is the
 same formula from the previous step's estimate, as in ours. With Θ = −M/T_d both carry the speed
-sensor's noise amplified by M/T_d (SPEC §9).
+sensor's noise amplified by M/T_d (the paper's TS-MHE-UIO).
 
 Speed: this form runs on the numpy dense-QP path only (no compiled kernel): it is not the default.
 """

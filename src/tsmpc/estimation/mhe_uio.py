@@ -1,8 +1,8 @@
 """TS-MHE-UIO: moving-horizon estimation of [v, α, ω] and of the friction force (paper eqs. "MHE",
-"disturb_estimation"; SPEC §9).
+"disturb_estimation"; the paper's TS-MHE-UIO).
 
 Measurements ``y = C x = [v, ω]`` (α is not measured). Model along the window: the dynamic model
-evaluated directly at each sample's scheduling ϑ_k = (δ_k, v_k, α̂_k) (SPEC §5: online, the exact
+evaluated directly at each sample's scheduling ϑ_k = (δ_k, v_k, α̂_k) (online, the exact
 A_d(ϑ), B_d(ϑ), not the vertex blend), ``x_{k+1} = A_k x_k + B_k u_k + E_k F + w_k``.
 
 Unknown input. The paper's UIO removes F from the state equation with ``Θ = (C E)⁺`` and

@@ -1,4 +1,4 @@
-"""TS-LQR step (:class:`tsmpc.control.ts_lqr.TSLQR`, SPEC §8) in one compiled call.
+"""TS-LQR step (:class:`tsmpc.control.ts_lqr.TSLQR`, the paper's inner loop) in one compiled call.
 
 Law (issue 13's): ``u_f = N̄(ϑ) r + K(ϑ) x`` with the blended LMI gain ``K(ϑ) = Σ μ_i(ϑ) K_i`` and
 the static reference gain ``N̄ = −[C (A + B K₅)⁻¹ B]⁻¹`` of the continuous plant + Apkarian filter

@@ -1,6 +1,6 @@
 """Plant block: the T_d/h RK4 steps of :class:`tsmpc.vehicle.plant.Plant` between two inner steps in
 one compiled call (linear and Pacejka tyres). Same right-hand side, same operation order as the
-float closure of ``Plant._make_rhs`` (SPEC §3), so the two agree to rounding (tested ≤ 1e-10)."""
+float closure of ``Plant._make_rhs`` (the plant model), so the two agree to rounding (tested ≤ 1e-10)."""
 
 from __future__ import annotations
 

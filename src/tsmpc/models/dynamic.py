@@ -1,8 +1,8 @@
 """Dynamic control-oriented model, its TS form and the Apkarian augmentation (paper eq.
-"dynamic model"; SPEC §5, §6).
+"dynamic model"; the paper's dynamic model; the paper's LMI designs).
 
 State ``x_d = [v, α, ω]``, input ``u_d = [F_xR, δ]``, disturbance ``F_fr = (μ(road) − μ_o) M g``.
-Continuous LPV form ``ẋ = A(ϑ) x + B(ϑ) u + E F_fr`` derived from the plant of SPEC §3 with
+Continuous LPV form ``ẋ = A(ϑ) x + B(ϑ) u + E F_fr`` derived from the plant model with
 linear tyres and small body-slip angles (sin α ≈ α where it multiplies a force, cos α ≈ 1)::
 
     A11 = −μ_o g / v − ½ρC_dA_r v / M    A12 = C_x sin δ / M          A13 = C_x a sin δ / (M v)
@@ -17,7 +17,7 @@ paper's discrete model is Euler at ``T_d``: ``A_d = I + T_d A``, ``B_d = T_d B``
 :func:`discretize` also offers the exact zero-order-hold discretisation, which stays stable at low
 speed where Euler does not (|1 + T_d A22| > 1 below v ≈ 0.37 m/s at T_d = 10 ms).
 
-Scheduling ϑ = (δ, v, α) in the box of SPEC §5; the matrices do not depend on α (it is a premise
+Scheduling ϑ = (δ, v, α) in the dynamic scheduling box; the matrices do not depend on α (it is a premise
 of the paper's 8-vertex polytope all the same). Speeds below the box are clipped before the
 matrices are evaluated (:meth:`DynamicTS.clip`), which is the documented low-speed behaviour.
 """
@@ -102,7 +102,7 @@ def discretize(
 def augment_apkarian(
     A: ArrayLike, B: ArrayLike, bandwidth: float
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Apkarian augmentation with a yaw-rate integrator (SPEC §6), continuous time.
+    """Apkarian augmentation with a yaw-rate integrator (the paper's LMI designs), continuous time.
 
     Augmented state ``[v, α, ω, F_f, δ_f, ζ]``: the plant inputs become first-order filter
     states ``ḟ = λ(u − f)`` so the new input matrix is constant, and ``ζ̇ = ω_ref − ω`` (the

@@ -1,4 +1,4 @@
-"""Kinematic error model and its exact TS form (paper eq. "kinematic error model"; SPEC §4).
+"""Kinematic error model and its exact TS form (paper eq. "kinematic error model").
 
 State ``x_c = [e_x, e_y, e_θ]`` (vehicle-frame errors), input ``u_c = [v, ω]``, reference input
 ``r_c = [v_d cos e_θ, ω_d]``. Euler at ``T_c``::

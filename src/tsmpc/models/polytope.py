@@ -1,5 +1,5 @@
 """Scheduling boxes, TS membership functions and vertex enumeration (paper eq. "weighting
-function"; SPEC §4). One implementation shared by the kinematic and dynamic TS models.
+function"; the paper's kinematic model). One implementation shared by the kinematic and dynamic TS models.
 
 Vertex ordering (documented once, used everywhere): with r premise variables, vertex ``i`` has
 the binary digits ``b_0 … b_{r-1}`` of ``i`` with ``b_0`` the *most* significant bit, and premise
@@ -31,7 +31,8 @@ class SchedulingBox:
 
     Attributes:
         names: premise names, length r.
-        lower, upper: bounds, shape (r,), ``lower < upper``.
+        lower: lower bounds, shape (r,), ``lower < upper``.
+        upper: upper bounds, shape (r,).
     """
 
     names: tuple[str, ...]

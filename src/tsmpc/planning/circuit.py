@@ -1,4 +1,4 @@
-"""The built-in "paper-like circuit" (SPEC §10), so the main job runs on a fresh machine.
+"""The built-in "paper-like circuit" (the paper's scenario), so the main job runs on a fresh machine.
 
 Our own waypoints and speed caps, shaped after the facts the paper reports about its run (not its
 data): an eastbound straight with a strong initial acceleration, an S-bend to a northbound segment
@@ -45,7 +45,7 @@ TAIL_S = 2.0
 
 
 def builtin_circuit(settings: PlannerSettings | None = None, dt: float = 0.1) -> Reference:
-    """Plan the paper-like circuit (SPEC §10) with ``settings`` (default ``PlannerSettings()``).
+    """Plan the paper-like circuit (the paper's scenario) with ``settings`` (default ``PlannerSettings()``).
 
     Returns an open :class:`Reference` sampled at ``dt``; at dt = 0.1 s it has ≥ RUN_STEPS + 45
     samples. Cheap (≈ 0.05 s).

@@ -1,7 +1,7 @@
-"""The paper planner's reference format (SPEC §10): 6 comma-separated rows x_d, y_d, θ_d (wrapped),
+"""The paper planner's reference format: 6 comma-separated rows x_d, y_d, θ_d (wrapped),
 v_d, α_d (unused), ω_d; one column per 0.1 s. The paper's run uses columns 5…1316 (1-based).
 
-The format has no time column, so the column period is *measured* (SPEC §13): with the planner's
+The format has no time column, so the column period is *measured* (beyond the paper): with the planner's
 integration convention x(k) = x(k−1) + v(k) cos θ(k) T, the travelled distance per column over v
 gives T, and so does Δθ over ω. A file sampled at another period is read at its own period (or
 refused when the two measures disagree, or disagree with an explicit ``dt``)."""

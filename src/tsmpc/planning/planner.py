@@ -1,4 +1,4 @@
-"""Trajectory planner (the paper's "trajectory planning" block; SPEC §10).
+"""Trajectory planner (the paper's "trajectory planning" block; the paper's scenario).
 
 From waypoints (or a track centre line) to a :class:`~tsmpc.planning.reference.Reference`:
 
@@ -108,11 +108,12 @@ def _check_samples(n: float, what: str) -> None:
 
 @dataclass(frozen=True)
 class PathGeometry:
-    """A path on a uniform arc-length grid (SPEC §10).
+    """A path on a uniform arc-length grid (the paper's scenario).
 
     Attributes:
         s: (m,) arc length [m], from 0 to ``length``.
-        x, y: (m,) position [m].
+        x: (m,) position X [m].
+        y: (m,) position Y [m].
         heading: (m,) tangent direction [rad], unwrapped.
         kappa: (m,) curvature [1/m] (positive turning left).
         closed: the path is a closed loop (s = length is s = 0).
@@ -223,7 +224,7 @@ def path_geometry(
 
 @dataclass(frozen=True)
 class SpeedProfile:
-    """Speed along the path (SPEC §10).
+    """Speed along the path (the paper's scenario).
 
     Attributes:
         s: (m,) arc length [m], uniform, from 0 to the path length.
@@ -269,7 +270,7 @@ def speed_profile(
     geo: PathGeometry, settings: PlannerSettings, *, omega_max: float | None = None,
     jerk_max: float = JERK_MAX, h: float = DS_SPEED, oversample: int = 8,
 ) -> SpeedProfile:
-    """Speed profile within every limit of ``settings`` on the path ``geo`` (SPEC §10).
+    """Speed profile within every limit of ``settings`` on the path ``geo`` (the paper's scenario).
 
     v²(s) is a uniform quadratic B-spline of knot step ≈ h whose control points c are the
     variables of a linear programme (maximise Σc). The spline's convex-hull property makes the
@@ -374,7 +375,7 @@ def plan_path(
     laps: int = 1, tail_s: float = 0.0, omega_max: float | None = None, jerk_max: float = JERK_MAX,
     v_cap: ArrayLike | None = None,
 ) -> Reference:
-    """Plan a reference through ``waypoints`` (n, 2) [m] (SPEC §10).
+    """Plan a reference through ``waypoints`` (n, 2) [m] (the paper's scenario).
 
     Args:
         waypoints: points of the path, in driving order (a closed lap need not repeat the first).

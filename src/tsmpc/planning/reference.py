@@ -1,4 +1,4 @@
-"""Reference trajectories: one typed object for the planner's output (SPEC §10).
+"""Reference trajectories: one typed object for the planner's output (the paper's scenario).
 
 A :class:`Reference` is uniformly sampled. θ is unwrapped (continuous). Integration convention
 (the paper planner's): θ(k) = θ(k−1) + ω(k)T, x(k) = x(k−1) + v(k) cos θ(k) T.
@@ -48,7 +48,8 @@ class Reference:
 
     Attributes:
         t: (n,) time [s], uniform step.
-        x, y: (n,) position [m].
+        x: (n,) position X [m].
+        y: (n,) position Y [m].
         theta: (n,) heading [rad], unwrapped.
         v: (n,) speed [m/s].
         omega: (n,) yaw rate [rad/s].
@@ -151,7 +152,7 @@ class Reference:
     def heading_lag(self) -> float:
         """How long θ_d lags the path's tangent [s], measured from the geometry.
 
-        Under the planners' convention (SPEC §10: θ(k) = θ(k−1) + ω(k)T, x(k) = x(k−1) +
+        Under the planners' convention (θ(k) = θ(k−1) + ω(k)T, x(k) = x(k−1) +
         v(k) cos θ(k) T) θ_d(k) is the heading of the step *into* sample k, half a source period
         T_src/2 behind the tangent — whatever the reference was resampled to since; a reference
         whose θ_d is the tangent itself has no lag. The lag τ is the least-squares fit of

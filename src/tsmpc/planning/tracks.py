@@ -1,4 +1,4 @@
-"""Real race tracks in the TUMFTM racetrack-database format (SPEC §10).
+"""Real race tracks in the TUMFTM racetrack-database format (the paper's scenario).
 
 A file is a closed centre line with the widths to the right and left track borders::
 
@@ -33,12 +33,14 @@ TUMFTM_HEADER = "# x_m,y_m,w_tr_right_m,w_tr_left_m"
 
 @dataclass(frozen=True)
 class Track:
-    """A closed race track (SPEC §10).
+    """A closed race track (the paper's scenario).
 
     Attributes:
         name: track name (the file stem).
-        x, y: (n,) centre line [m], in driving order; the loop closes from the last point to the first.
-        w_right, w_left: (n,) distance from the centre line to the right / left border [m].
+        x: (n,) centre line X [m], in driving order; the loop closes from the last point to the first.
+        y: (n,) centre line Y [m].
+        w_right: (n,) distance from the centre line to the right border [m].
+        w_left: (n,) distance from the centre line to the left border [m].
     """
 
     name: str
@@ -144,7 +146,7 @@ def load_tumftm(path: str | Path) -> Track:
 
 def plan_track(track: Track, settings: PlannerSettings, dt: float = 0.1, laps: int = 1,
                tail_s: float = 0.0) -> Reference:
-    """A closed-lap reference along the centre line of ``track`` (SPEC §10).
+    """A closed-lap reference along the centre line of ``track`` (the paper's scenario).
 
     The lap time is a whole number of samples; ``tail_s`` > 0 continues along the next lap (and
     returns an open reference) for an MPC's look-ahead.

@@ -1,4 +1,4 @@
-"""Waypoint lists for the planner (SPEC §10): a CSV of ``x,y`` rows [m], optionally with a header
+"""Waypoint lists for the planner: a CSV of ``x,y`` rows [m], optionally with a header
 naming its columns (``x``, ``y`` and the optional speed cap ``v`` [m/s] to the next waypoint).
 
 The columns are strict (issue 24): a header may name only those columns, each once; a file

@@ -41,10 +41,31 @@ __all__ = ["AnimationResult", "animate_run", "car_outline", "predicted_poses"]
 class AnimationResult:
     """What :func:`animate_run` wrote and how long it took."""
 
-    gif: Path
+    gif: Path | None  #: None when only an MP4 was asked for (``out`` ending in .mp4)
     mp4: Path | None
     frames: int
     render_s: float  #: wall time of drawing the frames and encoding the files [s]
+
+
+def ffmpeg_executable() -> str | None:
+    """The ffmpeg that writes MP4s: the one on the PATH, else the binary of the pip-installable
+    ``imageio-ffmpeg`` (``pip install "tsmpc[video]"``); None when neither exists."""
+    exe = shutil.which("ffmpeg")
+    if exe is not None:
+        return exe
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        return None
+    try:
+        return str(imageio_ffmpeg.get_ffmpeg_exe())
+    except RuntimeError:  # the package without its binary (an unsupported platform)
+        return None
+
+
+#: How to get an MP4 writer, for error messages.
+FFMPEG_HINT = ('MP4 needs ffmpeg: pip install "tsmpc[video]" (imageio-ffmpeg, a bundled ffmpeg) or put '
+               "ffmpeg on the PATH; or write a GIF (--out NAME.gif)")
 
 
 def predicted_poses(log: RunLog, k: int) -> NDArray[np.float64]:
@@ -94,11 +115,13 @@ def animate_run(
     mp4: bool = True,
     progress: Callable[[int, int], None] | None = None,
 ) -> AnimationResult:
-    """Render ``log`` as a GIF at ``out`` (and an MP4 beside it when ffmpeg exists and ``mp4``).
+    """Render ``log`` as a GIF at ``out`` (and an MP4 beside it when ffmpeg exists and ``mp4``),
+    or as an MP4 only when ``out`` ends in ``.mp4`` (then ffmpeg is required: never a GIF under
+    an MP4's name).
 
     Args:
         log: the run (one method).
-        out: GIF path.
+        out: GIF path (``.gif``) or MP4 path (``.mp4``).
         vehicle: body dimensions of the car (paper defaults if None).
         track: race track whose borders are drawn (when the run is on one).
         road_width: draw borders at ± road_width/2 around the reference instead (no track) [m].
@@ -108,11 +131,13 @@ def animate_run(
         duration_s: seconds rendered (None: to the end) [s].
         view_m: width of the car-following view [m].
         size_px: (width, height) of the frames [px].
-        mp4: also write an MP4 when ffmpeg is on the PATH.
+        mp4: also write an MP4 beside the GIF when ffmpeg is available (:func:`ffmpeg_executable`).
         progress: called with (frame, frames).
 
     Raises:
-        ConfigError: an argument is out of range or the window selects no step.
+        ConfigError: an argument is out of range, the window selects no step, ``out`` is neither a
+            .gif nor a .mp4, or an MP4 is asked for without ffmpeg (before rendering anything).
+        OSError: ffmpeg failed to write the MP4 asked for.
     """
     if not (fps > 0 and np.isfinite(fps)):
         raise ConfigError(f"animate: fps must be positive, got {fps}")
@@ -122,6 +147,13 @@ def animate_run(
         raise ConfigError("animate: view_m and road_width must be positive")
     vehicle = vehicle or VehicleParams()
     out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix not in (".gif", ".mp4"):
+        raise ConfigError(f"animate: {out}: the file name must end in .gif or .mp4")
+    ffmpeg = ffmpeg_executable()
+    only_mp4 = suffix == ".mp4"
+    if only_mp4 and ffmpeg is None:
+        raise ConfigError(f"animate: {out}: {FFMPEG_HINT}")
     t0 = time.perf_counter()
     k0 = max(0, round(start_s / log.Tc))
     k1 = log.n_outer if duration_s is None else min(log.n_outer, k0 + round(duration_s / log.Tc))
@@ -130,21 +162,28 @@ def animate_run(
         raise ConfigError(f"animate: no MPC step in [{start_s}, {start_s + (duration_s or 0)}] s "
                           f"(the run has {log.simulated_s:.1f} s)")
     out.parent.mkdir(parents=True, exist_ok=True)
-    mp4_path = out.with_suffix(".mp4") if mp4 and shutil.which("ffmpeg") else None
-    video = _Mp4Writer(mp4_path, fps) if mp4_path is not None else None
+    mp4_path = out if only_mp4 else (out.with_suffix(".mp4") if mp4 and ffmpeg else None)
+    video = _Mp4Writer(mp4_path, fps, ffmpeg or "ffmpeg") if mp4_path is not None else None
     # Frames are quantized as they come (a full run of RGB frames would take gigabytes).
     palette: Image.Image | None = None
     frames: list[Image.Image] = []
+    n_frames = 0
     try:
         for rgb in _render(log, steps, vehicle, track, road_width, view_m, size_px, progress):
             if palette is None:  # the first frame shows every colour of the animation
                 palette = rgb.quantize(colors=128, method=Image.Quantize.MEDIANCUT,
                                        dither=Image.Dither.NONE)
-            frames.append(rgb.quantize(palette=palette, dither=Image.Dither.NONE))
+            n_frames += 1
+            if not only_mp4:
+                frames.append(rgb.quantize(palette=palette, dither=Image.Dither.NONE))
             if video is not None:
                 video.write(rgb)
     finally:
         ok = video.close() if video is not None else False
+    if only_mp4:
+        if not ok:
+            raise OSError(f"animate: ffmpeg ({ffmpeg}) failed to write {out}")
+        return AnimationResult(None, out, n_frames, time.perf_counter() - t0)
     _write_gif(frames, out, fps)
     return AnimationResult(out, mp4_path if ok else None, len(frames), time.perf_counter() - t0)
 
@@ -293,9 +332,10 @@ class _Mp4Writer:
 
     A failing ffmpeg is not an error: the GIF is the deliverable, the MP4 a convenience."""
 
-    def __init__(self, path: Path, fps: float) -> None:
+    def __init__(self, path: Path, fps: float, exe: str = "ffmpeg") -> None:
         self.path = path
         self.fps = fps
+        self.exe = exe
         self.tmp = path.with_name(f".{path.stem}.tmp.mp4")
         self.proc: subprocess.Popen[bytes] | None = None
         self.size = (0, 0)
@@ -307,7 +347,7 @@ class _Mp4Writer:
         if self.proc is None:
             w, h = frame.size
             self.size = (w - w % 2, h - h % 2)
-            cmd = ["ffmpeg", "-loglevel", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24",
+            cmd = [self.exe, "-loglevel", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24",
                    "-s", f"{self.size[0]}x{self.size[1]}", "-r", f"{self.fps}", "-i", "-",
                    "-pix_fmt", "yuv420p", "-vcodec", "libx264", str(self.tmp)]
             try:

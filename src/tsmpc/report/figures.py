@@ -86,8 +86,10 @@ def circuit_figure(logs: dict[str, RunLog]) -> Figure:
         a.set_ylabel("Y [m]")
     ax.plot(first.ref[0, 0], first.ref[0, 1], "go", ms=6, label="start")
     k = int(np.argmax(np.abs(first.errors[:, 1]))) if first.n_outer else 0
-    cx, cy = first.ref[k, 0], first.ref[k, 1]
-    r = 6.0
+    # The window holds the reference point and the car at that step (a diverged car is metres off).
+    car = first.state_outer[k, :2] if first.n_outer else first.ref[0, :2]
+    cx, cy = 0.5 * (first.ref[k, 0] + car[0]), 0.5 * (first.ref[k, 1] + car[1])
+    r = max(6.0, 0.5 * float(np.hypot(*(car - first.ref[k, :2]))) + 3.0)
     axz.set_xlim(cx - r, cx + r)
     axz.set_ylim(cy - r, cy + r)
     axz.set_title(f"zoom at t = {first.t_outer[k]:.1f} s (largest |e_y| of {first.method})")
@@ -120,19 +122,37 @@ def velocity_figure(logs: dict[str, RunLog]) -> Figure:
     return fig
 
 
+#: The errors figure zooms on the first seconds of a run at least this many times longer.
+_ZOOM_S = 10.0
+
+
 def errors_figure(logs: dict[str, RunLog]) -> Figure:
-    """e_x, e_y, e_θ, v_d − v, ω_d − ω against time."""
+    """e_x, e_y, e_θ, v_d − v, ω_d − ω against time; for a run much longer than 10 s a second
+    column zooms on its first 10 s (a start-up transient is invisible on a 127 s axis)."""
     labels = _ERROR_LABELS
-    fig, axs = plt.subplots(5, 1, figsize=(11, 10), sharex=True)
+    t_end = max((float(log.t_outer[-1] - log.t_outer[0]) for log in logs.values() if log.n_outer),
+                default=0.0)
+    zoom = t_end > 4 * _ZOOM_S
+    fig, grid = plt.subplots(5, 2 if zoom else 1, figsize=(14 if zoom else 11, 10), squeeze=False,
+                             sharex="col", gridspec_kw={"width_ratios": [3, 1.2]} if zoom else None)
     for name, log in logs.items():
         err = tracking_errors(log)
-        for a, (key, _) in zip(axs, labels, strict=True):
-            a.plot(log.t_outer, err[key], lw=0.9, label=name, **_style(name, log.n_outer))
-    for a, (_, lab) in zip(axs, labels, strict=True):
-        a.set_ylabel(lab)
-        a.grid(alpha=0.3)
-    axs[0].legend(fontsize=8, ncol=4)
-    axs[-1].set_xlabel("t [s]")
+        for i, (key, _) in enumerate(labels):
+            grid[i, 0].plot(log.t_outer, err[key], lw=0.9, label=name, **_style(name, log.n_outer))
+            if zoom:
+                t0 = log.t_outer[0] if log.n_outer else 0.0
+                k = log.t_outer <= t0 + _ZOOM_S
+                grid[i, 1].plot(log.t_outer[k], err[key][k], lw=1.0, label=name,
+                                **_style(name, int(k.sum())))
+    for i, (_, lab) in enumerate(labels):
+        grid[i, 0].set_ylabel(lab)
+        for a in grid[i]:
+            a.grid(alpha=0.3)
+    grid[0, 0].legend(fontsize=8, ncol=4)
+    if zoom:
+        grid[0, 1].set_title(f"the first {_ZOOM_S:g} s", fontsize=10)
+        grid[-1, 1].set_xlabel("t [s]")
+    grid[-1, 0].set_xlabel("t [s]")
     fig.tight_layout()
     return fig
 
@@ -144,7 +164,7 @@ def differences_figure(logs: dict[str, RunLog]) -> Figure:
     method changes; curves that overlap in :func:`errors_figure` separate here.
     """
     base = baseline_method(logs)
-    fig, axs = plt.subplots(len(_ERROR_LABELS), 1, figsize=(11, 10), sharex=True)
+    fig, axs = plt.subplots(len(_ERROR_LABELS), 1, figsize=(13, 10), sharex=True)
     b = logs[base]
     eb = tracking_errors(b)
     others = [n for n in logs if n != base]
@@ -161,8 +181,8 @@ def differences_figure(logs: dict[str, RunLog]) -> Figure:
         a.axhline(0.0, color="k", lw=0.6)
         a.set_ylabel("Δ " + lab)
         a.grid(alpha=0.3)
-        if others:
-            a.legend(fontsize=7, ncol=3, loc="upper right")
+        if others:  # beside the axes: a legend inside would hide the peaks it describes
+            a.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.005, 0.5), frameon=False)
     if not others:
         axs[0].text(0.5, 0.5, f"one method ({base}): nothing to compare", transform=axs[0].transAxes,
                     ha="center")
@@ -197,6 +217,7 @@ def control_figure(logs: dict[str, RunLog], cfg: Config | None = None) -> Figure
         span = hi - lo
         a.set_ylim(lo - 0.06 * span, hi + 0.06 * span)
     # Time steps where any method's inner loop saturated.
+    saturated = any(log.saturated.any() for log in logs.values())
     for name, log in logs.items():
         if log.saturated.any():
             for a in (axs[0, 0], axs[1, 0]):
@@ -208,7 +229,8 @@ def control_figure(logs: dict[str, RunLog], cfg: Config | None = None) -> Figure
         a.legend(fontsize=7, ncol=3, loc="upper right")
     axs[1, 0].set_xlabel("t [s]")
     axs[1, 1].set_xlabel("t [s]")
-    fig.suptitle("control actions with their limits (shaded: inner saturation active)", fontsize=10)
+    fig.suptitle("control actions with their limits" + (" (shaded: inner saturation active)" if saturated
+                  else " (the inner loop never saturated)"), fontsize=10)
     fig.tight_layout()
     return fig
 
@@ -220,7 +242,15 @@ def friction_figure(logs: dict[str, RunLog]) -> Figure:
     axs[0].plot(first.t_inner, first.F_fr_true, "k-", lw=1.5, label="true F_fr")
     for name, log in logs.items():
         axs[0].plot(log.t_inner, log.F_fr_hat, lw=0.8, label=f"F̂_fr {name}", **_style(name, log.t_inner.size))
-    axs[0].set_ylabel("F_fr [N]")
+    axs[0].set_ylabel("F_fr = (μ(road) − μ_o) M g [N]", fontsize=9)
+    if first.t_inner.size:  # explain the deepest dip: where the road resists less than the models
+        i = int(np.argmin(first.F_fr_true))
+        if first.F_fr_true[i] < 0.0:
+            axs[0].annotate(f"μ(road) = {first.mu_road[i]:.2f} at t = {first.t_inner[i]:.1f} s: the road "
+                            f"resists {abs(first.F_fr_true[i]):.0f} N less than the models assume",
+                            xy=(first.t_inner[i], first.F_fr_true[i]), xytext=(0.02, 0.06),
+                            textcoords="axes fraction", fontsize=8,
+                            arrowprops={"arrowstyle": "->", "color": "0.4", "lw": 0.8})
     axs[0].legend(fontsize=8, ncol=3)
     axs[1].plot(first.t_inner, first.mu_road, "k-", lw=1.2)
     axs[1].set_ylabel("μ(road) [-]")

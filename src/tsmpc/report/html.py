@@ -75,8 +75,12 @@ def _table(tid: str, head: Iterable[str], rows: Iterable[tuple[Iterable[str], st
 
 def _rmse_table(metrics: dict[str, Any]) -> str:
     paper = bool(metrics.get("scenario", {}).get("paper_reference"))
-    rows = [([_e(lab), *(_num(v) for v in vals)], "paper" if lab.endswith("(paper)") else "")
-            for lab, vals in rmse_rows(metrics, paper)]
+    rows = []
+    for lab, vals in rmse_rows(metrics, paper):
+        if lab.endswith("(diverged)"):  # as the terminal prints it: no RMSE of a run cut short
+            rows.append(([_e(lab), "diverged", *(["—"] * (len(vals) - 1))], "bad"))
+            continue
+        rows.append(([_e(lab), *(_num(v) for v in vals)], "paper" if lab.endswith("(paper)") else ""))
     return _table("table-rmse", ("approach", "x [m]", "y [m]", "θ [rad]", "v [m/s]", "ω [rad/s]"), rows)
 
 
@@ -133,7 +137,12 @@ def render_report(
     """
     sc = metrics.get("scenario", {})
     methods = list(metrics.get("methods", {}))
-    title = title or f"tsmpc run — {sc.get('name', '?')} — {', '.join(methods)}"
+    command = "compare" if len(methods) > 1 else "run"
+    title = title or f"tsmpc {command} — {sc.get('name', '?')} — {', '.join(methods)}"
+    paper_rows = any(lab.endswith("(paper)")
+                     for lab, _ in rmse_rows(metrics, bool(sc.get("paper_reference"))))
+    inner = ("oracle: the inner loop on the true plant state, no friction compensation"
+             if metrics.get("oracle") else "the inner loop on the MHE-UIO estimate")
     failed = [n for n, m in metrics["methods"].items() if m.get("termination", "completed") != "completed"]
     status = (f'<span class="warn">{_e(", ".join(failed))} did not complete</span>' if failed
               else '<span class="ok">every method completed</span>')
@@ -144,14 +153,14 @@ def render_report(
         f"<title>{_e(title)}</title><style>{_CSS}</style></head><body>",
         f"<h1>{_e(title)}</h1>",
         f'<p class="sub">{status}; simulated {_num(sc.get("tracked_steps", 0), ".0f")} MPC steps '
-        f'at T_c = {_e(sc.get("Tc", "?"))} s; oracle = {_e(metrics.get("oracle", False))}; '
+        f'at T_c = {_e(sc.get("Tc", "?"))} s; {_e(inner)}; '
         f'generated {datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")} by tsmpc '
         f'{_e(metrics.get("versions", {}).get("tsmpc", "?"))}.</p>',
         '<nav><a href="#tables">tables</a><a href="#figures">figures</a><a href="#scenario">scenario</a>'
         '<a href="#versions">versions</a><a href="#files">data files</a></nav>',
         '<h2 id="tables">Tracking RMSE</h2>',
         "<p>Root-mean-square errors over the run (m, rad, m/s, rad/s)"
-        + ("; the paper's Table 5 rows in grey italics." if sc.get("paper_reference") else ".") + "</p>",
+        + ("; the paper's Table 5 rows in grey italics." if paper_rows else ".") + "</p>",
         _rmse_table(metrics),
         "<h2>Solve times, tracking and real-time factor</h2>",
         "<p>Per-step wall times measured inside the closed loop.</p>",

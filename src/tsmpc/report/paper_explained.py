@@ -1,4 +1,4 @@
-"""Table 5 explained, the presentation (SPEC §14): Markdown tables and figures from the rows
+"""Table 5 explained, the presentation (the published run): Markdown tables and figures from the rows
 measured by :mod:`tsmpc.sim.paper_explained`, and the marked blocks of README.md and
 docs/paper.md that ``examples/paper_explained.py --update-docs`` rewrites.
 
@@ -9,7 +9,6 @@ from __future__ import annotations
 import itertools
 import math
 import os
-import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,7 +37,7 @@ __all__ = [
     "walk_table",
 ]
 
-#: The published run's start-up transient as SPEC §14 reports it (read off the paper's figures):
+#: The published run's start-up transient as reported for the published run (read off the paper's figures):
 #: (quantity, peak, time [s]). Shown as markers beside the measured curves, never as measurements.
 PUBLISHED_TRANSIENT = (("e_y [m]", 1.9, 4.0), ("e_θ [deg]", 8.0, 2.0), ("ω_d − ω [deg/s]", 6.0, None))
 
@@ -84,7 +83,7 @@ def as_run_table(results: Sequence[RowResult]) -> str:
                      + " | |")
         if paper:
             lines.append(f"| {r.method} | Table 5 | " + " | ".join(_f(k, paper[k]) for k in RMSE_KEYS)
-                         + " | ≈ 1.9 at ≈ 4 s (SPEC §14) |")
+                         + " | ≈ 1.9 at ≈ 4 s (published run) |")
             lines.append(f"| {r.method} | paper-run ÷ Table 5 | "
                          + " | ".join(_ratio(pr[k], paper[k]) for k in RMSE_KEYS) + " | |")
     return "\n".join(lines) + "\n"
@@ -111,7 +110,7 @@ def walk_table(results: Sequence[RowResult], *, convention: str = "rmse") -> str
                      f"| {xmax:.2f} | {r.what} |")
     paper = PAPER_TABLE5["REF"]
     lines.append("| REF, paper Table 5 | " + " | ".join(_f(k, paper[k]) for k in RMSE_KEYS)
-                 + " | ≈ 1.9 | ≈ 8 | — | as published (MATLAB; SPEC §14 for the transient) |")
+                 + " | ≈ 1.9 | ≈ 8 | — | as published (MATLAB; the transient as reported) |")
     return "\n".join(lines) + "\n"
 
 
@@ -126,7 +125,7 @@ def sensitivity_table(results: Sequence[RowResult]) -> str:
                      f"| {abs(math.degrees(tr.eth_peak_rad)):.1f} at {tr.eth_peak_t_s:.1f} "
                      f"| {abs(math.degrees(tr.omega_err_peak)):.1f} | "
                      + " | ".join(_f(k, e[k]) for k in RMSE_KEYS) + " |")
-    lines.append("| published run (SPEC §14) | unknown | ≈ 1.9 at ≈ 4 | ≈ 8 at ≈ 2 | ≈ 6 | "
+    lines.append("| published run | unknown | ≈ 1.9 at ≈ 4 | ≈ 8 at ≈ 2 | ≈ 6 | "
                  + " | ".join(_f(k, PAPER_TABLE5["REF"][k]) for k in RMSE_KEYS) + " |")
     return "\n".join(lines) + "\n"
 
@@ -352,7 +351,7 @@ def attribution_text(walk: Sequence[RowResult], *, top: int = 2) -> str:
 
 def startup_figure(logs: dict[str, RunLog], seconds: float = 15.0) -> Any:
     """e_y, e_θ and ω_d − ω over the first ``seconds`` of each run (reference time from the first
-    sample), with the published run's reported peaks (SPEC §14) as hollow markers."""
+    sample), with the published run's reported peaks (the published run) as hollow markers."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -373,10 +372,10 @@ def startup_figure(logs: dict[str, RunLog], seconds: float = 15.0) -> Any:
         if when is None:
             for s in (1, -1):
                 a.axhline(s * peak, color="0.4", ls=(0, (2, 3)), lw=1.0,
-                          label="published run, ≈ ±6°/s (SPEC §14)" if s == 1 else None)
+                          label="published run, ≈ ±6°/s (the published run)" if s == 1 else None)
         else:
             a.plot([when], [peak], "o", ms=9, mfc="none", mec="k", mew=1.5,
-                   label=f"published run, ≈ {peak:g} at ≈ {when:g} s (SPEC §14)")
+                   label=f"published run, ≈ {peak:g} at ≈ {when:g} s (the published run)")
         a.set_ylabel(name)
         a.grid(alpha=0.3)
         a.legend(fontsize=7, loc="upper right")
@@ -445,18 +444,15 @@ def estimator_forms_figure(columns: dict[str, dict[str, RunLog]]) -> Any:
     return fig
 
 
-_BLOCK = "<!-- paper-explained:{name}:{end} -->"
-
-
 def update_block(text: str, name: str, body: str) -> str:
     """``text`` with the block between ``<!-- paper-explained:NAME:begin -->`` and
-    ``<!-- paper-explained:NAME:end -->`` replaced by ``body``. Raises ValueError when the markers
-    are missing (a generator must never append blindly)."""
-    begin, end = _BLOCK.format(name=name, end="begin"), _BLOCK.format(name=name, end="end")
-    pat = re.compile(re.escape(begin) + r".*?" + re.escape(end), re.S)
-    if not pat.search(text):
-        raise ValueError(f"markers of block {name!r} not found")
-    return pat.sub(lambda _m: f"{begin}\n{body.strip()}\n{end}", text, count=1)
+    ``<!-- paper-explained:NAME:end -->`` replaced by ``body`` (the docs' one marker scheme,
+    :func:`tsmpc.report.docs.update_block`). Raises ValueError when the markers are missing (a
+    generator must never append blindly)."""
+    from tsmpc.report.docs import BlockId
+    from tsmpc.report.docs import update_block as update
+
+    return update(text, BlockId("paper-explained", name), body)
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Figure of a planned reference: path (with track borders), v_d(t) and ω_d(t) (SPEC §10).
+"""Figure of a planned reference: path (with track borders), v_d(t) and ω_d(t) (the paper's scenario).
 
 Plotting only; matplotlib (Agg) is imported inside the functions so the library never needs it.
 """

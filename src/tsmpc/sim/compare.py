@@ -1,4 +1,4 @@
-"""The paper's comparison in one call (SPEC §10–11): run each method on one scenario, compute
+"""The paper's comparison in one call (the paper's comparison): run each method on one scenario, compute
 the metrics and write every output file. ``tsmpc compare`` and ``tsmpc run`` are shells over
 :func:`compare`."""
 
@@ -171,26 +171,47 @@ def compare(
     ``designs``: the (kinematic, dynamic) LMI designs of ``cfg`` when the caller has them
     (default: the design cache). A run that stops early (|e_y| beyond the scenario's bound,
     non-finite plant) has ``status`` ``"diverged"``; ``metrics["diverged"]`` lists those methods.
+    Interrupted (KeyboardInterrupt, which the CLI raises for SIGINT and SIGTERM), the methods that
+    had finished are written (without figures; ``metrics["interrupted"]`` names them and the ones
+    that did not finish) before the interrupt propagates.
     """
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
     kd, dd = designs or (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
     logs: dict[str, RunLog] = {}
-    for method in methods:
-        k_total = tracked_steps(scenario.reference, cfg.mpc.N)
-        if max_steps is not None:
-            k_total = min(k_total, max_steps)
-        prog = progress_factory(method.value, k_total) if progress_factory else None
-        plant = plant_factory() if plant_factory is not None else None
-        logs[method.value] = simulate(cfg, method, scenario, oracle=oracle, plant=plant,
-                                      kinematic_design=kd, dynamic_design=dd, progress=prog,
-                                      max_steps=max_steps)
+    try:
+        for method in methods:
+            k_total = tracked_steps(scenario.reference, cfg.mpc.N)
+            if max_steps is not None:
+                k_total = min(k_total, max_steps)
+            prog = progress_factory(method.value, k_total) if progress_factory else None
+            plant = plant_factory() if plant_factory is not None else None
+            logs[method.value] = simulate(cfg, method, scenario, oracle=oracle, plant=plant,
+                                          kinematic_design=kd, dynamic_design=dd, progress=prog,
+                                          max_steps=max_steps)
+    except KeyboardInterrupt:  # Ctrl-C / SIGTERM: keep the methods that had finished
+        if logs and out_dir is not None:
+            metrics = _metrics(cfg, scenario, logs, max_steps, oracle, kd)
+            metrics["interrupted"] = {"finished": list(logs),
+                                      "not_finished": [m.value for m in methods if m.value not in logs]}
+            write_outputs(cfg, metrics, logs, Path(out_dir), plots=False)
+        raise
+    metrics = _metrics(cfg, scenario, logs, max_steps, oracle, kd)
+    files: list[Path] = []
+    if out_dir is not None:
+        files = write_outputs(cfg, metrics, logs, Path(out_dir), plots=plots, figures=figures)
+    return CompareResult(metrics, logs, tuple(files))
+
+
+def _metrics(cfg: Config, scenario: Scenario, logs: dict[str, RunLog], max_steps: int | None,
+             oracle: bool, kd: Any) -> dict[str, Any]:
+    """The metrics.json content of the runs in ``logs``."""
     metrics: dict[str, Any] = {
         "methods": {name: compute_metrics(log) for name, log in logs.items()},
         "scenario": _scenario_summary(cfg, scenario, max_steps),
         "versions": versions(),
         "oracle": oracle,
-        "paper_run_rmse": cfg.metrics.paper_run_rmse,  # tables show the SPEC §14 convention too
+        "paper_run_rmse": cfg.metrics.paper_run_rmse,  # tables show the published run's RMSE convention too
         "designs": {"kinematic_S": kd.S.tolist(), "kinematic_P": kd.P.tolist()},
     }
     laps = int(scenario.meta.get("laps", 1) or 1)
@@ -208,10 +229,22 @@ def compare(
         for m in metrics["methods"].values():
             den = ref_m["mpc_ms"]["median"]  # 0 or NaN when REF stopped before its first solve
             m["mpc_ms_ratio_to_REF"] = m["mpc_ms"]["median"] / den if den > 0 else float("nan")
-    files: list[Path] = []
-    if out_dir is not None:
-        files = write_outputs(cfg, metrics, logs, Path(out_dir), plots=plots, figures=figures)
-    return CompareResult(metrics, logs, tuple(files))
+    return metrics
+
+
+def _config_toml(cfg: Config, methods: list[str]) -> str:
+    """The run's config as TOML; ``mpc.mode`` says which methods ran (each method runs with its
+    own scheduling mode, whatever the config's ``mpc.mode``)."""
+    lines = cfg.to_toml().splitlines()
+    if methods != [cfg.mpc.mode.value]:
+        section = ""
+        for i, line in enumerate(lines):
+            if line.startswith("["):
+                section = line
+            elif section == "[mpc]" and line.startswith("mode = "):
+                lines[i] = f"{line}  # this run: {', '.join(methods)} (each with its own mode, --methods)"
+                break
+    return "\n".join(lines) + "\n"
 
 
 def write_outputs(
@@ -229,7 +262,7 @@ def write_outputs(
         "rmse.csv": rmse_csv(metrics, with_paper),
         "rmse.md": rmse_markdown(metrics, with_paper),
         "rmse.tex": rmse_latex(metrics, with_paper),
-        "config.toml": cfg.to_toml(),
+        "config.toml": _config_toml(cfg, list(logs)),
         "versions.json": json.dumps(metrics["versions"], indent=2),
     }
     files = []

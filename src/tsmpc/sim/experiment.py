@@ -1,5 +1,5 @@
 """One pipeline from inputs to results: ``tsmpc compare`` and ``tsmpc run`` are thin shells over it,
-so a library user gets exactly what the command line does (SPEC §13).
+so a library user gets exactly what the command line does (beyond the paper).
 
 Two steps, so that every input is checked before anything is solved or written:
 

@@ -1,4 +1,4 @@
-"""Run log: every signal of a closed-loop run as named arrays (SPEC §11).
+"""Run log: every signal of a closed-loop run as named arrays (the paper's Table 5 metrics).
 
 The simulator fills a :class:`RunLog`; metrics, figures and writers read it. Outer-loop signals are
 sampled every T_c (length K), inner-loop signals every T_d (length K · T_c/T_d). Units are SI.

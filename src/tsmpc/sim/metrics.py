@@ -1,9 +1,9 @@
-"""Metrics of a run as the paper reports them, and more (SPEC §11).
+"""Metrics of a run as the paper reports them, and more (the paper's Table 5 metrics).
 
 Tracking errors are sampled every T_c: vehicle-frame e_x, e_y, e_θ, and v_d − v, ω_d − ω, from the
 *true* plant state. RMSE over the run in SI units (the paper's Table 5 columns x, y, θ, v, ω).
 Beside it, :func:`paper_run_rmse` is the convention the published run's Table 5 was computed with
-(SPEC §14); metrics.json carries both (``rmse``, ``rmse_paper_run``).
+(the published run); metrics.json carries both (``rmse``, ``rmse_paper_run``).
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ PAPER_TABLE5: dict[str, dict[str, float]] = {
     "NL": {"x": 0.528, "y": 0.225, "theta": 0.015, "v": 0.268, "omega": 0.012},
 }
 
-#: The published run's RMSE convention (SPEC §14): the pose errors are averaged over the first
+#: The published run's RMSE convention (docs: Table 5 explained): the pose errors are averaged over the first
 #: K − PAPER_RUN_POSE_DROP outer steps (1262 of its 1272), the v and ω errors over K entries plus
 #: PAPER_RUN_ZERO_PAD zeros (1292). The counts are the published run's, applied to any run length.
 PAPER_RUN_POSE_DROP = 10
@@ -138,7 +138,7 @@ class RunMetrics:
     slip_rmse_rad: float  #: α̂ − α
     speed_estimate_rmse: float  #: v̂ − v [m/s]
     control_effort: ControlEffort
-    rmse_paper_run: ErrorStats  #: RMSE under the published run's convention (SPEC §14)
+    rmse_paper_run: ErrorStats  #: RMSE under the published run's RMSE convention
     simulated_s: float
     outer_steps: int
     inner_steps: int
@@ -215,7 +215,7 @@ def tracking_errors(log: RunLog) -> dict[str, np.ndarray]:
 def paper_run_rmse_from_arrays(pose_errors: ArrayLike, ref_vw: ArrayLike, end_vw: ArrayLike, *,
                                pose_drop: int = PAPER_RUN_POSE_DROP,
                                zero_pad: int = PAPER_RUN_ZERO_PAD) -> ErrorStats:
-    """RMSE under the published run's convention (SPEC §14, "RMSE convention").
+    """RMSE under the published run's RMSE convention (docs: Table 5 explained).
 
     Args:
         pose_errors: (K, 3) e_x, e_y, e_θ at the *start* of each outer step (plant pose against

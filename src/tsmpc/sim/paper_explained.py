@@ -1,4 +1,4 @@
-"""Table 5 explained (SPEC §14): the paper as it was run, and each step from there to ours.
+"""Table 5 explained: the paper as it was run, and each step from there to ours.
 
 The runs behind the explained table of README.md and docs/paper.md, every row measured here
 (:mod:`tsmpc.report.paper_explained` formats them; ``examples/paper_explained.py`` is the script):
@@ -9,7 +9,7 @@ The runs behind the explained table of README.md and docs/paper.md, every row me
   removal lands exactly on the ``paper`` preset (checked by :func:`walk_rows`);
 * the ablation beyond the paper up to the default (the rows of ``examples/paper_ablation.py``);
 * a sensitivity study of the start-up transient to the steering row of the gains (not a preset:
-  the published gains are unknown, SPEC §14);
+  the published gains are unknown);
 * the points of the feasibility LMI a solver could have returned (:func:`design_points`) and the
   counterfactuals that test the speed-headroom explanation of x and of NL's divergence
   (:func:`headroom_counterfactuals`): studies, not presets.
@@ -59,7 +59,7 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Quirk:
-    """One condition of the published run (SPEC §14) and how to remove it.
+    """One condition of the published run and how to remove it.
 
     Attributes:
         name: short label ("steering bias 30°").
@@ -81,7 +81,7 @@ def _paper_value(section: str, field: str) -> Any:
     return getattr(getattr(Config.preset("paper"), section), field)
 
 
-#: The published run's quirks in the order the walk removes them (SPEC §14). The order keeps every
+#: The published run's quirks in the order the walk removes them (the published run). The order keeps every
 #: intermediate configuration valid: the as-run law's own switches go before the law, the 1 ms
 #: inner rate before the design formulation (ours does not certify at 1 ms), the 101-step time
 #: base before the 1 ms rate, the feasible point before the formulation it belongs to.
@@ -143,7 +143,7 @@ def walk_rows() -> list[ExplainedRow]:
     """``paper-as-run``, then each quirk of :data:`QUIRKS` removed in turn (cumulatively); the last
     row is the ``paper`` preset. Raises AssertionError if the walk does not end on it."""
     cfg = Config.preset("paper-as-run")
-    rows = [ExplainedRow("paper-as-run", cfg, "the published run (SPEC §14)", "as-run")]
+    rows = [ExplainedRow("paper-as-run", cfg, "the published run", "as-run")]
     for i, q in enumerate(QUIRKS):
         cfg = q.remove(cfg)
         last = i == len(QUIRKS) - 1
@@ -242,7 +242,7 @@ def measure(reference: Path, rows: Sequence[ExplainedRow], *, methods: Sequence[
 def gain_sensitivity(reference: Path, factors: Sequence[float] = (1.0, 0.7, 0.5), *,
                      max_steps: int | None = None, keep_logs: bool = False) -> list[RowResult]:
     """``paper-as-run`` (REF) with the ζ entry of the steering row of every vertex gain scaled by
-    each factor: a study, not a switch. The published gains are unknown (SPEC §14); the δ_f / ζ
+    each factor: a study, not a switch. The published gains are unknown; the δ_f / ζ
     ratio of the steering row sets how much of the 30° bias the yaw-rate integrator must wind out
     (Δζ = b (1 − K_δ,δf) / K_δ,ζ) and so the size of the start-up transient."""
     from tsmpc.synthesis.cache import load_or_design_dynamic
@@ -341,7 +341,7 @@ def _as_run_design(cfg: Config) -> Any:
 
 @dataclass(frozen=True)
 class DesignPoint:
-    """A point of the published run's feasibility LMI (SPEC §14) and what it does in the run.
+    """A point of the published run's feasibility LMI and what it does in the run.
 
     Attributes:
         label: which point ("analytic centre", "Clarabel's answer", ...).

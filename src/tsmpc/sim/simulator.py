@@ -1,4 +1,4 @@
-"""Multi-rate closed-loop simulation of the cascade (SPEC §1, §10).
+"""Multi-rate closed-loop simulation of the cascade (the paper's cascade; the paper's scenario).
 
 A thin loop: every T_d the simulator reads the plant's state, adds sensor noise and faults, calls
 the :class:`~tsmpc.control.cascade.Cascade` (outer MPC every T_c/T_d calls, MHE-UIO + TS-LQR
@@ -53,11 +53,13 @@ class Scenario:
         reference: reference sampled at T_c, including the N-step look-ahead at its end.
         friction: μ(road) as a function of time and travelled distance.
         initial_error: (lateral offset [m], heading offset [rad]) of the start pose.
-        plant_vehicle, plant_tyre: plant-only parameters (model mismatch); None = the config's.
+        plant_vehicle: plant-only vehicle parameters (model mismatch); None = the config's.
+        plant_tyre: plant-only tyre parameters (model mismatch); None = the config's.
         actuators: steering servo / force lag in front of the default plant; None = ideal.
-        measured_steering, measured_force: the platform measures the steering angle / drive
-            force the vehicle really received (the plant's ``applied_input``) and gives it to the
-            cascade (the MHE then uses it instead of the command).
+        measured_steering: the platform measures the steering angle the vehicle really
+            received (the plant's ``applied_input``) and gives it to the cascade (the MHE then
+            uses it instead of the command).
+        measured_force: the same for the drive force.
         sensor_fault: measurement corruption (dropouts, NaN bursts); None = healthy sensors.
         divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track's
             half-width); None = ``cfg.divergence_bound_m``.
@@ -195,7 +197,7 @@ def simulate(
 
     limit_blas_threads()
     oracle = oracle or cfg.lqr.oracle
-    true_state = cfg.lqr.true_state_feedback  # the published run's quirk (SPEC §14)
+    true_state = cfg.lqr.true_state_feedback  # the published run's quirk
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=kinematic_design,
                       dynamic_design=dynamic_design)
     ref, N, Tc, Td, n_in = cascade.reference, cfg.mpc.N, cfg.rates.Tc, cfg.rates.Td, cascade.n_inner

@@ -1,4 +1,4 @@
-"""The analytic centre of a system of LMIs (SPEC §6, §14): the point a feasibility problem's
+"""The analytic centre of a system of LMIs: the point a feasibility problem's
 interior-point solver converges to when the problem has no objective.
 
 For affine symmetric matrix functions ``M_k(x) = F0_k + Σ_j x_j F_kj`` (k = 1 … m) the analytic

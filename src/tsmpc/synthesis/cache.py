@@ -1,4 +1,4 @@
-"""On-disk cache of the LMI designs (SPEC §6): a run never re-solves an unchanged design.
+"""On-disk cache of the LMI designs (the paper's LMI designs): a run never re-solves an unchanged design.
 
 A design is stored as one JSON file named by the SHA-256 of every input it depends on (the
 settings, the box, the vehicle, the sample time, the formulation version). Floats are written with

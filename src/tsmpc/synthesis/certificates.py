@@ -1,4 +1,4 @@
-"""Numerical certificates of LMI designs (SPEC §6): every LMI is recomputed with numpy after the
+"""Numerical certificates of LMI designs: every LMI is recomputed with numpy after the
 solve, never trusting a solver status.
 
 A certificate reports two numbers for a matrix ``M`` that must be negative definite:

@@ -1,4 +1,4 @@
-"""Dynamic TS-LMI-LQR on the Apkarian-augmented model (paper Sec. 3.2; SPEC §6).
+"""Dynamic TS-LMI-LQR on the Apkarian-augmented model (paper Sec. 3.2; the paper's LMI designs).
 
 Model: the continuous LPV model of :mod:`tsmpc.models.dynamic`, augmented with the input filter
 ``ḟ = λ(u − f)`` and the yaw-rate integrator ``ζ̇ = ω_ref − ω`` → state

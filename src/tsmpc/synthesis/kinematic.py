@@ -1,5 +1,5 @@
 """Kinematic LQR-LMI and terminal set (paper eqs. "Feasibility-LMI" and
-"terminal_set_computation"; SPEC §6).
+"terminal_set_computation"; the paper's LMI designs).
 
 LQR-LMI: common ``Y ≻ 0``, per-vertex ``W_i``; for every vertex i of the TS error model::
 

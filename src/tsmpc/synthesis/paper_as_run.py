@@ -1,4 +1,4 @@
-"""The dynamic TS-LMI-LQR as the published run solved it (SPEC §14): a quirk of that run, not a
+"""The dynamic TS-LMI-LQR as the published run solved it (the published run): a quirk of that run, not a
 recommendation (``dynamic_lmi.formulation = "feasibility-euler"``, the ``paper-as-run`` preset).
 
 Problem. The Apkarian-augmented model ``[v, α, ω, F_f, δ_f, ζ]`` of :mod:`tsmpc.models.dynamic`
@@ -6,7 +6,7 @@ discretised by **Euler** at ``T_d`` (the published run: 1 ms) at the **8 vertice
 (δ, v, α) only, one common ``Y = P⁻¹`` and one ``W_i`` per vertex, the paper's LQR-LMI at each
 vertex (the Schur form of ``(A_i + B K_i)ᵀ P (A_i + B K_i) − P + Q + K_iᵀ R K_i ≺ 0``,
 ``K_i = W_i Y⁻¹``, as in :mod:`tsmpc.synthesis.kinematic`) and **no objective**: a feasibility
-problem. It has no unique answer and the published gains are unknown (SPEC §14); which point is
+problem. It has no unique answer and the published gains are unknown; which point is
 kept is its own switch (``dynamic_lmi.feasible_point``):
 
 * ``"analytic-center"`` (the ``paper-as-run`` preset): the analytic centre of the 8 vertex LMIs and
@@ -25,7 +25,7 @@ decide"): the steering row's δ_f / ζ ratio sets the start-up transient, and th
 gain sets the headroom on the fastest stretch.
 
 What is *not* certified, by construction of the published design: the interpolated loop between
-the vertices (the model is not affine in the premises, SPEC §6) and, with the as-run law's
+the vertices (the model is not affine in the premises, the paper's LMI designs) and, with the as-run law's
 unclipped memberships, anything outside the box. :func:`grid_report` measures the former on a
 dense grid (Euler model) and reports it; it does not reject the design. The numerical conditioning
 uses the state and input scaling of :mod:`tsmpc.synthesis.dynamic` (reused by import).

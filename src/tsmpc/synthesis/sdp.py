@@ -1,4 +1,4 @@
-"""Solving the design SDPs (SPEC §6): solver choice, failures as :class:`SolverError`, and the
+"""Solving the design SDPs (the paper's LMI designs): solver choice, failures as :class:`SolverError`, and the
 margin ladder that makes every certificate hold with a margin no solver tolerance can flip.
 
 Each design poses its LMIs with a *relative margin* ``t`` built into the SDP (a decrease

@@ -1,8 +1,8 @@
-"""Nonlinear single-track vehicle plant with linear or Pacejka tyres, RK4 (SPEC §3).
+"""Nonlinear single-track vehicle plant with linear or Pacejka tyres, RK4 (the plant model).
 
 State ``x = [X, Y, θ, v, α, ω]`` (global position [m], heading [rad, unwrapped], CoG speed [m/s],
 body slip angle [rad], yaw rate [rad/s]); input ``u = [F_xR, δ]`` (rear drive force [N], front
-steering [rad]); exogenous ``μ(road)`` (longitudinal resistance coefficient, SPEC §3)::
+steering [rad]); exogenous ``μ(road)`` (longitudinal resistance coefficient, the plant model)::
 
     Ẋ = v cos(θ+α),  Ẏ = v sin(θ+α),  θ̇ = ω
     v̇ = [F_xR cos α − F_yF sin(δ−α) + F_yR sin α − ½ρC_dA_r v² − F_res] / M

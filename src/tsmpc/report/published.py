@@ -1,0 +1,1031 @@
+"""Every result the documentation publishes, produced from real runs: the producers of the
+generated blocks of README.md and docs/*.md (:mod:`tsmpc.report.docs`) and of the figures in
+docs/img. ``python docs/generate.py`` is the one command that runs them all (``--only`` a subset,
+``--check`` compares with the published numbers instead of writing).
+
+Each :class:`Producer` is one section of the generator: it runs the runs the text describes
+(the same library calls as the documented commands), renders its blocks and, when asked, writes
+its figures. Runs are deterministic (fixed seeds), so a fresh run reproduces a published number to
+its printed digits; timings are machine-dependent and marked so the drift check skips them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from dataclasses import replace as dc_replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tsmpc.report.docs import BlockId
+
+__all__ = [
+    "PRODUCERS",
+    "TIMING_COLUMNS",
+    "Context",
+    "Produced",
+    "Producer",
+    "load_average",
+    "precise",
+    "producer_names",
+]
+
+#: Table columns holding timings (machine-dependent): regenerated, never drift-checked.
+TIMING_COLUMNS = ("[ms]", "real-time", "wall")
+#: Text lines holding timings: regenerated, never drift-checked.
+TIMING_LINES = ("load average",)
+
+RMSE_KEYS = ("x", "y", "theta", "v", "omega")
+_SYM = {"x": "x", "y": "y", "theta": "θ", "v": "v", "omega": "ω"}
+
+
+@dataclass
+class Context:
+    """What producers share: the repository root, the paper's data, where figures go (None: a
+    scratch folder), a cache of runs shared by producers of one invocation, and progress."""
+
+    root: Path
+    img_dir: Path | None = None
+    progress: Callable[[str], None] = lambda _s: None
+    quick: bool = False  #: the CI subset: only the rows the drift test re-runs
+    max_steps: int | None = None  #: shortened runs (examples under test); never for the docs
+    reference: Path | None = None  #: the paper's reference file (default: ../shared/data)
+    cache: dict[str, Any] = field(default_factory=dict)
+    scratch: Path = field(default_factory=lambda: Path(tempfile.mkdtemp(prefix="tsmpc-docs-")))
+
+    @property
+    def shared(self) -> Path:
+        return self.root.parent / "shared" / "data"
+
+    @property
+    def paper_reference(self) -> Path:
+        return self.reference or self.shared / "paper" / "planner_references_100ms.csv"
+
+    def track(self, name: str) -> Path:
+        return self.shared / "tracks" / f"{name}.csv"
+
+    def figure(self, name: str) -> Path:
+        folder = self.img_dir if self.img_dir is not None else self.scratch / "img"
+        folder.mkdir(parents=True, exist_ok=True)
+        return folder / name
+
+    def memo(self, key: str, fn: Callable[[], Any]) -> Any:
+        if key not in self.cache:
+            self.cache[key] = fn()
+        return self.cache[key]
+
+
+@dataclass
+class Produced:
+    """A producer's output: block bodies, figures written, blocks holding only timings (not
+    drift-checked) and blocks re-run only in part (the fresh table holds a subset of rows)."""
+
+    blocks: dict[BlockId, str] = field(default_factory=dict)
+    figures: list[Path] = field(default_factory=list)
+    timing: set[BlockId] = field(default_factory=set)
+    partial: set[BlockId] = field(default_factory=set)
+
+    def add(self, producer: str, name: str, body: str, *, timing: bool = False,
+            partial: bool = False) -> None:
+        b = BlockId(producer, name)
+        self.blocks[b] = body
+        if timing:
+            self.timing.add(b)
+        if partial:
+            self.partial.add(b)
+
+
+@dataclass(frozen=True)
+class Producer:
+    """One section of the generator."""
+
+    name: str
+    fn: Callable[[Context], Produced]
+    about: str
+    ci: bool = False  #: re-run by the drift test in CI
+
+
+def load_average() -> float:
+    return os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+
+
+# -- formatting ------------------------------------------------------------------------------
+
+#: Extra decimals printed by :func:`_d` (the drift check renders fresh numbers more precisely, so
+#: a published number is compared with the fresh run's value, not with its rounding).
+_EXTRA_DIGITS = [0]
+
+
+@contextlib.contextmanager
+def precise(extra: int = 4) -> Iterator[None]:
+    """Within the block, producers print every number with ``extra`` more decimals (for
+    :func:`tsmpc.report.docs.drift`: the tolerance is then 2 % plus half a unit of the published
+    number's last digit, not of both numbers')."""
+    old = _EXTRA_DIGITS[0]
+    _EXTRA_DIGITS[0] = extra
+    try:
+        yield
+    finally:
+        _EXTRA_DIGITS[0] = old
+
+
+def _d(v: float, d: int) -> str:
+    """``v`` with ``d`` decimals (more inside :func:`precise`)."""
+    return f"{float(v):.{d + _EXTRA_DIGITS[0]}f}"
+
+
+def _f(v: float | None, d: int = 3) -> str:
+    if v is None or not math.isfinite(float(v)):
+        return "—"
+    return _d(v, d)
+
+
+def _rmse_cells(r: dict[str, float]) -> list[str]:
+    return [_f(r[k], 4 if k in ("theta", "omega") else 3) for k in RMSE_KEYS]
+
+
+def _row(cells: Sequence[str]) -> str:
+    return "| " + " | ".join(cells) + " |"
+
+
+def _table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    return "\n".join([_row(head), "|" + "---|" * len(head), *(_row(r) for r in rows)]) + "\n"
+
+
+def _pct(a: float, b: float) -> str:
+    """a relative to b, signed percent."""
+    return ("+" if a >= b else "") + f"{_d(100.0 * (a / b - 1.0), 0)} %".replace("-", "−") if b else "—"
+
+
+def _diverged_at(termination: str) -> str:
+    return termination.split(" at ")[-1] if " at " in termination else termination
+
+
+def _ms(x: float) -> str:
+    return f"{x:.3g}"
+
+
+# -- running ---------------------------------------------------------------------------------
+
+def _experiment(ctx: Context, key: str, cfg: Any, methods: Sequence[str], *, out: Path | None = None,
+                plots: bool = False, **kw: Any) -> Any:
+    """One run through :mod:`tsmpc.sim.experiment` (what ``tsmpc compare`` / ``run`` do),
+    memoised by ``key`` within this invocation."""
+    from tsmpc.sim import experiment
+
+    def go() -> Any:
+        ctx.progress(key)
+        if ctx.max_steps is not None:
+            kw["duration"] = ctx.max_steps * cfg.rates.Tc
+        exp = experiment.prepare(cfg, list(methods), **kw)
+        return experiment.run(exp, out, plots=plots)
+
+    return ctx.memo(key, go)
+
+
+def _simulate(ctx: Context, key: str, cfg: Any, scenario: Any, method: str = "ref", *,
+              oracle: bool = False, plant: Any = None) -> Any:
+    from tsmpc.sim.simulator import simulate
+
+    def go() -> Any:
+        ctx.progress(key)
+        return simulate(cfg, method, scenario, oracle=oracle, plant=plant, max_steps=ctx.max_steps)
+
+    return ctx.memo(key, go)
+
+
+@contextlib.contextmanager
+def _timed_child() -> Iterator[dict[str, float]]:
+    """Wall and CPU time of the child processes run inside the block."""
+    import resource
+
+    r0, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
+    out: dict[str, float] = {}
+    yield out
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    out["wall"] = time.perf_counter() - t0
+    out["cpu"] = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+
+
+def _cli(ctx: Context, *args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """``tsmpc ARGS`` in a fresh process from the repository root (as a user types it)."""
+    e = {**os.environ, **(env or {})}
+    src = str(ctx.root / "src")
+    e["PYTHONPATH"] = os.pathsep.join([src, e.get("PYTHONPATH", "")])
+    res = subprocess.run([sys.executable, "-m", "tsmpc", *args], cwd=ctx.root, env=e,
+                         capture_output=True, text=True, timeout=3600)
+    if res.returncode not in (0, 1):
+        raise RuntimeError(f"tsmpc {' '.join(args)} exited {res.returncode}: {res.stderr[-2000:]}")
+    return res
+
+
+# -- quick start: `tsmpc compare` on the built-in circuit -------------------------------------
+
+def _quickstart_run(ctx: Context) -> tuple[Path, dict[str, float]]:
+    def go() -> tuple[Path, dict[str, float]]:
+        out = ctx.scratch / "compare"
+        ctx.progress("tsmpc compare (built-in circuit, four methods)")
+        with _timed_child() as t:
+            _cli(ctx, "compare", "--out", str(out))
+        t["load"] = load_average()
+        return out, t
+
+    return ctx.memo("quickstart", go)
+
+
+def quickstart(ctx: Context) -> Produced:
+    from tsmpc.config import Config, replace
+    from tsmpc.sim.compare import load_scenario
+    from tsmpc.sim.metrics import compute_metrics
+    from tsmpc.sim.run_dir import load_run
+
+    p = Produced()
+    out, t = _quickstart_run(ctx)
+    run = load_run(out)
+    rows = []
+    for name, m in run.metrics["methods"].items():
+        rows.append([name, *_rmse_cells(m["rmse"]), _f(m["max_abs_lateral_m"]),
+                     _ms(m["mpc_ms"]["median"]), f"{_d(m['realtime_factor'], 0)}×"])
+    p.add("quickstart", "table", _table(
+        ["approach", "x [m]", "y [m]", "θ [rad]", "v [m/s]", "ω [rad/s]", "max \\|e_y\\| [m]",
+         "MPC median [ms]", "real-time factor"], rows))
+    p.add("quickstart", "command", f"load average {_d(t['load'], 1)}: the whole command took "
+          f"{_d(t['wall'], 1)} s of wall time, {_d(t['cpu'], 1)} s of CPU", timing=True)
+    cfg = Config()
+    off = replace(cfg, mpc=replace(cfg.mpc, slip_aware=False, tangent_heading=False))
+    m_off = compute_metrics(_simulate(ctx, "builtin REF, slip-aware and tangent heading off", off,
+                                      load_scenario(off)))
+    p.add("quickstart", "without-slip-aware", f"without them REF's RMSE y is "
+          f"{_d(m_off['rmse']['y'], 3)} m and its max |e_y| {_d(m_off['max_abs_lateral_m'], 2)} m")
+    logs = run.logs
+    if "FZN" in logs and "NL" in logs:
+        k = min(logs["FZN"].n_outer, logs["NL"].n_outer)
+        d = np.abs(logs["FZN"].errors[:k, 1] - logs["NL"].errors[:k, 1])
+        i = int(np.argmax(d))
+        p.add("quickstart", "differences", f"here FZN's lateral error differs from NL's by at most "
+              f"{_d(1000 * d[i], 1)} mm (at t = {_d(logs['NL'].t_outer[i], 0)} s)")
+    for stem in ("friction", "differences", "control", "solve_time"):
+        dst = ctx.figure(f"compare_{stem}.png")
+        shutil.copyfile(out / f"{stem}.png", dst)
+        p.figures.append(dst)
+    # the friction figure's dip at the ice patch, explained with the run's numbers
+    log = logs.get("REF") or next(iter(logs.values()))
+    i = int(np.argmin(log.F_fr_true))
+    p.add("quickstart", "ice", f"{_d(log.F_fr_true[i] / 1000, 1)} kN at t = {_d(log.t_inner[i], 1)} s "
+          f"(μ(road) = {_d(log.mu_road[i], 2)} against the models' μ_o = {run.config.vehicle.mu_nominal:g})")
+    return p
+
+
+def animation(ctx: Context) -> Produced:
+    """The README's GIF: REF of the quick-start run (`tsmpc animate RUN --method ref`)."""
+    from tsmpc.report.animation import animate_run
+    from tsmpc.sim.run_dir import load_run
+
+    p = Produced()
+    out, _ = _quickstart_run(ctx)
+    run = load_run(out)
+    dst = ctx.figure("animation.gif")
+    ctx.progress("animation (REF, whole circuit)")
+    t0 = time.perf_counter()
+    res = animate_run(run.logs["REF"], ctx.scratch / "animation_full.gif", vehicle=run.config.vehicle,
+                      road_width=4.0, mp4=False)
+    full_s = time.perf_counter() - t0
+    # the README shows the fast S-bend, 12 s at 640 × 480 (the full run is 100 MB of GIF)
+    short = animate_run(run.logs["REF"], dst, vehicle=run.config.vehicle, road_width=4.0,
+                        start_s=58.0, duration_s=12.0, size_px=(640, 480), mp4=False)
+    p.figures.append(short.gif)
+    w, h = 800, 600
+    p.add("animation", "timing", f"({res.frames} frames, {w} × {h}) renders in "
+          f"{_d(full_s, 0)} s at load average {_d(load_average(), 1)}", timing=True)
+    return p
+
+
+# -- design time -----------------------------------------------------------------------------
+
+def design_time(ctx: Context) -> Produced:
+    from tsmpc.config import Config
+    from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
+
+    p = Produced()
+    cfg = Config()
+    with tempfile.TemporaryDirectory() as tmp:
+        ctx.progress("LMI designs from an empty cache")
+        t0 = time.perf_counter()
+        load_or_design_kinematic(cfg, Path(tmp))
+        t1 = time.perf_counter()
+        load_or_design_dynamic(cfg, Path(tmp))
+        t2 = time.perf_counter()
+    p.add("design", "time", f"measured {_d(t2 - t0, 1)} s — kinematic {_d(t1 - t0, 1)} s, dynamic "
+          f"{_d(t2 - t1, 1)} s — on 2 cores at load average {_d(load_average(), 1)}", timing=True)
+    return p
+
+
+def terminal_set(ctx: Context) -> Produced:
+    """How far the kinematic design's terminal set lands from the paper's S."""
+    from tsmpc.config import Config
+    from tsmpc.synthesis.cache import load_or_design_kinematic
+
+    p = Produced()
+    S = load_or_design_kinematic(Config()).S
+    paper = np.array([[0.465, 0, 0], [0, 23.813, 76.596], [0, 76.596, 257.251]])
+    nz = paper != 0
+    dev = np.abs(S[nz] / paper[nz] - 1.0) * 100.0
+    p.add("terminal-set", "deviation", f"{_d(dev.min(), 0)}–{_d(dev.max(), 0)} %")
+    return p
+
+
+# -- the ablation on the paper reference -------------------------------------------------------
+
+def ablation_rows() -> list[tuple[str, Any, bool]]:
+    """(label, config, oracle) of each row of the ablation, in order."""
+    from tsmpc.config import Config, replace
+
+    paper = Config.preset("paper")
+    fb = replace(paper, lqr=replace(paper.lqr, speed_feedback=True))
+    return [
+        ("**paper preset**", paper, False),
+        ("+ speed-error feedback", fb, False),
+        ("+ MHE-window friction estimate", replace(fb, lqr=replace(fb.lqr, friction_estimate="window")),
+         False),
+        ("+ outer-loop mechanisms (**= default**)", Config(), False),
+        ("oracle (`--oracle`)", Config(), True),
+        ("paper preset, compensation off", replace(paper, lqr=replace(paper.lqr,
+                                                                      friction_compensation=False)),
+         False),
+    ]
+
+
+def _ablation_runs(ctx: Context) -> list[tuple[str, Any, Any]]:
+    from tsmpc.sim.compare import load_scenario
+
+    out = []
+    for label, cfg, oracle in ablation_rows():
+        log = _simulate(ctx, f"paper reference REF: {label}{' oracle' if oracle else ''}", cfg,
+                        load_scenario(cfg, ctx.paper_reference), oracle=oracle)
+        out.append((label, cfg, log))
+    return out
+
+
+def ablation(ctx: Context) -> Produced:
+    from tsmpc.sim.metrics import PAPER_TABLE5, compute_metrics
+
+    p = Produced()
+    runs = _ablation_runs(ctx)
+    ms = []
+    rows, effort = [], []
+    for label, _cfg, log in runs:
+        m = compute_metrics(log)
+        ev = log.events
+        m["dF_std"] = float(np.std(np.diff(log.command[:, 0])))
+        ms.append(m)
+        steps = f"{ev['mpc_soft']} / {ev['mpc_fallback']}"
+        if log.termination != "completed":
+            rows.append([label, f"diverged at {_diverged_at(log.termination)}", "—", "—", "—", "—",
+                         _f(m["max_abs_lateral_m"], 2)])
+            effort.append([label, steps, "—"])
+            continue
+        rows.append([label, *_rmse_cells(m["rmse"]), _f(m["max_abs_lateral_m"], 2)])
+        effort.append([label, steps, f"{_d(m['dF_std'], 0)}"])
+    t5 = PAPER_TABLE5["REF"]
+    rows.append(["REF, paper Table 5", *_rmse_cells(t5), "—"])
+    # two narrow tables rather than one wide one: each fits a page at 1400 px
+    p.add("ablation", "table", _table(["row", "x", "y", "θ", "v", "ω", "max \\|e_y\\| [m]"], rows))
+    p.add("ablation", "effort", _table(["row", "soft / fallback MPC steps", "σ(ΔF_xR) [N]"], effort))
+    paper, fb, win, dflt, oracle, _off = ms
+    (_, _, log_paper), (_, _, log_fb), (_, _, log_win), _, _, (_, _, log_off) = runs
+
+    def ratios(m: dict[str, Any]) -> str:
+        return ", ".join(f"{_d(m['rmse'][k] / t5[k], 2)}× ({_SYM[k]})" for k in RMSE_KEYS)
+
+    def err_rms(log: Any, raw: bool) -> float:
+        est = log.F_fr_raw if raw else log.F_fr_hat
+        return float(np.sqrt(np.mean((est - log.F_fr_true) ** 2)))
+
+    status = ("completes the paper run with no soft or fallback MPC step"
+              if log_paper.termination == "completed" and not log_paper.events["mpc_soft"]
+              and not log_paper.events["mpc_fallback"] else f"ends: {log_paper.termination}")
+    k10 = min(round(10.0 / log_off.Tc), log_off.n_outer - 1)
+    bullets = [
+        f"* **paper preset**: {status}; against the paper's REF row it lands at {ratios(paper)}.",
+        f"* **+ speed-error feedback**: RMSE x {_d(paper['rmse']['x'], 3)} → {_d(fb['rmse']['x'], 3)} m "
+        f"(÷ {_d(paper['rmse']['x'] / fb['rmse']['x'], 1)}), RMSE v {_d(paper['rmse']['v'], 3)} → "
+        f"{_d(fb['rmse']['v'], 3)} m/s (÷ {_d(paper['rmse']['v'] / fb['rmse']['v'], 1)}).",
+        f"* **+ MHE-window friction estimate**: RMSE x {_d(fb['rmse']['x'], 4)} → "
+        f"{_d(win['rmse']['x'], 4)} m, "
+        f"RMSE v {_d(fb['rmse']['v'], 3)} → {_d(win['rmse']['v'], 3)} m/s; σ(ΔF_xR) {_d(fb['dF_std'], 0)} → "
+        f"{_d(win['dF_std'], 0)} N; RMS error of the friction estimate {_d(err_rms(log_fb, True), 0)} N "
+        f"(one-step formula) → {_d(err_rms(log_win, False), 0)} N (window).",
+        f"* **+ outer-loop mechanisms (= default)**: RMSE y {_d(win['rmse']['y'], 3)} → "
+        f"{_d(dflt['rmse']['y'], 3)} m, max \\|e_y\\| {_d(win['max_abs_lateral_m'], 2)} → "
+        f"{_d(dflt['max_abs_lateral_m'], 2)} m, RMSE θ {_d(win['rmse']['theta'], 4)} → "
+        f"{_d(dflt['rmse']['theta'], 4)} rad.",
+        f"* **oracle**: RMSE x {_d(oracle['rmse']['x'], 3)} m against the default's "
+        f"{_d(dflt['rmse']['x'], 3)} m.",
+        f"* **compensation off**: e_x is {_d(log_off.errors[k10, 0], 1)} m at t = "
+        f"{_d(log_off.t_outer[k10] - log_off.t_outer[0], 0)} s; the run "
+        + ("completes." if log_off.termination == "completed"
+           else f"ends {log_off.termination.split(':')[0]} at {_diverged_at(log_off.termination)}."),
+    ]
+    p.add("ablation", "reading", "\n".join(bullets) + "\n")
+    # the paper preset's speed loop, from the same runs (docs/paper.md)
+    def miss(log: Any) -> tuple[float, float, float]:
+        v_end = log.state_outer[1:, 3]
+        u = log.u_c[:-1, 0]
+        vd = log.ref[:-1, 3]
+        def rms(a):
+            return (float(np.sqrt(np.mean(a ** 2))))
+        return rms(v_end - u), rms(u - vd), rms(log.ref[:, 3] - log.state_outer[:, 3])
+
+    a, b, c = miss(log_paper)
+    a2, b2, _ = miss(log_fb)
+    p.add("ablation", "speed-loop",
+          f"On the paper run with the paper preset, v at the end of each T_c misses the command "
+          f"held over it by {_d(a, 2)} m/s RMS; the MPC makes up for it by commanding v_ref {_d(b, 2)} m/s "
+          f"RMS away from v_d — the outer loop closes the speed loop itself, through an input its "
+          f"model takes for the speed — and the car's own v stays within {_d(c, 2)} m/s RMS of v_d at "
+          f"the price of RMSE_x {_d(paper['rmse']['x'], 2)} m. With the speed-error feedback the miss "
+          f"drops to {_d(a2, 2)} m/s RMS and the command's departure from v_d to {_d(b2, 2)} m/s RMS.")
+    return p
+
+
+def slip_aware(ctx: Context) -> Produced:
+    """The two outer-loop mechanisms switched one at a time (docs/design-decisions.md)."""
+    from tsmpc.config import Config, replace
+    from tsmpc.sim.compare import load_scenario
+    from tsmpc.sim.metrics import compute_metrics
+
+    p = Produced()
+    rows = []
+    base = Config()
+    for sa, th in ((False, False), (True, False), (False, True), (True, True)):
+        cfg = replace(base, mpc=replace(base.mpc, slip_aware=sa, tangent_heading=th))
+        m = compute_metrics(_simulate(ctx, f"paper reference REF, slip-aware {sa}, tangent {th}", cfg,
+                                      load_scenario(cfg, ctx.paper_reference)))
+        bold = (lambda s: f"**{s}**") if sa and th else (lambda s: s)
+        rows.append(["on" if sa else "off", "on (default)" if sa and th else ("on" if th else "off"),
+                     bold(_f(m["rmse"]["y"])), bold(_f(m["max_abs_lateral_m"])),
+                     _f(m["rmse"]["theta"], 4)])
+    p.add("slip-aware", "table", _table(["slip-aware", "tangent heading", "RMSE y [m]",
+                                         "max \\|e_y\\| [m]", "RMSE θ [rad]"], rows))
+    return p
+
+
+def speed_mode(ctx: Context) -> Produced:
+    """Speed-mode time constants per vertex of the dynamic design, and the figure."""
+    from tsmpc.config import Config
+    from tsmpc.control.speed_mode import speed_modes
+    from tsmpc.models.dynamic import DynamicTS
+    from tsmpc.synthesis.cache import load_or_design_dynamic
+
+    p = Produced()
+    cfg = Config()
+    dd = load_or_design_dynamic(cfg)
+    verts = DynamicTS(cfg.dynamic_box, cfg.vehicle, cfg.rates.Td).premise_box.vertices()
+    lam, tau = cfg.dynamic_lmi.filter_bandwidth, cfg.lqr.speed_time_constant
+    modes = speed_modes(dd.K, verts, cfg.vehicle, lam, tau)
+    groups: dict[tuple[float, ...], list[int]] = {}
+    for s in modes:
+        key = (round(s.design, 2), round(s.reference_scheduled, 2), round(s.static_gain, 2),
+               round(s.with_speed_feedback, 2), s.v)
+        groups.setdefault(key, []).append(s.vertex)
+    rows = []
+    for _key, idx in groups.items():
+        s = modes[idx[0]]
+        poles = ", ".join(f"{t:.2g}" for t in s.design_poles_tau)
+        rows.append([f"{', '.join(map(str, idx))}: (±{_d(np.degrees(abs(s.delta)), 0)}°, {s.v:g}, "
+                     f"±{abs(s.alpha):g})", f"{_d(s.design, 2)}", f"{_d(s.reference_scheduled, 2)}",
+                     f"{_d(s.static_gain, 2)}", f"{_d(s.with_speed_feedback, 2)}", poles])
+    p.add("speed-mode", "table", _table(
+        ["vertex (δ, v, α)", "design model [s]", "feed-forward at the reference (old) [s]",
+         "N̄ at the measured speed (paper preset) [s]", "+ speed-error feedback (default) [s]",
+         "design closed-loop poles 1/\\|Re s\\| [s]"], rows))
+    def rng(attr):
+        return (f"{_d(min(getattr(s, attr) for s in modes), 2)}–"
+               f"{_d(max(getattr(s, attr) for s in modes), 2)} s")
+    gains = [-k[0, 0] / (1.0 - k[0, 3]) for k in dd.K]
+    p.add("speed-mode", "summary",
+          f"* design model: {rng('design')}; the LQR's own speed gain through the filter is "
+          f"{_d(min(gains), 0)}–{_d(max(gains), 0)} N per m/s (−K_v/(1 − K_F) over the vertices);\n"
+          f"* feed-forward at the reference (the old law): {rng('reference_scheduled')};\n"
+          f"* static reference gain N̄ at the measured speed (paper preset): {rng('static_gain')};\n"
+          f"* + speed-error feedback, τ = {tau:g} s (default): {rng('with_speed_feedback')}.\n")
+    dst = ctx.figure("speed_mode.png")
+    _speed_mode_figure(cfg, dd, dst)
+    p.figures.append(dst)
+    return p
+
+
+def _speed_mode_figure(cfg: Any, dd: Any, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from tsmpc.control.speed_mode import speed_modes
+    from tsmpc.models.dynamic import DynamicTS
+
+    pb = DynamicTS(cfg.dynamic_box, cfg.vehicle, cfg.rates.Td).premise_box
+    v = np.linspace(cfg.dynamic_box.v[0], cfg.dynamic_box.v[1], 37)
+    z = np.stack([np.zeros_like(v), v, np.zeros_like(v)], axis=-1)
+    K = np.tensordot(pb.memberships(z), dd.K, axes=(1, 0))
+    modes = speed_modes(K, z, cfg.vehicle, cfg.dynamic_lmi.filter_bandwidth, cfg.lqr.speed_time_constant)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for attr, label, style in (
+        ("reference_scheduled", "feed-forward scheduled at the reference (exact equilibrium)", "r--"),
+        ("design", "LMI design model (rolling resistance as −μ_o g/v · v)", "k:"),
+        ("static_gain", "static reference gain N̄ at the measured speed (paper preset)", "b-"),
+        ("with_speed_feedback", "+ speed-error feedback, τ = 0.3 s (default)", "g-"),
+    ):
+        ax.plot(v, [getattr(m, attr) for m in modes], style, label=label)
+    ax.set_xlabel("speed v [m/s]")
+    ax.set_ylabel("63 % time of a v_ref step [s]")
+    ax.set_yscale("log")
+    ax.axhline(cfg.rates.Tc, color="0.6", lw=0.8)
+    ax.text(v[-1], cfg.rates.Tc * 1.1, "T_c (what the MPC assumes)", ha="right", fontsize=8, color="0.4")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("Speed mode of the inner loop (paper's LQR weights, δ = 0)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+# -- the four methods --------------------------------------------------------------------------
+
+def _agreement(metrics: dict[str, Any]) -> float:
+    """Largest relative spread of any RMSE column across the methods, in percent."""
+    worst = 0.0
+    for k in RMSE_KEYS:
+        vals = [m["rmse"][k] for m in metrics["methods"].values()]
+        worst = max(worst, (max(vals) - min(vals)) / min(vals) * 100.0)
+    return worst
+
+
+def four_methods(ctx: Context) -> Produced:
+    from tsmpc.config import Config
+
+    p = Produced()
+    res = _experiment(ctx, "paper reference, four methods", Config(), ["fzn", "ref", "iter", "nl"],
+                      reference=ctx.paper_reference)
+    rows = [[n, *_rmse_cells(m["rmse"]), _ms(m["mpc_ms"]["median"]), f"{_d(m['wall_s'], 1)}"]
+            for n, m in res.metrics["methods"].items()]
+    p.add("four-methods", "table", _table(["approach", "x", "y", "θ", "v", "ω", "MPC median [ms]",
+                                           "run wall [s]"], rows))
+    p.add("four-methods", "agreement", f"agree within {max(1, math.ceil(_agreement(res.metrics)))} %")
+    p.add("four-methods", "timing", f"measured at load average {_d(load_average(), 1)}", timing=True)
+    return p
+
+
+def offset_start(ctx: Context) -> Produced:
+    """`tsmpc compare --reference PAPER --scenario offset_start`: where the methods differ."""
+    from tsmpc.config import Config
+
+    p = Produced()
+    out = ctx.scratch / "offset_start"
+    res = _experiment(ctx, "paper reference, offset_start, four methods", Config(),
+                      ["fzn", "ref", "iter", "nl"], reference=ctx.paper_reference,
+                      robustness="offset_start", out=None if ctx.quick else out, plots=not ctx.quick)
+    ms = res.metrics["methods"]
+    rows = []
+    for n, m in ms.items():
+        clipped = "—" if n == "NL" else str(m["events"]["mpc_scheduling_clipped"])
+        rows.append([n, *_rmse_cells(m["rmse"]), _f(m["max_abs_lateral_m"], 2), clipped,
+                     _ms(m["mpc_ms"]["median"])])
+    p.add("offset-start", "table", _table(
+        ["approach", "x", "y", "θ", "v", "ω", "max \\|e_y\\| [m]", "clipped premise samples",
+         "MPC median [ms]"], rows))
+    nl = ms.get("NL")
+    if nl is not None:
+        parts = []
+        for n, m in ms.items():
+            if n == "NL":
+                continue
+            k = max(RMSE_KEYS, key=lambda key, m=m: abs(m["rmse"][key] / nl["rmse"][key] - 1.0))
+            parts.append(f"{n} {_pct(m['rmse'][k], nl['rmse'][k])} in {_SYM[k]}")
+        p.add("offset-start", "vs-nl", "the largest difference of each method from NL over the "
+              "five RMSE columns: " + ", ".join(parts))
+    if not ctx.quick:
+        dst = ctx.figure("offset_start_errors.png")
+        shutil.copyfile(out / "errors.png", dst)
+        p.figures.append(dst)
+    return p
+
+
+# -- CommonRoad ----------------------------------------------------------------------------------
+
+_CR_ROWS = ("CommonRoad ST", "tsmpc plant, same parameters (linear tyres, same servo)",
+            "CommonRoad multi-body (`--plant commonroad-mb`)")
+
+
+def commonroad(ctx: Context) -> Produced:
+    """REF on the built-in circuit on CommonRoad's vehicle 2 (`tsmpc run --plant commonroad-st`
+    / `commonroad-mb`) and on tsmpc's plant with the same parameters (examples/commonroad_plant.py)."""
+    from tsmpc.config import Config, TyreModel, TyreParams
+    from tsmpc.sim.compare import load_scenario
+    from tsmpc.sim.metrics import compute_metrics
+    from tsmpc.vehicle.actuators import Actuators, SteeringServo
+    from tsmpc.vehicle.commonroad import commonroad_config
+
+    p = Produced()
+    logs: dict[str, Any] = {}
+    walls: dict[str, float] = {}
+    wanted = _CR_ROWS[:1] if ctx.quick else _CR_ROWS
+    for label in wanted:
+        if label == _CR_ROWS[1]:
+            cfg = commonroad_config(Config(), vehicle_id=2)
+            sc = dc_replace(load_scenario(cfg), measured_steering=True, plant_tyre=TyreParams(
+                model=TyreModel.LINEAR), actuators=Actuators(SteeringServo(time_constant_s=0.05,
+                                                                              rate_limit=0.4)))
+            logs[label] = _simulate(ctx, "CommonRoad vehicle 2 on tsmpc's plant", cfg, sc)
+        else:
+            plant = "commonroad-st" if label == _CR_ROWS[0] else "commonroad-mb"
+            res = _experiment(ctx, f"built-in circuit REF on {plant}", Config(), ["ref"], plant=plant,
+                              cr_vehicle=2)
+            logs[label] = res.logs["REF"]
+        walls[label] = logs[label].wall_s
+    ms = {k: compute_metrics(v) for k, v in logs.items()}
+    rows = [[k, *(_f(m["rmse"][c], 4) for c in RMSE_KEYS), _f(m["max_abs_lateral_m"])]
+            for k, m in ms.items()]
+    p.add("commonroad", "table", _table(["plant", "x", "y", "θ", "v", "ω", "max abs(e_y) [m]"], rows),
+          partial=ctx.quick)
+    if ctx.quick:
+        return p
+    st, own, mb = (ms[k] for k in _CR_ROWS)
+    p.add("commonroad", "vs-own", "; ".join(f"{_SYM[k]} {_pct(st['rmse'][k], own['rmse'][k])}"
+                                            for k in RMSE_KEYS))
+    fails, speeds = [], []
+    for log in logs.values():
+        bad = log.mhe_status == "failed"
+        fails.append(int(bad.sum()))
+        if bad.any():
+            speeds += [float(log.state[bad, 3].min()), float(log.state[bad, 3].max())]
+    p.add("commonroad", "mhe", f"{min(fails)}–{max(fails)} failed steps"
+          + (f" (model prediction used) at {_d(min(speeds), 1)}–{_d(max(speeds), 1)} m/s" if speeds else ""))
+    sim_s = logs[_CR_ROWS[2]].simulated_s
+    p.add("commonroad", "mb-cost", f"costs {_d(walls[_CR_ROWS[2]] / sim_s, 2)} s of computation per "
+          f"simulated second (load average {_d(load_average(), 1)})", timing=True)
+    p.add("commonroad", "mb-max", f"{_d(mb['max_abs_lateral_m'], 2)} m")
+    return p
+
+
+# -- race tracks, the envelope -----------------------------------------------------------------
+
+TRACKS = ("Hockenheim", "Monza", "Silverstone", "Spa", "Zandvoort")
+
+
+def _plan(ctx: Context, track: str, *extra: str) -> Path:
+    """`tsmpc plan TRACK --out t.csv [extra]` (in this process)."""
+    from typer.testing import CliRunner
+
+    from tsmpc.cli import app
+
+    def go() -> Path:
+        out = ctx.scratch / "plans" / f"{track}{'_'.join(extra)}.csv"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        res = CliRunner().invoke(app, ["plan", str(ctx.track(track)), "--out", str(out), *extra])
+        if res.exit_code != 0:
+            raise RuntimeError(f"tsmpc plan {track} failed: {res.output}")
+        return out
+
+    return ctx.memo(f"plan {track} {extra}", go)
+
+
+def _track_run(ctx: Context, track: str, *, before: bool = False, laps: int = 1,
+               plan: Sequence[str] = ()) -> Any:
+    from tsmpc.config import Config, replace
+
+    cfg = Config()
+    if before:
+        cfg = replace(cfg, mpc=replace(cfg.mpc, slip_aware=False, tangent_heading=False))
+    key = f"{track} REF{' before' if before else ''}{f' {laps} laps' if laps > 1 else ''} {plan}"
+    return _experiment(ctx, key, cfg, ["ref"], reference=_plan(ctx, track, *plan), laps=laps)
+
+
+def race_tracks(ctx: Context) -> Produced:
+    p = Produced()
+    rows = []
+    for track in (("Zandvoort",) if ctx.quick else TRACKS):
+        after = _track_run(ctx, track).metrics["methods"]["REF"]
+        before = _track_run(ctx, track, before=True).metrics["methods"]["REF"]
+        ev = after["events"]
+        rows.append([track, f"{_d(before['max_abs_lateral_m'], 2)} / {_d(before['rmse']['y'], 3)}",
+                     f"{_d(after['max_abs_lateral_m'], 2)} / {_d(after['rmse']['y'], 3)}",
+                     _f(after["rmse"]["x"]), f"{_d(after['outer_steps'] * 0.1, 0)}",
+                     str(ev["mpc_soft"] + ev["mpc_fallback"])])
+    p.add("race-tracks", "table", _table(
+        ["track", "outer loop of the paper: max \\|e_y\\| / RMSE y [m]", "default", "RMSE x default [m]",
+         "lap [s]", "soft + fallback MPC steps"], rows), partial=ctx.quick)
+    if ctx.quick:
+        return p
+    laps = _track_run(ctx, "Zandvoort", laps=3).metrics["methods"]["REF"]
+    p.add("race-tracks", "laps", ", ".join(f"{_d(v, 3)}" for v in laps["max_abs_lateral_per_lap_m"])
+          + " m")
+    return p
+
+
+def envelope(ctx: Context) -> Produced:
+    """Monza beyond the default box (docs/envelope.md)."""
+    from tsmpc.config import Config, replace
+
+    p = Produced()
+    plan = ("--v-max", "25", "--a-lat", "6")
+    fast = _track_run(ctx, "Monza", plan=plan).metrics["methods"]["REF"]
+    ev = fast["events"]
+    cfg = Config()
+    off = replace(cfg, mpc=replace(cfg.mpc, slip_aware=False, tangent_heading=False))
+    m_off = _experiment(ctx, "Monza 25 m/s REF, slip-aware off", off, ["ref"],
+                        reference=_plan(ctx, "Monza", *plan)).metrics["methods"]["REF"]
+    soft = ev["mpc_soft"] + ev["mpc_fallback"]
+    p.add("envelope", "fast",
+          f"the lap ({_d(fast['outer_steps'] * 0.1, 0)} s) ends {fast['termination']} with max |e_y| "
+          f"{_d(fast['max_abs_lateral_m'], 2)} m, RMSE y {_d(fast['rmse']['y'], 3)} m, RMSE v "
+          f"{_d(fast['rmse']['v'], 3)} m/s and {'no' if soft == 0 else soft} soft or fallback MPC "
+          f"step{'' if soft == 1 else 's'}; with the boxes widened but without the slip-aware loop "
+          f"and the tangent heading max |e_y| is {_d(m_off['max_abs_lateral_m'], 2)} m")
+    grip = _experiment(ctx, "Monza a_lat 10 REF", Config(), ["ref"],
+                       reference=_plan(ctx, "Monza", "--v-max", "25", "--a-lat", "10"))
+    g = grip.metrics["methods"]["REF"]
+    p.add("envelope", "grip", f"`REF ({g['status']})`: {g['termination']}")
+    return p
+
+
+# -- robustness (docs/sweeps.md) ---------------------------------------------------------------
+
+_SCENARIOS = {
+    "nominal": "nominal",
+    "ice_patch": "`ice_patch` (30 m of μ = 0.1, tyre grip scaled)",
+    "wet_section": "`wet_section` (μ = 0.6 on 40 % of the path)",
+    "noise_x10": "`noise_x10`",
+    "sensor_dropout": "`sensor_dropout` (0.2 s frozen every 5 s)",
+    "nan_bursts": "`nan_bursts` (50 ms of NaN every 7 s)",
+    "mass_stiffness_mismatch": "`mass_stiffness_mismatch` (+20 % M, −20 % C)",
+    "actuator_lag": "`actuator_lag` (steering servo 50 ms / 0.4 rad/s, force lag 50 ms, applied "
+                    "steering measured)",
+}
+
+
+def _sweep_task(ctx: Context, key: str, **params: Any) -> dict[str, Any]:
+    """One run as `tsmpc sweep` runs it (a task of a one-point sweep, executed here)."""
+    import tomli_w
+
+    from tsmpc.sweep import expand, load_sweep, run_task
+
+    def go() -> dict[str, Any]:
+        ctx.progress(key)
+        f = ctx.scratch / "sweeps" / f"{abs(hash(key))}.toml"
+        f.parent.mkdir(parents=True, exist_ok=True)
+        spec = {"name": "docs", "grid": {"method": ["ref"], **{k: [v] for k, v in params.items()}}}
+        f.write_text(tomli_w.dumps(spec), encoding="utf-8")
+        (task,) = expand(load_sweep(f))
+        return run_task(task)
+
+    return ctx.memo(key, go)
+
+
+def robustness(ctx: Context) -> Produced:
+    from tsmpc.sim.compare import load_scenario
+
+    p = Produced()
+    rows = []
+
+    def row(label: str, recs: Sequence[dict[str, Any]]) -> list[str]:
+        cells = []
+        for k in ("x", "y", "v"):
+            cells.append(" / ".join(_f(r["metrics"]["rmse"][k]) if r["status"] == "completed" else "—"
+                                    for r in recs))
+        cells.append(" / ".join(_f(r["metrics"]["max_abs_lateral_m"], 2) if r["status"] == "completed"
+                                else "> 5" for r in recs))
+        ok = all(r["status"] == "completed" for r in recs)
+        return [label, *cells, "yes" if ok else "**no**"]
+
+    for name, label in _SCENARIOS.items():
+        rows.append(row(label, [_sweep_task(ctx, f"sweep: builtin {name}", scenario=name)]))
+    for track in TRACKS:
+        path = str(ctx.track(track))
+        rec = _sweep_task(ctx, f"sweep: {track} lap", track=path)
+        rows.append(row(f"{track} lap ({_d(rec['metrics']['outer_steps'] * 0.1, 0)} s)", [rec]))
+    rows.append(row("sensor noise × 100 (stress)",
+                    [_sweep_task(ctx, "sweep: noise x100", noise_scale=100.0)]))
+    monza = str(ctx.track("Monza"))
+    speed = {}
+    for s in (1.2, 1.3):
+        recs = [_sweep_task(ctx, f"sweep: builtin speed x{s}", speed_scale=s),
+                _sweep_task(ctx, f"sweep: Monza speed x{s}", speed_scale=s, track=monza)]
+        speed[s] = recs
+        rows.append(row(f"speed × {s:g}, circuit / Monza", recs))
+    p.add("robustness", "table", _table(["scenario", "RMSE x [m]", "RMSE y [m]", "RMSE v [m/s]",
+                                         "max \\|e_y\\| [m]", "survived"], rows))
+    # where the controller stops: the first speed scaling that does not survive
+    stops = []
+    for s, recs in speed.items():
+        if all(r["status"] == "completed" for r in recs):
+            continue
+        for where, r in zip(("the circuit", "Monza"), recs, strict=True):
+            clipped = r["metrics"]["events"]["mpc_scheduling_clipped"]
+            end = (f"ends {r['reason']}" if r["status"] != "completed" else "completes")
+            stops.append(f"on {where} {clipped} clipped premise samples and the run {end}")
+        p.add("robustness", "stops", f"Speed × {s:g}: " + "; ".join(stops) + ".")
+        break
+    else:
+        p.add("robustness", "stops", "Every speed scaling above completes.")
+    # actuators: the actuator_lag scenario with other measurement choices
+    from tsmpc.config import Config
+    from tsmpc.robustness import apply_robustness
+    from tsmpc.sim.metrics import compute_metrics
+    from tsmpc.vehicle.actuators import Actuators, ForceLag, SteeringServo
+
+    cfg, sc = apply_robustness("actuator_lag", Config(), load_scenario(Config()))
+    unmeasured = compute_metrics(_simulate(ctx, "actuator_lag, steering not measured", cfg,
+                                           dc_replace(sc, measured_steering=False)))
+    force = compute_metrics(_simulate(ctx, "actuator_lag, force measured too", cfg,
+                                      dc_replace(sc, measured_force=True)))
+    slow = dc_replace(sc, actuators=Actuators(SteeringServo(0.05, 0.4), ForceLag(0.1)))
+    log_slow = _simulate(ctx, "actuator_lag, 0.1 s force lag", cfg, slow)
+    k40 = min(log_slow.n_outer, int(40.0 / log_slow.Tc))
+    v_err = log_slow.ref[:k40, 3] - log_slow.state_outer[:k40, 3]
+    sat = float(np.mean(log_slow.saturated[: k40 * round(log_slow.Tc / log_slow.Td)]))
+    p.add("robustness", "actuators",
+          f"y {_d(unmeasured['rmse']['y'], 3)} m with the steering not measured. Measuring the "
+          f"delivered force and giving it to the MHE as well gives RMSE x {_d(force['rmse']['x'], 3)} m, "
+          f"v {_d(force['rmse']['v'], 3)} m/s, the inner loop saturated on "
+          f"{force['events']['inner_saturated']} steps. With a 0.1 s force lag the first 40 s have "
+          f"a v RMSE of {_d(float(np.sqrt(np.mean(v_err ** 2))), 2)} m/s, the inner loop saturated "
+          f"{_d(100 * sat, 0)} % of the time ({log_slow.termination})")
+    return p
+
+
+def sweep_example(ctx: Context) -> Produced:
+    """`tsmpc sweep examples/sweep.toml`: its figure and how long it takes."""
+    p = Produced()
+    out = ctx.scratch / "sweep"
+    ctx.progress("tsmpc sweep examples/sweep.toml")
+    with _timed_child() as t:
+        _cli(ctx, "sweep", "examples/sweep.toml", "--out", str(out))
+    import pandas as pd
+
+    n = len(pd.read_csv(out / "aggregate.csv"))
+    p.add("sweep-example", "count", f"{n} runs")
+    p.add("sweep-example", "timing", f"{_d(t['wall'], 0)} s wall on 2 cores at load average "
+          f"{_d(load_average(), 1)}, kernels cached", timing=True)
+    dst = ctx.figure("sweep_by_scenario.png")
+    shutil.copyfile(out / "by_scenario.png", dst)
+    p.figures.append(dst)
+    return p
+
+
+# -- Table 5 explained (issue 22's producer) ---------------------------------------------------
+
+def paper_explained(ctx: Context) -> Produced:
+    from tsmpc.report.paper_explained import generate
+
+    p = Produced()
+    rep = generate(ctx.paper_reference, ctx.img_dir if ctx.img_dir is not None else ctx.scratch / "img",
+                   progress=ctx.progress)
+    for name, body in rep.blocks.items():
+        p.add("paper-explained", name, body)
+    p.figures += list(rep.figures)
+    return p
+
+
+# -- benchmarks (timings) ----------------------------------------------------------------------
+
+def _bench(ctx: Context, name: str, *args: str) -> dict[str, Any]:
+    import json
+
+    def go() -> dict[str, Any]:
+        ctx.progress(f"benchmarks/{name}.py")
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ctx.root / "src"),
+                                                            os.environ.get("PYTHONPATH", "")])}
+        res = subprocess.run([sys.executable, str(ctx.root / "benchmarks" / f"{name}.py"), "--json",
+                              *args], cwd=ctx.root, env=env, capture_output=True, text=True,
+                             timeout=3600, check=True)
+        return json.loads(res.stdout[res.stdout.index("{"):])
+
+    return ctx.memo(f"bench {name}", go)
+
+
+def benchmarks(ctx: Context) -> Produced:
+    """The timing tables and sentences of README.md and docs/performance.md (never drift-checked)."""
+    p = Produced()
+    load0 = load_average()
+    mpc = _bench(ctx, "mpc_step")
+    inner = _bench(ctx, "inner_step")
+    plant = _bench(ctx, "plant_step")
+    casc = _bench(ctx, "cascade_run", "--methods", "ref,nl")
+    step = _bench(ctx, "cascade_step")
+    load = 0.5 * (load0 + load_average())
+    p.add("benchmarks", "blocks", _render_blocks(mpc, inner, plant, load), timing=True)
+    p.add("benchmarks", "run", _render_run(casc), timing=True)
+    s = step["results"]
+    p.add("benchmarks", "cascade-step", f"measured at load average {_d(step['load_avg_1min'], 1)} on 2 "
+          f"cores: median {_d(s['step']['median'], 3)} ms per call, overhead "
+          f"{_d(s['overhead']['median'], 4)} ms = {_d(100 * s['overhead_ratio_median'], 0)} %", timing=True)
+    # compiling the kernels into an empty cache, then loading them
+    with tempfile.TemporaryDirectory() as tmp:
+        env = {"NUMBA_CACHE_DIR": tmp}
+        ctx.progress("tsmpc warmup (empty kernel cache, then again)")
+        with _timed_child() as first:
+            _cli(ctx, "warmup", env=env)
+        with _timed_child() as again:
+            _cli(ctx, "warmup", env=env)
+    p.add("benchmarks", "compile", f"{_d(first['wall'], 1)} s wall at load average {_d(load_average(), 1)}; "
+          f"a later `tsmpc warmup` process, which only loads them: {_d(again['wall'], 1)} s", timing=True)
+    with _timed_child() as cmd:
+        _cli(ctx, "compare", "--reference", str(ctx.paper_reference), "--methods", "ref", "--no-plots",
+             "--out", str(ctx.scratch / "bench_compare"))
+    p.add("benchmarks", "command", f"{_d(cmd['wall'], 1)} s wall ({_d(cmd['cpu'], 1)} s CPU) at load average "
+          f"{_d(load_average(), 1)}", timing=True)
+    sw = _bench(ctx, "sweep_scaling")
+    p.add("benchmarks", "sweep-scaling", f"measured a {_d(sw['speedup_2_over_1'], 2)}× speed-up from 1 to "
+          f"2 workers ({sw['runs']} runs, load average {_d(load_average(), 1)})", timing=True)
+    return p
+
+
+def _med(d: dict[str, Any], key: str) -> float:
+    return float(d[key]["median"])
+
+
+def _speedup(a: float, b: float) -> str:
+    return f"{_d(b / a, 0)}×" if math.isfinite(b) and a > 0 else "—"
+
+
+def _render_blocks(mpc: dict[str, Any], inner: dict[str, Any], plant: dict[str, Any], load: float) -> str:
+    r, rn = mpc["results"], mpc.get("results_numpy", {})
+    def num(d, k):
+        return (_med(d, k) if k in d else float("nan"))
+    rows = []
+    for m in ("FZN", "REF", "ITER"):
+        a, b = _med(r, m), num(rn, m)
+        rows.append([f"TS-MPC {m}", f"{_d(a, 3)}", _f(b), _speedup(a, b)])
+    if "NL" in r:
+        nl, ref = _med(r, "NL"), _med(r, "REF")
+        extra = f" (numpy REF: {_d(nl / num(rn, 'REF'), 1)}×)" if "REF" in rn else ""
+        rows.append(["NL-MPC (IPOPT, warm-started)", f"{_d(nl, 2)}", "—",
+                     f"NL/REF {_d(nl / ref, 0)}×{extra}"])
+    ir, irn = inner["results"], inner.get("results_numpy", {})
+    for key, label, d in (("mhe", "MHE-UIO", 3), ("lqr", "TS-LQR (static reference gain)", 4)):
+        a, b = _med(ir, key), num(irn, key)
+        rows.append([label, f"{a:.{d}f}", _f(b), _speedup(a, b)])
+    blk, blkn = plant["block_10steps_ms"], plant.get("block_10steps_ms_numpy", {})
+    kinds = ("pacejka", "linear")
+    a = [blk[k] for k in kinds]
+    b = [blkn.get(k, float("nan")) for k in kinds]
+    rows.append(["plant block, 10 RK4 steps (Pacejka / linear)", " / ".join(f"{_d(x, 4)}" for x in a),
+                 " / ".join(_f(x) for x in b),
+                 " / ".join(_speedup(x, y) for x, y in zip(a, b, strict=True))])
+    return (f"Measured at load average {_d(load, 1)} on the 2-core machine shared with other jobs "
+            "(`mpc_step.py`, `inner_step.py`, `plant_step.py`; the NL/REF ratio is measured in the "
+            "same run; the paper reports 40–50×):\n\n"
+            + _table(["block (median, ms)", "compiled", "numpy", "speed-up"], rows))
+
+
+def _render_run(casc: dict[str, Any]) -> str:
+    ref = casc["results"]["REF"]
+    nump = casc.get("results_numpy", {}).get("REF")
+    ms = ref["ms"]
+    part = ", ".join(f"{label} {_d(ms[k]['median'], 4)} / {_d(ms[k]['p99'], 4)}"
+                     for k, label in (("mpc", "MPC"), ("mhe", "MHE"), ("lqr", "TS-LQR"),
+                                      ("plant_block", "plant block")))
+    nl = casc["results"].get("NL")
+    return (f"Whole paper run ({_d(ref['simulated_s'], 1)} s simulated, `cascade_run.py`): REF's loop "
+            f"takes {_d(ref['loop_s'], 2)} s wall / {_d(ref['simulate_cpu_s'], 2)} s CPU "
+            f"({_d(ref['realtime_factor'], 0)}× real time"
+            + (f"; {_d(nump['loop_s'], 1)} s with the numpy blocks" if nump else "")
+            + f"); inside the cascade (medians / p99, ms) {part}"
+            + (f"; NL's loop {_d(nl['loop_s'], 1)} s" if nl else "") + ".")
+
+
+# -- the registry ------------------------------------------------------------------------------
+
+PRODUCERS: tuple[Producer, ...] = (
+    Producer("quickstart", quickstart, "`tsmpc compare` on the built-in circuit: table, figures"),
+    Producer("animation", animation, "the README's GIF (REF of the quick-start run)"),
+    Producer("design", design_time, "LMI design time from an empty cache (timing)"),
+    Producer("terminal-set", terminal_set, "the terminal set against the paper's S"),
+    Producer("ablation", ablation, "the paper preset and the ablation on the paper reference", ci=True),
+    Producer("slip-aware", slip_aware, "the outer-loop mechanisms one at a time"),
+    Producer("speed-mode", speed_mode, "speed-mode time constants per vertex, figure"),
+    Producer("four-methods", four_methods, "FZN, REF, ITER, NL on the paper run"),
+    Producer("offset-start", offset_start, "where the four methods differ (offset_start)", ci=True),
+    Producer("commonroad", commonroad, "CommonRoad's vehicle models against tsmpc's plant", ci=True),
+    Producer("race-tracks", race_tracks, "race tracks at the default plan", ci=True),
+    Producer("envelope", envelope, "Monza beyond the default box"),
+    Producer("robustness", robustness, "the robustness scenarios (docs/sweeps.md)"),
+    Producer("sweep-example", sweep_example, "the example sweep: figure and time"),
+    Producer("paper-explained", paper_explained, "Table 5 explained (≈ 25 runs, 10–15 min)"),
+    Producer("benchmarks", benchmarks, "benchmarks/*.py timing tables (never drift-checked)"),
+)
+
+
+def producer_names() -> list[str]:
+    return [p.name for p in PRODUCERS]
