@@ -29,6 +29,8 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
+from tsmpc.blas import limit_blas_threads
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -125,6 +127,7 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    limit_blas_threads()  # the runs are subprocesses; keep this process's BLAS to one thread as well
     t0 = time.perf_counter()
     trials = run_trials(args.trials, jobs=args.jobs, seed=args.seed)
     landed = [t for t in trials if t.landed]
