@@ -458,7 +458,7 @@ class PurePursuitSettings(_Frozen):
 
     lookahead_time_s: NonNegFloat = Field(0.6, le=10.0, description="look-ahead time: L_d grows "
                                            "with the speed as lookahead_time_s · v [s]")
-    lookahead_min_m: PositiveFloat = Field(3.0, description="shortest look-ahead distance [m]")
+    lookahead_min_m: PositiveFloat = Field(5.0, description="shortest look-ahead distance [m]")
     lookahead_max_m: PositiveFloat = Field(40.0, description="longest look-ahead distance [m]")
 
     @model_validator(mode="after")
@@ -472,9 +472,9 @@ class StanleySettings(_Frozen):
     δ = ψ_e + atan(k e_fa / (k_soft + v)) (+ the curvature feed-forward when switched on).
     Defaults from the documented search on the built-in circuit (examples/tune_baselines.py)."""
 
-    gain: PositiveFloat = Field(2.0, le=100.0, description="cross-track gain k [1/s]")
+    gain: PositiveFloat = Field(5.0, le=100.0, description="cross-track gain k [1/s]")
     softening_speed: NonNegFloat = Field(
-        1.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s]")
+        16.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s]")
     curvature_feedforward: bool = Field(
         True, description="feed-forward atan(L κ_d) − atan(a κ_d): zero steady-state error on a "
         "circle for a CoG-referenced path (False = the classic law)")
@@ -488,7 +488,7 @@ class BaselineSettings(_Frozen):
     pure_pursuit: PurePursuitSettings = PurePursuitSettings()
     stanley: StanleySettings = StanleySettings()
     along_track_gain: NonNegFloat = Field(
-        0.5, le=20.0, description="speed channel of the geometric laws: v_ref = v_d cos e_θ + "
+        5.0, le=20.0, description="speed channel of the geometric laws: v_ref = v_d cos e_θ + "
         "gain · e_x, proportional feedback on the along-track error [1/s]")
 
 

@@ -12,7 +12,8 @@ saturated to the steering limit ``lqr.delta_max``. The bracket is the *curvature
 (``baselines.stanley.curvature_feedforward``; off = the classic law): the reference is the CoG's
 path, and on a circle of curvature κ a kinematic bicycle whose CoG follows it sees ψ_e = atan(a κ)
 at its front axle while it needs δ = atan(L κ); without the bracket the cross-track term must make
-up the difference, i.e. a steady offset ≈ (v / k) tan(b κ) to the outside of every corner.
+up the difference, i.e. a steady offset ≈ (k_soft + v) tan(b κ) / k to the outside of every
+corner.
 
 δ becomes a curvature through the kinematic bicycle, κ = tan δ / L, and then the yaw-rate command
 ω_ref = v_ref κ (:mod:`tsmpc.control.geometric`, the one conversion). The speed channel is
