@@ -23,8 +23,8 @@ TC = 0.01
 K, KS = 2.5, 1.0
 
 
-def _st(cfg: Config, ff: bool = True, delta_max: float = math.radians(25)) -> Stanley:
-    s = StanleySettings(gain=K, softening_speed=KS, curvature_feedforward=ff)
+def _st(cfg: Config, ff: bool = True, delta_max: float = math.radians(25), kpsi: float = 1.0) -> Stanley:
+    s = StanleySettings(gain=K, softening_speed=KS, curvature_feedforward=ff, heading_gain=kpsi)
     return Stanley(s, replace(cfg.mpc, tangent_heading=True), TC, cfg.vehicle, delta_max=delta_max,
                    along_track_gain=0.5)
 
@@ -48,30 +48,34 @@ def test_lateral_offset_on_a_straight(cfg: Config, d: float) -> None:
     assert res.status == MPCStatus.OPTIMAL
 
 
-def test_heading_error_on_a_straight(cfg: Config) -> None:
+@pytest.mark.parametrize("kpsi", [1.0, 0.6])
+def test_heading_error_on_a_straight(cfg: Config, kpsi: float) -> None:
     """On the path, heading ψ0 to the right: ψ_e = ψ0 and the front axle sits a sin ψ0 right of
-    the path: δ = ψ0 + atan(k a sin ψ0 / (k_soft + v))."""
+    the path: δ = k_ψ ψ0 + atan(k a sin ψ0 / (k_soft + v))."""
     v, psi0 = 8.0, 0.1
     w = straight_window(v, TC, 400)
     a = cfg.vehicle.a
     e = _errors(w, (0.0, 0.0, -psi0))
-    want = psi0 + math.atan(K * a * math.sin(psi0) / (KS + v))
-    assert _st(cfg).steering(e, w, v) == pytest.approx(want, abs=1e-12)
+    want = kpsi * psi0 + math.atan(K * a * math.sin(psi0) / (KS + v))
+    assert _st(cfg, kpsi=kpsi).steering(e, w, v) == pytest.approx(want, abs=1e-12)
 
 
 @pytest.mark.parametrize("left", [True, False])
 @pytest.mark.parametrize("ff", [True, False])
-def test_steady_state_on_a_circle(cfg: Config, left: bool, ff: bool) -> None:
+@pytest.mark.parametrize("kpsi", [1.0, 0.5])
+def test_steady_state_on_a_circle(cfg: Config, left: bool, ff: bool, kpsi: float) -> None:
     """CoG on a circle of radius R, heading along it. The front axle lies at √(R² + a²) from the
-    centre, a²/… outside the path, and the path's tangent at its nearest point is turned by
-    atan(a/R): δ = atan(a/R) + atan(k (√(R² + a²) − R) / (k_soft + v)) [+ atan(L/R) − atan(a/R)]."""
+    centre, √(R² + a²) − R outside the path, and the path's tangent at its nearest point is turned
+    by atan(a/R): δ = k_ψ atan(a/R) + atan(k (√(R² + a²) − R) / (k_soft + v))
+    [+ atan(L/R) − k_ψ atan(a/R)]."""
     R, v = 20.0, 10.0
     a, L = cfg.vehicle.a, cfg.vehicle.wheelbase
     w = circle_window(R, v, TC, 400, left=left)
     cross = math.atan(K * (math.hypot(R, a) - R) / (KS + v))
-    want = (math.atan(L / R) if ff else math.atan(a / R)) + cross
+    want = (math.atan(L / R) if ff else kpsi * math.atan(a / R)) + cross
     sgn = 1.0 if left else -1.0
-    assert _st(cfg, ff=ff).steering(np.zeros(3), w, v) == pytest.approx(sgn * want, abs=1e-4)
+    st = _st(cfg, ff=ff, kpsi=kpsi)
+    assert st.steering(np.zeros(3), w, v) == pytest.approx(sgn * want, abs=1e-4)
 
 
 def test_steering_saturates(cfg: Config) -> None:

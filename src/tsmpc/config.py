@@ -469,14 +469,18 @@ class PurePursuitSettings(_Frozen):
 
 class StanleySettings(_Frozen):
     """Stanley's law (:mod:`tsmpc.control.stanley`):
-    δ = ψ_e + atan(k e_fa / (k_soft + v)) (+ the curvature feed-forward when switched on).
+    δ = k_ψ ψ_e + atan(k e_fa / (k_soft + v)) (+ the curvature feed-forward when switched on).
     Defaults from the documented search on the built-in circuit (examples/tune_baselines.py)."""
+
+    heading_gain: PositiveFloat = Field(
+        1.0, le=2.0, description="k_ψ on the heading error (1 = the classic law; at T_c the heading "
+        "term's per-step loop gain is k_ψ v T_c / L)")
 
     gain: PositiveFloat = Field(5.0, le=100.0, description="cross-track gain k [1/s]")
     softening_speed: NonNegFloat = Field(
         16.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s]")
     curvature_feedforward: bool = Field(
-        True, description="feed-forward atan(L κ_d) − atan(a κ_d): zero steady-state error on a "
+        True, description="feed-forward atan(L κ_d) − k_ψ atan(a κ_d): zero steady-state error on a "
         "circle for a CoG-referenced path (False = the classic law)")
 
 

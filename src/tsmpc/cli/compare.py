@@ -261,7 +261,7 @@ def _print_comfort(console: Any, metrics: dict[str, Any]) -> None:
 
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
-                  "nan_bursts, mass_stiffness_mismatch, offset_start, actuator_lag (see "
+                  "nan_bursts, mass_stiffness_mismatch, stiffness_mismatch, offset_start, actuator_lag (see "
                   "tsmpc.robustness).")
 _PLANT_HELP = ("Plant: tsmpc (the built-in nonlinear single-track), commonroad-st or commonroad-mb "
                "(CommonRoad's single-track / multi-body model behind a steering servo; needs the "

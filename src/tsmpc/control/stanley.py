@@ -6,14 +6,20 @@ front axle lies at distance a ahead along the heading θ; with the reference pat
 to it (tangent θ_p, curvature κ_p) and its cross-track error e (positive when the path lies to the
 left of the axle)::
 
-    δ = ψ_e + atan(k e / (k_soft + v_ref)) [+ atan(L κ_p) − atan(a κ_p)],   ψ_e = wrap(θ_p − θ),
+    δ = k_ψ ψ_e + atan(k e / (k_soft + v_ref)) [+ atan(L κ_p) − k_ψ atan(a κ_p)],   ψ_e = wrap(θ_p − θ),
 
-saturated to the steering limit ``lqr.delta_max``. The bracket is the *curvature feed-forward*
-(``baselines.stanley.curvature_feedforward``; off = the classic law): the reference is the CoG's
-path, and on a circle of curvature κ a kinematic bicycle whose CoG follows it sees ψ_e = atan(a κ)
-at its front axle while it needs δ = atan(L κ); without the bracket the cross-track term must make
-up the difference, i.e. a steady offset ≈ (k_soft + v) tan(b κ) / k to the outside of every
-corner.
+saturated to the steering limit ``lqr.delta_max`` (``baselines.stanley``: k, k_soft, k_ψ, the
+feed-forward switch).
+
+* k_ψ = 1 is the classic law. Run every T_c, its heading term alone gives ω = v tan(ψ_e) / L, i.e.
+  e_θ⁺ ≈ (1 − k_ψ v T_c / L) e_θ per step: at T_c = 0.1 s and L = 1.79 m the classic law
+  overshoots the heading every step above 18 m/s, and the inner loop's yaw-rate lag turns that into
+  a growing oscillation. k_ψ < 1 is the usual remedy when the law cannot run faster.
+* The bracket is the *curvature feed-forward* (off = the classic law): the reference is the CoG's
+  path, and on a circle of curvature κ a kinematic bicycle whose CoG follows it sees
+  ψ_e = atan(a κ) at its front axle while it needs δ = atan(L κ); without the bracket the
+  cross-track term must make up the difference, i.e. a steady offset ≈ (k_soft + v) tan(b κ) / k
+  (for k_ψ = 1) to the outside of every corner.
 
 δ becomes a curvature through the kinematic bicycle, κ = tan δ / L, and then the yaw-rate command
 ω_ref = v_ref κ (:mod:`tsmpc.control.geometric`, the one conversion). The speed channel is
@@ -50,7 +56,7 @@ class Stanley:
     """Stanley's law on the reference window; the outer MPC's step protocol.
 
     Args:
-        settings: gain k, softening speed, curvature feed-forward switch.
+        settings: gain k, softening speed, heading gain k_ψ, curvature feed-forward switch.
         mpc: the MPC settings (input box Π, horizon N for the result's shape, tangent heading).
         Tc: outer sample time [s].
         vehicle: axle distances a, b (wheelbase L = a + b).
@@ -89,9 +95,11 @@ class Stanley:
         near = nearest_point(fx, fy, np.asarray(window.x, dtype=float), np.asarray(window.y, dtype=float),
                              None if kap is None else np.asarray(kap, dtype=float))
         st = self.settings
-        delta = _wrap(near.heading - th) + math.atan2(st.gain * -near.offset, st.softening_speed + v)
+        delta = (st.heading_gain * _wrap(near.heading - th)
+                 + math.atan2(st.gain * -near.offset, st.softening_speed + v))
         if st.curvature_feedforward:
-            delta += math.atan(self.wheelbase * near.kappa) - math.atan(self.a * near.kappa)
+            delta += (math.atan(self.wheelbase * near.kappa)
+                      - st.heading_gain * math.atan(self.a * near.kappa))
         return min(max(delta, -self.delta_max), self.delta_max)
 
     def step(self, errors: Any, u_prev: Any, reference: Any) -> MPCResult:

@@ -1,0 +1,162 @@
+"""The README's baseline table (issue 26): every outer-loop method — the TS-MPC's three scheduling
+modes, the NL-MPC and the four baselines users pick instead — in the same cascade on five cases.
+
+    python examples/baseline_table.py [--out results/baselines] [--shared ../shared]
+
+Cases: the paper reference (paper-run window), two public race tracks (TUMFTM, LGPL-3.0) planned
+at v_max = 22 m/s and a_lat = 5 m/s² (as ``tsmpc plan TRACK --v-max 22 --a-lat 5``; the scheduling
+boxes are widened and the designs re-certified as ``tsmpc compare`` does), and two model
+mismatches on the paper reference (plant mass +20 % and cornering stiffness −20 %; stiffness −20 %
+alone), plus the settling time after an offset start (2 m, 0.2 rad) on the paper reference.
+Every case is one :func:`tsmpc.sim.compare.compare` call (all methods, one seed); its outputs
+(metrics.json, comfort.md, …) are written under ``--out/<case>/`` and the table is built from
+those metrics only. :func:`baseline_table` returns the Markdown (the docs generator's entry point)
+and writes it to ``--out/baseline_table.md``. ``TSMPC_EXAMPLE_STEPS`` shortens every run (CI).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tsmpc.config import Config, Method, PlannerSettings
+
+#: Rows: every method, in this order.
+METHODS = (Method.FZN, Method.REF, Method.ITER, Method.NL, Method.PURE_PURSUIT, Method.STANLEY,
+           Method.LQR, Method.LTV)
+#: The two race tracks (files in ../shared/data/tracks) and their plan.
+TRACKS = ("Monza", "Silverstone")
+V_MAX, A_LAT = 22.0, 5.0
+PAPER_FILE = Path("data/paper/planner_references_100ms.csv")
+
+
+@dataclass(frozen=True)
+class Case:
+    """One column group of the table: a reference and a robustness scenario on it."""
+
+    key: str  #: folder name under --out
+    label: str  #: label in the table
+    reference: Path  #: paper-format file or planned CSV
+    robustness: str = "nominal"
+
+
+def plan_tracks(shared: Path, work: Path, cfg: Config) -> dict[str, Path]:
+    """Plan each of :data:`TRACKS` at (V_MAX, A_LAT) into ``work/<track>.csv`` (as ``tsmpc plan``:
+    a closed lap, the track's narrowest half-width as the divergence bound)."""
+    from tsmpc.planning.planner import plan_path
+    from tsmpc.planning.tracks import load_tumftm
+
+    out = {}
+    settings = PlannerSettings(v_max=V_MAX, a_lat_max=A_LAT)
+    for name in TRACKS:
+        track = load_tumftm(shared / "data" / "tracks" / f"{name}.csv")
+        ref = plan_path(track.centre, settings, closed=True, dt=cfg.rates.Tc)
+        half = float(min(track.w_left.min(), track.w_right.min()))
+        path = work / f"{name}_{V_MAX:g}_{A_LAT:g}.csv"
+        ref.to_csv(path, {"source": f"{name}.csv", "half_width_m": f"{half:.3f}"})
+        out[name] = path
+    return out
+
+
+def cases(shared: Path, planned: dict[str, Path]) -> list[Case]:
+    """The five table cases and the offset start (key ``offset_start``), in order."""
+    paper = shared / PAPER_FILE
+    return [
+        Case("paper", "paper reference", paper),
+        *(Case(name.lower(), f"{name} (22 m/s, 5 m/s²)", path) for name, path in planned.items()),
+        Case("mass_stiffness", "paper ref., mass +20 %, stiffness −20 %", paper, "mass_stiffness_mismatch"),
+        Case("stiffness", "paper ref., stiffness −20 %", paper, "stiffness_mismatch"),
+        Case("offset_start", "paper ref., offset start", paper, "offset_start"),
+    ]
+
+
+def run_case(case: Case, out: Path, methods: tuple[Method, ...], max_steps: int | None) -> dict[str, Any]:
+    """All ``methods`` on ``case`` (as ``tsmpc compare --reference R --scenario S``: envelope fit,
+    designs from the cache); writes the comparison's files into ``out/<case.key>``; its metrics."""
+    from tsmpc.envelope import fit_envelope
+    from tsmpc.robustness import apply_robustness
+    from tsmpc.sim.compare import compare, load_scenario
+    from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
+
+    cfg = Config()
+    scenario = load_scenario(cfg, case.reference)
+    if case.robustness != "nominal":
+        cfg, scenario = apply_robustness(case.robustness, cfg, scenario)
+    cfg = fit_envelope(cfg, scenario.reference).config
+    designs = (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
+    res = compare(cfg, scenario, methods, out / case.key, plots=False, max_steps=max_steps,
+                  designs=designs)
+    return res.metrics
+
+
+def _cells(m: dict[str, Any], Tc: float) -> list[str]:
+    if m["status"] == "diverged":  # where it left the road; no comfort or timing of a partial run
+        return [f"diverged at {m['outer_steps'] * Tc:.1f} s", f"> {m['max_abs_lateral_m']:.2f}",
+                "—", "—", "—"]
+    c = m["comfort"]
+    return [f"{m['rmse']['y']:.3f}", f"{m['max_abs_lateral_m']:.3f}", f"{c['lat_jerk_rms']:.3f}",
+            f"{c['steering_rate_rms']:.4f}", f"{m['mpc_ms']['median']:.3f}"]
+
+
+def table_markdown(results: dict[str, tuple[Case, dict[str, Any]]]) -> str:
+    """One table: a row per (case, method), the case named on its first row."""
+    head = ("case", "method", "RMSE y [m]", "max \\|e_y\\| [m]", "RMS lateral jerk [m/s³]",
+            "RMS steering rate [rad/s]", "outer step, median [ms]")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for key, (case, metrics) in results.items():
+        if key == "offset_start":
+            continue
+        for i, (name, m) in enumerate(metrics["methods"].items()):
+            label = f"**{case.label}**" if i == 0 else ""
+            lines.append(f"| {label} | {name} | " + " | ".join(_cells(m, metrics["scenario"]["Tc"])) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def settling_markdown(metrics: dict[str, Any]) -> str:
+    """Settling time (|e_y| ≤ 0.10 m from then on) after the offset start, per method."""
+    names = list(metrics["methods"])
+    vals = []
+    for n in names:
+        m = metrics["methods"][n]
+        s = m["comfort"]["settling_time_s"]
+        vals.append("diverged" if m["status"] == "diverged" else ("never" if math.isnan(s) else f"{s:.1f}"))
+    return ("| offset start (paper ref.) | " + " | ".join(names) + " |\n|" + "---|" * (len(names) + 1)
+            + "\n| settling time [s] | " + " | ".join(vals) + " |\n")
+
+
+def baseline_table(out: Path, *, shared: Path = Path("../shared"), methods: tuple[Method, ...] = METHODS,
+                   max_steps: int | None = None) -> str:
+    """Run every case, write ``out/<case>/`` and ``out/baseline_table.md``; return the Markdown."""
+    out.mkdir(parents=True, exist_ok=True)
+    load0 = os.getloadavg()[0]
+    planned = plan_tracks(shared, out, Config())
+    results = {}
+    for case in cases(shared, planned):
+        results[case.key] = (case, run_case(case, out, methods, max_steps))
+    load1 = os.getloadavg()[0]
+    text = (table_markdown(results) + "\n" + settling_markdown(results["offset_start"][1])
+            + f"\nProduced by `python examples/baseline_table.py` (outputs of every case under its "
+            f"`--out`); {os.cpu_count()} cores, load average {load0:.1f} at the start and {load1:.1f} "
+            "at the end" + (f"; runs shortened to {max_steps} outer steps" if max_steps else "") + ".\n")
+    from tsmpc.io import atomic_write_text
+
+    atomic_write_text(out / "baseline_table.md", text)
+    return text
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("results/baselines"))
+    ap.add_argument("--shared", type=Path, default=Path("../shared"),
+                    help="folder holding data/paper and data/tracks (not bundled)")
+    args = ap.parse_args()
+    steps = int(os.environ.get("TSMPC_EXAMPLE_STEPS", "0")) or None
+    print(baseline_table(args.out, shared=args.shared, max_steps=steps))
+
+
+if __name__ == "__main__":
+    main()
