@@ -473,12 +473,12 @@ class StanleySettings(_Frozen):
     Defaults from the documented search on the built-in circuit (examples/tune_baselines.py)."""
 
     heading_gain: PositiveFloat = Field(
-        1.0, le=2.0, description="k_ψ on the heading error (1 = the classic law; at T_c the heading "
+        0.3, le=2.0, description="k_ψ on the heading error (1 = the classic law; at T_c the heading "
         "term's per-step loop gain is k_ψ v T_c / L)")
 
-    gain: PositiveFloat = Field(5.0, le=100.0, description="cross-track gain k [1/s]")
+    gain: PositiveFloat = Field(2.0, le=100.0, description="cross-track gain k [1/s]")
     softening_speed: NonNegFloat = Field(
-        16.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s]")
+        8.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s]")
     curvature_feedforward: bool = Field(
         True, description="feed-forward atan(L κ_d) − k_ψ atan(a κ_d): zero steady-state error on a "
         "circle for a CoG-referenced path (False = the classic law)")
@@ -492,7 +492,7 @@ class BaselineSettings(_Frozen):
     pure_pursuit: PurePursuitSettings = PurePursuitSettings()
     stanley: StanleySettings = StanleySettings()
     along_track_gain: NonNegFloat = Field(
-        5.0, le=20.0, description="speed channel of the geometric laws: v_ref = v_d cos e_θ + "
+        8.0, le=20.0, description="speed channel of the geometric laws: v_ref = v_d cos e_θ + "
         "gain · e_x, proportional feedback on the along-track error [1/s]")
 
 
