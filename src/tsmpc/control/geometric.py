@@ -65,12 +65,14 @@ class PathPoint:
     """The point of the reference polyline nearest to a query point.
 
     Attributes:
-        x, y: the point [m].
+        x: the point's x [m].
+        y: the point's y [m].
         heading: the path's tangent there [rad] (vertex tangents interpolated along the segment).
         kappa: the reference curvature there [1/m] (interpolated along the segment).
         offset: signed distance of the query point from the path [m], positive to the left of it.
-        segment: index i of the segment (samples i, i+1); t: position along it in [0, 1] (beyond
-            on the first and last segments: the path extended along them).
+        segment: index i of the segment (samples i, i+1).
+        t: position along the segment in [0, 1] (beyond on the first and last segments: the path
+            extended along them).
     """
 
     x: float

@@ -52,7 +52,8 @@ class LTVMPC(TSMPC):
     Args:
         settings: horizon, weights, bounds, soft penalty (``mode`` is not used).
         model: kinematic TS model (only its T_c is used: no scheduling box).
-        P, S: terminal cost and terminal set of the kinematic design.
+        P: terminal cost (3, 3) of the kinematic design.
+        S: terminal set matrix (3, 3) of the kinematic design, χ = {x : xᵀSx ≤ 1}.
         jit: the compiled Riccati fast path (None = unless ``TSMPC_NO_JIT`` is set).
     """
 
