@@ -16,7 +16,7 @@ import pytest
 
 from _paths import circle_window, straight_window
 from tsmpc.config import Config, PurePursuitSettings, replace
-from tsmpc.control.geometric import lookahead_point, nearest_point, vehicle_pose
+from tsmpc.control.geometric import lookahead_point, nearest_point, reference_heading, vehicle_pose
 from tsmpc.control.pure_pursuit import PurePursuit
 from tsmpc.control.ts_mpc import MPCStatus
 from tsmpc.models.kinematic import pose_to_errors
@@ -25,21 +25,22 @@ TC = 0.02  # fine sampling: chords ≤ 0.3 m
 
 
 def _pp(cfg: Config, t_la: float = 1.0, L_min: float = 3.0, L_max: float = 40.0, gain: float = 0.5,
-        tangent: bool = True) -> PurePursuit:
+        tangent: bool = True, average: bool = True) -> PurePursuit:
     s = PurePursuitSettings(lookahead_time_s=t_la, lookahead_min_m=L_min, lookahead_max_m=L_max)
-    return PurePursuit(s, replace(cfg.mpc, tangent_heading=tangent), TC, along_track_gain=gain)
+    mpc = replace(cfg.mpc, tangent_heading=tangent, step_average_reference=average)
+    return PurePursuit(s, mpc, TC, along_track_gain=gain)
 
 
-def _errors(w, pose, tangent: bool = True) -> np.ndarray:
-    th_d = w.theta[0] + (0.5 * w.omega[1] * TC if tangent else 0.0)
-    return pose_to_errors(pose[0], pose[1], pose[2], w.x[0], w.y[0], th_d)
+def _errors(w, pose) -> np.ndarray:
+    """Errors against the window's first sample and θ_d (the default windows carry the tangent)."""
+    return pose_to_errors(pose[0], pose[1], pose[2], w.x[0], w.y[0], w.theta[0])
 
 
 @pytest.mark.parametrize("R", [20.0, 80.0])
 @pytest.mark.parametrize("v", [5.0, 15.0])
 @pytest.mark.parametrize("left", [True, False])
 def test_curvature_on_a_circle_is_one_over_R(cfg: Config, R: float, v: float, left: bool) -> None:
-    w = circle_window(R, v, TC, 600, left=left)
+    w = circle_window(R, v, TC, 600, left=left, tangent_convention=False)  # what the MPC sees
     pp = _pp(cfg, t_la=1.0, L_min=9.0)
     x0 = np.zeros(3)  # on the circle, heading along its tangent
     kappa = pp.curvature(x0, w, v)
@@ -51,16 +52,26 @@ def test_curvature_on_a_circle_is_one_over_R(cfg: Config, R: float, v: float, le
 
 
 def test_the_pose_uses_the_heading_the_errors_were_taken_against(cfg: Config) -> None:
-    """Paper-convention θ_d (heading of the step into the sample): the cascade moves it to the
-    tangent (mpc.tangent_heading); the law must recover the same pose, else κ is biased."""
+    """The cascade takes the errors against the path tangent (mpc.tangent_heading) or the raw θ_d
+    (the paper preset); the law must recover that pose, else its curvature is biased. Default: the
+    window carries the tangents (mpc.step_average_reference); paper preset: raw θ_d in both; the
+    tangent with raw windows: measured on the window (Reference.tangent_heading)."""
+    from tsmpc.planning.reference import Reference
+
     R, v = 30.0, 10.0
-    w = circle_window(R, v, TC, 600)
+    raw = circle_window(R, v, TC, 600)  # the planner's convention: θ_d lags the tangent
+    ref = Reference(np.arange(600) * TC, raw.x, raw.y, raw.theta, raw.v, raw.omega, raw.kappa)
+    tan = circle_window(R, v, TC, 600, tangent_convention=False)
     X, Y, th = 0.3, -0.2, 0.05
-    for tangent in (True, False):
-        e = _errors(w, (X, Y, th), tangent)
-        assert vehicle_pose(e, w, TC, tangent) == pytest.approx((X, Y, th), abs=1e-12)
-    w_tan = circle_window(R, v, TC, 600, tangent_convention=False)  # θ_d = the tangent itself
-    assert _pp(cfg, tangent=False).curvature(np.zeros(3), w_tan, v) == pytest.approx(1 / R, rel=1e-3)
+    for tangent, average, w, th_d in ((True, True, tan, tan.theta[0]), (False, False, raw, raw.theta[0]),
+                                      (True, False, ref, ref.tangent_heading()[0])):
+        e = pose_to_errors(X, Y, th, w.x[0], w.y[0], th_d)
+        heading = reference_heading(w, tangent, average)
+        assert vehicle_pose(e, w, heading) == pytest.approx((X, Y, th), abs=1e-12)
+        assert _pp(cfg, tangent=tangent, average=average).curvature(
+            pose_to_errors(0.0, 0.0, float(tan.theta[0]), w.x[0], w.y[0], th_d), w, v
+        ) == pytest.approx(1 / R, rel=1e-3)
+    assert abs(tan.theta[0] - raw.theta[0]) > 1e-3  # the two conventions differ here
 
 
 @pytest.mark.parametrize("d", [-1.0, 0.5, 2.0])

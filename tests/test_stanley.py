@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from _paths import circle_window, straight_window
-from tsmpc.config import Config, StanleySettings, replace
+from tsmpc.config import Config, StanleySettings
 from tsmpc.control.stanley import Stanley
 from tsmpc.control.ts_mpc import MPCStatus
 from tsmpc.models.kinematic import pose_to_errors
@@ -25,12 +25,13 @@ K, KS = 2.5, 1.0
 
 def _st(cfg: Config, ff: bool = True, delta_max: float = math.radians(25), kpsi: float = 1.0) -> Stanley:
     s = StanleySettings(gain=K, softening_speed=KS, curvature_feedforward=ff, heading_gain=kpsi)
-    return Stanley(s, replace(cfg.mpc, tangent_heading=True), TC, cfg.vehicle, delta_max=delta_max,
+    return Stanley(s, cfg.mpc, TC, cfg.vehicle, delta_max=delta_max,
                    along_track_gain=0.5)
 
 
 def _errors(w, pose) -> np.ndarray:
-    return pose_to_errors(pose[0], pose[1], pose[2], w.x[0], w.y[0], w.theta[0] + 0.5 * w.omega[1] * TC)
+    """Errors against the window's first sample and θ_d (the default windows carry the tangent)."""
+    return pose_to_errors(pose[0], pose[1], pose[2], w.x[0], w.y[0], w.theta[0])
 
 
 @pytest.mark.parametrize("d", [1.0, -0.5])
@@ -70,7 +71,7 @@ def test_steady_state_on_a_circle(cfg: Config, left: bool, ff: bool, kpsi: float
     [+ atan(L/R) − k_ψ atan(a/R)]."""
     R, v = 20.0, 10.0
     a, L = cfg.vehicle.a, cfg.vehicle.wheelbase
-    w = circle_window(R, v, TC, 400, left=left)
+    w = circle_window(R, v, TC, 400, left=left, tangent_convention=False)  # what the MPC sees
     cross = math.atan(K * (math.hypot(R, a) - R) / (KS + v))
     want = (math.atan(L / R) if ff else kpsi * math.atan(a / R)) + cross
     sgn = 1.0 if left else -1.0

@@ -25,14 +25,18 @@ __all__ = [
     "BaselineSettings",
     "Config",
     "DynamicBox",
+    "DynamicLMIFormulation",
     "DynamicLMISettings",
     "FrictionEstimate",
+    "InnerLaw",
     "KinematicBox",
     "KinematicLMISettings",
     "LQRSettings",
+    "MHEForm",
     "MHESettings",
     "MPCSettings",
     "Method",
+    "MetricsSettings",
     "NoiseSettings",
     "PlannerSettings",
     "PurePursuitSettings",
@@ -127,6 +131,36 @@ class FrictionEstimate(StrEnum):
 
     WINDOW = "window"  #: window-constant unknown input of the MHE (ours: low noise)
     UIO = "uio"  #: the paper's one-step UIO formula F̂ = Θ(y − C(Ax̂ + Bu)) (σ ≈ 340 N)
+
+
+class InnerLaw(StrEnum):
+    """Which inner-loop law runs (SPEC §8, §14)."""
+
+    STATIC_GAIN = "static-gain"  #: ours: TS-LQR + static reference gain N̄, exact filter, anti-windup
+    #: a quirk of the published run, not a recommendation: the law as it ran (Euler filter at T_d,
+    #: fed back the previous clipped force, no anti-windup; :mod:`tsmpc.control.paper_as_run`)
+    AS_RUN = "as-run"
+
+
+class DynamicLMIFormulation(StrEnum):
+    """Formulation of the dynamic TS-LMI-LQR (SPEC §6, §14)."""
+
+    #: ours: guaranteed cost, interpolated gains imposed on a (δ, v) grid, ZOH, grid-certified
+    GUARANTEED_COST = "guaranteed-cost"
+    #: a quirk of the published run, not a recommendation: a feasibility problem (no objective),
+    #: one common Lyapunov matrix over the 8 vertices, Euler at T_d
+    #: (:mod:`tsmpc.synthesis.paper_as_run`)
+    FEASIBILITY_EULER = "feasibility-euler"
+
+
+class MHEForm(StrEnum):
+    """How the MHE-UIO treats the unknown friction force (SPEC §9)."""
+
+    #: ours: a window-constant unknown input fitted inside the MHE (compiled fast path)
+    WINDOW = "window"
+    #: the paper's UIO form: F eliminated through E_d (A_o = (I − E_dΘC_d)A_d, B_o likewise, the
+    #: transition adds E_dΘy), F̂ = Θ(y − C_d(A_d x̂ + B_d u)) after each solve; numpy path only
+    UIO = "uio"
 
 
 class VehicleParams(_Frozen):
@@ -230,6 +264,11 @@ class Rates(_Frozen):
     Tc: PositiveFloat = Field(0.1, le=1.0, description="outer loop (MPC) sample time [s]")
     Td: PositiveFloat = Field(0.01, description="inner loop (LQR, MHE) sample time [s]")
     h: PositiveFloat = Field(0.001, ge=1e-5, description="plant RK4 integration step [s]")
+    inner_steps_per_outer: int | None = Field(
+        None, ge=1, le=100000,
+        description="inner steps run per outer step; None = T_c/T_d. A quirk of the published run, "
+        "not a recommendation: it ran 101 steps of 1 ms per 0.1 s outer step (the plant advances "
+        "0.101 s while the reference advances 0.1 s: a 1 % time-base drift; SPEC §14)")
 
     @model_validator(mode="after")
     def _integer_ratios(self) -> Rates:
@@ -241,7 +280,9 @@ class Rates(_Frozen):
 
     @property
     def inner_per_outer(self) -> int:
-        """Number of inner steps per outer step."""
+        """Number of inner steps per outer step (``inner_steps_per_outer`` when set)."""
+        if self.inner_steps_per_outer is not None:
+            return self.inner_steps_per_outer
         return round(self.Tc / self.Td)
 
     @property
@@ -320,6 +361,10 @@ class DynamicLMISettings(_Frozen):
     R: tuple[FiniteFloat, ...] = Field((0.001, 9.0), description="diag R on [F_xR, δ]")
     filter_bandwidth: PositiveFloat = Field(10.0, description="Apkarian filter λ [rad/s]")
     grid_points: int = Field(15, ge=3, le=101, description="certificate grid points per axis")
+    formulation: DynamicLMIFormulation = Field(
+        DynamicLMIFormulation.GUARANTEED_COST,
+        description="'guaranteed-cost' (ours) or 'feasibility-euler' (a quirk of the published run, "
+        "not a recommendation: no objective, 8 vertex LMIs, Euler at T_d)")
 
     @model_validator(mode="after")
     def _check(self) -> DynamicLMISettings:
@@ -348,7 +393,13 @@ class MPCSettings(_Frozen):
         True, description="beyond the paper: errors of the velocity pose θ + α̂ (MHE) feed the MPC"
     )
     tangent_heading: bool = Field(
-        True, description="beyond the paper: θ_d + ω_d(k+1) T_c / 2, the path tangent at sample k"
+        True, description="beyond the paper: the measured e_θ against the path's tangent at the "
+        "sample (θ_d moved forward by its measured lag, half the reference's own period)"
+    )
+    step_average_reference: bool = Field(
+        True, description="beyond the paper: the reference inputs of each T_c step are that step's "
+        "averages from the path geometry, ω_d = Δθ_tangent / T_c and v_d = chord / T_c (the "
+        "paper's are the planner's samples, which describe the step *into* the sample)"
     )
 
     @field_validator("mode")
@@ -395,10 +446,44 @@ class LQRSettings(_Frozen):
     speed_time_constant: PositiveFloat = Field(
         0.3, description="time constant τ [s] of the speed-error feedback M (v_ref − v̂)/τ"
     )
+    # Quirks of the published run (SPEC §14), not recommendations: the ``paper-as-run`` preset.
+    true_state_feedback: bool = Field(
+        False, description="the inner law runs on the true plant state [v, α, ω] while the MHE is "
+        "computed but unused; the compensation stays as configured (a quirk of the published run, "
+        "not a recommendation; unlike the oracle ablation, which also drops the compensation)")
+    law: InnerLaw = Field(
+        InnerLaw.STATIC_GAIN, description="inner law: 'static-gain' (ours) or 'as-run' (a quirk of "
+        "the published run, not a recommendation: Euler filter, previous clipped force fed back, "
+        "no anti-windup)")
+    steering_bias_rad: FiniteFloat = Field(
+        0.0, ge=-math.pi, le=math.pi,
+        description="as-run law: σ = δ + bias [rad] is fed back where the design expects δ (the "
+        "published run: 30° = 0.5236 rad; a quirk, not a recommendation)")
+    scheduling_speed_shift: FiniteFloat = Field(
+        0.0, ge=-50.0, le=50.0,
+        description="as-run law: the gains are scheduled on v + shift [m/s] (the published run: "
+        "+2 m/s over the design interval [2, 18] m/s; a quirk, not a recommendation)")
+    extrapolate_memberships: bool = Field(
+        False, description="as-run law: memberships are not clipped into the box, so scheduling "
+        "values outside it extrapolate the vertex gains (a quirk of the published run, not a "
+        "recommendation)")
+    initial_filter_state: tuple[FiniteFloat, FiniteFloat] | None = Field(
+        None, description="as-run law: Apkarian filter states (F₁(0) [N], σ₁(0) [rad]) at the "
+        "start, σ₁ in the fed-back coordinate δ + steering_bias_rad (the published run: "
+        "(4355.15, 0.52466)); None = bumpless start at the steady state of the first reference")
 
     @model_validator(mode="after")
     def _check(self) -> LQRSettings:
         _interval(self.force_min, self.force_max, "force_min/force_max")
+        if self.law != InnerLaw.AS_RUN:
+            bad = [name for name, on in (
+                ("steering_bias_rad", self.steering_bias_rad != 0.0),
+                ("scheduling_speed_shift", self.scheduling_speed_shift != 0.0),
+                ("extrapolate_memberships", self.extrapolate_memberships),
+                ("initial_filter_state", self.initial_filter_state is not None)) if on]
+            if bad:
+                raise ConfigError(f"lqr: {', '.join(bad)}: only for the as-run law (set "
+                                  "lqr.law = \"as-run\" or leave at the default)")
         return self
 
     def force_limits(self, vehicle: VehicleParams) -> tuple[float, float]:
@@ -420,6 +505,9 @@ class MHESettings(_Frozen):
     P: tuple[FiniteFloat, ...] = Field((2.0, 2.0, 2.0), description="diag arrival-cost weight")
     x_min: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field((0.0, -0.1, -1.4))
     x_max: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field((18.0, 0.1, 1.4))
+    form: MHEForm = Field(
+        MHEForm.WINDOW, description="'window' (ours: window-constant friction force, compiled) or "
+        "'uio' (the paper's form: friction eliminated through E_d; numpy path, slower)")
 
     @model_validator(mode="after")
     def _check(self) -> MHESettings:
@@ -449,6 +537,16 @@ class PlannerSettings(_Frozen):
     a_lon_max: PositiveFloat = Field(2.6, description="longitudinal acceleration limit [m/s^2]")
     a_brake_max: PositiveFloat = Field(3.0, description="braking deceleration limit [m/s^2]")
     v_start: NonNegFloat = Field(1.0, description="speed at the start of an open path [m/s]")
+
+
+class MetricsSettings(_Frozen):
+    """What the tables of a comparison show (SPEC §11, §14). metrics.json always holds both RMSE
+    conventions."""
+
+    paper_run_rmse: bool = Field(
+        False, description="also show each method's RMSE under the published run's convention "
+        "(SPEC §14: pose errors at the start of each outer step, first K − 10 steps; v, ω at its "
+        "end, K + 20 entries with 20 zeros) beside ours in the tables")
 
 
 class PurePursuitSettings(_Frozen):
@@ -511,6 +609,7 @@ class Config(_Frozen):
     mhe: MHESettings = MHESettings()
     noise: NoiseSettings = NoiseSettings()
     planner: PlannerSettings = PlannerSettings()
+    metrics: MetricsSettings = MetricsSettings()
     baselines: BaselineSettings = BaselineSettings()
     seed: int = Field(0, ge=0, description="seed of every random draw of a run")
     divergence_bound_m: PositiveFloat = Field(
@@ -519,9 +618,11 @@ class Config(_Frozen):
 
     @classmethod
     def preset(cls, name: str) -> Config:
-        """A named configuration (:data:`PRESETS`): ``"default"`` (our best cascade) or
+        """A named configuration (:data:`PRESETS`): ``"default"`` (our best cascade),
         ``"paper"`` (the cascade as published: no speed-error feedback, the paper's one-step
-        UIO friction estimate compensated; every weight is the paper's in both)."""
+        UIO friction estimate compensated; every weight is the paper's in both) or
+        ``"paper-as-run"`` (the published run's simulation with its quirks, SPEC §14: never a
+        recommendation)."""
         return validate(cls, _preset_dict(name), source=f"preset {name!r}")
 
     def to_dict(self) -> dict[str, Any]:
@@ -547,7 +648,23 @@ PRESETS: dict[str, dict[str, Any]] = {
     # no speed-error feedback, the body-frame kinematic error model against the reference heading
     # as given (no slip-aware loop, no tangent heading). The weights are the paper's already.
     "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio"},
-              "mpc": {"slip_aware": False, "tangent_heading": False}},
+              "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False}},
+    # The paper as it was run (SPEC §14): the ``paper`` preset plus every quirk of the published
+    # simulation, each its own switch. Quirks of that run, not recommendations; never the default.
+    "paper-as-run": {
+        "vehicle": {"mu_nominal": 0.65},  # the controller models' nominal μ (M g μ = 4355.15 N)
+        "rates": {"Td": 0.001, "inner_steps_per_outer": 101},  # inner loop + MHE at 1 ms, 101 steps
+        "dynamic_box": {"v": (2.0, 18.0)},  # the design interval of the speed premise
+        "dynamic_lmi": {"formulation": "feasibility-euler"},  # feasibility LMI, 8 vertices, Euler
+        "lqr": {"speed_feedback": False, "friction_estimate": "uio",
+                "friction_compensation": False,  # the force command was the clipped LQR output
+                "true_state_feedback": True,  # the inner law on the true states; MHE unused
+                "law": "as-run", "steering_bias_rad": 0.5236, "scheduling_speed_shift": 2.0,
+                "extrapolate_memberships": True, "initial_filter_state": (4355.15, 0.52466)},
+        "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False},
+        "noise": {"scale": 0.0},  # the noise model existed but was not called
+        "metrics": {"paper_run_rmse": True},
+    },
 }
 
 

@@ -90,7 +90,7 @@ class EnvelopeFit:
             return ""
         fields = ", ".join(sorted({s.field for s in self.widened}))
         return (f"scheduling boxes widened to cover the reference ({self.ranges.describe()}): "
-                f"{fields}; designs re-solved and re-certified (cached)")
+                f"{fields}; their designs are solved and certified next (cached)")
 
 
 def reference_ranges(ref: Reference, cfg: Config) -> ReferenceRanges:

@@ -10,6 +10,7 @@ __all__ = [
     "CertificateError",
     "ConfigError",
     "DataFormatError",
+    "DesignError",
     "NonFiniteError",
     "SolverError",
     "TsmpcError",
@@ -38,3 +39,9 @@ class SolverError(TsmpcError, RuntimeError):
 
 class CertificateError(TsmpcError, RuntimeError):
     """An LMI design was returned by the solver but its certificate does not hold."""
+
+
+class DesignError(TsmpcError, ValueError):
+    """No certified LMI design exists for a configuration (its boxes, weights, vehicle or rates):
+    an input problem — the message names the LMI, where it fails and the settings that would
+    help."""

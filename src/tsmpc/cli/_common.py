@@ -191,35 +191,11 @@ def handle_interrupts() -> Iterator[None]:
 
 # -- status while designs are solved -------------------------------------------------------
 def design_status(cfg: Config) -> tuple[Any, Any]:
-    """Load or solve the kinematic and dynamic LMI designs of ``cfg`` with a status line and
-    the elapsed time on stderr (a first run or changed design inputs solve for seconds to a
-    minute, depending on the machine and its load)."""
+    """Load or solve the kinematic and dynamic LMI designs of ``cfg``, one status line on stderr
+    before ("solving…") and one after the certificates hold ("certified … margin …")."""
     from rich.console import Console
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-    from tsmpc.synthesis.cache import (
-        cache_dir,
-        dynamic_key,
-        kinematic_key,
-        load_or_design_dynamic,
-        load_or_design_kinematic,
-    )
+    from tsmpc.sim.experiment import solve_designs
 
-    console = Console(stderr=True)
-    cached = {k: (cache_dir() / f"{k}-{key(cfg)[:32]}.json").exists()
-              for k, key in (("kinematic", kinematic_key), ("dynamic", dynamic_key))}
-    out = []
-    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
-                  console=console, transient=True) as progress:
-        for name, fn in (("kinematic", load_or_design_kinematic), ("dynamic", load_or_design_dynamic)):
-            what = ("loading from the cache" if cached[name] else
-                    "solving and certifying (new inputs: seconds to a minute)")
-            if not console.is_terminal and not cached[name]:
-                console.print(f"LMI design: {name}: {what} ...")
-            task = progress.add_task(f"LMI design: {name}: {what}", total=None)
-            t0 = time.perf_counter()
-            out.append(fn(cfg))
-            progress.remove_task(task)
-            if not cached[name]:
-                console.print(f"LMI design: {name} ready in {time.perf_counter() - t0:.1f} s")
-    return out[0], out[1]
+    console = Console(stderr=True, highlight=False, soft_wrap=True)
+    return solve_designs(cfg, lambda text: console.print(text, markup=False))

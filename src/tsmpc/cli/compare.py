@@ -13,7 +13,6 @@ from tsmpc.cli._common import (
     Interrupted,
     check_interrupted,
     check_out_dir,
-    design_status,
     fail,
     finite,
     handle_interrupts,
@@ -60,63 +59,54 @@ def _execute(
     laps: int = 1, dt: float | None = None, strict_box: bool = False,
     plant: str = "tsmpc", cr_vehicle: int = 2,
 ) -> None:
-    """The body of ``compare`` and ``run``: the options arrive by name (the commands pass their
-    parameters, which carry the same names), so adding an option cannot shift the others."""
+    """The body of ``compare`` and ``run``: a thin shell over :mod:`tsmpc.sim.experiment`
+    (``prepare`` validates every input before any work, ``run`` solves the designs and runs).
+    The options arrive by name (the commands pass their parameters, which carry the same names),
+    so adding an option cannot shift the others."""
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from tsmpc.blas import limit_blas_threads
-    from tsmpc.config import replace
-    from tsmpc.sim.compare import compare, load_scenario
-    from tsmpc.sim.simulator import Method
+    from tsmpc.sim import experiment
 
     limit_blas_threads()
     console = Console()
     if not console.is_terminal:  # piped to a file or CI log: do not squeeze the tables to 80 columns
         console = Console(width=140)
-    # Every input is checked before any work: options, config, reference, output folder.
+    err_console = Console(stderr=True, highlight=False, soft_wrap=True)
+    # Every input is checked before any work: options, config, reference, envelope, output folder.
     finite("--duration", duration, lo=0.1)
     finite("--dt", dt, lo=1e-4)
     if seed is not None and seed < 0:
         fail(ConfigError(f"--seed = {seed}: must be an integer >= 0"))
     cfg = load_config_or_exit(config, preset)
-    if seed is not None:
-        cfg = replace(cfg, seed=seed)
-    try:
-        methods = [Method.parse(m) for m in methods_text.split(",") if m.strip()]
-    except ValueError as err:
-        fail(err)
+    methods = [m for m in methods_text.split(",") if m.strip()]
     if not methods:
         fail(ConfigError("--methods is empty"))
     try:
-        scenario = load_scenario(cfg, reference, _parse_window(window), laps=laps, dt=dt)
+        exp = experiment.prepare(
+            cfg, methods, reference=reference,
+            window=_parse_window(window), laps=laps, dt=dt, robustness=robustness, duration=duration,
+            seed=seed, plant=plant, cr_vehicle=cr_vehicle, strict_box=strict_box, oracle=oracle)
     except (TsmpcError, OSError) as err:
         fail(err)
-    if robustness != "nominal":
-        from tsmpc.robustness import apply_robustness
-
-        try:
-            cfg, scenario = apply_robustness(robustness, cfg, scenario, until_s=duration)
-        except ValueError as err:
-            fail(err)
-    cfg, scenario, plant_factory = _plant_setup(plant, cr_vehicle, cfg, scenario)
-    fit = _fit_envelope(cfg, scenario, strict_box)  # a refusal is an input error: before --out
     check_out_dir(out, overwrite=overwrite)
-    cfg = _certify_envelope(console, fit)
-    max_steps = None if duration is None else max(1, round(duration / cfg.rates.Tc))
+    if exp.envelope.widened:
+        console.print(exp.envelope.message, markup=False, highlight=False)
+
+    def status(text: str) -> None:
+        err_console.print(text, markup=False)
+
     with handle_interrupts():
         try:
             if overwrite:
                 _remove_previous_outputs(out)
-            mark_partial(out, "running", methods=[m.value for m in methods])
+            mark_partial(out, "running", methods=[m.value for m in exp.methods])
             try:
-                designs = design_status(cfg)
-            except TsmpcError as err:  # e.g. an infeasible LMI for these weights and boxes
+                designs = experiment.solve_designs(exp.config, status)
+            except TsmpcError as err:  # no certified design for these settings: a bad input
                 (out / PARTIAL_MARKER).unlink(missing_ok=True)
-                fail(f"LMI design failed: {err}", code=1)
-            from tsmpc import kernels
-
-            kernels.warmup()  # compile/load before the progress bars (the first run says so)
+                fail(err)
             with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
                           TextColumn("{task.completed}/{task.total} MPC steps"),
                           TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
@@ -130,9 +120,8 @@ def _execute(
                     return update
 
                 try:
-                    result = compare(cfg, scenario, methods, out, plots=not no_plots, oracle=oracle,
-                                     max_steps=max_steps, progress_factory=factory, designs=designs,
-                                     plant_factory=plant_factory)
+                    result = experiment.run(exp, out, plots=not no_plots, progress_factory=factory,
+                                            status=status, designs=designs)
                 except TsmpcError as err:
                     fail(err, code=1)
             (out / PARTIAL_MARKER).unlink(missing_ok=True)
@@ -146,56 +135,6 @@ def _execute(
     bad = [n for n, m in result.metrics["methods"].items() if m["termination"] != "completed"]
     if bad:
         raise typer.Exit(1)
-
-
-def _plant_setup(plant: str, cr_vehicle: int, cfg: Any, scenario: Any) -> tuple[Any, Any, Any]:
-    """(config, scenario, plant factory) for ``--plant``: tsmpc's own, or a CommonRoad model
-    with vehicle ``--cr-vehicle`` (controllers set up for it, the servo's steering angle measured)."""
-    from dataclasses import replace as dc_replace
-
-    name = plant.strip().lower()
-    if name == "tsmpc":
-        return cfg, scenario, None
-    from tsmpc.vehicle.commonroad import COMMONROAD_MODELS, CommonRoadPlant, commonroad_config
-
-    if name not in COMMONROAD_MODELS:
-        fail(ConfigError(f"unknown --plant {plant!r}; allowed: tsmpc, {', '.join(COMMONROAD_MODELS)}"))
-    try:
-        cfg = commonroad_config(cfg, cr_vehicle)
-        CommonRoadPlant(cr_vehicle, h=cfg.rates.h)  # fail here, before any work, if unusable
-    except TsmpcError as err:
-        fail(err)
-    meta = {**scenario.meta, "plant": name, "cr_vehicle": cr_vehicle}
-    sc = dc_replace(scenario, measured_steering=True, meta=meta)
-    model = COMMONROAD_MODELS[name]
-    return cfg, sc, lambda: CommonRoadPlant(cr_vehicle, model=model, h=cfg.rates.h)
-
-
-def _fit_envelope(cfg: Any, scenario: Any, strict: bool) -> Any:
-    """The reference's ranges against the designs' boxes (SPEC §13): widened, or refused
-    (``--strict-box``, a steering angle beyond the actuator) with exit 2 before any work."""
-    from tsmpc.envelope import fit_envelope
-
-    try:
-        return fit_envelope(cfg, scenario.reference, strict=strict)
-    except TsmpcError as err:
-        fail(err)
-
-
-def _certify_envelope(console: Any, fit: Any) -> Any:
-    """The widened config once its designs are solved and certified (cached); one line says so.
-    No certified design for the range: exit 2 before simulating, with the reason."""
-    from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
-
-    if fit.widened:
-        console.print(fit.message, markup=False, highlight=False)
-        try:
-            load_or_design_kinematic(fit.config)
-            load_or_design_dynamic(fit.config)
-        except TsmpcError as err:
-            fail(ConfigError(f"no certified design covers the reference ({fit.ranges.describe()}): "
-                             f"{err}"))
-    return fit.config
 
 
 def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
@@ -266,8 +205,9 @@ _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x
 _PLANT_HELP = ("Plant: tsmpc (the built-in nonlinear single-track), commonroad-st or commonroad-mb "
                "(CommonRoad's single-track / multi-body model behind a steering servo; needs the "
                "[commonroad] extra).")
-_PRESET_HELP = ("Named configuration under --config: 'default' (our best cascade) or 'paper' (the cascade "
-                "as published: no speed-error feedback, the paper's UIO friction estimate).")
+_PRESET_HELP = ("Named configuration under --config: 'default' (our best cascade), 'paper' (the cascade "
+                "as published: no speed-error feedback, the paper's UIO friction estimate) or "
+                "'paper-as-run' (the published run's quirks, SPEC §14: not a recommendation).")
 _STRICT_HELP = ("Refuse a reference that leaves the designs' scheduling boxes (default: widen the boxes "
                 "by a margin and re-solve and re-certify the designs, cached).")
 _DT_HELP = ("Column period [s] of a paper-format file (default: measured from the data; a value the "

@@ -19,11 +19,13 @@ def design(
     """Kinematic LQR-LMI + terminal set and dynamic TS-LMI-LQR: S, P, gains, certificates, times."""
     import json
     import time
+    from dataclasses import asdict
 
     import numpy as np
 
     from tsmpc.errors import TsmpcError
     from tsmpc.synthesis.cache import design_to_dict, load_or_design_dynamic, load_or_design_kinematic
+    from tsmpc.synthesis.certificates import MIN_RELATIVE_MARGIN, worst
 
     cfg = load_config_or_exit(config)
     try:
@@ -37,7 +39,9 @@ def design(
         return
     if as_json:
         out = {"kinematic": design_to_dict(kd), "dynamic": design_to_dict(dd),
-               "wall_s": {"kinematic": t1 - t0, "dynamic": t2 - t1}}
+               "wall_s": {"kinematic": t1 - t0, "dynamic": t2 - t1},
+               "smallest_margin": {name: asdict(worst(d.certificates))
+                                   for name, d in (("kinematic", kd), ("dynamic", dd))}}
         typer.echo(json.dumps(out, indent=1))
         return
 
@@ -54,12 +58,16 @@ def design(
     con.print(f"grid: max spectral radius {dd.grid_max_rho:.5f}, "
               f"max Lyapunov ratio {dd.grid_max_decrease:.6f}")
     con.print(f"K (vertex 0, physical units) =\n{dd.K[0]}")
-    table = Table(title="Certificates (λmax of a matrix that must be ≺ 0)")
+    table = Table(title="Certificates (λmax of a matrix that must be ≺ 0; a relative margin "
+                  f"<= -{MIN_RELATIVE_MARGIN:g} is required)")
     table.add_column("design")
-    table.add_column("worst certificate")
-    table.add_column("margin", justify="right")
+    table.add_column("smallest margin: certificate")
+    table.add_column("absolute", justify="right")
+    table.add_column("relative", justify="right")
+    table.add_column("imposed in the SDP", justify="right")
     table.add_column("all hold")
     for name, d in (("kinematic", kd), ("dynamic", dd)):
-        worst = max(d.certificates, key=lambda c: c.margin)
-        table.add_row(name, worst.name, f"{worst.margin:.3e}", str(all(c.holds for c in d.certificates)))
+        w = worst(d.certificates)
+        table.add_row(name, w.name, f"{w.margin:.3e}", f"{w.relative:.3e}", f"{d.margin_imposed:.0e}",
+                      str(all(c.holds for c in d.certificates)))
     con.print(table)

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tsmpc.config import Config, Method
+from tsmpc.config import Config, InnerLaw, Method, MHEForm
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
@@ -64,7 +64,9 @@ class Measurement:
         stamp: time the sample was taken [s] (same clock as ``t`` of ``step``); a sample older
             than the cascade's ``max_age_s`` is rejected as stale. None = fresh.
         state: ground-truth [v, α, ω] (simulation only: the *oracle* ablation). When given, the
-            TS-LQR uses it instead of the MHE's estimate and gets no friction compensation.
+            TS-LQR uses it instead of the MHE's estimate and gets no friction compensation —
+            or, with ``lqr.true_state_feedback`` (the published run's quirk), the compensation
+            as configured.
     """
 
     pose: tuple[float, float, float]
@@ -177,13 +179,28 @@ class Cascade:
         self.n_inner = rates.inner_per_outer
         ref = reference if abs(reference.dt - self.Tc) <= 1e-9 else reference.resample(self.Tc)
         self.reference = ref
+        # the path's tangent at each sample, from the geometry (any sample period; slip_aware.py)
+        self._theta_tangent = ref.tangent_heading()
+        # what the MPC's steps see: the planner's samples (paper) or each T_c step's averages
+        self._mpc_reference = ref.step_averages() if cfg.mpc.step_average_reference else ref
         kd = kinematic_design or load_or_design_kinematic(cfg)
         dd = dynamic_design or load_or_design_dynamic(cfg)
         self.mpc = build_outer_controller(cfg, self.method, kd.P, kd.S, K=kd.K)
         dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, self.Td)
-        self.lqr = TSLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, self.Td,
-                         bandwidth=cfg.dynamic_lmi.filter_bandwidth)
-        self.mhe = MHEUIO(cfg.mhe, dyn, cfg.vehicle, self.Td)
+        if cfg.lqr.law == InnerLaw.AS_RUN:  # the published run's law (SPEC §14): a quirk
+            from tsmpc.control.paper_as_run import AsRunLQR
+
+            self.lqr = AsRunLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, self.Td,
+                                bandwidth=cfg.dynamic_lmi.filter_bandwidth)
+        else:
+            self.lqr = TSLQR(dd.K, dyn, cfg.vehicle, cfg.lqr, self.Td,
+                             bandwidth=cfg.dynamic_lmi.filter_bandwidth)
+        if cfg.mhe.form == MHEForm.UIO:  # the paper's UIO form (numpy path)
+            from tsmpc.estimation.mhe_paper_uio import PaperUIOMHE
+
+            self.mhe = PaperUIOMHE(cfg.mhe, dyn, cfg.vehicle, self.Td)
+        else:
+            self.mhe = MHEUIO(cfg.mhe, dyn, cfg.vehicle, self.Td)
         self.max_age_s = self.Tc if max_age_s is None else float(max_age_s)
         self._slip_gate = SlipGate(self.Tc, cfg.noise.position * cfg.noise.scale)
         self.reset(x0)
@@ -279,20 +296,22 @@ class Cascade:
                 self._pose = np.array([X, Y, th])
             else:  # keep the last good pose: the MPC never sees NaN
                 ev["pose_rejected"] += 1
-            k = max(math.floor(t / self.Tc + 1e-6), 0)
+            if self.cfg.rates.inner_steps_per_outer is None:
+                k = max(math.floor(t / self.Tc + 1e-6), 0)
+            else:  # a fixed number of calls per reference sample (the published run's time base)
+                k = self._calls // self.n_inner
             ref = self.reference
             kk = min(k, len(ref) - 1)
             p = self._pose
-            window = ref.window(k, self.cfg.mpc.N + 1)
+            window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
             mpc_cfg = self.cfg.mpc
             if mpc_cfg.slip_aware or mpc_cfg.tangent_heading:  # beyond the paper: slip_aware.py
                 last = self._last
                 a_hat = float(last.estimate.x[1]) if mpc_cfg.slip_aware and last is not None else 0.0
                 if mpc_cfg.slip_aware:  # α̂ bounded by the measured course over ground
                     a_hat = self._slip_gate(p, a_hat)
-                dth = float(window.omega[1]) * self.Tc if mpc_cfg.tangent_heading else 0.0
-                e_meas = outer_loop_errors(p, np.array([ref.x[kk], ref.y[kk], ref.theta[kk]]),
-                                           a_hat, dth)
+                th_d = self._theta_tangent[kk] if mpc_cfg.tangent_heading else ref.theta[kk]
+                e_meas = outer_loop_errors(p, np.array([ref.x[kk], ref.y[kk], th_d]), a_hat)
             else:
                 e_meas = np.array(pose_to_errors(p[0], p[1], p[2], ref.x[kk], ref.y[kk],
                                                  ref.theta[kk]))
@@ -324,7 +343,13 @@ class Cascade:
             est = Estimate(x_hat, last.F_fr if last is not None else 0.0, 0.0,
                            EstimatorStatus.FAILED, time.perf_counter() - t1)
         t2 = time.perf_counter()
-        inner = est if m.state is None else _oracle_estimate(m.state)
+        if m.state is None:
+            inner = est
+        elif self.cfg.lqr.true_state_feedback:  # the published run: true state, F̂ as configured
+            inner = Estimate(np.asarray(m.state, dtype=float).reshape(3).copy(), est.F_fr,
+                             est.F_fr_raw, est.status, est.solve_time_s)
+        else:
+            inner = _oracle_estimate(m.state)
         out = self.lqr.step(inner, v_ref, w_ref)
         t3 = time.perf_counter()
         self._u_applied = np.array([out.F_xR, out.delta])

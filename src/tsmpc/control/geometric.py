@@ -7,10 +7,13 @@ speed channel.
 pose it tracks against reference sample k (the velocity pose under the slip-aware outer loop,
 whose heading is the direction of travel; see :mod:`tsmpc.control.slip_aware`). With the
 reference heading θ_d' the errors were taken against, the pose is
-θ = θ_d' − e_θ, (X, Y) = (x_d, y_d) − R(θ) [e_x, e_y]. θ_d' is the sample's θ_d, moved to the path
-tangent by ω_d(k+1) T_c / 2 when ``mpc.tangent_heading`` is on — exactly what the cascade did
-(:func:`tsmpc.control.slip_aware.outer_loop_errors`); a 0.01 rad mismatch here would bias a pure
-pursuit's curvature by 2 · 0.01 / L_d.
+θ = θ_d' − e_θ, (X, Y) = (x_d, y_d) − R(θ) [e_x, e_y]. θ_d' is what the cascade used
+(:func:`reference_heading`): the path's tangent at the sample under ``mpc.tangent_heading``, else
+the sample's θ_d. The window the MPC receives carries exactly that heading in the default
+configuration (``mpc.step_average_reference``: its θ are the tangents) and in the paper preset
+(neither switch: the raw θ_d); with the tangent heading but raw windows, the tangent is measured
+on the window (:meth:`tsmpc.planning.reference.Reference.tangent_heading`). A heading off by
+ω_d T_c / 2 (0.01 rad) would bias a pure pursuit's curvature by 2 · 0.01 / L_d.
 
 **Curvature to yaw rate (the one conversion).** A geometric law yields a path curvature κ (pure
 pursuit directly; Stanley through the kinematic bicycle κ = tan δ / L, :func:`curvature_of_steering`).
@@ -38,24 +41,27 @@ __all__ = [
     "curvature_of_steering",
     "lookahead_point",
     "nearest_point",
+    "reference_heading",
     "speed_command",
     "vehicle_pose",
     "yaw_rate_command",
 ]
 
 
-def vehicle_pose(
-    errors: NDArray[np.float64], window: Any, Tc: float, tangent_heading: bool
-) -> tuple[float, float, float]:
-    """(X, Y, θ) of the pose whose errors against ``window``'s first sample are ``errors``.
+def reference_heading(window: Any, tangent_heading: bool, step_average: bool) -> float:
+    """θ_d' [rad] the outer loop's errors were taken against at the window's first sample, for the
+    switches ``mpc.tangent_heading`` and ``mpc.step_average_reference`` (module docstring)."""
+    th = float(window.theta[0])
+    if tangent_heading and not step_average and hasattr(window, "tangent_heading"):
+        th = float(window.tangent_heading()[0])
+    return th
 
-    ``tangent_heading``: the errors were taken against θ_d + ω_d(k+1) T_c / 2 (``mpc.tangent_heading``).
-    """
+
+def vehicle_pose(errors: NDArray[np.float64], window: Any, heading: float) -> tuple[float, float, float]:
+    """(X, Y, θ) of the pose whose errors against the window's first sample (x_d, y_d) with
+    reference heading ``heading`` (:func:`reference_heading`) are ``errors``."""
     e_x, e_y, e_th = (float(v) for v in errors)
-    th_d = float(window.theta[0])
-    if tangent_heading and len(window.omega) > 1:
-        th_d += 0.5 * float(window.omega[1]) * Tc
-    th = th_d - e_th
+    th = float(heading) - e_th
     c, s = math.cos(th), math.sin(th)
     return float(window.x[0]) - (c * e_x - s * e_y), float(window.y[0]) - (s * e_x + c * e_y), th
 

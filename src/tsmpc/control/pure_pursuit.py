@@ -31,6 +31,7 @@ from tsmpc.control.baselines import law_result
 from tsmpc.control.geometric import (
     lookahead_point,
     nearest_point,
+    reference_heading,
     speed_command,
     vehicle_pose,
     yaw_rate_command,
@@ -45,7 +46,8 @@ class PurePursuit:
 
     Args:
         settings: look-ahead time and bounds.
-        mpc: the MPC settings (input box Π, horizon N for the result's shape, tangent heading).
+        mpc: the MPC settings (input box Π, horizon N for the result's shape, the reference
+            heading switches).
         Tc: outer sample time [s].
         along_track_gain: gain of the speed channel's along-track feedback [1/s].
     """
@@ -56,6 +58,7 @@ class PurePursuit:
         self.N = mpc.N
         self.Tc = float(Tc)
         self.tangent_heading = mpc.tangent_heading
+        self.step_average = mpc.step_average_reference
         self.gain = float(along_track_gain)
         self._umin = np.asarray(mpc.u_min, dtype=float)
         self._umax = np.asarray(mpc.u_max, dtype=float)
@@ -77,7 +80,8 @@ class PurePursuit:
 
     def curvature(self, errors: Any, window: Any, v: float) -> float:
         """κ [1/m] of the arc from the pose to the look-ahead point at speed v."""
-        X, Y, th = vehicle_pose(np.asarray(errors, dtype=float), window, self.Tc, self.tangent_heading)
+        heading = reference_heading(window, self.tangent_heading, self.step_average)
+        X, Y, th = vehicle_pose(np.asarray(errors, dtype=float), window, heading)
         xs, ys = np.asarray(window.x, dtype=float), np.asarray(window.y, dtype=float)
         near = nearest_point(X, Y, xs, ys)
         gx, gy = lookahead_point(X, Y, xs, ys, near, self.lookahead(v))

@@ -57,17 +57,21 @@ def velocity_frame_errors(
 
 
 def outer_loop_errors(
-    pose: NDArray[np.float64], ref_pose: NDArray[np.float64], alpha_hat: float, dtheta_next: float
+    pose: NDArray[np.float64], ref_pose: NDArray[np.float64], alpha_hat: float, dtheta_next: float = 0.0
 ) -> NDArray[np.float64]:
     """The errors the MPC receives: of the velocity pose (``alpha_hat``, 0 = body frame) against
-    the reference pose whose heading is moved to the path tangent at the sample by half the
-    next heading step ``dtheta_next`` = ω_d(k+1) T_c (0 = the reference heading as given).
+    the reference pose ``ref_pose`` (x_d, y_d, heading), its heading moved by half of
+    ``dtheta_next`` (0: as given; the cascade passes the path's tangent heading at the sample,
+    :meth:`~tsmpc.planning.reference.Reference.tangent_heading`, in ``ref_pose`` directly).
 
-    Why the tangent: under the paper planner's convention x(k) = x(k−1) + v(k) cos θ(k) T
+    Why the tangent: under the planners' convention x(k) = x(k−1) + v(k) cos θ(k) T
     (SPEC §10) θ_d(k) is the heading of the step *into* sample k; the path's tangent at (x_d, y_d)(k)
-    lies halfway to the next step's heading, θ_d(k) + ω_d(k+1) T / 2. The kinematic model takes
-    θ_d as the direction the reference point moves, so the raw heading is a bias of ω_d T / 2 on
-    e_θ (0.011 rad at 0.22 rad/s) that the MPC holds against with a lateral offset in every corner.
+    lies halfway to the next step's heading, θ_d(k) + ω_d(k+1) T / 2 with T the reference's *own*
+    sample period. The kinematic model takes θ_d as the direction the reference point moves, so
+    the raw heading is a bias of ω_d T / 2 on e_θ (0.011 rad at 0.22 rad/s and T = 0.1 s) that the
+    MPC holds against with a lateral offset in every corner. The tangent is taken from the
+    geometry, so a reference sampled at 20 ms, 50 ms or 100 ms (and resampled to T_c) gets the
+    correction of its own period.
     """
     r = np.array([ref_pose[0], ref_pose[1], ref_pose[2] + 0.5 * dtheta_next])
     return velocity_frame_errors(pose, r, alpha_hat)

@@ -39,6 +39,7 @@ from tsmpc.control.baselines import law_result
 from tsmpc.control.geometric import (
     curvature_of_steering,
     nearest_point,
+    reference_heading,
     speed_command,
     vehicle_pose,
     yaw_rate_command,
@@ -57,7 +58,8 @@ class Stanley:
 
     Args:
         settings: gain k, softening speed, heading gain k_ψ, curvature feed-forward switch.
-        mpc: the MPC settings (input box Π, horizon N for the result's shape, tangent heading).
+        mpc: the MPC settings (input box Π, horizon N for the result's shape, the reference
+            heading switches).
         Tc: outer sample time [s].
         vehicle: axle distances a, b (wheelbase L = a + b).
         delta_max: steering limit [rad].
@@ -70,6 +72,7 @@ class Stanley:
         self.N = mpc.N
         self.Tc = float(Tc)
         self.tangent_heading = mpc.tangent_heading
+        self.step_average = mpc.step_average_reference
         self.a = float(vehicle.a)
         self.wheelbase = float(vehicle.wheelbase)
         self.delta_max = float(delta_max)
@@ -89,7 +92,8 @@ class Stanley:
 
     def steering(self, errors: Any, window: Any, v: float) -> float:
         """δ [rad] of the law at speed v (saturated to ±delta_max)."""
-        X, Y, th = vehicle_pose(np.asarray(errors, dtype=float), window, self.Tc, self.tangent_heading)
+        heading = reference_heading(window, self.tangent_heading, self.step_average)
+        X, Y, th = vehicle_pose(np.asarray(errors, dtype=float), window, heading)
         fx, fy = X + self.a * math.cos(th), Y + self.a * math.sin(th)
         kap = getattr(window, "kappa", None)
         near = nearest_point(fx, fy, np.asarray(window.x, dtype=float), np.asarray(window.y, dtype=float),

@@ -26,6 +26,9 @@ compensated F̂_fr: the MHE's window fit (default) or the paper's one-step UIO f
 
 Anti-windup: the filter states are clamped to the saturation limits and ζ stops integrating
 while an input saturates.
+
+The law as the published run ran it (SPEC §14; ``lqr.law = "as-run"``, a quirk of that run) is
+:mod:`tsmpc.control.paper_as_run`.
 """
 
 from __future__ import annotations

@@ -12,7 +12,8 @@ that noise on the force command. We return that formula as ``F_fr_raw`` (compens
 ``paper`` preset, ``lqr.friction_estimate = "uio"``) and estimate F as a *window-constant
 unknown input* inside the MHE: the least-squares fit over the 30 samples of the same decoupled
 relation, with the previous window's F as arrival prior (``F_fr``, the default's compensation).
-It reaches the controller without further filtering.
+It reaches the controller without further filtering. The paper's own form, with F eliminated
+from the window model through E_d, is :mod:`tsmpc.estimation.mhe_paper_uio` (``mhe.form = "uio"``).
 
 Window QP (variables ``z = [x_0, F, w_0 … w_{N−1}]``, 3 + 1 + 3N)::
 

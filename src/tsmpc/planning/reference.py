@@ -132,6 +132,70 @@ class Reference:
             y[i] = py + v * np.sin(th[i]) * dt
         return Reference(t, x, y, th, self.v[ji], self.omega[ji], self.kappa[ji], closed=False)
 
+    def heading_lag(self) -> float:
+        """How long θ_d lags the path's tangent [s], measured from the geometry.
+
+        Under the planners' convention (SPEC §10: θ(k) = θ(k−1) + ω(k)T, x(k) = x(k−1) +
+        v(k) cos θ(k) T) θ_d(k) is the heading of the step *into* sample k, half a source period
+        T_src/2 behind the tangent — whatever the reference was resampled to since; a reference
+        whose θ_d is the tangent itself has no lag. The lag τ is the least-squares fit of
+        chord(k) − θ_d(k) = τ θ̇_d(k) over the whole reference (chord: direction from sample k−1
+        to k+1, the tangent on a circular arc): one number, so the rounding of the positions in a
+        file (the paper's has 5 significant digits: 1 cm at 800 m) averages out. Bounded to
+        [−T, T]; 0 for a straight reference."""
+        n = len(self)
+        if n < 3:
+            return 0.0
+        dt = self.dt
+        k = np.arange(1, n - 1)
+        dx, dy = self.x[k + 1] - self.x[k - 1], self.y[k + 1] - self.y[k - 1]
+        moving = np.hypot(dx, dy) > 1e-6
+        off = (np.arctan2(dy, dx) - self.theta[k] + np.pi) % (2 * np.pi) - np.pi
+        rate = (self.theta[k + 1] - self.theta[k - 1]) / (2 * dt)
+        rate, off = rate[moving], off[moving]
+        den = float(np.sum(rate * rate))
+        if not den > 1e-12:
+            return 0.0
+        return float(np.clip(np.sum(rate * off) / den, -dt, dt))
+
+    def tangent_heading(self) -> NDArray[np.float64]:
+        """(n,) heading of the path's tangent at each sample [rad]: θ_d moved forward by its
+        :meth:`heading_lag` τ, θ_d(k) + τ (θ_d(k+1) − θ_d(k)) / T (linear interpolation of θ_d at
+        t + τ; the last sample of an open reference uses the previous step's rate). Independent
+        of the sample period: a path sampled at 20, 50 or 100 ms gets the correction of its own
+        convention."""
+        tau = self.heading_lag()
+        th = self.theta
+        if len(self) < 2 or tau == 0.0:
+            return th.copy()
+        step = np.diff(th)
+        if self.closed:  # the lap's first sample follows its last one (θ continued by a turn)
+            turn = th[-1] - th[0] + self.omega[0] * self.dt
+            turn = 2 * np.pi * np.round(turn / (2 * np.pi))
+            step = np.append(step, th[0] + turn - th[-1])
+        else:
+            step = np.append(step, step[-1])
+        return th + tau * step / self.dt
+
+    def step_averages(self) -> Reference:
+        """The reference as the path's geometry over each step: θ the tangent heading
+        (:meth:`tangent_heading`), ω(k) = (θ_tan(k+1) − θ_tan(k)) / T and v(k) = |p(k+1) − p(k)| / T,
+        the averages over the step *from* sample k (κ = ω / v). Positions and time unchanged.
+
+        An MPC whose step k → k+1 takes (v_d(k), ω_d(k)) then sees the same motion whatever the
+        reference's source period and heading convention: the planners' own samples describe the
+        step *into* the sample, a lag of T_src/2 in θ and of a whole step in ω, v at T_c."""
+        th = self.tangent_heading()
+        ext = self.window(0, len(self) + 1)  # one more sample: the lap's start, or continued
+        th_next = np.append(th[1:], th[-1] + (ext.theta[-1] - self.theta[-1]))
+        if self.closed:  # the lap's first tangent, continued by a whole turn
+            th_next[-1] = th[0] + (ext.theta[-1] - self.theta[0])
+        dt = self.dt
+        omega = (th_next - th) / dt
+        v = np.hypot(np.diff(ext.x), np.diff(ext.y)) / dt
+        kappa = np.where(v > 1e-6, omega / np.maximum(v, 1e-6), self.kappa)
+        return Reference(self.t, self.x, self.y, th, v, omega, kappa, closed=self.closed)
+
     def repeat(self, laps: int) -> Reference:
         """``laps`` consecutive laps of a closed reference (itself closed: the look-ahead past
         the last lap wraps into the next one)."""

@@ -195,6 +195,7 @@ def simulate(
 
     limit_blas_threads()
     oracle = oracle or cfg.lqr.oracle
+    true_state = cfg.lqr.true_state_feedback  # the published run's quirk (SPEC §14)
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=kinematic_design,
                       dynamic_design=dynamic_design)
     ref, N, Tc, Td, n_in = cascade.reference, cfg.mpc.N, cfg.rates.Tc, cfg.rates.Td, cascade.n_inner
@@ -220,7 +221,7 @@ def simulate(
             termination = f"diverged: |e_y| = {abs(e_y):.2f} m > {bound:g} m at t = {k * Tc:.1f} s"
             done = k + 1
             break
-        cmd = cascade.step(t, _measurement(y, x, plant, oracle, scenario))
+        cmd = cascade.step(t, _measurement(y, x, plant, oracle or true_state, scenario))
         if cmd.plan is not None:
             rec.plan(k, cmd)
         mu = float(scenario.friction.mu(t, s_travel))
@@ -240,4 +241,5 @@ def simulate(
             progress(k + 1, K)
     return rec.log(cascade.method.value, scenario.name, Tc, Td, done, rows,
                    wall_s=time.perf_counter() - t_start, termination=termination, events=cascade.events,
-                   meta={"oracle": oracle, "seed": cfg.seed, **scenario.meta})
+                   meta={"oracle": oracle, "seed": cfg.seed, **scenario.meta,
+                         "final_state": x.tolist()})

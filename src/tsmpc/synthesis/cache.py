@@ -14,16 +14,17 @@ import hashlib
 import json
 import os
 from dataclasses import asdict, fields
+from dataclasses import replace as dc_replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from tsmpc.config import Config
+from tsmpc.config import Config, DynamicLMIFormulation
 from tsmpc.errors import TsmpcError
 from tsmpc.io import atomic_write_text
 from tsmpc.synthesis.certificates import Certificate, check
-from tsmpc.synthesis.dynamic import DynamicDesign, certify_grid, design_dynamic
+from tsmpc.synthesis.dynamic import DynamicDesign, certify_dynamic, design_dynamic
 from tsmpc.synthesis.kinematic import KinematicDesign, certify_kinematic, design_kinematic
 
 __all__ = [
@@ -37,7 +38,7 @@ __all__ = [
 ]
 
 #: Bump when a formulation changes, so old cache entries are not reused.
-FORMAT_VERSION = 2
+FORMAT_VERSION = 4
 
 
 def cache_dir() -> Path:
@@ -59,8 +60,11 @@ def kinematic_key(cfg: Config) -> str:
 
 def dynamic_key(cfg: Config) -> str:
     """Hash of every input of the dynamic design."""
+    lmi = cfg.dynamic_lmi.model_dump(mode="json")
+    if lmi.get("formulation") == "guaranteed-cost":  # ours: the keys of existing designs do not change
+        del lmi["formulation"]
     return _hash("dynamic", {"box": cfg.dynamic_box.model_dump(mode="json"),
-                             "lmi": cfg.dynamic_lmi.model_dump(mode="json"),
+                             "lmi": lmi,
                              # unset optional fields (per-axle stiffness) are left out, so the
                              # keys of existing designs do not change
                              "vehicle": cfg.vehicle.model_dump(mode="json", exclude_none=True),
@@ -88,15 +92,16 @@ def design_from_dict(data: dict[str, Any]) -> KinematicDesign | DynamicDesign:
     for f in fields(cls):
         value = data[f.name]
         if f.name == "certificates":
-            value = tuple(Certificate(c["name"], float(c["margin"])) for c in value)
+            value = tuple(Certificate(c["name"], float(c["margin"]), float(c["relative"]))
+                          for c in value)
         elif isinstance(value, list):
             value = np.asarray(value, dtype=float)
         kwargs[f.name] = value
     return cls(**kwargs)
 
 
-def _recheck(design: KinematicDesign | DynamicDesign, cfg: Config) -> None:
-    """Recompute the certificates of a loaded design (raises on failure)."""
+def _recheck(design: KinematicDesign | DynamicDesign, cfg: Config) -> tuple[Certificate, ...]:
+    """Recompute the certificates of a loaded design on this machine (raises on failure)."""
     if isinstance(design, KinematicDesign):
         from tsmpc.models.kinematic import KinematicTS
 
@@ -105,9 +110,10 @@ def _recheck(design: KinematicDesign | DynamicDesign, cfg: Config) -> None:
                                   np.diag(cfg.kinematic_lmi.R), design.Y, design.K, design.Z,
                                   np.diag(np.square(cfg.kinematic_lmi.u_bar)), P=design.P, S=design.S)
     else:
-        _, _, certs = certify_grid(design.K, design.P, cfg.dynamic_box, cfg.vehicle, design.Td,
-                                   design.bandwidth, cfg.dynamic_lmi.grid_points)
+        _, _, certs = certify_dynamic(design.K, design.P, cfg.dynamic_box, cfg.vehicle,
+                                      cfg.dynamic_lmi, design.Td)
     check(certs, "cached design")
+    return tuple(certs)
 
 
 def _load_or_design(cfg: Config, kind: str, directory: Path | None, use_cache: bool) -> Any:
@@ -117,8 +123,8 @@ def _load_or_design(cfg: Config, kind: str, directory: Path | None, use_cache: b
         try:
             design = design_from_dict(json.loads(path.read_text()))
             if design.inputs_hash == key:
-                _recheck(design, cfg)
-                return design
+                # the certificates reported are the ones recomputed here, not the stored ones
+                return dc_replace(design, certificates=_recheck(design, cfg))
         except (TsmpcError, KeyError, ValueError, TypeError, json.JSONDecodeError):
             pass  # unreadable or stale entry: re-solve and overwrite it
     if kind == "kinematic":
@@ -144,5 +150,10 @@ def load_or_design_kinematic(
 def load_or_design_dynamic(
     cfg: Config, directory: Path | None = None, *, use_cache: bool = True
 ) -> DynamicDesign:
-    """The dynamic design of ``cfg``, from the cache when its inputs are unchanged."""
+    """The dynamic design of ``cfg``, from the cache when its inputs are unchanged (the published
+    run's feasibility design, :mod:`tsmpc.synthesis.paper_as_run`, when ``cfg`` selects it)."""
+    if cfg.dynamic_lmi.formulation == DynamicLMIFormulation.FEASIBILITY_EULER:
+        from tsmpc.synthesis.paper_as_run import load_or_design_feasibility
+
+        return load_or_design_feasibility(cfg, directory, use_cache=use_cache)  # type: ignore[return-value]
     return _load_or_design(cfg, "dynamic", directory, use_cache)

@@ -21,16 +21,20 @@ Formulation (why it differs from a textbook vertex LMI)
    ``W(ϑ) = Σ μ_i(ϑ) W_i`` — linear in the W_i, so the problem stays an SDP and its online gain is
    exactly ``K(ϑ) = W(ϑ) Y⁻¹ = Σ μ_i K_i``. α does not enter the matrices, so the α vertices share
    their gains.
-4. *Certificates.* Afterwards, numpy recomputes (a) each imposed LMI, and (b) on a dense grid of ϑ
-   (``grid_points`` per axis, default 15³) the spectral radius of the exact closed loop and the
-   Lyapunov decrease ``A_clᵀ P A_cl − P ≺ 0`` (relative margin reported). A failing certificate
-   raises :class:`CertificateError`.
+4. *A margin in the SDP.* The decrease condition is imposed with a relative margin t,
+   ``A_clᵀ P A_cl − (1−t) P + s(Q + KᵀRK) ⪯ 0`` (``(1−t) Y`` in the Schur form's corner), t from
+   the ladder of :mod:`tsmpc.synthesis.sdp` (1e-4 first): the recomputed certificates then hold
+   by ≈ t, 100× the threshold, on any CPU and BLAS.
+5. *Certificates.* Afterwards, numpy recomputes (a) the guaranteed-cost decrease at every LMI grid
+   point relative to P (:func:`certify_dynamic`), and (b) on a dense grid of ϑ (``grid_points`` per
+   axis, default 15³) the spectral radius of the exact closed loop and the Lyapunov decrease
+   ``A_clᵀ P A_cl − P ≺ 0`` (relative margin reported). A failing certificate raises
+   :class:`CertificateError`.
 """
 
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,15 +44,16 @@ from tsmpc.config import DynamicBox, DynamicLMISettings, VehicleParams
 from tsmpc.errors import SolverError
 from tsmpc.models.dynamic import Discretization, augment_apkarian, continuous_matrices, discretize
 from tsmpc.models.polytope import SchedulingBox
-from tsmpc.synthesis.certificates import Certificate, check, neg_def_margin
+from tsmpc.synthesis.certificates import Certificate, definite_certificate, lmi_certificate
+from tsmpc.synthesis.sdp import LADDER_FLOOR, Infeasible, SDPSolver, solve, solve_with_margin
 
-__all__ = ["DynamicDesign", "augmented_models", "design_dynamic", "per_vertex_dare_gains"]
+__all__ = ["DynamicDesign", "augmented_models", "certify_dynamic", "certify_grid", "design_dynamic",
+           "per_vertex_dare_gains"]
 
 #: Diagonal state / input scaling of the SDP: x = T_x x_s, u = T_u u_s (units: m/s, rad, rad/s,
 #: N, rad, rad → O(1) at the operating envelope).
 STATE_SCALE = np.array([1.0, 0.01, 0.1, 1000.0, 0.1, 0.1])
 INPUT_SCALE = np.array([1000.0, 0.1])
-LMI_EPS = 1e-8
 #: Enriched (δ, v) grid where the LMI is imposed: v is graded towards low speed (1/v terms).
 GRID_DELTA = 5
 GRID_V = 9
@@ -73,6 +78,8 @@ class DynamicDesign:
     status: str
     formulation: str = "guaranteed-cost LMI, common P, interpolated W on a (δ, v) grid, ZOH"
     inputs_hash: str = ""
+    margin_imposed: float = 0.0  #: relative margin t built into the SDP
+    solver: str = "CLARABEL"
 
 
 def augmented_models(
@@ -122,32 +129,79 @@ def per_vertex_dare_gains(
     return np.array(K)
 
 
+def _cost_scale(settings: DynamicLMISettings) -> float:
+    """Common scale s of Q and R in the SDP (1 / the largest scaled weight); the LQR optimum is
+    invariant to it, the guaranteed-cost matrix P is for the cost s·(xᵀQx + uᵀRu)."""
+    Tx, Tu = STATE_SCALE, INPUT_SCALE
+    return 1.0 / max(float(np.max(Tx**2 * np.asarray(settings.Q))),
+                     float(np.max(Tu**2 * np.asarray(settings.R))))
+
+
 def design_dynamic(
     box: DynamicBox, vehicle: VehicleParams, settings: DynamicLMISettings, Td: float,
-    inputs_hash: str = "",
+    inputs_hash: str = "", *, solver: SDPSolver | str = SDPSolver.CLARABEL,
 ) -> DynamicDesign:
-    """Solve the dynamic TS-LMI-LQR with cvxpy + Clarabel and certify it (see module docstring).
+    """Solve the dynamic TS-LMI-LQR with cvxpy (Clarabel by default) and certify it (see the
+    module docstring). Every LMI carries the relative margin of :mod:`tsmpc.synthesis.sdp`'s ladder.
 
-    Raises :class:`SolverError` if the SDP fails and :class:`CertificateError` if a recomputed
-    certificate does not hold.
+    Raises :class:`SolverError` if the SDP fails or no margin is feasible (naming the LMI, the
+    grid point that blocks and the options that would help) and
+    :class:`~tsmpc.errors.CertificateError` if a recomputed certificate does not hold.
     """
-    import cvxpy as cp
-
     t0 = time.perf_counter()
     lam = settings.filter_bandwidth
     pb = _premise_box(box)
+    s_solver = SDPSolver(str(solver).upper())
     Tx, Tu = np.diag(STATE_SCALE), np.diag(INPUT_SCALE)
     Txi = np.diag(1.0 / STATE_SCALE)
-    Q = Tx @ np.diag(settings.Q) @ Tx
-    R = Tu @ np.diag(settings.R) @ Tu
-    s = 1.0 / max(Q.max(), R.max())
-    Qh, Rh = np.sqrt(Q * s), np.sqrt(R * s)
+    s = _cost_scale(settings)
+    Qh = np.sqrt(Tx @ np.diag(settings.Q) @ Tx * s)
+    Rh = np.sqrt(Tu @ np.diag(settings.R) @ Tu * s)
 
     zg = _lmi_grid(box)
     mu = pb.memberships(zg)  # (g, 8)
     A, B = augmented_models(zg, vehicle, Td, lam)
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
+        raise SolverError(f"dynamic TS-LMI-LQR at Td={Td}: the model is not finite on the box "
+                          "(check vehicle parameters and dynamic_box)")
     As = Txi @ A @ Tx
     Bs = Txi @ B @ Tu
+    what = f"dynamic TS-LMI-LQR at Td={Td}"
+
+    def attempt(t: float) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
+        Ys, Ks, status = _guaranteed_cost_lmi(As, Bs, mu, pb, Qh, Rh, t, s_solver, what)
+        Ps = np.linalg.inv(Ys)
+        P = Txi @ Ps @ Txi
+        return Tu @ Ks @ Txi, 0.5 * (P + P.T), status  # physical: u = T_u K_s T_x⁻¹ x
+
+    def certify(res: tuple[NDArray[np.float64], NDArray[np.float64], str]) -> list[Certificate]:
+        return certify_dynamic(res[0], res[1], box, vehicle, settings, Td)[2]
+
+    try:
+        (K, P, status), certs, t_imp = solve_with_margin(attempt, certify, f"dynamic design (Td={Td})")
+    except Infeasible as exc:
+        raise SolverError(
+            f"{what}: no common Lyapunov matrix with a relative margin >= {LADDER_FLOOR:g} "
+            f"({s_solver.value}: {exc.status}) over the box δ ∈ [{box.delta[0]:.3f}, "
+            f"{box.delta[1]:.3f}] rad, v ∈ [{box.v[0]:g}, {box.v[1]:g}] m/s"
+            f"{_blocking_point(As, Bs, mu, pb, Qh, Rh, zg, s_solver, what)}; narrow dynamic_box.v "
+            "or dynamic_box.delta (plan the reference slower: tsmpc plan --v-max / --a-lat), or "
+            "change dynamic_lmi.Q/R") from None
+    rho, dec, _ = certify_grid(K, P, box, vehicle, Td, lam, settings.grid_points)
+    return DynamicDesign(K=K, P=P, Td=float(Td), bandwidth=lam, certificates=tuple(certs),
+                         grid_max_rho=rho, grid_max_decrease=dec,
+                         solve_time_s=time.perf_counter() - t0, status=status,
+                         inputs_hash=inputs_hash, margin_imposed=t_imp, solver=s_solver.value)
+
+
+def _guaranteed_cost_lmi(
+    As: NDArray[np.float64], Bs: NDArray[np.float64], mu: NDArray[np.float64], pb: SchedulingBox,
+    Qh: NDArray[np.float64], Rh: NDArray[np.float64], t: float, solver: SDPSolver, what: str,
+    points: NDArray[np.intp] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
+    """min trace X, X ⪰ Y⁻¹, s.t. the guaranteed-cost LMI with relative margin t at the grid
+    points (scaled coordinates) → (Y_s, K_s (8, 2, 6), status)."""
+    import cvxpy as cp
 
     n, m = 6, 2
     Y = cp.Variable((n, n), symmetric=True)
@@ -157,47 +211,76 @@ def design_dynamic(
     Wv = [W[(bool(b[0]), bool(b[1]))] for b in pb.vertex_bits]
     Zn, Znm = np.zeros((n, n)), np.zeros((n, m))
     cons = [cp.bmat([[X, np.eye(n)], [np.eye(n), Y]]) >> 0]
-    for g in range(zg.shape[0]):
+    for g in (range(As.shape[0]) if points is None else points):
         Wg = sum(float(mu[g, i]) * Wv[i] for i in range(len(Wv)) if mu[g, i] > 0.0)
         AY = As[g] @ Y + Bs[g] @ Wg
         M = cp.bmat([
-            [Y, AY.T, (Qh @ Y).T, (Rh @ Wg).T],
+            [(1.0 - t) * Y, AY.T, (Qh @ Y).T, (Rh @ Wg).T],
             [AY, Y, Zn, Znm],
             [Qh @ Y, Zn, np.eye(n), Znm],
             [Rh @ Wg, Znm.T, Znm.T, np.eye(m)],
         ])
-        cons.append(0.5 * (M + M.T) >> LMI_EPS * np.eye(3 * n + m))
+        cons.append(0.5 * (M + M.T) >> 0)
     prob = cp.Problem(cp.Minimize(cp.trace(X)), cons)
-    try:
-        with warnings.catch_warnings():  # the status is reported; certificates decide
-            warnings.simplefilter('ignore', UserWarning)
-            prob.solve(solver=cp.CLARABEL)
-    except cp.error.SolverError as exc:  # pragma: no cover - depends on the solver build
-        raise SolverError(f"dynamic TS-LMI-LQR at Td={Td}: Clarabel failed ({exc})") from exc
-    if Y.value is None or prob.status not in ("optimal", "optimal_inaccurate"):
-        raise SolverError(f"dynamic TS-LMI-LQR at Td={Td}: Clarabel returned {prob.status!r}")
-
+    status = solve(prob, solver, what)
+    if Y.value is None or any(w.value is None for w in Wv):
+        raise Infeasible(status)
     Ys = 0.5 * (Y.value + Y.value.T)
     Ps = np.linalg.inv(Ys)
-    Ks = np.array([w.value @ Ps for w in Wv])  # scaled gains, (8, 2, 6)
-    K = Tu @ Ks @ Txi  # physical: u = T_u K_s T_x⁻¹ x
-    P = Txi @ Ps @ Txi
-    P = 0.5 * (P + P.T)
+    return Ys, np.array([w.value @ Ps for w in Wv]), status
 
-    certs: list[Certificate] = [Certificate("Y positive definite", neg_def_margin(-Ys))]
-    Kg = np.tensordot(mu, Ks, axes=(1, 0))
-    Acl = As + Bs @ Kg
-    ric = np.swapaxes(Acl, -1, -2) @ Ps @ Acl - Ps + s * Q + np.swapaxes(Kg, -1, -2) @ (s * R) @ Kg
-    lmi = Ys @ ric @ Ys
-    certs += [Certificate(f"guaranteed cost at δ={zg[g, 0]:.3f}, v={zg[g, 1]:.2f}", neg_def_margin(lmi[g]))
+
+def _blocking_point(
+    As: NDArray[np.float64], Bs: NDArray[np.float64], mu: NDArray[np.float64], pb: SchedulingBox,
+    Qh: NDArray[np.float64], Rh: NDArray[np.float64], zg: NDArray[np.float64], solver: SDPSolver,
+    what: str,
+) -> str:
+    """Which grid point makes the SDP infeasible: the points are added from the centre of the box
+    outwards until the problem at the ladder's floor margin has no solution (a diagnosis run only
+    when the design failed)."""
+    centre = 0.5 * (pb.lower + pb.upper)
+    span = pb.upper - pb.lower
+    order = np.argsort(np.max(np.abs(zg - centre) / span, axis=1), kind="stable")
+    for n in range(1, order.size + 1):
+        try:
+            _guaranteed_cost_lmi(As, Bs, mu, pb, Qh, Rh, LADDER_FLOOR, solver, what, order[:n])
+        except (Infeasible, SolverError):
+            g = int(order[n - 1])
+            return (f"; infeasible once the grid point δ = {zg[g, 0]:.3f} rad, v = {zg[g, 1]:.2f} "
+                    "m/s is added (guaranteed-cost LMI)")
+    return ""
+
+
+def certify_dynamic(
+    K: NDArray[np.float64], P: NDArray[np.float64], box: DynamicBox, vehicle: VehicleParams,
+    settings: DynamicLMISettings, Td: float,
+) -> tuple[float, float, list[Certificate]]:
+    """Every certificate of a dynamic design, recomputed with numpy from (K, P) in physical units:
+
+    * P positive definite (in the scaled states, where its condition number means something);
+    * the guaranteed-cost decrease ``A_clᵀ P A_cl − P + s(Q + KᵀRK) ≺ 0`` relative to P at every
+      point of the LMI grid (exact ZOH model, interpolated gain; absolute margin in the scaled
+      states);
+    * on the dense grid: spectral radius and Lyapunov decrease (:func:`certify_grid`).
+
+    Returns (max spectral radius, max Lyapunov ratio, certificates)."""
+    Tx = np.diag(STATE_SCALE)
+    certs = [definite_certificate("P positive definite (scaled states)", Tx @ P @ Tx)]
+    zg = _lmi_grid(box)
+    A, B = augmented_models(zg, vehicle, Td, settings.filter_bandwidth)
+    Kg = np.tensordot(_premise_box(box).memberships(zg), K, axes=(1, 0))
+    Acl = A + B @ Kg
+    s = _cost_scale(settings)
+    Q, R = s * np.diag(settings.Q), s * np.diag(settings.R)
+    ric = np.swapaxes(Acl, -1, -2) @ P @ Acl - P + Q + np.swapaxes(Kg, -1, -2) @ R @ Kg
+    # Absolute margins in the SDP's scaled states (physical P mixes N and rad: its entries span
+    # 1e-6…1e3); the relative margins are the same in either.
+    ric_s, P_s = Tx @ ric @ Tx, Tx @ P @ Tx
+    certs += [lmi_certificate(f"guaranteed cost at δ={zg[g, 0]:.3f}, v={zg[g, 1]:.2f}", ric_s[g], P_s)
               for g in range(zg.shape[0])]
-    rho, dec, cg = certify_grid(K, P, box, vehicle, Td, lam, settings.grid_points)
-    certs += cg
-    check(certs, f"dynamic design (Td={Td})")
-    return DynamicDesign(K=K, P=P, Td=float(Td), bandwidth=lam, certificates=tuple(certs),
-                         grid_max_rho=rho, grid_max_decrease=dec,
-                         solve_time_s=time.perf_counter() - t0, status=prob.status,
-                         inputs_hash=inputs_hash)
+    rho, dec, cg = certify_grid(K, P, box, vehicle, Td, settings.filter_bandwidth,
+                                settings.grid_points)
+    return rho, dec, certs + cg
 
 
 def certify_grid(
@@ -214,14 +297,19 @@ def certify_grid(
     A, B = augmented_models(z, vehicle, Td, bandwidth)
     Kg = np.tensordot(pb.memberships(z), K, axes=(1, 0))
     Acl = A + B @ Kg
-    rho = float(np.max(np.abs(np.linalg.eigvals(Acl))))
-    # Generalised eigenvalues of (A_clᵀ P A_cl, P) via the Cholesky factor of P.
-    Lc = np.linalg.cholesky(P)
-    Li = np.linalg.inv(Lc)
-    G = Li @ np.swapaxes(Acl, -1, -2) @ P @ Acl @ Li.T
-    dec = float(np.max(np.linalg.eigvalsh(0.5 * (G + np.swapaxes(G, -1, -2)))))
+    rho = float(np.max(np.abs(np.linalg.eigvals(Acl)))) if np.all(np.isfinite(Acl)) else np.inf
+    # Generalised eigenvalues of (A_clᵀ P A_cl, P) via the Cholesky factor of P, in the scaled
+    # states (the same eigenvalues, a far better conditioned P).
+    Tx, Txi = np.diag(STATE_SCALE), np.diag(1.0 / STATE_SCALE)
+    Ps, Acls = Tx @ P @ Tx, Txi @ Acl @ Tx
+    try:
+        Li = np.linalg.inv(np.linalg.cholesky(0.5 * (Ps + Ps.T)))
+        G = Li @ np.swapaxes(Acls, -1, -2) @ Ps @ Acls @ Li.T
+        dec = float(np.max(np.linalg.eigvalsh(0.5 * (G + np.swapaxes(G, -1, -2)))))
+    except np.linalg.LinAlgError:
+        dec = np.inf
     certs = [
-        Certificate(f"grid {n}^3 spectral radius − 1", rho - 1.0),
-        Certificate(f"grid {n}^3 Lyapunov decrease (λmax(P⁻¹A_clᵀPA_cl) − 1)", dec - 1.0),
+        Certificate(f"grid {n}^3 spectral radius − 1", rho - 1.0, rho - 1.0),
+        Certificate(f"grid {n}^3 Lyapunov decrease (λmax(P⁻¹A_clᵀPA_cl) − 1)", dec - 1.0, dec - 1.0),
     ]
     return rho, dec, certs

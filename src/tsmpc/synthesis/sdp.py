@@ -1,0 +1,116 @@
+"""Solving the design SDPs (SPEC §6): solver choice, failures as :class:`SolverError`, and the
+margin ladder that makes every certificate hold with a margin no solver tolerance can flip.
+
+Each design poses its LMIs with a *relative margin* ``t`` built into the SDP (a decrease
+condition ``A_clᵀ P A_cl − P + … ⪯ −t P`` is imposed as the Schur form with ``(1 − t) Y`` in
+place of ``Y``; see the design modules). :func:`solve_with_margin` tries :data:`TARGET_MARGIN`
+first; when the SDP is infeasible there it steps down (never below :data:`LADDER_FLOOR`, still
+≥ 3× the certificate threshold); when the numpy certificates miss the threshold (an inaccurate
+solver answer) it steps *up* — a stricter margin — and solves again. A solver status other than
+"optimal" is accepted only through the certificates.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+from enum import StrEnum
+from typing import Any, TypeVar
+
+from tsmpc.errors import SolverError
+from tsmpc.synthesis.certificates import TARGET_MARGIN, Certificate
+
+__all__ = ["LADDER_DOWN", "LADDER_UP", "Infeasible", "SDPSolver", "solve", "solve_with_margin"]
+
+#: Margins tried, in order, while the SDP is infeasible (relative; the certificate threshold is 1e-6).
+LADDER_DOWN = (TARGET_MARGIN, 1e-5, 3e-6)
+LADDER_FLOOR = LADDER_DOWN[-1]
+#: Stricter margins tried when the certificates of a feasible answer miss the threshold.
+LADDER_UP = (4 * TARGET_MARGIN, 16 * TARGET_MARGIN)
+
+T = TypeVar("T")
+
+
+class SDPSolver(StrEnum):
+    """SDP solver of the designs (through cvxpy). Clarabel is the default; SCS (first-order,
+    looser) serves as the independent second solver of the machine-independence test."""
+
+    CLARABEL = "CLARABEL"
+    SCS = "SCS"
+
+
+#: Solver options: Clarabel's defaults; SCS asked for far more accuracy than its default 1e-4.
+_OPTIONS: dict[SDPSolver, dict[str, Any]] = {
+    SDPSolver.CLARABEL: {},
+    SDPSolver.SCS: {"eps_abs": 1e-6, "eps_rel": 1e-6, "max_iters": 100_000},
+}
+
+
+class Infeasible(Exception):  # internal control flow of the ladder, never escapes
+    """The SDP has no solution at this margin (or the solver could not find one)."""
+
+    def __init__(self, status: str) -> None:
+        super().__init__(status)
+        self.status = status
+
+
+def solve(prob: Any, solver: SDPSolver | str, what: str) -> str:
+    """Solve a cvxpy problem; returns its status. Any solver exception (a crash, NaN/inf in the
+    data) becomes :class:`SolverError` naming ``what``; an infeasible or unsolved problem raises
+    :class:`Infeasible`."""
+    import cvxpy as cp
+
+    s = SDPSolver(str(solver).upper())
+    try:
+        with warnings.catch_warnings():  # the status is reported; certificates decide
+            warnings.simplefilter("ignore", UserWarning)
+            prob.solve(solver=getattr(cp, s.value), **_OPTIONS[s])
+    except cp.error.SolverError as exc:
+        raise Infeasible(f"{s.value} failed ({exc})") from None
+    except (ValueError, ArithmeticError, OverflowError) as exc:  # NaN/inf in the problem data
+        raise SolverError(f"{what}: invalid problem data ({exc})") from None
+    if prob.status not in ("optimal", "optimal_inaccurate"):
+        raise Infeasible(str(prob.status))
+    return str(prob.status)
+
+
+def solve_with_margin(
+    attempt: Callable[[float], T],
+    certify: Callable[[T], list[Certificate]],
+    what: str,
+    ladder: tuple[float, ...] = LADDER_DOWN,
+) -> tuple[T, list[Certificate], float]:
+    """Run ``attempt(margin)`` along the ladder until ``certify`` says every certificate holds.
+
+    Returns (design, certificates, margin imposed). Raises :class:`Infeasible` (with the last
+    status) when no margin of ``ladder`` (default :data:`LADDER_DOWN`) is feasible, and
+    ``CertificateError`` (from :func:`~tsmpc.synthesis.certificates.check`, listing the first
+    feasible answer's failures) when feasible answers never certify at any margin of either
+    ladder.
+    """
+    from tsmpc.synthesis.certificates import check
+
+    last: Infeasible | None = None
+    failed: list[Certificate] | None = None  # certificates of the first feasible, failing answer
+    for t in ladder:
+        try:
+            design = attempt(t)
+        except Infeasible as exc:
+            last = exc
+            continue
+        certs = certify(design)
+        if all(c.holds for c in certs):
+            return design, certs, t
+        failed = failed or certs
+        for t_up in (u for u in LADDER_UP if u > t):  # inaccurate answer: a stricter margin
+            try:
+                design_up = attempt(t_up)
+            except Infeasible:
+                break
+            certs_up = certify(design_up)
+            if all(c.holds for c in certs_up):
+                return design_up, certs_up, t_up
+    if failed is not None:
+        check(failed, what)  # raises, listing what failed at the first feasible margin
+    assert last is not None
+    raise last
