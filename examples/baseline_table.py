@@ -75,22 +75,17 @@ def cases(shared: Path, planned: dict[str, Path]) -> list[Case]:
 
 
 def run_case(case: Case, out: Path, methods: tuple[Method, ...], max_steps: int | None) -> dict[str, Any]:
-    """All ``methods`` on ``case`` (as ``tsmpc compare --reference R --scenario S``: envelope fit,
-    designs from the cache); writes the comparison's files into ``out/<case.key>``; its metrics."""
-    from tsmpc.envelope import fit_envelope
-    from tsmpc.robustness import apply_robustness
-    from tsmpc.sim.compare import compare, load_scenario
-    from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
+    """All ``methods`` on ``case`` through the CLI's own pipeline (``tsmpc compare --reference R
+    --scenario S``: :func:`tsmpc.sim.experiment.prepare` and :func:`~tsmpc.sim.experiment.run`,
+    envelope fit and certified designs included); writes the comparison's files into
+    ``out/<case.key>``; returns its metrics."""
+    from tsmpc.sim.experiment import prepare, run
 
     cfg = Config()
-    scenario = load_scenario(cfg, case.reference)
-    if case.robustness != "nominal":
-        cfg, scenario = apply_robustness(case.robustness, cfg, scenario)
-    cfg = fit_envelope(cfg, scenario.reference).config
-    designs = (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
-    res = compare(cfg, scenario, methods, out / case.key, plots=False, max_steps=max_steps,
-                  designs=designs)
-    return res.metrics
+    duration = None if max_steps is None else max_steps * cfg.rates.Tc
+    exp = prepare(cfg, methods, reference=case.reference, robustness=case.robustness,
+                  duration=duration)
+    return run(exp, out / case.key, plots=False).metrics
 
 
 #: (column head, value of a method's metrics entry, decimals) of the table, after the case/method.
