@@ -115,3 +115,16 @@ def test_acceptance_command_runs_on_the_paper_reference_and_a_planned_track(
     assert res.exit_code == (1 if metrics["diverged"] else 0), res.output
     assert "PURE_PURSUIT" in (out / "comfort.md").read_text()
     assert "table-comfort" in (out / "report.html").read_text()
+
+
+def test_a_run_folder_with_baselines_reads_back(cfg: Config, tmp_path: Path) -> None:
+    """Method names with an underscore (PURE_PURSUIT) survive timeseries.npz's `<METHOD>_<signal>`
+    keys: load_run gives back every method's log (what `tsmpc animate` reads)."""
+    from tsmpc.sim.run_dir import load_run
+
+    compare(cfg, load_scenario(cfg), [Method.PURE_PURSUIT, Method.REF], tmp_path, plots=False,
+            max_steps=20)
+    run = load_run(tmp_path)
+    assert list(run.logs) == ["PURE_PURSUIT", "REF"]
+    assert run.logs["PURE_PURSUIT"].u_c.shape == (20, 2)
+    assert np.all(np.isnan(run.logs["PURE_PURSUIT"].x_pred[:, 1:]))  # a law has no prediction

@@ -49,11 +49,8 @@ def load_logs_npz(path: str | Path, metrics: dict[str, Any] | None = None) -> di
     except (OSError, ValueError) as err:
         raise DataFormatError(f"{path}: not a readable NPZ file ({err})") from err
     with data:
-        methods: list[str] = []
-        for key in data.files:
-            m = key.split("_", 1)[0]
-            if m not in methods:
-                methods.append(m)
+        # Every log has t_outer: the method is what precedes it (method names may hold "_").
+        methods = [key[: -len("_t_outer")] for key in data.files if key.endswith("_t_outer")]
         if not methods:
             raise DataFormatError(f"{path}: no time series inside")
         metrics = metrics or {}
