@@ -554,7 +554,7 @@ class PurePursuitSettings(_Frozen):
     L_d = clip(lookahead_time_s · v, lookahead_min_m, lookahead_max_m) with v the commanded speed.
     Defaults from the documented search on the built-in circuit (examples/tune_baselines.py)."""
 
-    lookahead_time_s: NonNegFloat = Field(0.6, le=10.0, description="look-ahead time: L_d grows "
+    lookahead_time_s: NonNegFloat = Field(0.45, le=10.0, description="look-ahead time: L_d grows "
                                            "with the speed as lookahead_time_s · v [s]")
     lookahead_min_m: PositiveFloat = Field(5.0, description="shortest look-ahead distance [m]")
     lookahead_max_m: PositiveFloat = Field(40.0, description="longest look-ahead distance [m]")
@@ -576,7 +576,7 @@ class StanleySettings(_Frozen):
 
     gain: PositiveFloat = Field(2.0, le=100.0, description="cross-track gain k [1/s]")
     softening_speed: NonNegFloat = Field(
-        8.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s]")
+        4.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s]")
     curvature_feedforward: bool = Field(
         True, description="feed-forward atan(L κ_d) − k_ψ atan(a κ_d): zero steady-state error on a "
         "circle for a CoG-referenced path (False = the classic law)")
