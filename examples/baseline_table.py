@@ -154,7 +154,7 @@ def settling_markdown(metrics: dict[str, Any]) -> str:
     for n in names:
         m = metrics["methods"][n]
         s = m["comfort"]["settling_time_s"]
-        vals.append("diverged" if m["status"] == "diverged" else ("never" if math.isnan(s) else f"{s:.1f}"))
+        vals.append("diverged" if m["status"] == "diverged" else ("never" if math.isinf(s) else f"{s:.1f}"))
     return ("| offset start (paper ref.) | " + " | ".join(names) + " |\n|" + "---|" * (len(names) + 1)
             + "\n| settling time [s] | " + " | ".join(vals) + " |\n")
 

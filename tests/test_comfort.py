@@ -120,10 +120,11 @@ def test_settling_time_definition() -> None:
     exact = tau * math.log(2.0 / SETTLING_BAND_M)
     assert exact <= ts < exact + 0.1 + 1e-9
     assert settling_time(tt, np.full(tt.size, 0.05)) == 0.0  # never outside
-    assert math.isnan(settling_time(tt, np.where(tt > 29.0, 0.2, 0.0)))  # outside at the end
+    assert settling_time(tt, np.where(tt > 29.0, 0.2, 0.0)) == math.inf  # outside at the end
     late = np.where((tt > 10.0) & (tt < 12.0), 0.3, 0.0)  # a late excursion defines it
     assert settling_time(tt, late) == pytest.approx(12.0, abs=0.1 + 1e-9)
-    assert math.isnan(settling_time(tt, np.where(tt > 5, np.nan, 0.0)))  # NaN is not settled
+    assert settling_time(tt, np.where(tt > 5, np.nan, 0.0)) == math.inf  # NaN is not settled
+    assert math.isnan(settling_time(tt[:0], tt[:0]))  # no samples: undefined
 
 
 def test_every_run_reports_comfort(cfg: Config) -> None:

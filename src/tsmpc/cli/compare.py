@@ -187,14 +187,14 @@ def _print_comfort(console: Any, metrics: dict[str, Any]) -> None:
     from rich.markup import escape
     from rich.table import Table
 
-    from tsmpc.report.tables import COMFORT_COLUMNS, comfort_rows
+    from tsmpc.report.tables import COMFORT_COLUMNS, comfort_cell, comfort_rows
 
     t = Table(title=escape("Comfort and effort (5 Hz zero-phase low-pass before each derivative)"))
     t.add_column("method", no_wrap=True)
     for _, head, _ in COMFORT_COLUMNS:
         t.add_column(escape(head), justify="right")
     for label, vals in comfort_rows(metrics):
-        cells = ["—" if v != v else f"{v:.{d}f}" for v, (_, _, d) in zip(vals, COMFORT_COLUMNS, strict=True)]
+        cells = [comfort_cell(v, d) for v, (_, _, d) in zip(vals, COMFORT_COLUMNS, strict=True)]
         t.add_row(label, *cells, style="bold red" if label.endswith("(diverged)") else None)
     console.print(t)
 

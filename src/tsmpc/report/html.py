@@ -15,7 +15,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from tsmpc.report.tables import COMFORT_COLUMNS, comfort_rows, rmse_rows
+from tsmpc.report.tables import COMFORT_COLUMNS, comfort_cell, comfort_rows, rmse_rows
 from tsmpc.sim.log import atomic_write_text
 
 __all__ = ["FIGURE_CAPTIONS", "render_report", "write_report"]
@@ -99,8 +99,7 @@ def _timing_table(metrics: dict[str, Any]) -> str:
 
 
 def _comfort_table(metrics: dict[str, Any]) -> str:
-    rows = [([_e(lab), *("—" if v != v else _num(v, f".{d}f")
-                         for v, (_, _, d) in zip(vals, COMFORT_COLUMNS, strict=True))],
+    rows = [([_e(lab), *(comfort_cell(v, d) for v, (_, _, d) in zip(vals, COMFORT_COLUMNS, strict=True))],
              "bad" if lab.endswith("(diverged)") else "")
             for lab, vals in comfort_rows(metrics)]
     return _table("table-comfort", ("method", *(h for _, h, _ in COMFORT_COLUMNS)), rows)

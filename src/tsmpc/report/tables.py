@@ -8,8 +8,8 @@ from typing import Any
 
 from tsmpc.sim.metrics import PAPER_TABLE5, RMSE_KEYS
 
-__all__ = ["COMFORT_COLUMNS", "comfort_csv", "comfort_markdown", "comfort_rows", "is_diverged", "rmse_csv",
-           "rmse_latex", "rmse_markdown", "rmse_rows", "timing_rows"]
+__all__ = ["COMFORT_COLUMNS", "comfort_cell", "comfort_csv", "comfort_markdown", "comfort_rows",
+           "is_diverged", "rmse_csv", "rmse_latex", "rmse_markdown", "rmse_rows", "timing_rows"]
 
 _HEAD = ("approach", "x [m]", "y [m]", "theta [rad]", "v [m/s]", "omega [rad/s]")
 
@@ -121,12 +121,19 @@ def comfort_csv(metrics: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def comfort_cell(v: float, decimals: int) -> str:
+    """A comfort value: '—' when undefined (NaN), 'never' for a settling time that is infinite."""
+    if math.isnan(v):
+        return "—"
+    return "never" if math.isinf(v) else f"{v:.{decimals}f}"
+
+
 def comfort_markdown(metrics: dict[str, Any]) -> str:
     """Markdown comfort table (definitions and filtering: :mod:`tsmpc.sim.comfort`)."""
     head = ("method", *(h for _, h, _ in COMFORT_COLUMNS))
     out = ["| " + " | ".join(h.replace("|", "\\|") for h in head) + " |", "|" + "---|" * len(head)]
     for lab, vals in comfort_rows(metrics):
-        cells = ["—" if math.isnan(v) else f"{v:.{d}f}" for v, (_, _, d) in zip(vals, COMFORT_COLUMNS,
+        cells = [comfort_cell(v, d) for v, (_, _, d) in zip(vals, COMFORT_COLUMNS,
                                                                                strict=True)]
         out.append(f"| {lab} | " + " | ".join(cells) + " |")
     return "\n".join(out) + "\n"

@@ -27,7 +27,8 @@ both sampled every T_d (:class:`~tsmpc.sim.log.RunLog`):
   steering rate δ̇ (of the commanded steering), force-command rate Ḟ_xR.
 * **Settling time**: the first time (from the start of the run) after which |e_y| — the true
   lateral error, sampled every T_c — stays at or below :data:`SETTLING_BAND_M` = 0.10 m for the rest of
-  the run: 0 if it never exceeds the band, NaN if the last sample is outside it. Meant for the
+  the run: 0 if it never exceeds the band, +inf if the last sample is outside it (it has not
+  settled within the run; NaN only for a run without samples). Meant for the
   ``offset_start`` scenario (2 m, 0.2 rad off the path at t = 0); on other runs it says when the
   last excursion beyond 0.10 m ended.
 """
@@ -97,11 +98,14 @@ def body_accelerations(state: ArrayLike, dt: float) -> tuple[NDArray[np.float64]
 
 def settling_time(t: ArrayLike, e_y: ArrayLike, band: float = SETTLING_BAND_M) -> float:
     """First time (relative to ``t[0]``) after which |e_y| ≤ ``band`` for the rest of the samples;
-    0 if never outside, NaN if the last sample is outside (or there are none)."""
+    0 if never outside, +inf if the last sample is outside (not settled within the record), NaN
+    if there are no samples."""
     tt = np.asarray(t, dtype=float)
     e = np.abs(np.asarray(e_y, dtype=float))
-    if e.size == 0 or not e[-1] <= band:
+    if e.size == 0:
         return float("nan")
+    if not e[-1] <= band:
+        return float("inf")
     out = np.flatnonzero(~(e <= band))  # NaN counts as outside
     if out.size == 0:
         return 0.0
@@ -128,7 +132,7 @@ class ComfortMetrics:
     steering_rate_rms: float  #: RMS δ̇ [rad/s]
     force_rate_max: float  #: max |Ḟ_xR| of the commanded force [N/s]
     force_rate_rms: float  #: RMS Ḟ_xR [N/s]
-    settling_time_s: float  #: |e_y| ≤ settling_band_m from then on [s]; NaN: never settled
+    settling_time_s: float  #: |e_y| ≤ settling_band_m from then on [s]; +inf: not settled
     settling_band_m: float = SETTLING_BAND_M
     cutoff_hz: float = CUTOFF_HZ  #: low-pass cut-off before the derivatives [Hz]
 
