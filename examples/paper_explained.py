@@ -1,13 +1,14 @@
 """Table 5 explained: the paper as it was run (the `paper-as-run` preset, SPEC §14), each of its
 quirks removed one at a time down to the `paper` preset, and the ablation on to the default —
-every row measured here; plus the start-up transient figure, the gain-sensitivity study and the
-two MHE-UIO forms (README.md and docs/paper.md show this script's output).
+every row measured here; plus the start-up transient figure, the gain-sensitivity study, the
+points of the feasibility LMI, the speed-headroom counterfactuals, the paper's trends and the two
+MHE-UIO forms (README.md and docs/paper.md show this script's output).
 
     python examples/paper_explained.py [REFERENCE] [--img-dir docs/img] [--update-docs]
 
 REFERENCE defaults to ../shared/data/paper/planner_references_100ms.csv (the paper's file, not
 bundled). ``--update-docs`` rewrites the marked blocks of README.md and docs/paper.md with the
-tables printed here. ≈ 25 full runs at 1–10 ms inner steps: 10–15 minutes on two shared cores.
+tables printed here. ≈ 35 full runs at 1–10 ms inner steps: 15–25 minutes on two shared cores.
 """
 
 from __future__ import annotations

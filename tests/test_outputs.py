@@ -78,14 +78,15 @@ def test_show_reference_out_folder_writes_into_it(tmp_path: Path) -> None:
 
 
 def test_planner_output_keeps_full_precision(tmp_path: Path) -> None:
-    """A path far from the origin (1e9 m offsets) reads back bit for bit."""
+    """A path far from the origin (9e6 m offsets, near the 1e7 m coordinate limit) reads back bit
+    for bit."""
     import numpy as np
 
     from tsmpc.config import PlannerSettings
     from tsmpc.planning.paper_format import load_reference
     from tsmpc.planning.planner import plan_path
 
-    wp = np.array([[0.0, 0.0], [60.0, 0.0], [120.0, 10.0], [170.0, 40.0]]) + 1e9
+    wp = np.array([[0.0, 0.0], [60.0, 0.0], [120.0, 10.0], [170.0, 40.0]]) + 9e6
     ref = plan_path(wp, PlannerSettings(), closed=False)
     ref.to_csv(tmp_path / "far.csv")
     back = load_reference(tmp_path / "far.csv", window=None)

@@ -49,6 +49,7 @@ def test_preset_carries_every_condition_of_spec_14(as_run: Config) -> None:
     assert c.lqr.law == InnerLaw.AS_RUN and c.lqr.steering_bias_rad == 0.5236
     assert c.lqr.scheduling_speed_shift == 2.0 and c.lqr.extrapolate_memberships is True
     assert c.dynamic_box.v == (2.0, 18.0) and c.dynamic_lmi.formulation == "feasibility-euler"
+    assert c.dynamic_lmi.feasible_point == "analytic-center"  # our reading of the unknown point
     assert c.lqr.initial_filter_state == (4355.15, 0.52466)
     assert c.noise.scale == 0.0 and c.metrics.paper_run_rmse is True
     assert c.lqr.speed_feedback is False  # no speed integral, no speed-error feedback
@@ -64,14 +65,15 @@ def test_preset_is_never_the_default_and_new_switches_default_off() -> None:
     assert (d.lqr.steering_bias_rad, d.lqr.scheduling_speed_shift) == (0.0, 0.0)
     assert d.lqr.extrapolate_memberships is False and d.lqr.initial_filter_state is None
     assert d.dynamic_lmi.formulation == "guaranteed-cost" and d.mhe.form == "window"
+    assert d.dynamic_lmi.feasible_point == "solver"
     assert d.metrics.paper_run_rmse is False
     for name in ("paper", "default"):  # the other presets do not touch the new switches
         assert Config.preset(name).model_dump(include={"metrics"}) == d.model_dump(include={"metrics"})
 
 
 def test_default_dynamic_design_key_is_unchanged() -> None:
-    """The new ``formulation`` field is left out of the hash when it is ours: cached designs of
-    every existing config keep their key."""
+    """The new ``formulation`` and ``feasible_point`` fields are left out of the hash at their
+    defaults: cached designs of every existing config keep their key."""
     import hashlib
     import json
 
@@ -80,6 +82,7 @@ def test_default_dynamic_design_key_is_unchanged() -> None:
     for cfg in (Config(), Config.preset("paper")):
         lmi = cfg.dynamic_lmi.model_dump(mode="json")
         lmi.pop("formulation")
+        lmi.pop("feasible_point")
         payload = {"kind": "dynamic", "format": FORMAT_VERSION,
                    "box": cfg.dynamic_box.model_dump(mode="json"), "lmi": lmi,
                    "vehicle": cfg.vehicle.model_dump(mode="json", exclude_none=True), "Td": cfg.rates.Td}
@@ -87,6 +90,9 @@ def test_default_dynamic_design_key_is_unchanged() -> None:
         assert dynamic_key(cfg) == old
     assert dynamic_key(Config.preset(AS_RUN)) != dynamic_key(
         replace(Config.preset(AS_RUN), dynamic_lmi=replace(Config().dynamic_lmi)))
+    as_run = Config.preset(AS_RUN)
+    assert dynamic_key(as_run) != dynamic_key(
+        replace(as_run, dynamic_lmi=replace(as_run.dynamic_lmi, feasible_point="solver")))
 
 
 def test_preset_from_toml_and_cli(tmp_path: Path) -> None:
@@ -340,7 +346,8 @@ def test_paper_run_rmse_of_a_log_uses_the_state_at_the_end_of_each_step(
     cfg = replace(cfg, lqr=replace(cfg.lqr, law="static-gain", steering_bias_rad=0.0,
                                    scheduling_speed_shift=0.0, extrapolate_memberships=False,
                                    initial_filter_state=None),
-                  dynamic_lmi=replace(cfg.dynamic_lmi, formulation="guaranteed-cost"),
+                  dynamic_lmi=replace(cfg.dynamic_lmi, formulation="guaranteed-cost",
+                                      feasible_point="solver"),
                   dynamic_box=Config().dynamic_box)
     sc = load_scenario(cfg, paper_reference_path)
     short, longer = (simulate(cfg, Method.REF, sc, max_steps=n) for n in (12, 13))
@@ -412,6 +419,47 @@ def test_steady_straight_is_the_fixed_point_of_the_law(as_run: Config) -> None:
     law2._F1, law2._sigma, law2._zeta, law2._F_app = F, b, zeta, F
     law2.step(_est((v, 0.0, 0.0)), v_ref, 0.0)
     assert law2.state[0] == pytest.approx(F, rel=1e-9) and law2.state[1] == pytest.approx(b, abs=1e-9)
+
+
+def test_the_preset_gains_fall_short_on_the_fastest_stretch(as_run: Config,
+                                                           paper_reference_path: Path) -> None:
+    """The evidence for RMSE_x and NL's divergence, computed from the law itself: with the
+    preset's gains the steady force at the fastest reference sample with v_ref at the bound is
+    below what the plant needs; either counterfactual of the explained table (bound 22 m/s, or
+    the speed entry × 2.5) covers it. The needed force is μ_dry M g + drag (hand formula)."""
+    from dataclasses import replace as dc_replace
+
+    from tsmpc.sim.paper_explained import speed_headroom
+    from tsmpc.synthesis.cache import load_or_design_dynamic
+
+    d = load_or_design_dynamic(as_run)
+    v_d_max = float(np.max(load_scenario(as_run, paper_reference_path).reference.v))
+    h = speed_headroom(as_run, d, v_d_max)
+    p = as_run.vehicle
+    assert h.v == pytest.approx(v_d_max / 1.01, rel=1e-12) and h.v_ref_bound == 18.0
+    assert h.force_needed_N == pytest.approx(0.9 * p.mass * p.g + 0.5 * 1.184 * 0.36 * 1.91 * h.v**2)
+    assert h.force_needed_N - h.force_at_bound_N > 200.0  # measured: 332 N short
+    bound = replace(as_run, mpc=replace(as_run.mpc, u_max=(22.0, 1.4)))
+    assert speed_headroom(bound, d, v_d_max).force_at_bound_N > h.force_needed_N
+    K = np.array(d.K)
+    K[:, 0, 0] *= 2.5
+    assert speed_headroom(as_run, dc_replace(d, K=K), v_d_max).force_at_bound_N > h.force_needed_N
+
+
+def test_design_points_and_divergence_onset(paper_reference_path: Path) -> None:
+    """The design-points study (3 outer steps each): the centre and Clarabel's answer certify and
+    differ, the physical-units answer does not certify; the onset of two runs' difference."""
+    from tsmpc.sim.paper_explained import design_points, divergence_onset
+
+    pts = design_points(paper_reference_path, max_steps=3, uncertified_steps=3)
+    assert [p.certified for p in pts] == [True, True, False]
+    assert pts[0].steering_ratio != pytest.approx(pts[1].steering_ratio, rel=0.05)
+    assert all(p.result.metrics["outer_steps"] == 3 for p in pts)
+    a = SimpleNamespace(n_outer=4, t_outer=np.arange(4) * 0.1 + 5.0,
+                        errors=np.array([[1.0, 0.0, 0], [2.0, 0.05, 0], [3.0, 0.3, 0], [4.0, 1.0, 0]]))
+    b = SimpleNamespace(n_outer=4, t_outer=a.t_outer, errors=np.zeros((4, 3)))
+    assert divergence_onset(a, b) == pytest.approx((0.2, 3.0))
+    assert divergence_onset(b, b) is None
 
 
 def test_the_transient_grows_as_the_steering_zeta_gain_shrinks(paper_reference_path: Path) -> None:
@@ -553,7 +601,8 @@ def test_paper_as_run_end_to_end(as_run: Config, paper_reference_path: Path) -> 
     """The whole paper run with the preset (REF). Tolerances: the columns README reports inside
     the ½–2× band of Table 5 are asserted inside it; RMSE_x is documented outside it (the gains'
     speed headroom on the fastest stretch), so the test asserts that stretch and that x is within
-    the band outside it; the transient bounds bracket the gains obtained (δ_f / ζ ≈ −1)."""
+    the band outside it; the transient bounds bracket what the analytic centre's gains give
+    (δ_f / ζ ≈ −1.6: e_y peak 0.72 m, e_θ peak 10.2°; the published ≈ 1.9 m is not reached)."""
     from tsmpc.sim.metrics import PAPER_TABLE5, compute_metrics
     from tsmpc.sim.paper_explained import longitudinal_stretch
 
@@ -564,10 +613,28 @@ def test_paper_as_run_end_to_end(as_run: Config, paper_reference_path: Path) -> 
     paper = PAPER_TABLE5["REF"]
     for k in ("y", "theta", "v", "omega"):
         assert 0.5 <= m["rmse_paper_run"][k] / paper[k] <= 2.0, (k, m["rmse_paper_run"][k])
+    assert m["rmse_paper_run"]["x"] / paper["x"] > 2.0  # the documented miss
     st = longitudinal_stretch(log)
     assert st is not None and 55.0 < st.start_s < st.end_s < 85.0 and st.max_abs_m > 3.0
     assert 0.5 <= st.rmse_x_outside_m / paper["x"] <= 2.0
     # the start-up transient: positive e_y hump in the first 8 s, e_θ peak of several degrees
     t = log.t_outer - log.t_outer[0]
     ey = log.errors[t < 8.0, 1]
-    assert 0.2 < ey.max() < 1.0 and math.degrees(np.abs(log.errors[t < 8.0, 2]).max()) > 4.0
+    assert 0.5 < ey.max() < 1.0 and 8.0 < math.degrees(np.abs(log.errors[t < 8.0, 2]).max()) < 13.0
+
+
+@pytest.mark.slow
+def test_nl_completes_once_the_speed_bound_leaves_headroom(as_run: Config,
+                                                           paper_reference_path: Path) -> None:
+    """NL's divergence with the preset is the speed shortfall on the fastest stretch: with the
+    MPC's v_ref bound at 22 m/s (nothing else changed) NL completes, |e_x| stays below 1.5 m and
+    RMSE_x is inside the ½–2× band of Table 5 (measured: 0.30 m, max |e_x| 0.9 m)."""
+    from tsmpc.sim.metrics import PAPER_TABLE5, compute_metrics
+
+    cfg = replace(as_run, mpc=replace(as_run.mpc, u_max=(22.0, as_run.mpc.u_max[1])))
+    log = simulate(cfg, Method.NL, load_scenario(cfg, paper_reference_path))
+    assert log.termination == "completed"
+    m = compute_metrics(log)
+    assert 0.5 <= m["rmse_paper_run"]["x"] / PAPER_TABLE5["NL"]["x"] <= 2.0
+    assert np.abs(log.errors[:, 0]).max() < 1.5
+    assert m["events"]["mpc_soft"] == 0 and m["events"]["mpc_fallback"] == 0

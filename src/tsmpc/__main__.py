@@ -1,5 +1,23 @@
 """``python -m tsmpc`` runs the command-line interface."""
 
-from tsmpc.cli import app
+import signal
+import sys
 
-app()
+_early: list[int] = []
+
+
+def _early_handler(signum: int, _frame: object) -> None:
+    # Until the CLI's own handlers are installed (a fraction of a second of imports): an
+    # interrupt still ends with 128 + signal, not a traceback.
+    _early.append(signum)
+    raise KeyboardInterrupt
+
+
+for _s in (signal.SIGINT, signal.SIGTERM):
+    signal.signal(_s, _early_handler)
+try:
+    from tsmpc.cli import main
+except KeyboardInterrupt:
+    sys.exit(128 + (_early[0] if _early else signal.SIGINT))
+
+main()

@@ -16,7 +16,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
 from tsmpc.errors import ConfigError
 
@@ -27,6 +27,7 @@ __all__ = [
     "DynamicBox",
     "DynamicLMIFormulation",
     "DynamicLMISettings",
+    "FeasiblePoint",
     "FrictionEstimate",
     "InnerLaw",
     "KinematicBox",
@@ -43,6 +44,8 @@ __all__ = [
     "Rates",
     "SchedulingMode",
     "StanleySettings",
+    "StrictBool",
+    "StrictInt",
     "TyreModel",
     "TyreParams",
     "VehicleParams",
@@ -52,9 +55,25 @@ __all__ = [
     "resolve_preset",
 ]
 
-PositiveFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
-NonNegFloat = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+# Strict types (issue 24): a number field takes a number (an int or a float) and nothing else —
+# never a bool (``mass = true`` is not 1 kg) nor a string; an int field never a float, bool or
+# string; a bool field only true/false (never "yes" or 1). Every field of every model here (and of
+# the sweep schema) is built from these.
+PositiveFloat = Annotated[float, Strict(), Field(gt=0.0, allow_inf_nan=False)]
+NonNegFloat = Annotated[float, Strict(), Field(ge=0.0, allow_inf_nan=False)]
+FiniteFloat = Annotated[float, Strict(), Field(allow_inf_nan=False)]
+StrictInt = Annotated[int, Strict()]
+StrictBool = Annotated[bool, Strict()]
+
+#: Plausible range of every LMI / MPC / MHE weight entry (diagonal of Q, R, P): beyond it the
+#: problems are numerically meaningless (the solvers return NaN/inf or fail).
+WEIGHT_RANGE = (1e-8, 1e8)
+#: Largest speed any box, bound or limit may name [m/s] (720 km/h: beyond any road vehicle).
+V_LIMIT = 200.0
+#: Largest yaw rate any box or bound may name [rad/s].
+OMEGA_LIMIT = 20.0
+#: Most problems listed in one error message (the rest are counted).
+MAX_PROBLEMS = 20
 
 
 class _Frozen(BaseModel):
@@ -73,6 +92,17 @@ def _diag(values: tuple[float, ...], name: str, n: int, *, strict: bool = True) 
     if bad:
         kind = "positive" if strict else "non-negative"
         raise ConfigError(f"{name}: entries must be {kind}, got {values}")
+    lo, hi = WEIGHT_RANGE
+    bad = [v for v in values if v > hi or 0 < v < lo]
+    if bad:
+        raise ConfigError(f"{name}: entries must lie in [{lo:g}, {hi:g}] (a plausible weight), "
+                          f"got {bad[0]!r}")
+
+
+def _within(values: tuple[float, ...], name: str, lo: float, hi: float, unit: str) -> None:
+    for v in values:
+        if not lo <= v <= hi:
+            raise ConfigError(f"{name}: {v!r} is outside the plausible range [{lo:g}, {hi:g}] {unit}")
 
 
 class TyreModel(StrEnum):
@@ -153,6 +183,18 @@ class DynamicLMIFormulation(StrEnum):
     FEASIBILITY_EULER = "feasibility-euler"
 
 
+class FeasiblePoint(StrEnum):
+    """Which point of the feasibility LMI's solution set the design keeps (``feasibility-euler``
+    only; SPEC §14: a problem without objective has no unique answer)."""
+
+    #: the analytic centre of the LMIs (:mod:`tsmpc.synthesis.analytic_center`): what an
+    #: interior-point solver converges to without objective, the same in any units or scaling
+    ANALYTIC_CENTER = "analytic-center"
+    #: Clarabel's answer in the scaled coordinates of :mod:`tsmpc.synthesis.dynamic` (where the
+    #: solver stopped: depends on that scaling)
+    SOLVER = "solver"
+
+
 class MHEForm(StrEnum):
     """How the MHE-UIO treats the unknown friction force (SPEC §9)."""
 
@@ -166,24 +208,41 @@ class MHEForm(StrEnum):
 class VehicleParams(_Frozen):
     """Vehicle parameters, paper Table 1."""
 
-    a: PositiveFloat = Field(0.758, le=20.0, description="CoG to front axle [m]")
-    b: PositiveFloat = Field(1.036, le=20.0, description="CoG to rear axle [m]")
-    mass: PositiveFloat = Field(683.0, le=1e5, description="vehicle mass M [kg]")
-    inertia: PositiveFloat = Field(560.94, description="yaw inertia I [kg m^2]")
+    a: PositiveFloat = Field(0.758, ge=0.05, le=20.0, description="CoG to front axle [m], 0.05 to 20")
+    b: PositiveFloat = Field(1.036, ge=0.05, le=20.0, description="CoG to rear axle [m], 0.05 to 20")
+    mass: PositiveFloat = Field(683.0, ge=1.0, le=1e5,
+                                description="vehicle mass M [kg], 1 (a model car) to 1e5 (a truck)")
+    inertia: PositiveFloat = Field(
+        560.94, ge=0.01, le=1e7, description="yaw inertia I [kg m^2], 0.01 to 1e7; its radius of "
+        "gyration sqrt(I/M) must lie in [0.05, 10] m")
     cornering_stiffness: PositiveFloat = Field(
-        25000.0, description="cornering stiffness C_x of each axle [N/rad] (paper: both axles)"
+        25000.0, ge=1.0, le=1e7,
+        description="cornering stiffness C_x of each axle [N/rad] (paper: both axles), 1 to 1e7"
     )
     cornering_stiffness_front: PositiveFloat | None = Field(
-        None, description="front-axle cornering stiffness C_f [N/rad]; None = cornering_stiffness"
+        None, ge=1.0, le=1e7,
+        description="front-axle cornering stiffness C_f [N/rad], 1 to 1e7; None = cornering_stiffness"
     )
     cornering_stiffness_rear: PositiveFloat | None = Field(
-        None, description="rear-axle cornering stiffness C_r [N/rad]; None = cornering_stiffness"
+        None, ge=1.0, le=1e7,
+        description="rear-axle cornering stiffness C_r [N/rad], 1 to 1e7; None = cornering_stiffness"
     )
-    frontal_area: PositiveFloat = Field(1.91, description="frontal area A_r [m^2]")
-    air_density: PositiveFloat = Field(1.184, description="air density rho [kg/m^3]")
-    drag_coefficient: NonNegFloat = Field(0.36, description="drag coefficient C_d [-]")
-    mu_nominal: NonNegFloat = Field(0.5, le=3.0, description="nominal friction mu_o of the models [-]")
-    g: PositiveFloat = Field(9.81, description="gravity [m/s^2]")
+    frontal_area: PositiveFloat = Field(1.91, ge=0.01, le=100.0,
+                                        description="frontal area A_r [m^2], 0.01 to 100")
+    air_density: PositiveFloat = Field(1.184, ge=1e-3, le=5.0,
+                                       description="air density rho [kg/m^3], 0.001 to 5")
+    drag_coefficient: NonNegFloat = Field(0.36, le=3.0, description="drag coefficient C_d [-], 0 to 3")
+    mu_nominal: NonNegFloat = Field(0.5, le=3.0, description="nominal friction mu_o of the models [-], "
+                                    "0 to 3")
+    g: PositiveFloat = Field(9.81, ge=1.0, le=30.0, description="gravity [m/s^2], 1 to 30")
+
+    @model_validator(mode="after")
+    def _gyration(self) -> VehicleParams:
+        k = math.sqrt(self.inertia / self.mass)
+        if not 0.05 <= k <= 10.0:
+            raise ConfigError(f"inertia/mass: radius of gyration sqrt(I/M) = {k:.3g} m is outside "
+                              "the plausible [0.05, 10] m (check inertia and mass)")
+        return self
 
     @property
     def wheelbase(self) -> float:
@@ -247,28 +306,33 @@ class TyreParams(_Frozen):
     D = μ_tyre F_z and B = C_x / (C D) so that the small-slip stiffness equals C_x."""
 
     model: TyreModel = Field(TyreModel.PACEJKA, description="lateral tyre model of the plant")
-    mu_tyre: PositiveFloat = Field(0.9, le=3.0, description="peak lateral grip coefficient [-]")
-    shape_c: float = Field(1.3, gt=1.0, lt=2.0, description="Pacejka shape factor C [-]")
-    curvature_e: float = Field(
-        -0.5, ge=-5.0, lt=1.0, description="Pacejka curvature factor E [-] (E < 1)"
+    mu_tyre: PositiveFloat = Field(0.9, le=3.0, description="peak lateral grip coefficient [-], "
+                                   "(0, 3]")
+    shape_c: FiniteFloat = Field(1.3, gt=1.0, lt=2.0, description="Pacejka shape factor C [-], (1, 2)")
+    curvature_e: FiniteFloat = Field(
+        -0.5, ge=-5.0, lt=1.0, description="Pacejka curvature factor E [-], [-5, 1)"
     )
-    scale_grip_with_road: bool = Field(
+    scale_grip_with_road: StrictBool = Field(
         False, description="beyond the paper: mu_tyre scales with mu(road)/mu_dry"
     )
-    mu_dry: PositiveFloat = Field(0.9, description="road mu at which the tyre has mu_tyre [-]")
+    mu_dry: PositiveFloat = Field(0.9, le=3.0, description="road mu at which the tyre has mu_tyre "
+                                  "[-], (0, 3]")
 
 
 class Rates(_Frozen):
     """Sample times (SPEC §1). T_c / T_d and T_d / h must be integers."""
 
-    Tc: PositiveFloat = Field(0.1, le=1.0, description="outer loop (MPC) sample time [s]")
-    Td: PositiveFloat = Field(0.01, description="inner loop (LQR, MHE) sample time [s]")
-    h: PositiveFloat = Field(0.001, ge=1e-5, description="plant RK4 integration step [s]")
-    inner_steps_per_outer: int | None = Field(
+    Tc: PositiveFloat = Field(0.1, ge=1e-3, le=1.0,
+                              description="outer loop (MPC) sample time [s], 0.001 to 1")
+    Td: PositiveFloat = Field(0.01, ge=1e-4, le=0.1,
+                              description="inner loop (LQR, MHE) sample time [s], 1e-4 to 0.1, < Tc")
+    h: PositiveFloat = Field(0.001, ge=1e-5, le=0.01,
+                             description="plant RK4 integration step [s], 1e-5 to 0.01, <= Td")
+    inner_steps_per_outer: StrictInt | None = Field(
         None, ge=1, le=100000,
-        description="inner steps run per outer step; None = T_c/T_d. A quirk of the published run, "
-        "not a recommendation: it ran 101 steps of 1 ms per 0.1 s outer step (the plant advances "
-        "0.101 s while the reference advances 0.1 s: a 1 % time-base drift; SPEC §14)")
+        description="inner steps run per outer step, 1 to 100000; None = T_c/T_d. A quirk of the "
+        "published run, not a recommendation: it ran 101 steps of 1 ms per 0.1 s outer step (the "
+        "plant advances 0.101 s while the reference advances 0.1 s: a 1 % time-base drift; SPEC §14)")
 
     @model_validator(mode="after")
     def _integer_ratios(self) -> Rates:
@@ -276,6 +340,10 @@ class Rates(_Frozen):
             ratio = num / den
             if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
                 raise ConfigError(f"{name} = {ratio:.6g} must be a positive integer")
+        if self.Tc <= self.Td * (1.0 + 1e-9):
+            # The cascade is two loops: an outer step of one inner step has no inner loop.
+            raise ConfigError(f"Tc/Td: Tc = {self.Tc:g} s must be greater than Td = {self.Td:g} s "
+                              "(an integer multiple >= 2)")
         return self
 
     @property
@@ -298,16 +366,20 @@ class KinematicBox(_Frozen):
     text box is :meth:`paper_text`.
     """
 
-    omega: tuple[FiniteFloat, FiniteFloat] = Field((-1.42, 1.42), description="ω range [rad/s]")
-    v_d: tuple[PositiveFloat, PositiveFloat] = Field((1.0, 18.0), description="v_d range [m/s]")
+    omega: tuple[FiniteFloat, FiniteFloat] = Field(
+        (-1.42, 1.42), description="ω range [rad/s], within [-20, 20]")
+    v_d: tuple[PositiveFloat, PositiveFloat] = Field(
+        (1.0, 18.0), description="v_d range [m/s], within (0, 200]")
     e_theta: tuple[FiniteFloat, FiniteFloat] = Field(
-        (-math.radians(5.0), math.radians(5.0)), description="e_θ range [rad], |e_θ| < π"
+        (-math.radians(5.0), math.radians(5.0)), description="e_θ range [rad], within (-π, π)"
     )
 
     @model_validator(mode="after")
     def _check(self) -> KinematicBox:
         _interval(*self.omega, "omega")
         _interval(*self.v_d, "v_d")
+        _within(self.omega, "omega", -OMEGA_LIMIT, OMEGA_LIMIT, "rad/s")
+        _within(self.v_d, "v_d", 0.0, V_LIMIT, "m/s")
         _interval(*self.e_theta, "e_theta")
         if max(abs(self.e_theta[0]), abs(self.e_theta[1])) >= math.pi:
             raise ConfigError("e_theta: bounds must lie inside (-pi, pi)")
@@ -323,32 +395,41 @@ class DynamicBox(_Frozen):
     """Scheduling box of the dynamic TS model (SPEC §5): δ, v, α."""
 
     delta: tuple[FiniteFloat, FiniteFloat] = Field(
-        (-math.radians(25.0), math.radians(25.0)), description="steering δ range [rad]"
+        (-math.radians(25.0), math.radians(25.0)), description="steering δ range [rad], within "
+        "[-π/2, π/2]"
     )
-    v: tuple[PositiveFloat, PositiveFloat] = Field((2.0, 20.0), description="speed range [m/s]")
-    alpha: tuple[FiniteFloat, FiniteFloat] = Field((-0.1, 0.1), description="slip α range [rad]")
+    v: tuple[PositiveFloat, PositiveFloat] = Field(
+        (2.0, 20.0), description="speed range [m/s], within (0, 200]")
+    alpha: tuple[FiniteFloat, FiniteFloat] = Field(
+        (-0.1, 0.1), description="slip α range [rad], within [-1, 1]")
 
     @model_validator(mode="after")
     def _check(self) -> DynamicBox:
         _interval(*self.delta, "delta")
         _interval(*self.v, "v")
         _interval(*self.alpha, "alpha")
+        _within(self.delta, "delta", -math.pi / 2, math.pi / 2, "rad")
+        _within(self.v, "v", 0.0, V_LIMIT, "m/s")
+        _within(self.alpha, "alpha", -1.0, 1.0, "rad")
         return self
 
 
 class KinematicLMISettings(_Frozen):
     """Kinematic LQR-LMI and terminal set (SPEC §6)."""
 
-    Q: tuple[FiniteFloat, ...] = Field((1.0, 1.5, 3.0), description="diag Q_TS")
-    R: tuple[FiniteFloat, ...] = Field((1.0, 3.0), description="diag R_TS")
+    Q: tuple[FiniteFloat, ...] = Field((1.0, 1.5, 3.0), description="diag Q_TS, entries in [1e-8, 1e8]")
+    R: tuple[FiniteFloat, ...] = Field((1.0, 3.0), description="diag R_TS, entries in [1e-8, 1e8]")
     u_bar: tuple[PositiveFloat, PositiveFloat] = Field(
-        (18.0, 1.4), description="input bound of the terminal-set LMI [m/s, rad/s]"
+        (18.0, 1.4), description="input bound of the terminal-set LMI [m/s, rad/s], "
+        "within (0, 200] and (0, 20]"
     )
 
     @model_validator(mode="after")
     def _check(self) -> KinematicLMISettings:
         _diag(self.Q, "Q", 3)
         _diag(self.R, "R", 2)
+        _within(self.u_bar[:1], "u_bar[v]", 0.0, V_LIMIT, "m/s")
+        _within(self.u_bar[1:], "u_bar[ω]", 0.0, OMEGA_LIMIT, "rad/s")
         return self
 
 
@@ -356,47 +437,66 @@ class DynamicLMISettings(_Frozen):
     """Dynamic TS-LMI-LQR on the Apkarian-augmented model (SPEC §6)."""
 
     Q: tuple[FiniteFloat, ...] = Field(
-        (2500.0, 0.1, 0.1, 0.1, 1e5, 9e4), description="diag Q on [v, α, ω, F_f, δ_f, ζ]"
+        (2500.0, 0.1, 0.1, 0.1, 1e5, 9e4),
+        description="diag Q on [v, α, ω, F_f, δ_f, ζ], entries in [1e-8, 1e8]"
     )
-    R: tuple[FiniteFloat, ...] = Field((0.001, 9.0), description="diag R on [F_xR, δ]")
-    filter_bandwidth: PositiveFloat = Field(10.0, description="Apkarian filter λ [rad/s]")
-    grid_points: int = Field(15, ge=3, le=101, description="certificate grid points per axis")
+    R: tuple[FiniteFloat, ...] = Field((0.001, 9.0), description="diag R on [F_xR, δ], entries in "
+                                       "[1e-8, 1e8]")
+    filter_bandwidth: PositiveFloat = Field(10.0, ge=0.1, le=1000.0,
+                                            description="Apkarian filter λ [rad/s], 0.1 to 1000")
+    grid_points: StrictInt = Field(15, ge=3, le=101, description="certificate grid points per axis, "
+                                   "3 to 101")
     formulation: DynamicLMIFormulation = Field(
         DynamicLMIFormulation.GUARANTEED_COST,
         description="'guaranteed-cost' (ours) or 'feasibility-euler' (a quirk of the published run, "
         "not a recommendation: no objective, 8 vertex LMIs, Euler at T_d)")
+    feasible_point: FeasiblePoint = Field(
+        FeasiblePoint.SOLVER, description="feasibility-euler only: which point of the solution "
+        "set the design keeps: 'solver' (Clarabel's answer in the scaled coordinates) or "
+        "'analytic-center' (the LMIs' analytic centre, the same in any units)")
 
     @model_validator(mode="after")
     def _check(self) -> DynamicLMISettings:
         _diag(self.Q, "Q", 6)
         _diag(self.R, "R", 2)
+        if (self.feasible_point != FeasiblePoint.SOLVER
+                and self.formulation != DynamicLMIFormulation.FEASIBILITY_EULER):
+            raise ValueError("feasible_point: only for the 'feasibility-euler' formulation (the "
+                             "guaranteed-cost design has an objective)")
         return self
 
 
 class MPCSettings(_Frozen):
     """Kinematic TS-MPC and NL-MPC (SPEC §7, paper Table 2)."""
 
-    N: int = Field(40, ge=2, le=400, description="prediction horizon [steps]")
-    Q: tuple[FiniteFloat, ...] = Field((1.133, 0.067, 13.333), description="diag state weight")
-    R: tuple[FiniteFloat, ...] = Field((0.000005, 5.5), description="diag input-rate weight")
-    u_min: tuple[FiniteFloat, FiniteFloat] = Field((0.0, -1.4), description="[v, ω] lower")
-    u_max: tuple[FiniteFloat, FiniteFloat] = Field((18.0, 1.4), description="[v, ω] upper")
+    N: StrictInt = Field(40, ge=2, le=400, description="prediction horizon [steps], 2 to 400 "
+                         "(N·Tc <= 60 s)")
+    Q: tuple[FiniteFloat, ...] = Field((1.133, 0.067, 13.333), description="diag state weight, "
+                                       "entries 0 or in [1e-8, 1e8]")
+    R: tuple[FiniteFloat, ...] = Field((0.000005, 5.5), description="diag input-rate weight, "
+                                       "entries in [1e-8, 1e8]")
+    u_min: tuple[FiniteFloat, FiniteFloat] = Field(
+        (0.0, -1.4), description="[v, ω] lower, within [-200, 200] m/s and [-20, 20] rad/s")
+    u_max: tuple[FiniteFloat, FiniteFloat] = Field(
+        (18.0, 1.4), description="[v, ω] upper, within [-200, 200] m/s and [-20, 20] rad/s")
     du_max: tuple[PositiveFloat, PositiveFloat] = Field(
-        (5.0, 0.3), description="|Δv|, |Δω| per step"
+        (5.0, 0.3), description="|Δv|, |Δω| per step, within [0.001, 100] m/s and [1e-4, 20] rad/s"
     )
     mode: Method = Field(Method.REF, description="TS-MPC scheduling mode: fzn, ref or iter")
-    iter_tol: PositiveFloat = Field(1e-3, description="ITER: schedule change tolerance")
-    iter_max: int = Field(5, ge=1, le=50, description="ITER: maximum QPs per step")
-    soft_penalty: PositiveFloat = Field(1e4, description="exact penalty of soft constraints")
-    terminal_constraint: bool = Field(True, description="impose x_N' S x_N <= 1")
-    slip_aware: bool = Field(
+    iter_tol: PositiveFloat = Field(1e-3, le=1.0, description="ITER: schedule change tolerance, "
+                                    "(0, 1]")
+    iter_max: StrictInt = Field(5, ge=1, le=50, description="ITER: maximum QPs per step, 1 to 50")
+    soft_penalty: PositiveFloat = Field(1e4, ge=1e-3, le=1e9,
+                                        description="exact penalty of soft constraints, 1e-3 to 1e9")
+    terminal_constraint: StrictBool = Field(True, description="impose x_N' S x_N <= 1")
+    slip_aware: StrictBool = Field(
         True, description="beyond the paper: errors of the velocity pose θ + α̂ (MHE) feed the MPC"
     )
-    tangent_heading: bool = Field(
+    tangent_heading: StrictBool = Field(
         True, description="beyond the paper: the measured e_θ against the path's tangent at the "
         "sample (θ_d moved forward by its measured lag, half the reference's own period)"
     )
-    step_average_reference: bool = Field(
+    step_average_reference: StrictBool = Field(
         True, description="beyond the paper: the reference inputs of each T_c step are that step's "
         "averages from the path geometry, ω_d = Δθ_tangent / T_c and v_d = chord / T_c (the "
         "paper's are the planner's samples, which describe the step *into* the sample)"
@@ -415,39 +515,47 @@ class MPCSettings(_Frozen):
         _diag(self.R, "R", 2)
         for i in range(2):
             _interval(self.u_min[i], self.u_max[i], f"u_min/u_max[{i}]")
+        _within((self.u_min[0], self.u_max[0]), "u_min/u_max[v]", -V_LIMIT, V_LIMIT, "m/s")
+        _within((self.u_min[1], self.u_max[1]), "u_min/u_max[ω]", -OMEGA_LIMIT, OMEGA_LIMIT, "rad/s")
+        _within(self.du_max[:1], "du_max[v]", 1e-3, 100.0, "m/s per step")
+        _within(self.du_max[1:], "du_max[ω]", 1e-4, OMEGA_LIMIT, "rad/s per step")
         return self
 
 
 class LQRSettings(_Frozen):
     """Inner-loop TS-LQR (SPEC §8)."""
 
-    force_min: FiniteFloat = Field(-2000.0, description="F_xR lower saturation [N]")
-    force_max: FiniteFloat = Field(10000.0, description="F_xR upper saturation [N]")
-    delta_max: PositiveFloat = Field(math.radians(25.0), description="|δ| saturation [rad]")
-    force_min_per_kg: float | None = Field(
-        None, le=0.0, allow_inf_nan=False,
-        description="F_xR lower saturation per kg of vehicle mass [N/kg = m/s^2]; "
+    force_min: FiniteFloat = Field(-2000.0, ge=-1e6, le=1e6,
+                                   description="F_xR lower saturation [N], within [-1e6, 1e6]")
+    force_max: FiniteFloat = Field(10000.0, ge=-1e6, le=1e6,
+                                   description="F_xR upper saturation [N], within [-1e6, 1e6]")
+    delta_max: PositiveFloat = Field(math.radians(25.0), le=math.pi / 2,
+                                     description="|δ| saturation [rad], (0, π/2]")
+    force_min_per_kg: FiniteFloat | None = Field(
+        None, ge=-100.0, le=0.0,
+        description="F_xR lower saturation per kg of vehicle mass [N/kg = m/s^2], [-100, 0]; "
         "overrides force_min when set (limits that scale with the mass)")
-    force_max_per_kg: float | None = Field(
-        None, gt=0.0, allow_inf_nan=False,
-        description="F_xR upper saturation per kg of vehicle mass [N/kg]; overrides force_max")
-    friction_compensation: bool = Field(True, description="add F̂_fr to the force command")
+    force_max_per_kg: FiniteFloat | None = Field(
+        None, gt=0.0, le=100.0,
+        description="F_xR upper saturation per kg of vehicle mass [N/kg], (0, 100]; overrides force_max")
+    friction_compensation: StrictBool = Field(True, description="add F̂_fr to the force command")
     friction_estimate: FrictionEstimate = Field(
         FrictionEstimate.WINDOW, description="compensated F̂_fr: MHE window fit or the paper's UIO formula"
     )
-    oracle: bool = Field(
+    oracle: StrictBool = Field(
         False, description="deprecated (old config files): same as simulate(oracle=True), the "
         "simulation's ablation with the true state and no compensation"
     )
     # Beyond the paper (SPEC §13): proportional *feedback* on the speed error, not a feed-forward.
-    speed_feedback: bool = Field(
+    speed_feedback: StrictBool = Field(
         True, description="speed-error feedback M (v_ref − v̂)/τ added to the force (beyond the paper)"
     )
     speed_time_constant: PositiveFloat = Field(
-        0.3, description="time constant τ [s] of the speed-error feedback M (v_ref − v̂)/τ"
+        0.3, ge=0.01, le=100.0,
+        description="time constant τ [s] of the speed-error feedback M (v_ref − v̂)/τ, 0.01 to 100"
     )
     # Quirks of the published run (SPEC §14), not recommendations: the ``paper-as-run`` preset.
-    true_state_feedback: bool = Field(
+    true_state_feedback: StrictBool = Field(
         False, description="the inner law runs on the true plant state [v, α, ω] while the MHE is "
         "computed but unused; the compensation stays as configured (a quirk of the published run, "
         "not a recommendation; unlike the oracle ablation, which also drops the compensation)")
@@ -457,24 +565,28 @@ class LQRSettings(_Frozen):
         "no anti-windup)")
     steering_bias_rad: FiniteFloat = Field(
         0.0, ge=-math.pi, le=math.pi,
-        description="as-run law: σ = δ + bias [rad] is fed back where the design expects δ (the "
-        "published run: 30° = 0.5236 rad; a quirk, not a recommendation)")
+        description="as-run law: σ = δ + bias [rad] is fed back where the design expects δ, within "
+        "[-π, π] (the published run: 30° = 0.5236 rad; a quirk, not a recommendation)")
     scheduling_speed_shift: FiniteFloat = Field(
         0.0, ge=-50.0, le=50.0,
-        description="as-run law: the gains are scheduled on v + shift [m/s] (the published run: "
-        "+2 m/s over the design interval [2, 18] m/s; a quirk, not a recommendation)")
-    extrapolate_memberships: bool = Field(
+        description="as-run law: the gains are scheduled on v + shift [m/s], within [-50, 50] (the "
+        "published run: +2 m/s over the design interval [2, 18] m/s; a quirk, not a recommendation)")
+    extrapolate_memberships: StrictBool = Field(
         False, description="as-run law: memberships are not clipped into the box, so scheduling "
         "values outside it extrapolate the vertex gains (a quirk of the published run, not a "
         "recommendation)")
     initial_filter_state: tuple[FiniteFloat, FiniteFloat] | None = Field(
         None, description="as-run law: Apkarian filter states (F₁(0) [N], σ₁(0) [rad]) at the "
         "start, σ₁ in the fed-back coordinate δ + steering_bias_rad (the published run: "
-        "(4355.15, 0.52466)); None = bumpless start at the steady state of the first reference")
+        "(4355.15, 0.52466)), within [-1e6, 1e6] N and [-π, π] rad; None = bumpless start at the "
+        "steady state of the first reference")
 
     @model_validator(mode="after")
     def _check(self) -> LQRSettings:
         _interval(self.force_min, self.force_max, "force_min/force_max")
+        if self.initial_filter_state is not None:
+            _within(self.initial_filter_state[:1], "initial_filter_state[F]", -1e6, 1e6, "N")
+            _within(self.initial_filter_state[1:], "initial_filter_state[σ]", -math.pi, math.pi, "rad")
         if self.law != InnerLaw.AS_RUN:
             bad = [name for name, on in (
                 ("steering_bias_rad", self.steering_bias_rad != 0.0),
@@ -499,12 +611,19 @@ class LQRSettings(_Frozen):
 class MHESettings(_Frozen):
     """TS-MHE-UIO (SPEC §9)."""
 
-    N: int = Field(30, ge=2, le=300, description="estimation horizon [inner steps]")
-    Q: tuple[FiniteFloat, ...] = Field((10.0, 10.0, 2.0), description="diag process weight")
-    R: tuple[FiniteFloat, ...] = Field((0.033, 0.033), description="diag measurement weight")
-    P: tuple[FiniteFloat, ...] = Field((2.0, 2.0, 2.0), description="diag arrival-cost weight")
-    x_min: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field((0.0, -0.1, -1.4))
-    x_max: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field((18.0, 0.1, 1.4))
+    N: StrictInt = Field(30, ge=2, le=300, description="estimation horizon [inner steps], 2 to 300 "
+                         "(N·Td <= 10 s)")
+    Q: tuple[FiniteFloat, ...] = Field((10.0, 10.0, 2.0), description="diag process weight, entries "
+                                       "in [1e-8, 1e8]")
+    R: tuple[FiniteFloat, ...] = Field((0.033, 0.033), description="diag measurement weight, "
+                                       "entries in [1e-8, 1e8]")
+    P: tuple[FiniteFloat, ...] = Field((2.0, 2.0, 2.0), description="diag arrival-cost weight, "
+                                       "entries in [1e-8, 1e8]")
+    x_min: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(
+        (0.0, -0.1, -1.4), description="[v, α, ω] lower bounds, each within [-1000, 1000] (a "
+        "bound that wide is no bound: allowed, unlike 1e300)")
+    x_max: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(
+        (18.0, 0.1, 1.4), description="[v, α, ω] upper bounds, each within [-1000, 1000]")
     form: MHEForm = Field(
         MHEForm.WINDOW, description="'window' (ours: window-constant friction force, compiled) or "
         "'uio' (the paper's form: friction eliminated through E_d; numpy path, slower)")
@@ -516,34 +635,51 @@ class MHESettings(_Frozen):
         _diag(self.P, "P", 3)
         for i in range(3):
             _interval(self.x_min[i], self.x_max[i], f"x_min/x_max[{i}]")
+        for i, unit in enumerate(("m/s", "rad", "rad/s")):
+            _within((self.x_min[i], self.x_max[i]), f"x_min/x_max[{i}]", -1000.0, 1000.0, unit)
         return self
 
 
 class NoiseSettings(_Frozen):
     """Zero-mean Gaussian sensor noise (SPEC §10), standard deviations before ``scale``."""
 
-    v: NonNegFloat = Field(0.005, description="σ of v [m/s]")
-    omega: NonNegFloat = Field(1e-4, description="σ of ω [rad/s]")
-    position: NonNegFloat = Field(0.001, description="σ of X and Y [m]")
-    theta: NonNegFloat = Field(1e-4, description="σ of θ [rad]")
-    scale: NonNegFloat = Field(1.0, le=1e4, description="multiplies every σ")
+    v: NonNegFloat = Field(0.005, le=10.0, description="σ of v [m/s], 0 to 10 (also after scale)")
+    omega: NonNegFloat = Field(1e-4, le=1.0, description="σ of ω [rad/s], 0 to 1 (also after scale)")
+    position: NonNegFloat = Field(0.001, le=10.0, description="σ of X and Y [m], 0 to 10 (also "
+                                  "after scale)")
+    theta: NonNegFloat = Field(1e-4, le=1.0, description="σ of θ [rad], 0 to 1 (also after scale)")
+    scale: NonNegFloat = Field(1.0, le=1e4, description="multiplies every σ, 0 to 1e4")
+
+    @model_validator(mode="after")
+    def _scaled(self) -> NoiseSettings:
+        for name, cap, unit in (("v", 10.0, "m/s"), ("omega", 1.0, "rad/s"), ("position", 10.0, "m"),
+                                ("theta", 1.0, "rad")):
+            sigma = getattr(self, name) * self.scale
+            if sigma > cap:
+                raise ConfigError(f"{name} * scale = {sigma:.3g} {unit}: a sensor noise beyond "
+                                  f"{cap:g} {unit} is not a sensor (lower {name} or scale)")
+        return self
 
 
 class PlannerSettings(_Frozen):
     """Speed-profile limits of the planner (SPEC §10)."""
 
-    v_max: PositiveFloat = Field(14.7, le=150.0, description="maximum speed [m/s]")
-    a_lat_max: PositiveFloat = Field(3.0, description="lateral acceleration limit [m/s^2]")
-    a_lon_max: PositiveFloat = Field(2.6, description="longitudinal acceleration limit [m/s^2]")
-    a_brake_max: PositiveFloat = Field(3.0, description="braking deceleration limit [m/s^2]")
-    v_start: NonNegFloat = Field(1.0, description="speed at the start of an open path [m/s]")
+    v_max: PositiveFloat = Field(14.7, le=150.0, description="maximum speed [m/s], (0, 150]")
+    a_lat_max: PositiveFloat = Field(3.0, le=50.0, description="lateral acceleration limit [m/s^2], "
+                                     "(0, 50]")
+    a_lon_max: PositiveFloat = Field(2.6, le=50.0, description="longitudinal acceleration limit "
+                                     "[m/s^2], (0, 50]")
+    a_brake_max: PositiveFloat = Field(3.0, le=50.0, description="braking deceleration limit "
+                                       "[m/s^2], (0, 50]")
+    v_start: NonNegFloat = Field(1.0, le=150.0, description="speed at the start of an open path "
+                                 "[m/s], 0 to 150")
 
 
 class MetricsSettings(_Frozen):
     """What the tables of a comparison show (SPEC §11, §14). metrics.json always holds both RMSE
     conventions."""
 
-    paper_run_rmse: bool = Field(
+    paper_run_rmse: StrictBool = Field(
         False, description="also show each method's RMSE under the published run's convention "
         "(SPEC §14: pose errors at the start of each outer step, first K − 10 steps; v, ω at its "
         "end, K + 20 entries with 20 zeros) beside ours in the tables")
@@ -577,7 +713,7 @@ class StanleySettings(_Frozen):
     gain: PositiveFloat = Field(2.0, le=100.0, description="cross-track gain k [1/s]")
     softening_speed: NonNegFloat = Field(
         4.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s]")
-    curvature_feedforward: bool = Field(
+    curvature_feedforward: StrictBool = Field(
         True, description="feed-forward atan(L κ_d) − k_ψ atan(a κ_d): zero steady-state error on a "
         "circle for a CoG-referenced path (False = the classic law)")
 
@@ -611,10 +747,24 @@ class Config(_Frozen):
     planner: PlannerSettings = PlannerSettings()
     metrics: MetricsSettings = MetricsSettings()
     baselines: BaselineSettings = BaselineSettings()
-    seed: int = Field(0, ge=0, description="seed of every random draw of a run")
+    seed: StrictInt = Field(0, ge=0, lt=2**63, description="seed of every random draw of a run, "
+                            "0 to 2^63 - 1")
     divergence_bound_m: PositiveFloat = Field(
-        5.0, description="|e_y| [m] beyond which a run is diverged (when the track width is unknown)"
+        5.0, le=1000.0,
+        description="|e_y| [m] beyond which a run is diverged (when the track width is unknown), "
+        "(0, 1000]"
     )
+
+    @model_validator(mode="after")
+    def _horizons(self) -> Config:
+        # Cross-field: the horizons in seconds (a 400-step MPC at Tc = 1 s looks 400 s ahead).
+        t_mpc = self.mpc.N * self.rates.Tc
+        if t_mpc > 60.0 + 1e-9:
+            raise ConfigError(f"mpc.N * rates.Tc = {t_mpc:g} s: the MPC horizon must be <= 60 s")
+        t_mhe = self.mhe.N * self.rates.Td
+        if t_mhe > 10.0 + 1e-9:
+            raise ConfigError(f"mhe.N * rates.Td = {t_mhe:g} s: the MHE window must be <= 10 s")
+        return self
 
     @classmethod
     def preset(cls, name: str) -> Config:
@@ -655,7 +805,10 @@ PRESETS: dict[str, dict[str, Any]] = {
         "vehicle": {"mu_nominal": 0.65},  # the controller models' nominal μ (M g μ = 4355.15 N)
         "rates": {"Td": 0.001, "inner_steps_per_outer": 101},  # inner loop + MHE at 1 ms, 101 steps
         "dynamic_box": {"v": (2.0, 18.0)},  # the design interval of the speed premise
-        "dynamic_lmi": {"formulation": "feasibility-euler"},  # feasibility LMI, 8 vertices, Euler
+        # feasibility LMI, 8 vertices, Euler; the point kept: the LMIs' analytic centre (the
+        # published solver's point is unknown; the centre is what an interior-point method
+        # converges to without objective, in any units)
+        "dynamic_lmi": {"formulation": "feasibility-euler", "feasible_point": "analytic-center"},
         "lqr": {"speed_feedback": False, "friction_estimate": "uio",
                 "friction_compensation": False,  # the force command was the clipped LQR output
                 "true_state_feedback": True,  # the inner law on the true states; MHE unused
@@ -682,17 +835,31 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def format_validation_error(err: ValidationError, source: str = "config") -> str:
-    """One line per problem: ``source: field.path: reason (got value)``."""
+def _short(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}… ({len(text)} characters)"
+
+
+def format_validation_error(err: ValidationError, source: str = "config",
+                            limit: int = MAX_PROBLEMS) -> str:
+    """One line per problem: ``source: field.path: reason (got value)``; at most ``limit``
+    problems (then a count of the rest), each value shortened: the output stays bounded whatever
+    the input (a file with a million unknown keys gives 21 lines)."""
     lines = []
-    for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"]) or "<root>"
+    errors = err.errors()
+    for e in errors[:limit]:
+        loc = _short(".".join(str(p) for p in e["loc"]) or "<root>", 120).strip("'\"")
         msg = e["msg"]
         if e["type"] == "extra_forbidden":
             msg = "unknown field (check the spelling; see tsmpc.config for the allowed names)"
+        elif e["type"] in ("float_type", "int_type", "bool_type") and isinstance(e.get("input"),
+                                                                               (bool, str)):
+            msg += " (values are not converted: write a number as a number, a bool as true/false)"
         got = e.get("input")
-        tail = "" if e["type"] in ("extra_forbidden", "missing") else f" (got {got!r})"
+        tail = "" if e["type"] in ("extra_forbidden", "missing") else f" (got {_short(got)})"
         lines.append(f"{source}: {loc}: {msg}{tail}")
+    if len(errors) > limit:
+        lines.append(f"{source}: … and {len(errors) - limit} more problems")
     return "\n".join(lines)
 
 
@@ -724,11 +891,23 @@ def load_config(path: str | Path | None = None, preset: str | None = None) -> Co
     from tsmpc.textfile import read_text
 
     p = Path(path)
-    try:
-        data = tomllib.loads(read_text(p, "config file (TOML)", ConfigError))
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{p}: invalid TOML: {err}") from None
+    data = parse_toml(read_text(p, "config file (TOML)", ConfigError, limit=MAX_CONFIG_BYTES), p)
     return validate(Config, resolve_preset(data, preset, source=str(p)), source=str(p))
+
+
+#: Largest config or sweep file read [bytes] (a full config is < 10 kB).
+MAX_CONFIG_BYTES = 1024 * 1024
+
+
+def parse_toml(text: str, source: str | Path) -> dict[str, Any]:
+    """``tomllib.loads`` raising :class:`ConfigError` naming ``source`` for invalid TOML and for
+    absurd nesting (tomllib recurses: 100 000 nested arrays end in RecursionError)."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{source}: invalid TOML: {err}") from None
+    except RecursionError:
+        raise ConfigError(f"{source}: invalid TOML: nested too deeply") from None
 
 
 def resolve_preset(data: dict[str, Any], preset: str | None = None, source: str = "config") -> dict[str, Any]:

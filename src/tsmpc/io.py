@@ -8,7 +8,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write_bytes", "atomic_write_text"]
+__all__ = ["atomic_savefig", "atomic_write_bytes", "atomic_write_text", "overwrite_in_place"]
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
@@ -39,3 +39,31 @@ def _umask() -> int:
 def atomic_write_text(path: str | Path, text: str) -> None:
     """Write UTF-8 ``text`` to ``path`` atomically."""
     atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def atomic_savefig(fig: object, path: str | Path, **kwargs: object) -> None:
+    """Save a matplotlib figure atomically: rendered in memory (format from the suffix), then
+    written by :func:`atomic_write_bytes` — an interrupt or a full disk leaves no partial or
+    temporary file."""
+    import io
+
+    path = Path(path)
+    buf = io.BytesIO()
+    fig.savefig(buf, format=path.suffix.lstrip(".").lower() or "png", **kwargs)  # type: ignore[attr-defined]
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def overwrite_in_place(path: str | Path, data: bytes) -> None:
+    """Rewrite the existing regular file ``path`` in place (no new file: works on a full disk for
+    a small file that already owns its blocks, where :func:`atomic_write_bytes` cannot). For
+    small status files only (a reader may see a half-written file while it runs)."""
+    import stat
+
+    fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(f"{path}: not a regular file")
+        os.write(fd, data)
+        os.ftruncate(fd, len(data))
+    finally:
+        os.close(fd)

@@ -24,6 +24,14 @@ record atomically to ``DIR/runs/<id>.json`` as soon as it arrives; ids hash the 
 parameters, so ``resume`` skips what is on disk and a record is never written twice. A worker that
 dies takes its task with it; the scheduler re-runs the task on another worker. At the end the
 aggregate table (one row per run) is written as CSV and Parquet.
+
+Hostile sweep files and folders (issue 24): the schema is strict (numbers are numbers, booleans
+booleans), an axis may be in ``[grid]`` or in ``[random]`` but not both, a sweep has at most
+``max_runs`` runs (:data:`MAX_RUNS` unless raised with ``--max-runs``), names are short and
+printable. Nothing is written before the file, the base config and its LMI designs are valid.
+``resume`` re-reads every record on disk: one that is not a valid record of this sweep (empty,
+garbage, ``[]``, a folder) is set aside under ``runs/.unreadable/`` and re-run, and records of
+tasks lost to worker failures (status ``failed``) are re-run too (``retry_failed``).
 """
 
 from __future__ import annotations
@@ -34,16 +42,24 @@ import json
 import math
 import os
 import time
-import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
-from tsmpc.config import Config, Method, resolve_preset, validate
+from tsmpc.config import (
+    MAX_CONFIG_BYTES,
+    Config,
+    Method,
+    StrictBool,
+    StrictInt,
+    parse_toml,
+    resolve_preset,
+    validate,
+)
 from tsmpc.errors import ConfigError
 from tsmpc.io import atomic_write_bytes, atomic_write_text
 from tsmpc.robustness import ROBUSTNESS_SCENARIOS
@@ -52,6 +68,7 @@ from tsmpc.sweep_axes import _CHOICE_AXES, _FLOAT_AXES, AXES
 __all__ = [
     "AXES",
     "FRICTIONS",
+    "MAX_RUNS",
     "RunParams",
     "RunTask",
     "SweepResult",
@@ -81,11 +98,20 @@ AXIS_LIMITS: dict[str, tuple[float, float]] = {
     # Faster than 3x the planned speed leaves any sensible scheduling box (and the road).
     "speed_scale": (0.0, 3.0),
 }
-_Noise = Annotated[float, Field(gt=0.0, le=1000.0, allow_inf_nan=False)]
-_Scale = Annotated[float, Field(gt=0.0, le=10.0, allow_inf_nan=False)]
-_Speed = Annotated[float, Field(gt=0.0, le=3.0, allow_inf_nan=False)]
-_Seed = Annotated[int, Field(ge=0, lt=2**63)]
-_Duration = Annotated[float, Field(gt=0.0, le=1e5, allow_inf_nan=False)]
+_Noise = Annotated[float, Strict(), Field(gt=0.0, le=1000.0, allow_inf_nan=False)]
+_Scale = Annotated[float, Strict(), Field(gt=0.0, le=10.0, allow_inf_nan=False)]
+_Speed = Annotated[float, Strict(), Field(gt=0.0, le=3.0, allow_inf_nan=False)]
+_Seed = Annotated[int, Strict(), Field(ge=0, lt=2**63)]
+_Duration = Annotated[float, Strict(), Field(gt=0.0, le=1e5, allow_inf_nan=False)]
+_Real = Annotated[float, Strict(), Field(allow_inf_nan=False)]
+#: A path or a name in a sweep file: short and without control characters.
+_Text = Annotated[str, Strict(), Field(max_length=4096, pattern=r"^[^\x00-\x1f\x7f]*$")]
+#: Most runs of a sweep unless raised (``run_sweep(max_runs=...)``, ``tsmpc sweep --max-runs``).
+MAX_RUNS = 10_000
+#: Most random draws per grid point.
+MAX_RANDOM_N = 10_000
+#: Statuses of a run record; ``failed`` = the task was lost to worker failures (retried on resume).
+RECORD_STATUSES = ("completed", "diverged", "degraded", "error", "failed")
 
 
 class _Strict(BaseModel):
@@ -103,7 +129,7 @@ class RunParams(_Strict):
     inertia_scale: _Scale = 1.0
     cornering_scale: _Scale = 1.0
     speed_scale: _Speed = 1.0
-    track: str = "builtin"
+    track: _Text = "builtin"
     seed: _Seed | None = None  #: None: the base config's seed
 
 
@@ -123,16 +149,21 @@ def _check_named(v: str, allowed: dict[str, str], what: str) -> str:
 class GridAxes(_Strict):
     """Values of each axis; the runs are their cartesian product (missing axes keep defaults)."""
 
-    method: list[str] | None = None
-    friction: list[str] | None = None
-    scenario: list[str] | None = None
+    method: list[_Text] | None = None
+    friction: list[_Text] | None = None
+    scenario: list[_Text] | None = None
     noise_scale: list[_Noise] | None = None
     mass_scale: list[_Scale] | None = None
     inertia_scale: list[_Scale] | None = None
     cornering_scale: list[_Scale] | None = None
     speed_scale: list[_Speed] | None = None
-    track: list[str] | None = None
+    track: list[_Text] | None = None
     seed: list[_Seed] | None = None
+
+    @property
+    def size(self) -> int:
+        """Points of the cartesian product (before duplicates are merged)."""
+        return math.prod(len(getattr(self, name) or [None]) for name in AXES)
 
     @model_validator(mode="after")
     def _values(self) -> GridAxes:
@@ -155,10 +186,10 @@ class RandomSpec(_Strict):
     n draws at every grid point (common random numbers: methods compared on equal draws);
     ``true``: fresh draws at every grid point."""
 
-    n: int = Field(ge=1, le=100_000)
+    n: StrictInt = Field(ge=1, le=MAX_RANDOM_N)
     seed: _Seed = 0
-    per_grid_point: bool = False
-    ranges: dict[str, tuple[float, float]] = Field(default_factory=dict)
+    per_grid_point: StrictBool = False
+    ranges: dict[str, tuple[_Real, _Real]] = Field(default_factory=dict)
     choices: dict[str, list[Any]] = Field(default_factory=dict)
 
     @field_validator("ranges")
@@ -198,17 +229,35 @@ class RandomSpec(_Strict):
 class SweepSpec(_Strict):
     """A validated sweep file."""
 
-    name: str = "sweep"
+    name: Annotated[str, Strict(), Field(min_length=1, max_length=200,
+                                         pattern=r"^[^\x00-\x1f\x7f]*$")] = "sweep"
     duration_s: _Duration | None = None
-    base_config: str | None = None
+    base_config: _Text | None = None
     config: dict[str, Any] = Field(default_factory=dict)
     grid: GridAxes = GridAxes()
     random: RandomSpec | None = None
-    retries: int = Field(2, ge=0, le=10, description="re-runs of a task whose worker failed")
-    max_lateral_m: float = Field(5.0, gt=0.0, le=1e3, allow_inf_nan=False,
+    retries: StrictInt = Field(2, ge=0, le=10, description="re-runs of a task whose worker failed")
+    max_lateral_m: _Real = Field(5.0, gt=0.0, le=1e3,
                                  description="|e_y| beyond which a run has diverged")
     #: Folder the relative paths of the file are resolved against (set by load_sweep).
     root: str = "."
+
+    @model_validator(mode="after")
+    def _disjoint(self) -> SweepSpec:
+        """An axis is either a grid axis or a random one: in both, the draws would silently
+        replace the grid's values."""
+        if self.random is not None:
+            both = [a for a in AXES if getattr(self.grid, a) is not None
+                    and (a in self.random.ranges or a in self.random.choices)]
+            if both:
+                raise ConfigError(f"axis {both[0]!r} is in [grid] and in [random]: give it in one "
+                                  "of them (the random draws would replace the grid's values)")
+        return self
+
+    @property
+    def n_points(self) -> int:
+        """Runs of the sweep before duplicates are merged: grid points × random draws."""
+        return self.grid.size * (self.random.n if self.random is not None else 1)
 
 
 @dataclass(frozen=True)
@@ -241,20 +290,25 @@ class SweepResult:
 
 
 # -- loading and expansion ----------------------------------------------------------------
-def load_sweep(path: str | Path) -> SweepSpec:
+def load_sweep(path: str | Path, *, max_runs: int = MAX_RUNS) -> SweepSpec:
     """Read and validate a sweep file; every problem raises :class:`ConfigError` naming the field,
-    before any task starts (the base config and track files are checked too)."""
+    before any task starts (the base config and track files are checked too; a sweep of more than
+    ``max_runs`` runs is refused before it is expanded)."""
     from tsmpc.textfile import read_text
 
     p = Path(path)
-    try:
-        data = tomllib.loads(read_text(p, "sweep file (TOML)", ConfigError))
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{p}: invalid TOML: {err}") from None
+    data = parse_toml(read_text(p, "sweep file (TOML)", ConfigError, limit=MAX_CONFIG_BYTES), p)
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: a sweep file is a TOML table")
-    data.setdefault("root", str(p.resolve().parent))
+    if "root" in data:
+        raise ConfigError(f"{p}: root: unknown field (relative paths are resolved against the "
+                          "sweep file's folder)")
+    data["root"] = str(p.resolve().parent)
     spec = validate(SweepSpec, data, source=str(p))
+    if spec.n_points > max_runs:
+        raise ConfigError(f"{p}: the sweep has {spec.n_points:,} runs ({spec.grid.size:,} grid "
+                          f"points × {spec.random.n if spec.random else 1} random draws), more "
+                          f"than {max_runs:,}; raise the limit with --max-runs, or shrink the axes")
     cfg = base_config(spec, source=str(p))
     for t in dict.fromkeys(_track_values(spec)):
         _check_track(t, spec, cfg, source=str(p))
@@ -295,11 +349,10 @@ def base_config(spec: SweepSpec, source: str = "sweep") -> Config:
 
         path = Path(spec.root) / spec.base_config
         try:
-            data = tomllib.loads(read_text(path, "config file (TOML)", ConfigError))
+            data = parse_toml(read_text(path, "config file (TOML)", ConfigError,
+                                        limit=MAX_CONFIG_BYTES), path)
         except ConfigError as err:
             raise ConfigError(f"{source}: base_config: {err}") from None
-        except tomllib.TOMLDecodeError as err:
-            raise ConfigError(f"{source}: base_config: invalid TOML in {path}: {err}") from None
     merged = resolve_preset(_merge(data, spec.config), source=f"{source}: config")  # preset = "paper"
     return validate(Config, merged, source=f"{source}: config")
 
@@ -467,11 +520,15 @@ def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
     status, reason = "completed", ""
     if log.termination != "completed":
         status, reason = "diverged", log.termination
-    elif track is not None:
-        off = off_track(track, log.state_outer[:, 0], log.state_outer[:, 1])
-        if off.any():
-            k = int(np.argmax(off))
-            status, reason = "diverged", f"left the track at t = {log.t_outer[k] - log.t_outer[0]:.1f} s"
+    elif track is not None and off_track(track, log.state_outer[:, 0], log.state_outer[:, 1]).any():
+        k = int(np.argmax(off_track(track, log.state_outer[:, 0], log.state_outer[:, 1])))
+        status, reason = "diverged", f"left the track at t = {log.t_outer[k] - log.t_outer[0]:.1f} s"
+    else:
+        from tsmpc.sim.health import health_problem
+
+        problem = health_problem(metrics)  # completed, but the controller did not work
+        if problem:
+            status, reason = "degraded", problem
     return metrics, status, reason
 
 
@@ -481,11 +538,63 @@ ProgressFn = Callable[[int, int, dict[str, Any]], None]
 PlotFn = Callable[[Any, Path, tuple[str, ...]], list[Path]]
 
 
+def read_record(path: Path, rid: str | None = None) -> dict[str, Any] | None:
+    """The run record at ``path`` if it is one (a JSON object with this ``id``, a known status
+    and its params), else None: empty, garbage, ``[]``, a folder, too large, too deeply nested."""
+    from tsmpc.errors import TsmpcError
+    from tsmpc.textfile import read_text
+
+    try:
+        rec = json.loads(read_text(path, "run record", limit=16 * 1024 * 1024))
+    except (TsmpcError, ValueError, RecursionError):
+        return None
+    if not isinstance(rec, dict) or not isinstance(rec.get("params"), dict):
+        return None
+    if rec.get("id") != (rid or path.stem) or rec.get("status") not in RECORD_STATUSES:
+        return None
+    if not isinstance(rec.get("metrics", {}), dict):
+        return None
+    return rec
+
+
+def _set_aside(path: Path, runs_dir: Path) -> None:
+    """Move an unreadable record out of the way (kept for inspection, never deleted)."""
+    bad = runs_dir / ".unreadable"
+    bad.mkdir(exist_ok=True)
+    target = bad / f"{path.name}.{time.strftime('%Y%m%dT%H%M%S')}.{os.getpid()}"
+    os.replace(path, target)
+
+
+def records_on_disk(runs_dir: Path, ids: set[str], *, repair: bool, retry_failed: bool
+                    ) -> tuple[set[str], int, int]:
+    """(ids whose record on disk counts as done, unreadable records, failed records to retry).
+    ``repair``: unreadable records are set aside under ``runs/.unreadable/``."""
+    done: set[str] = set()
+    unreadable = retry = 0
+    if not runs_dir.is_dir():
+        return done, 0, 0
+    for path in sorted(runs_dir.glob("*.json")):
+        if path.stem not in ids:
+            continue
+        rec = read_record(path)
+        if rec is None:
+            unreadable += 1
+            if repair:
+                _set_aside(path, runs_dir)
+            continue
+        if rec["status"] == "failed" and retry_failed:
+            retry += 1
+            continue
+        done.add(path.stem)
+    return done, unreadable, retry
+
+
 def run_sweep(
     spec: SweepSpec, out: str | Path, *, scheduler: str | None = None, workers: int = 2,
     resume: bool = False, run_fn: Callable[[RunTask], dict[str, Any]] = run_task,
     progress: ProgressFn | None = None, plots: bool = True, plotter: PlotFn | None = None,
     connect_timeout: float = 5.0, design_fn: Callable[[Config], tuple[Any, Any]] | None = None,
+    retry_failed: bool | None = None,
 ) -> SweepResult:
     """Run every task of ``spec`` on Dask and write the records, the aggregate and the plots.
 
@@ -495,7 +604,10 @@ def run_sweep(
         scheduler: address of an existing Dask scheduler; None starts a LocalCluster of
             ``workers`` single-threaded worker processes on the loopback interface.
         resume: skip runs whose record is already in ``out/runs``. Without it an ``out`` that
-            already holds records is refused (nothing is overwritten).
+            already holds records is refused (nothing is overwritten). Unreadable records are
+            set aside (``runs/.unreadable/``) and re-run.
+        retry_failed: re-run the runs whose record says ``failed`` (lost to worker failures);
+            None = with ``resume``.
         run_fn: the task function (default: simulate; :func:`dry_run` for plumbing checks).
         progress: called as ``progress(done, total, record)`` after each record is written.
         plots: write the summary plots.
@@ -510,36 +622,46 @@ def run_sweep(
     out = Path(out)
     runs_dir = out / "runs"
     tasks = expand(spec)
-    on_disk = {p.stem for p in runs_dir.glob("*.json")} if runs_dir.is_dir() else set()
     ids = {t.id for t in tasks}
-    if on_disk & ids and not resume:
-        raise ConfigError(f"{out}: already holds {len(on_disk & ids)} records of this sweep; "
+    retry_failed = resume if retry_failed is None else retry_failed
+    any_on_disk = runs_dir.is_dir() and any(p.stem in ids for p in runs_dir.glob("*.json"))
+    if any_on_disk and not resume:
+        raise ConfigError(f"{out}: already holds records of this sweep; "
                           "use --resume to finish it or choose another --out")
+    on_disk, _, _ = records_on_disk(runs_dir, ids, repair=resume, retry_failed=retry_failed)
     pending = [t for t in tasks if t.id not in on_disk]
     skipped = len(tasks) - len(pending)
     written: set[str] = set()
     failed = duplicates = 0
     done = skipped
-    # Connect first (a wrong address fails in seconds, before anything is written).
+    # Connect first (a wrong address fails in seconds), then the designs: nothing is written
+    # before both worked.
     client, cluster = connect(scheduler, workers, connect_timeout) if pending else (None, None)
+    try:
+        if client is not None and run_fn is run_task:
+            # The axes never touch the controller settings, so one pair of LMI designs serves
+            # every run: solved (or loaded from the design cache) and certified here, shipped
+            # with the tasks — remote workers need no shared disk and solve nothing.
+            cfg = base_config(spec)
+            designs = design_fn(cfg) if design_fn is not None else _designs(cfg)
+            if scheduler is None:  # local workers share this machine's kernel cache: fill it once
+                from tsmpc import kernels
+
+                kernels.warmup()
+            pending = [RunTask(t.id, t.params, t.config, t.duration_s, t.max_lateral_m, t.root,
+                               designs) for t in pending]
+    except BaseException:
+        if client is not None:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        raise
     runs_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "sweep.json", json.dumps(
         {"name": spec.name, "spec": spec.model_dump(mode="json"),
          "runs": [{"id": t.id, **t.params.model_dump()} for t in tasks]}, indent=1))
     if client is not None:
         try:
-            if run_fn is run_task:
-                # The axes never touch the controller settings, so one pair of LMI designs serves
-                # every run: solved (or loaded from the design cache) and certified here, shipped
-                # with the tasks — remote workers need no shared disk and solve nothing.
-                cfg = base_config(spec)
-                designs = design_fn(cfg) if design_fn is not None else _designs(cfg)
-                if scheduler is None:  # local workers share this machine's kernel cache: fill it once
-                    from tsmpc import kernels
-
-                    kernels.warmup()
-                pending = [RunTask(t.id, t.params, t.config, t.duration_s, t.max_lateral_m, t.root,
-                                   designs) for t in pending]
             futures = {client.submit(run_fn, t, key=f"tsmpc-run-{t.id}", retries=spec.retries,
                                      pure=False): t for t in pending}
             for fut in as_completed(futures):
@@ -575,9 +697,18 @@ def run_sweep(
 
 
 def _designs(cfg: Config) -> tuple[Any, Any]:
+    """The base config's designs; a failed design is a :class:`ConfigError` naming the likely
+    field (tsmpc.diagnose), whatever the solver raised."""
+    from tsmpc.diagnose import explain_design_failure
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
-    return load_or_design_kinematic(cfg), load_or_design_dynamic(cfg)
+    out = []
+    for kind, fn in (("kinematic", load_or_design_kinematic), ("dynamic", load_or_design_dynamic)):
+        try:
+            out.append(fn(cfg))
+        except Exception as err:  # the solver's own exceptions too
+            raise ConfigError(f"base config: {explain_design_failure(kind, cfg, err)}") from None
+    return out[0], out[1]
 
 
 def connect(scheduler: str | None, workers: int, timeout: float = 5.0) -> tuple[Any, Any]:
@@ -606,12 +737,28 @@ def connect(scheduler: str | None, workers: int, timeout: float = 5.0) -> tuple[
     level = quiet.level
     quiet.setLevel(logging.CRITICAL)  # the connection retries log tracebacks of their own
     try:
+        _probe(scheduler, timeout)
         return Client(scheduler, timeout=timeout), None
     except (OSError, TimeoutError, ValueError) as err:
         raise ConfigError(f"--scheduler {scheduler}: no scheduler answered within {timeout:g} s "
                           f"({type(err).__name__}); check the address or --connect-timeout") from None
     finally:
         quiet.setLevel(level)
+
+
+def _probe(address: str, timeout: float) -> None:
+    """Open a comm to ``address`` and complete Dask's handshake within ``timeout`` seconds (raises
+    TimeoutError/OSError otherwise). ``Client(timeout=...)`` does not bound the handshake: a port
+    that accepts but never speaks held it for a minute (issue 24)."""
+    import asyncio
+
+    from distributed.comm import connect as comm_connect
+
+    async def go() -> None:
+        comm = await asyncio.wait_for(comm_connect(address, timeout=timeout), timeout)
+        await comm.close()
+
+    asyncio.run(go())
 
 
 # -- aggregation ---------------------------------------------------------------------------
@@ -641,8 +788,9 @@ def aggregate(out: str | Path, ids: list[str] | None = None) -> Any:
     runs_dir = Path(out) / "runs"
     recs = {}
     for p in sorted(runs_dir.glob("*.json")):
-        rec = json.loads(p.read_text())
-        recs[rec["id"]] = rec
+        rec = read_record(p)  # an unreadable record is no row (resume sets it aside and re-runs it)
+        if rec is not None:
+            recs[rec["id"]] = rec
     order = [i for i in ids if i in recs] if ids is not None else list(recs)
     return pd.DataFrame([_row(recs[i]) for i in order])
 

@@ -34,6 +34,9 @@ def _main(
     ),
 ) -> None:
     """TS-MPC trajectory tracking for autonomous vehicles."""
+    from tsmpc.cli._common import safe_stdio
+
+    safe_stdio()  # a closed stdout is refused here, before any work (exit 2)
 
 
 def _register() -> None:
@@ -43,4 +46,62 @@ def _register() -> None:
 
 _register()
 
-__all__ = ["app"]
+
+def main() -> None:
+    """The ``tsmpc`` entry point: ``app`` with SIGINT/SIGTERM handled from the first moment (an
+    interrupt at any time exits 128 + signal, never 0 or 1) and a closed or full stdout reported
+    in one line (never a second error at interpreter exit)."""
+    import contextlib
+    import os
+    import signal
+    import sys
+
+    from tsmpc.cli import _common
+
+    _common.install_signal_handlers()
+    code: object = 0
+    try:
+        try:
+            app()
+        finally:
+            # From here to the exit, signals are only recorded, then blocked (the interpreter's
+            # shutdown restores the default handlers: a signal then would kill the process
+            # without a word) and read as pending.
+            _common.record_signals_only()
+    except SystemExit as exc:
+        code = exc.code
+    except KeyboardInterrupt:
+        code = 130
+    except Exception as exc:  # the last net: one line, never a traceback (TSMPC_DEBUG=1 shows it)
+        if os.environ.get("TSMPC_DEBUG"):
+            raise
+        if isinstance(exc, OSError):
+            what = f"cannot write{' ' + str(exc.filename) if exc.filename else ''}: {exc.strerror or exc}"
+        else:
+            what = f"internal error {type(exc).__name__}: {' '.join(str(exc).split())[:500]}"
+        with contextlib.suppress(Exception):
+            sys.stderr.write(f"error: {what}\n")
+        code = 1
+    pending: set[int] = set()
+    with contextlib.suppress(AttributeError, OSError, ValueError):
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+        pending = {int(s) for s in signal.sigpending()}
+    sig = _common.first_signal() or (min(pending) if pending else None)
+    if sig is not None:
+        code = 128 + sig
+        _common.late_interrupt(sig)
+    try:
+        if sys.stdout is not None:
+            sys.stdout.flush()
+    except (OSError, ValueError):
+        with contextlib.suppress(Exception):
+            fd = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(fd, sys.stdout.fileno())
+        if code in (0, None):
+            with contextlib.suppress(Exception):
+                sys.stderr.write("error: cannot write to stdout (closed or full)\n")
+            code = 1
+    sys.exit(code)
+
+
+__all__ = ["app", "main"]

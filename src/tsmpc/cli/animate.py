@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from tsmpc.cli import app
-from tsmpc.cli._common import fail
+from tsmpc.cli._common import check_out_file, console, fail, refuse_ineffective
 
 
 @app.command("animate")
@@ -29,13 +29,12 @@ def animate_cmd(
     no_mp4: bool = typer.Option(False, "--no-mp4", help="Skip the MP4 even when ffmpeg is present."),
 ) -> None:
     """Animate a run: the car on its track with the MPC's predicted path, e_y and v below."""
-    from rich.console import Console
-
     from tsmpc.errors import TsmpcError
     from tsmpc.planning.tracks import load_tumftm
     from tsmpc.report.animation import animate_run
     from tsmpc.sim.run_dir import load_run
 
+    refuse_ineffective({"road_width": (track is not None, "--track draws the track's own borders")})
     try:
         run = load_run(run_dir)
         name = (method.upper() if method else ("REF" if "REF" in run.logs else next(iter(run.logs))))
@@ -43,11 +42,16 @@ def animate_cmd(
             raise ValueError(f"{run_dir}: no method {name} in this run (it has {', '.join(run.logs)})")
         trk = load_tumftm(track) if track is not None else None
         target = out if out is not None else run_dir / f"animation_{name}.gif"
+    except (TsmpcError, ValueError, OSError) as err:
+        fail(err)
+    check_out_file(target, option="--out")
+    try:
         res = animate_run(run.logs[name], target, vehicle=run.config.vehicle, track=trk,
                           road_width=road_width, fps=fps, every=every, start_s=start, duration_s=duration,
                           view_m=view, size_px=(width, height), mp4=not no_mp4)
-    except (TsmpcError, ValueError, OSError) as err:
+    except (TsmpcError, ValueError) as err:
         fail(err)
-    console = Console()
-    console.print(f"wrote {res.gif}" + (f" and {res.mp4}" if res.mp4 else "")
-                  + f": {res.frames} frames in {res.render_s:.1f} s")
+    except OSError as err:  # disk full, a name too long: one line, no half-written file kept
+        fail(f"animate failed: cannot write {err.filename or target}: {err.strerror or err}", code=1)
+    console().print(f"wrote {res.gif}" + (f" and {res.mp4}" if res.mp4 else "")
+                    + f": {res.frames} frames in {res.render_s:.1f} s")

@@ -10,12 +10,16 @@ import typer
 from tsmpc.cli import app
 from tsmpc.cli._common import (
     PARTIAL_MARKER,
-    Interrupted,
+    check_environment,
     check_interrupted,
+    check_laps,
     check_out_dir,
+    check_scenario_options,
+    deferred_interrupts,
+    design_status,
     fail,
     finite,
-    handle_interrupts,
+    guarded_run,
     load_config_or_exit,
     mark_partial,
 )
@@ -64,16 +68,17 @@ def _execute(
     The options arrive by name (the commands pass their parameters, which carry the same names),
     so adding an option cannot shift the others."""
     from rich.console import Console
+    from rich.markup import escape
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from tsmpc.blas import limit_blas_threads
     from tsmpc.sim import experiment
 
+    check_environment()  # cache folders, BLAS threads: before any work
     limit_blas_threads()
-    console = Console()
+    console = Console(emoji=False)  # user strings are escaped where printed (markup)
     if not console.is_terminal:  # piped to a file or CI log: do not squeeze the tables to 80 columns
-        console = Console(width=140)
-    err_console = Console(stderr=True, highlight=False, soft_wrap=True)
+        console = Console(width=140, emoji=False)
     # Every input is checked before any work: options, config, reference, envelope, output folder.
     finite("--duration", duration, lo=0.1)
     finite("--dt", dt, lo=1e-4)
@@ -83,6 +88,7 @@ def _execute(
     methods = [m for m in methods_text.split(",") if m.strip()]
     if not methods:
         fail(ConfigError("--methods is empty"))
+    check_laps(laps)
     try:
         exp = experiment.prepare(
             cfg, methods, reference=reference,
@@ -90,51 +96,62 @@ def _execute(
             seed=seed, plant=plant, cr_vehicle=cr_vehicle, strict_box=strict_box, oracle=oracle)
     except (TsmpcError, OSError) as err:
         fail(err)
+    check_scenario_options(exp.scenario, reference=reference, laps=laps, plant=plant)
     check_out_dir(out, overwrite=overwrite)
     if exp.envelope.widened:
         console.print(exp.envelope.message, markup=False, highlight=False)
 
-    def status(text: str) -> None:
-        err_console.print(text, markup=False)
+    # Every ending that is not success is one line, a non-zero exit and PARTIAL saying why
+    # (interrupted, no design for this config: exit 2, a failed write, an unexpected error).
+    with guarded_run(out):
+        if overwrite:
+            _remove_previous_outputs(out)
+        mark_partial(out, "running", methods=[m.value for m in exp.methods])
+        designs = design_status(exp.config)  # no design for this config: DesignError (exit 2)
+        from tsmpc import kernels
 
-    with handle_interrupts():
-        try:
-            if overwrite:
-                _remove_previous_outputs(out)
-            mark_partial(out, "running", methods=[m.value for m in exp.methods])
-            try:
-                designs = experiment.solve_designs(exp.config, status)
-            except TsmpcError as err:  # no certified design for these settings: a bad input
-                (out / PARTIAL_MARKER).unlink(missing_ok=True)
-                fail(err)
-            with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
-                          TextColumn("{task.completed}/{task.total} MPC steps"),
-                          TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
+        with deferred_interrupts():  # numba/LLVM call back into Python: never raise in there
+            kernels.warmup()  # compile/load before the progress bars (the first run says so)
+        with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
+                      TextColumn("{task.completed}/{task.total} MPC steps"),
+                      TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
 
-                def factory(name: str, total: int) -> Any:
-                    task = progress.add_task(name, total=total)
+            def factory(name: str, total: int) -> Any:
+                task = progress.add_task(name, total=total)
 
-                    def update(k: int, _k_total: int) -> None:
-                        check_interrupted()  # a solver may have swallowed the signal
-                        progress.update(task, completed=k)
-                    return update
+                def update(k: int, _k_total: int) -> None:
+                    check_interrupted()  # a solver may have swallowed the signal
+                    progress.update(task, completed=k)
+                return update
 
-                try:
-                    result = experiment.run(exp, out, plots=not no_plots, progress_factory=factory,
-                                            status=status, designs=designs)
-                except TsmpcError as err:
-                    fail(err, code=1)
-            (out / PARTIAL_MARKER).unlink(missing_ok=True)
-        except Interrupted as sig:
-            mark_partial(out, "interrupted", signal=str(sig))
-            typer.secho(f"interrupted ({sig}): {out} holds a partial run (see {out / PARTIAL_MARKER})",
-                        err=True, fg=typer.colors.RED)
-            raise typer.Exit(sig.code) from None
-    _print_tables(console, result.metrics)
-    console.print(f"wrote {len(result.files)} files to [bold]{out}[/bold]")
+            # The loop's blocks call compiled code: a signal only sets a flag there, checked
+            # after every MPC step (check_interrupted in the progress callback).
+            with deferred_interrupts():
+                result = experiment.run(exp, out, plots=not no_plots, progress_factory=factory,
+                                        designs=designs)
+        _print_tables(console, result.metrics)
+        console.print(f"wrote {len(result.files)} files to [bold]{escape(str(out))}[/bold]")
+        sick = _unhealthy(result.metrics)
+        if sick:
+            mark_partial(out, "failed", reason="; ".join(sick))
+            fail("; ".join(sick), code=1)
+        check_interrupted()
+        (out / PARTIAL_MARKER).unlink(missing_ok=True)
     bad = [n for n, m in result.metrics["methods"].items() if m["termination"] != "completed"]
     if bad:
         raise typer.Exit(1)
+
+
+def _unhealthy(metrics: dict[str, Any]) -> list[str]:
+    """A method that completed but whose controller did not work (tsmpc.sim.health)."""
+    from tsmpc.sim.health import health_problem
+
+    out = []
+    for name, m in metrics["methods"].items():
+        problem = health_problem(m) if m["termination"] == "completed" else None
+        if problem:
+            out.append(f"{name}: {problem}")
+    return out
 
 
 def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
@@ -144,7 +161,7 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
     from tsmpc.report.tables import rmse_rows
 
     paper = bool(metrics["scenario"].get("paper_reference"))
-    t = Table(title=f"RMSE — {metrics['scenario']['name']}"
+    t = Table(title=f"RMSE — {escape(str(metrics['scenario']['name']))}"
               + (" (paper rows from Table 5)" if paper else ""))
     for col in ("approach", "x [m]", "y [m]", "θ [rad]", "v [m/s]", "ω [rad/s]"):
         t.add_column(escape(col), justify="right" if col != "approach" else "left")

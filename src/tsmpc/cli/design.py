@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from tsmpc.cli import app
-from tsmpc.cli._common import fail, load_config_or_exit
+from tsmpc.cli._common import check_environment, fail, load_config_or_exit, solve_design
 
 
 @app.command("design")
@@ -28,14 +28,15 @@ def design(
     from tsmpc.synthesis.certificates import MIN_RELATIVE_MARGIN, worst
 
     cfg = load_config_or_exit(config)
-    try:
+    check_environment(kernels=False)
+    try:  # no design for this config (infeasible, solver failure): exit 2 naming the likely field
         t0 = time.perf_counter()
-        kd = load_or_design_kinematic(cfg, use_cache=not no_cache)
+        kd = solve_design("kinematic", lambda c: load_or_design_kinematic(c, use_cache=not no_cache), cfg)
         t1 = time.perf_counter()
-        dd = load_or_design_dynamic(cfg, use_cache=not no_cache)
+        dd = solve_design("dynamic", lambda c: load_or_design_dynamic(c, use_cache=not no_cache), cfg)
         t2 = time.perf_counter()
     except TsmpcError as err:
-        fail(err, code=1)
+        fail(err)
         return
     if as_json:
         out = {"kinematic": design_to_dict(kd), "dynamic": design_to_dict(dd),

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import typer
 
 from tsmpc.cli import app
-from tsmpc.cli._common import check_out_file, fail, finite
+from tsmpc.cli._common import check_laps, check_out_file, fail, finite, refuse_ineffective
 from tsmpc.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -27,40 +27,11 @@ class OutputFormat(StrEnum):
     paper = "paper"
 
 
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
 def _read_waypoints(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-    """(x, y) waypoints from a CSV with columns x,y (an optional header line; extra columns such
-    as a speed cap ``v`` are used when the header names them)."""
-    import numpy as np
+    """(x, y) waypoints and the optional speed caps (:func:`tsmpc.planning.waypoints.read_waypoints`)."""
+    from tsmpc.planning.waypoints import read_waypoints
 
-    from tsmpc.errors import DataFormatError
-    from tsmpc.textfile import read_text
-
-    lines = [ln.strip() for ln in read_text(path, "waypoints CSV (x,y rows)").splitlines()]
-    lines = [ln for ln in lines if ln and not ln.startswith("#")]
-    header = None
-    if lines and not _is_number(lines[0].split(",")[0]):
-        header = [h.strip().lower() for h in lines[0].split(",")]
-        lines = lines[1:]
-    try:
-        data = np.array([[float(v) for v in ln.split(",")] for ln in lines], dtype=float)
-    except ValueError as err:
-        raise DataFormatError(f"{path}: waypoints must be numeric 'x,y' rows ({err})") from None
-    if data.ndim != 2 or data.shape[0] < 2 or data.shape[1] < 2:
-        raise DataFormatError(f"{path}: expected at least 2 rows of 'x,y' waypoints")
-    if not np.all(np.isfinite(data)):
-        raise DataFormatError(f"{path}: data row {int(np.argwhere(~np.isfinite(data))[0, 0]) + 1}: "
-                              "NaN or inf (waypoints must be finite)")
-    ix, iy = (header.index("x"), header.index("y")) if header and {"x", "y"} <= set(header) else (0, 1)
-    cap = data[:, header.index("v")] if header and "v" in header else None
-    return data[:, [ix, iy]], cap
+    return read_waypoints(path)
 
 
 @app.command("plan")
@@ -72,7 +43,8 @@ def plan(
     a_lat: float = typer.Option(3.0, help="Lateral acceleration limit [m/s^2]."),
     a_lon: float = typer.Option(2.6, help="Longitudinal acceleration limit [m/s^2]."),
     a_brake: float = typer.Option(3.0, help="Braking deceleration limit [m/s^2]."),
-    v_start: float = typer.Option(1.0, help="Start speed of an open path [m/s]."),
+    v_start: float | None = typer.Option(None, help="Start speed of an open path [m/s] "
+                                         "[default: 1.0]."),
     dt: float = typer.Option(0.1, help="Sample time [s]."),
     laps: int = typer.Option(1, min=1, help="Laps (closed paths)."),
     tail: float = typer.Option(0.0, help="Extra look-ahead time at the end [s]."),
@@ -93,11 +65,15 @@ def plan(
 
     finite("--dt", dt, lo=0.0, lo_open=True, hi=10.0)
     finite("--tail", tail, lo=0.0, hi=3600.0)
-    if laps > 1000:
-        fail(ConfigError(f"--laps = {laps}: at most 1000"))
+    check_laps(laps)
+    is_track = is_tumftm(source)
+    is_closed = (True if closed is None else closed) if is_track else bool(closed)
+    if v_start is not None and is_closed:  # an option that would be ignored is refused
+        fail(ConfigError("--v-start has no effect on a closed lap (flying start); drop it or "
+                         "plan an open path with --open"))
     try:
         settings = PlannerSettings(v_max=v_max, a_lat_max=a_lat, a_lon_max=a_lon,
-                                   a_brake_max=a_brake, v_start=v_start)
+                                   a_brake_max=a_brake, v_start=1.0 if v_start is None else v_start)
     except ValidationError as err:
         e = err.errors()[0]
         opt = {"v_max": "--v-max", "a_lat_max": "--a-lat", "a_lon_max": "--a-lon",
@@ -106,16 +82,15 @@ def plan(
     check_out_file(out, overwrite=overwrite)
     meta: dict[str, object] = {}
     try:
-        if is_tumftm(source):
+        if is_track:
             track = load_tumftm(source)
-            ref = plan_path(track.centre, settings, closed=True if closed is None else closed, dt=dt,
-                            laps=laps, tail_s=tail)
+            ref = plan_path(track.centre, settings, closed=is_closed, dt=dt, laps=laps, tail_s=tail)
             # The narrowest half-width: beyond it the car has left the road somewhere on the lap.
             half = float(min(track.w_left.min(), track.w_right.min()))
             meta = {"source": source.name, "half_width_m": f"{half:.3f}"}
         else:
             wp, cap = _read_waypoints(source)
-            ref = plan_path(wp, settings, closed=bool(closed), dt=dt, laps=laps, tail_s=tail, v_cap=cap)
+            ref = plan_path(wp, settings, closed=is_closed, dt=dt, laps=laps, tail_s=tail, v_cap=cap)
         if fmt is OutputFormat.paper:
             save_paper_format(ref, out)
         else:
@@ -172,6 +147,8 @@ def show_reference(
     png_path = out or file.with_suffix(".png")
     if out is not None and (out.is_dir() or str(out).endswith(("/", "\\"))):
         png_path = out / f"{file.stem}.png"
+    refuse_ineffective({"window": (is_tumftm(file), "a track is planned whole: --window picks "
+                                   "columns of a paper-format file or rows of a planned CSV")})
     check_out_file(png_path)
     track = None
     try:
@@ -181,6 +158,8 @@ def show_reference(
         else:
             ref = load_reference(file, window=win)
         png = save_reference_figure(ref, png_path, track=track, title=file.stem)
-    except (TsmpcError, OSError) as err:
+    except (TsmpcError, ValueError) as err:
         fail(err)
+    except OSError as err:
+        fail(f"--out {png_path}: cannot write ({err.strerror or err})", code=1)
     typer.echo(f"wrote {png}")

@@ -3,19 +3,23 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import typer
 
 from tsmpc.cli import app
 from tsmpc.cli._common import (
     PARTIAL_MARKER,
-    Interrupted,
+    check_environment,
     check_out_dir,
+    console,
+    deferred_interrupts,
     design_status,
     fail,
     finite,
-    handle_interrupts,
+    guarded_run,
     mark_partial,
+    refuse_ineffective,
 )
 from tsmpc.errors import ConfigError
 
@@ -27,80 +31,107 @@ def sweep_cmd(
         None, "--scheduler", help="Address of a running Dask scheduler (default: a LocalCluster)."),
     workers: int = typer.Option(2, "--workers", min=1, help="LocalCluster worker processes."),
     out: Path = typer.Option(Path("results/sweep"), "--out", help="Output folder."),
-    resume: bool = typer.Option(False, "--resume", help="Skip runs whose record is already in --out."),
+    resume: bool = typer.Option(False, "--resume", help="Skip runs whose record is already in --out "
+                                "(unreadable records are set aside and re-run)."),
+    retry_failed: bool | None = typer.Option(
+        None, "--retry-failed/--no-retry-failed",
+        help="With --resume: re-run the runs lost to worker failures [default: on]."),
     no_plots: bool = typer.Option(False, "--no-plots", help="Skip the summary plots."),
     dry_run: bool = typer.Option(
         False, "--dry-run", help="Check the cluster plumbing: tasks sleep instead of simulating."),
     connect_timeout: float = typer.Option(
         5.0, "--connect-timeout", help="Seconds to wait for --scheduler before giving up."),
+    max_runs: int = typer.Option(
+        10_000, "--max-runs", min=1, max=100_000,
+        help="Refuse a sweep with more runs than this (grid points × random draws)."),
 ) -> None:
     """Run every point of a sweep as a Dask task; write one record per run, the aggregate table
     (CSV, Parquet) and summary plots."""
-    from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-    from rich.table import Table
+    from rich.text import Text
 
     from tsmpc.errors import TsmpcError
+    from tsmpc.sweep import base_config, expand, load_sweep, run_sweep, run_task
     from tsmpc.sweep import dry_run as dry_fn
-    from tsmpc.sweep import expand, load_sweep, run_sweep, run_task
 
-    console = Console()
+    con = console()
+    check_environment(kernels=not dry_run)
     finite("--connect-timeout", connect_timeout, lo=0.0, lo_open=True, hi=600.0)
     if workers > 64:
         fail(ConfigError(f"--workers = {workers}: at most 64 local worker processes"))
+    refuse_ineffective({
+        "workers": (scheduler is not None, "--scheduler runs the tasks on that cluster's workers"),
+        "connect_timeout": (scheduler is None, "it bounds the wait for --scheduler (a local "
+                            "cluster is started, not connected to)"),
+        "retry_failed": (not resume, "failed records are retried only when resuming (--resume)"),
+    })
     try:
-        spec = load_sweep(sweep_file)  # every problem is reported before any task starts
+        spec = load_sweep(sweep_file, max_runs=max_runs)  # every problem before any task starts
     except TsmpcError as err:
         fail(err)
-    if resume:
-        check_out_dir(out, overwrite=True)  # records on disk are kept and skipped
-    else:
-        check_out_dir(out, overwrite=False)
+    designs = None
+    if not dry_run:  # one pair of designs serves every run: solved before anything is written
+        try:
+            designs = design_status(base_config(spec))
+        except TsmpcError as err:
+            fail(err)
+    check_out_dir(out, overwrite=resume)  # with --resume, records on disk are kept and skipped
     n = len(expand(spec))
     where = scheduler or f"a local cluster of {workers} worker processes"
-    console.print(f"sweep [bold]{spec.name}[/bold]: {n} runs on {where} → {out}")
+    con.print(Text.assemble("sweep ", (spec.name, "bold"), f": {n} runs on {where} → {out}"))
     counts: dict[str, int] = {}
     with Progress(TextColumn("[bold]runs"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TextColumn("{task.description}"), TimeElapsedColumn(), TimeRemainingColumn(),
-                  console=console) as progress:
+                  TextColumn("{task.description}", markup=False), TimeElapsedColumn(),
+                  TimeRemainingColumn(), console=con) as progress:
         task = progress.add_task("", total=n)
 
         def on_record(done: int, total: int, rec: dict) -> None:
             counts[rec["status"]] = counts.get(rec["status"], 0) + 1
             progress.update(task, completed=done, description=" ".join(f"{k}={v}" for k, v in counts.items()))
 
-        try:
-            with handle_interrupts():
-                mark_partial(out, "running")
+        hint = f"the records finished so far are in {out / 'runs'}; finish the sweep with --resume"
+        with guarded_run(out, what="sweep", on_interrupt=hint):
+            mark_partial(out, "running")
+            if not dry_run and scheduler is None:  # local workers share this machine's kernel cache
+                from tsmpc import kernels
+
+                with deferred_interrupts():  # numba/LLVM call back into Python: never raise there
+                    kernels.warmup()
+            try:
                 res = run_sweep(spec, out, scheduler=scheduler, workers=workers, resume=resume,
                                 run_fn=dry_fn if dry_run else run_task, progress=on_record,
                                 plots=not no_plots, connect_timeout=connect_timeout,
-                                design_fn=design_status)
+                                design_fn=(lambda _cfg: designs) if designs else design_status,
+                                retry_failed=retry_failed)
+            except ConfigError as err:  # e.g. no scheduler answered: nothing ran
                 (out / PARTIAL_MARKER).unlink(missing_ok=True)
-        except TsmpcError as err:
+                fail(err)
             progress.stop()
-            (out / PARTIAL_MARKER).unlink(missing_ok=True)  # nothing ran: nothing partial
-            fail(err)
-        except Interrupted as sig:
-            mark_partial(out, "interrupted", signal=str(sig))
-            progress.stop()
-            typer.secho(f"interrupted ({sig}): the records finished so far are in {out / 'runs'}; "
-                        f"finish the sweep with --resume", err=True, fg=typer.colors.RED)
-            raise typer.Exit(sig.code) from None
-    t = Table(title=f"sweep {spec.name}: {res.n_runs} runs ({res.executed} run now, {res.skipped} resumed)")
+            _summary(con, spec.name, res, out)
+            (out / PARTIAL_MARKER).unlink(missing_ok=True)
+
+
+def _summary(con: Any, name: str, res: Any, out: Path) -> None:
+    """The table of statuses and the runs that did not complete (user strings printed as text)."""
+    from rich.table import Table
+    from rich.text import Text
+
+    t = Table(title=Text(f"sweep {name}: {res.n_runs} runs ({res.executed} run now, "
+                         f"{res.skipped} resumed)"))
     for col in ("status", "runs", "RMSE y median [m]", "max |e_y| worst [m]", "MPC median [ms]"):
-        t.add_column(col.replace("[", "\\["), justify="right")
+        t.add_column(Text(col), justify="right")
     tab = res.table
     if len(tab):
         for status, grp in tab.groupby("status"):
             t.add_row(str(status), str(len(grp)), _fmt(grp.get("rmse_y"), "median"),
                       _fmt(grp.get("max_abs_lateral_m"), "max"), _fmt(grp.get("mpc_median_ms"), "median"))
-    console.print(t)
+    con.print(t)
     bad = tab[tab["status"] != "completed"] if len(tab) else tab
     for _, row in bad.iterrows():
-        console.print(f"[yellow]{row['id']}[/yellow] {row['method']} {row['scenario']} {row['track']}: "
-                      f"{row['status']}: {row['reason']}")
-    console.print(f"wrote {len(res.files)} files and {res.n_runs} records to [bold]{out}[/bold]")
+        con.print(Text.assemble((str(row["id"]), "yellow"), f" {row['method']} {row['scenario']} "
+                                f"{row['track']}: {row['status']}: {row['reason']}"))
+    con.print(Text.assemble(f"wrote {len(res.files)} files and {res.n_runs} records to ",
+                            (str(out), "bold")))
 
 
 def _fmt(col: object, how: str) -> str:

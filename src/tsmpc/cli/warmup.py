@@ -5,6 +5,7 @@ from __future__ import annotations
 import typer
 
 from tsmpc.cli import app
+from tsmpc.cli._common import check_environment, deferred_interrupts, fail, handle_interrupts
 
 
 @app.command("warmup")
@@ -15,8 +16,14 @@ def warmup_cmd() -> None:
     if not kernels.enabled():
         typer.echo("kernels are switched off (TSMPC_NO_JIT is set): nothing to compile")
         return
-    ok, seconds = kernels.warmup()
+    check_environment()  # an unusable NUMBA_CACHE_DIR / cache folder: exit 2 naming it
+    try:
+        with handle_interrupts(), deferred_interrupts():  # never raise inside numba/LLVM callbacks
+            ok, seconds = kernels.warmup()
+    except KeyboardInterrupt as sig:
+        typer.secho(f"interrupted ({sig})", err=True, fg=typer.colors.RED)
+        raise typer.Exit(getattr(sig, "code", 130)) from None
     if not ok:
-        typer.echo("compiled kernels unavailable: simulations use the numpy implementations", err=True)
-        raise typer.Exit(1)
+        fail(f"compiled kernels unavailable ({kernels.failure() or 'numba failed'}): simulations "
+             "use the numpy implementations", code=1)
     typer.echo(f"kernels ready in {seconds:.1f} s (cache: {kernels.numba_cache_dir()})")

@@ -15,6 +15,21 @@ falls back at this level (MPC: the shifted previous plan; MHE: the last estimate
 and anything else holds the previous command. Every such event is counted in
 :attr:`Cascade.events` (``step_errors`` for exceptions, :attr:`Cascade.last_error` says which).
 
+Garbage that is finite is rejected too (issue 24), each kind under its own counter:
+
+* ``time_rejected``: a call time that is not finite, goes backwards or repeats, or jumps ahead by
+  more than ``max_time_jump_s``; the cascade's own clock (previous time + T_d) is used instead;
+* ``stamp_rejected``: a sample stamped in the future (beyond the call time + T_d) or with a
+  non-finite stamp (stale samples: ``stale_rejected``);
+* ``speed_rejected``: a speed or yaw rate no vehicle this config drives can have (negative beyond
+  the noise, far above every speed bound of the config);
+* ``pose_jump_rejected``: a pose further from the dead-reckoned pose than the car can have
+  drifted since the last accepted one (1 m + 2 m per second without a pose), or a heading off by
+  more than 0.3 rad + 0.5 rad/s.
+
+Between accepted poses the pose is dead-reckoned from the estimate (v̂, α̂, ω̂), so the MPC of a
+call without a usable pose sees where the car most likely is, not where it was.
+
 The cascade does no logging (STYLE §3): each :class:`Command` carries what a logger needs (the
 estimate, the MPC result when the MPC ran at that call, the block timings).
 """
@@ -47,7 +62,18 @@ EVENT_NAMES = (
     "mhe_failed",  # MHE solver failures (model prediction used)
     "inner_saturated",  # TS-LQR steps with an active saturation
     "pose_rejected",  # MPC steps that used the last good pose (NaN or stale pose)
+    "time_rejected",  # calls whose time went backwards, repeated, jumped or was not finite
+    "stamp_rejected",  # samples stamped in the future or with a non-finite stamp
+    "speed_rejected",  # samples with an impossible speed or yaw rate (negative, absurd)
+    "pose_jump_rejected",  # poses further than the car can have moved since the last good one
 )
+#: Drift allowed between the dead-reckoned and a measured pose: metres plus metres per second
+#: without an accepted pose (dead reckoning on the estimate drifts slowly; a pose jump does not).
+POSE_JUMP_M = 1.0
+POSE_DRIFT_M_PER_S = 2.0
+#: Heading counterpart [rad, rad/s].
+HEADING_JUMP_RAD = 0.3
+HEADING_DRIFT_RAD_PER_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -160,12 +186,15 @@ class Cascade:
             None = taken from the first measurement (α = 0).
         max_age_s: a measurement whose ``stamp`` is older than this is rejected [s]
             (default: T_c).
+        max_time_jump_s: a call time more than this after the previous one is rejected (the
+            cascade's own clock is used) [s] (default: T_c).
     """
 
     def __init__(
         self, cfg: Config, method: Method | str, reference: Reference, *,
         kinematic_design: Any = None, dynamic_design: Any = None,
         x0: ArrayLike | None = None, max_age_s: float | None = None,
+        max_time_jump_s: float | None = None,
     ) -> None:
         from tsmpc.control.ts_lqr import TSLQR
         from tsmpc.estimation.mhe_uio import MHEUIO
@@ -202,7 +231,17 @@ class Cascade:
         else:
             self.mhe = MHEUIO(cfg.mhe, dyn, cfg.vehicle, self.Td)
         self.max_age_s = self.Tc if max_age_s is None else float(max_age_s)
+        self.max_time_jump_s = self.Tc if max_time_jump_s is None else float(max_time_jump_s)
         self._slip_gate = SlipGate(self.Tc, cfg.noise.position * cfg.noise.scale)
+        # Plausible measurements (issue 24): beyond every speed / yaw-rate bound of the config,
+        # with room for the sensor noise.
+        nz = cfg.noise
+        v_bound = max(cfg.mpc.u_max[0], cfg.dynamic_box.v[1], cfg.kinematic_box.v_d[1])
+        w_bound = max(abs(cfg.mpc.u_min[1]), cfg.mpc.u_max[1], *map(abs, cfg.kinematic_box.omega))
+        self._v_range = (-max(1.0, 5.0 * nz.v * nz.scale), 2.0 * v_bound + 5.0 + 5.0 * nz.v * nz.scale)
+        self._w_limit = max(4.0, 2.0 * w_bound) + 5.0 * nz.omega * nz.scale
+        self._pose_noise = 5.0 * nz.position * nz.scale
+        self._heading_noise = 5.0 * nz.theta * nz.scale
         self.reset(x0)
 
     # -------------------------------------------------------------------------- state
@@ -220,7 +259,10 @@ class Cascade:
         self._slip_gate.reset()
         self.mpc.reset()
         self._calls = 0
+        self._t_last: float | None = None
         self._pose = None if self._x0 is None else self._x0[:3].copy()
+        self._pose_t = 0.0  # time of the last accepted pose
+        self._pose_fresh = False
         self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
         self._u_applied = np.zeros(2)
         self._last: Command | None = None
@@ -255,7 +297,7 @@ class Cascade:
     def step(self, t: float, measurement: Measurement) -> Command:
         """One call every T_d: the command to apply until the next call. Never raises."""
         try:
-            cmd = self._step(float(t), measurement)
+            cmd = self._step(self._clock(t), measurement)
         except Exception as err:  # the contract: a guidance step never raises
             self._caught(err)
             cmd = self._hold()
@@ -276,25 +318,99 @@ class Cascade:
         return Command(last.F_xR, last.delta, last.saturated, last.v_ref, last.omega_ref,
                        last.estimate, held=True)
 
+    def _clock(self, t: Any) -> float:
+        """The call's time: ``t`` when it follows the previous call (later by at most
+        ``max_time_jump_s``), else the cascade's own clock, previous + T_d (``time_rejected``)."""
+        try:
+            tt = float(t)
+        except (TypeError, ValueError):
+            tt = math.nan
+        last = self._t_last
+        if last is None:
+            ok = math.isfinite(tt) and abs(tt) < 1e9
+            tt = tt if ok else 0.0
+        else:
+            ok = math.isfinite(tt) and last < tt <= last + self.max_time_jump_s + 1e-9
+            tt = tt if ok else last + self.Td
+        if not ok:
+            self._events["time_rejected"] += 1
+        self._t_last = tt
+        return tt
+
     def _fresh(self, t: float, m: Measurement) -> bool:
-        if m.stamp is None or t - float(m.stamp) <= self.max_age_s + 1e-12:
+        if m.stamp is None:
+            return True
+        try:
+            stamp = float(m.stamp)
+        except (TypeError, ValueError):
+            stamp = math.nan
+        if not math.isfinite(stamp) or stamp > t + self.Td + 1e-9:  # from the future: garbage
+            self._events["stamp_rejected"] += 1
+            return False
+        if t - stamp <= self.max_age_s + 1e-12:
             return True
         self._events["stale_rejected"] += 1
         return False
 
+    def _plausible_speeds(self, v: float, om: float) -> bool:
+        """False (counted) for a finite speed or yaw rate no vehicle of this config can have."""
+        if not (math.isfinite(v) and math.isfinite(om)):
+            return True  # NaN: the MHE rejects it (mhe_rejected)
+        lo, hi = self._v_range
+        if lo <= v <= hi and abs(om) <= self._w_limit:
+            return True
+        self._events["speed_rejected"] += 1
+        return False
+
+    def _accept_pose(self, t: float, X: float, Y: float, th: float) -> bool:
+        """Is a finite, fresh pose consistent with where the car can be (the dead-reckoned pose)?"""
+        p = self._pose
+        if p is None:
+            return True
+        dt = max(t - self._pose_t, 0.0)
+        far = math.hypot(X - p[0], Y - p[1]) > POSE_JUMP_M + POSE_DRIFT_M_PER_S * dt + self._pose_noise
+        dth = (th - p[2] + math.pi) % (2.0 * math.pi) - math.pi
+        turned = abs(dth) > HEADING_JUMP_RAD + HEADING_DRIFT_RAD_PER_S * dt + self._heading_noise
+        if far or turned:
+            self._events["pose_jump_rejected"] += 1
+            return False
+        return True
+
+    def _dead_reckon(self, est: Estimate) -> None:
+        """Advance the pose by one T_d on the estimate (until the next accepted measurement)."""
+        p = self._pose
+        if p is None:
+            return
+        v, a, w = (float(c) for c in est.x[:3])
+        if not (math.isfinite(v) and math.isfinite(a) and math.isfinite(w)):
+            return
+        v = min(max(v, 0.0), self._v_range[1])
+        heading = p[2] + a
+        self._pose = np.array([p[0] + v * math.cos(heading) * self.Td,
+                               p[1] + v * math.sin(heading) * self.Td, p[2] + w * self.Td])
+
     def _step(self, t: float, m: Measurement) -> Command:
         X, Y, th = (float(c) for c in m.pose)
         v, om = float(m.v), float(m.omega)
-        if self._x0 is None:  # start from the first measurement
-            self.reset(np.nan_to_num(np.array([X, Y, th, v, 0.0, om])))
+        if self._x0 is None:  # start from the first measurement (its garbage made harmless)
+            x0 = np.nan_to_num(np.array([X, Y, th, v, 0.0, om]), posinf=0.0, neginf=0.0)
+            x0[3] = min(max(x0[3], 0.0), self._v_range[1])
+            x0[5] = min(max(x0[5], -self._w_limit), self._w_limit)
+            t_last = self._t_last
+            self.reset(x0)
+            self._t_last, self._pose_t = t_last, t
         ev = self._events
         fresh = self._fresh(t, m)
+        speeds_ok = self._plausible_speeds(v, om)
+        # The pose, every call: accepted when fresh, finite and where the car can be; else the
+        # dead-reckoned pose stands (advanced at the end of the call).
+        pose_ok = fresh and _finite(X, Y, th) and self._accept_pose(t, X, Y, th)
+        if pose_ok:
+            self._pose, self._pose_t = np.array([X, Y, th]), t
         plan = e_meas = None
         t_mpc = 0.0
         if self._calls % self.n_inner == 0:
-            if fresh and _finite(X, Y, th):
-                self._pose = np.array([X, Y, th])
-            else:  # keep the last good pose: the MPC never sees NaN
+            if not pose_ok:  # the MPC never sees NaN nor a jump: the dead-reckoned pose
                 ev["pose_rejected"] += 1
             if self.cfg.rates.inner_steps_per_outer is None:
                 k = max(math.floor(t / self.Tc + 1e-6), 0)
@@ -328,7 +444,7 @@ class Cascade:
             ev["mpc_fallback"] += plan.status == MPCStatus.FALLBACK
             ev["mpc_scheduling_clipped"] += int(plan.n_clipped)
         v_ref, w_ref = float(self._u_prev[0]), float(self._u_prev[1])
-        y = np.array([v, om]) if fresh else np.full(2, np.nan)
+        y = np.array([v, om]) if fresh and speeds_ok else np.full(2, np.nan)
         u_mhe = self._u_applied
         if m.force is not None or m.steering is not None:
             u_mhe = np.array([self._u_applied[0] if m.force is None else float(m.force),
@@ -343,6 +459,7 @@ class Cascade:
             est = Estimate(x_hat, last.F_fr if last is not None else 0.0, 0.0,
                            EstimatorStatus.FAILED, time.perf_counter() - t1)
         t2 = time.perf_counter()
+        self._dead_reckon(est)
         if m.state is None:
             inner = est
         elif self.cfg.lqr.true_state_feedback:  # the published run: true state, F̂ as configured

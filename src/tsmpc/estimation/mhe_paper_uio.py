@@ -109,15 +109,9 @@ class PaperUIOMHE(MHEUIO):
         pred = A[-1] @ self._x + B[-1] @ u
         F_raw = float(th[0] * (y[0] - pred[0]) + th[2] * (y[1] - pred[2])) if ok else 0.0
         x_pred = pred + E * self._F
-        if not (np.all(np.isfinite(x_pred)) and np.isfinite(F_raw)):
-            return self._failed(F_raw, t0)
-        xs[n] = x_pred
-        if ok:
-            xs[n, 0], xs[n, 2] = y[0], y[1]
-        if n < 2 or not ok:
-            self._x = np.clip(xs[n], self._xmin, self._xmax)
-            status = EstimatorStatus.REJECTED if not ok else EstimatorStatus.WARMUP
-            return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)
+        early = self._predict(y, ok, n, xs, x_pred, F_raw, t0)
+        if early is not None:
+            return early
         arrival = xs[0] if full else self._arrival
         qp = self.build_uio(self._Y[: n + 1], us, self._W[: n + 1], A, B, arrival, self._F)
         z = self._solve(qp)

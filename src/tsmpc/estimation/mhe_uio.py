@@ -359,6 +359,22 @@ class MHEUIO:
         status = EstimatorStatus.OK if full else EstimatorStatus.WARMUP
         return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)
 
+    def _predict(self, y: NDArray[np.float64], ok: bool, n: int, xs: NDArray[np.float64],
+                 x_pred: NDArray[np.float64], F_raw: float, t0: float) -> Estimate | None:
+        """Store the one-step prediction ``x_pred`` (with the measured v, ω) as the window's last
+        sample; the estimate to return without a window solve (non-finite prediction: FAILED;
+        warm-up or a rejected sample: the prediction), else None."""
+        if not (np.all(np.isfinite(x_pred)) and np.isfinite(F_raw)):
+            return self._failed(F_raw, t0)
+        xs[n] = x_pred
+        if ok:
+            xs[n, 0], xs[n, 2] = y[0], y[1]
+        if n < 2 or not ok:
+            self._x = np.clip(xs[n], self._xmin, self._xmax)
+            status = EstimatorStatus.REJECTED if not ok else EstimatorStatus.WARMUP
+            return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)
+        return None
+
     def _step_dense(self, y: NDArray[np.float64], u: NDArray[np.float64], ok: bool, n: int, full: bool,
                     us: NDArray[np.float64], xs: NDArray[np.float64],
                     matrices: tuple[NDArray[np.float64], NDArray[np.float64]] | None, t0: float,
@@ -373,15 +389,9 @@ class MHEUIO:
             pred = A[-1] @ self._x + B[-1] @ u
             x_pred = pred - B[-1, :, 0] * self._F  # E_d = −B_d[:, :1]
             F_raw = float((pred[0] - y[0]) * self.vehicle.mass / self.Td) if ok else 0.0
-            if not (np.all(np.isfinite(x_pred)) and np.isfinite(F_raw)):
-                return self._failed(F_raw, t0)
-            xs[n] = x_pred
-            if ok:
-                xs[n, 0], xs[n, 2] = y[0], y[1]
-            if n < 2 or not ok:
-                self._x = np.clip(xs[n], self._xmin, self._xmax)
-                status = EstimatorStatus.REJECTED if not ok else EstimatorStatus.WARMUP
-                return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)
+            early = self._predict(y, ok, n, xs, x_pred, F_raw, t0)
+            if early is not None:
+                return early
         else:
             A, B = matrices
             x_pred = A[-1] @ self._x + B[-1] @ u - B[-1, :, 0] * self._F

@@ -11,6 +11,12 @@ it, which stays the tests' oracle and is used whenever the kernels are off.
   later processes load the machine code from the cache. ``tsmpc warmup`` compiles ahead of time.
 * Nothing here imports numba at ``import tsmpc``: :func:`load` is called by the online blocks when
   they are constructed, i.e. only by code that simulates.
+* The cache heals or is named (issue 24): the cache folder must be a writable folder *before*
+  numba is imported (numba silently falls back to the package's ``__pycache__`` otherwise), so an
+  unusable ``NUMBA_CACHE_DIR`` is refused with one line naming it (:func:`cache_problem`; the CLI
+  exits 2, a library caller gets numpy and the line); a cache entry numba cannot load (corrupt,
+  truncated, unreadable) is deleted and the kernels compiled again, once; if that fails too, one
+  line names the folder.
 """
 
 from __future__ import annotations
@@ -23,11 +29,12 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-__all__ = ["enabled", "load", "numba_cache_dir", "warmup"]
+__all__ = ["cache_problem", "enabled", "failure", "load", "numba_cache_dir", "warmup"]
 
 _MODULES = ("mpc", "mhe", "plant", "lqr")
 _LOADED: dict[str, ModuleType] | None = None
 _FAILED = False
+_FAILURE: str | None = None
 
 
 def enabled() -> bool:
@@ -41,16 +48,41 @@ def numba_cache_dir() -> Path:
     env = os.environ.get("NUMBA_CACHE_DIR")
     if env:
         return Path(env)
-    base = os.environ.get("TSMPC_CACHE_DIR")
-    return (Path(base) if base else Path.home() / ".cache" / "tsmpc") / "numba"
+    from tsmpc.paths import cache_root
+
+    return cache_root() / "numba"
+
+
+def cache_problem() -> str | None:
+    """None when the kernel cache folder is usable (or the kernels are off); else one line naming
+    ``NUMBA_CACHE_DIR`` (or the default folder) and why it is not."""
+    if not enabled():
+        return None
+    from tsmpc.paths import folder_problem
+
+    cache = numba_cache_dir()
+    problem = folder_problem(cache)
+    if problem is None:
+        return None
+    who = "NUMBA_CACHE_DIR" if os.environ.get("NUMBA_CACHE_DIR") else "the kernel cache"
+    return (f"{who} {cache}: {problem}; fix or unset it (TSMPC_NO_JIT=1 runs without compiled "
+            "kernels)")
+
+
+def failure() -> str | None:
+    """Why the compiled kernels are unavailable (None when they are, or not tried yet)."""
+    return _FAILURE
+
+
+def _tree_folder(cache: Path) -> Path:
+    """numba's user-provided cache keeps each source folder in ``<name>_<sha1 of its path>``."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    return cache / f"{os.path.basename(here)}_{hashlib.sha1(here.encode()).hexdigest()}"
 
 
 def _cold(cache: Path) -> bool:
-    """True if some kernel module of this source tree has no entry in the cache yet.
-
-    numba's user-provided cache keeps each source folder in ``<name>_<sha1 of its path>``."""
-    here = os.path.dirname(os.path.abspath(__file__))
-    folder = cache / f"{os.path.basename(here)}_{hashlib.sha1(here.encode()).hexdigest()}"
+    """True if some kernel module of this source tree has no entry in the cache yet."""
+    folder = _tree_folder(cache)
     try:
         names = {p.name.split(".")[0] for p in folder.glob("*.nbi")}
     except OSError:
@@ -61,7 +93,7 @@ def _cold(cache: Path) -> bool:
 def load(name: str) -> Any:
     """The kernel module ``name`` (mpc, mhe, plant, lqr), compiled or loaded from the cache; None
     when the kernels are off or numba is unavailable (the caller then uses numpy)."""
-    global _LOADED, _FAILED
+    global _LOADED, _FAILED, _FAILURE
     if not enabled() or _FAILED:
         return None
     if _LOADED is None:
@@ -69,27 +101,72 @@ def load(name: str) -> Any:
             _LOADED = _import_all()
         except Exception as err:  # a broken numba must never stop a simulation
             _FAILED = True
-            print(f"tsmpc: compiled kernels unavailable ({type(err).__name__}: {err}); using numpy",
-                  file=sys.stderr)
+            _FAILURE = " ".join(f"{type(err).__name__}: {err}".split())[:500]
+            print(f"tsmpc: compiled kernels unavailable ({_FAILURE}); using numpy", file=sys.stderr)
             return None
     return _LOADED[name]
 
 
-def _import_all() -> dict[str, ModuleType]:
+class KernelCacheError(RuntimeError):
+    """The kernel cache folder is unusable, or its entries cannot be loaded nor rebuilt."""
+
+
+def _forget_modules() -> None:
+    for m in _MODULES:
+        sys.modules.pop(f"tsmpc.kernels.{m}", None)
+
+
+def _purge(folder: Path) -> int:
+    """Delete this tree's cache entries of the kernel modules; returns how many."""
+    n = 0
+    for p in folder.glob("*.nb[ic]"):
+        if p.name.split(".")[0] in _MODULES:
+            p.unlink()
+            n += 1
+    return n
+
+
+def _compile_all() -> dict[str, ModuleType]:
     import importlib
 
+    mods = {m: importlib.import_module(f"tsmpc.kernels.{m}") for m in _MODULES}
+    for m in mods.values():
+        m.warm()  # compile (or load) every signature now, not inside the first timed step
+    return mods
+
+
+def _import_all() -> dict[str, ModuleType]:
     cache = numba_cache_dir()
+    problem = cache_problem()
+    if problem is not None:  # numba would silently cache in the package's __pycache__ instead
+        raise KernelCacheError(problem)
     if "NUMBA_CACHE_DIR" not in os.environ:
         # Must be set before numba is imported: numba reads it once.
-        cache.mkdir(parents=True, exist_ok=True)
         os.environ["NUMBA_CACHE_DIR"] = str(cache)
     cold = _cold(cache)
     if cold:
         print("tsmpc: compiling kernels (first run only)…", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    mods = {m: importlib.import_module(f"tsmpc.kernels.{m}") for m in _MODULES}
-    for m in mods.values():
-        m.warm()  # compile (or load) every signature now, not inside the first timed step
+    try:
+        mods = _compile_all()
+    except Exception as err:  # a corrupt, truncated or unreadable cache entry: rebuild it once
+        folder = _tree_folder(cache)
+        try:
+            removed = _purge(folder)
+        except OSError as rm_err:
+            raise KernelCacheError(f"the kernel cache {folder} cannot be loaded ({type(err).__name__}: "
+                                   f"{err}) nor cleaned ({rm_err.strerror or rm_err})") from None
+        if not removed:
+            raise
+        print(f"tsmpc: the kernel cache in {folder} could not be loaded ({type(err).__name__}); "
+              "compiling the kernels again…", file=sys.stderr, flush=True)
+        _forget_modules()
+        cold = True
+        try:
+            mods = _compile_all()
+        except Exception as err2:
+            raise KernelCacheError(f"the kernel cache {folder} is unusable even after a rebuild "
+                                   f"({type(err2).__name__}: {err2})") from None
     if cold:
         print(f"tsmpc: kernels compiled in {time.perf_counter() - t0:.1f} s (cached in {cache})",
               file=sys.stderr, flush=True)

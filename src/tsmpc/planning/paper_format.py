@@ -14,7 +14,7 @@ import numpy as np
 
 from tsmpc.errors import DataFormatError
 from tsmpc.planning.reference import CSV_HEADER, Reference, check_consistency, check_window
-from tsmpc.textfile import read_text
+from tsmpc.textfile import number, read_text
 
 __all__ = [
     "PAPER_COLUMNS",
@@ -98,7 +98,7 @@ def _parse_paper(text: str, p: Path, window: tuple[int, int] | None, dt: float |
     rows = []
     for i, ln in enumerate(lines):
         try:
-            rows.append([float(v) for v in ln.split(",")])
+            rows.append([number(v) for v in ln.split(",")])
         except ValueError:
             raise DataFormatError(f"{p}: row {i + 1} ({_ROWS[i]}) has a non-numeric value") from None
     if len({len(r) for r in rows}) != 1:
@@ -166,7 +166,7 @@ def load_reference(
 
 def _numeric_row(line: str) -> bool:
     try:
-        [float(v) for v in line.split(",")]
+        [number(v) for v in line.split(",")]
     except ValueError:
         return False
     return True

@@ -29,7 +29,7 @@ from scipy.interpolate import CubicSpline
 
 from tsmpc.config import PlannerSettings
 from tsmpc.errors import DataFormatError, SolverError
-from tsmpc.planning.reference import Reference
+from tsmpc.planning.reference import MAX_HEADING_STEP_RAD, Reference, check_coordinates
 
 __all__ = [
     "JERK_MAX",
@@ -63,6 +63,7 @@ def check_waypoints(wp: NDArray[np.float64], closed: bool) -> None:
     turning back by more than :data:`MAX_WAYPOINT_TURN_DEG`), a closing chord much longer than
     the path's segments (a half lap "closed" by a straight line) and paths longer than
     :data:`MAX_PATH_LENGTH_M`. Waypoints are numbered from 1 in file order."""
+    check_coordinates(wp[:, 0], wp[:, 1], "planner: waypoints")
     seg_vec = np.diff(wp, axis=0)
     seg = np.hypot(seg_vec[:, 0], seg_vec[:, 1])
     keep = seg > 1e-9
@@ -432,6 +433,14 @@ def plan_path(
     mid = np.concatenate([[-0.5 * v[0] * dt], 0.5 * (s_k[1:] + s_k[:-1])])
     theta = geo.heading_at(mid)
     omega = np.concatenate([[v[0] * float(geo.kappa_at(np.zeros(1))[0])], np.diff(theta) / dt])
+    turn = np.abs(np.diff(theta))
+    if turn.size and turn.max() > MAX_HEADING_STEP_RAD:  # a polygon, not a path (issue 24)
+        fine = dt * MAX_HEADING_STEP_RAD / float(turn.max())
+        unit = 10.0 ** (np.floor(np.log10(fine)) - 1)  # two significant digits, rounded down
+        raise DataFormatError(
+            f"planner: dt = {dt:g} s is too coarse for this path: the heading turns "
+            f"{turn.max():.3g} rad between two samples (at most {MAX_HEADING_STEP_RAD:g}); "
+            f"use --dt <= {np.floor(fine / unit) * unit:.2g}")
     kappa = np.where(v > 1e-6, omega / np.maximum(v, 1e-6), geo.kappa_at(s_k))
     x, y, _ = integrate_pose(float(geo.x[0]), float(geo.y[0]), float(theta[0]), v, omega, dt)
     return Reference(t=t, x=x, y=y, theta=theta, v=v, omega=omega, kappa=kappa,

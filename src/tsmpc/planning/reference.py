@@ -15,13 +15,28 @@ from numpy.typing import NDArray
 from tsmpc.errors import DataFormatError
 
 __all__ = [
-    "CSV_HEADER", "POSE_TOLERANCE_M", "Reference", "check_consistency", "check_window", "read_csv_meta",
+    "CSV_HEADER", "MAX_COORDINATE_M", "MAX_CURVATURE", "MAX_HALF_WIDTH_M", "MAX_HEADING_STEP_RAD",
+    "POSE_TOLERANCE_M", "Reference", "check_consistency", "check_coordinates", "check_window",
+    "read_csv_meta",
 ]
 
 #: Largest mismatch [m] accepted between a step of the position and v_d·T (plus 10 % of v_d·T).
 POSE_TOLERANCE_M = 0.05
 #: Largest mismatch [rad] accepted between a step of θ_d and ω_d·T (plus 10 % of |ω_d|·T).
 HEADING_TOLERANCE_RAD = 0.02
+
+#: Largest |x|, |y| of any reference, track or waypoint [m]. Decision (issue 24): coordinates are
+#: refused beyond it, not silently recentred — a double keeps ~2e-9 m resolution at 1e7 m (any
+#: Earth-local metric frame, e.g. UTM, fits), while at 1e12 m the plant's 1 ms position steps lose
+#: ~1e-4 m each and the tracking error grows a hundredfold. Shift such data to a local origin.
+MAX_COORDINATE_M = 1e7
+#: Largest |κ| of a reference file [1/m] (a 0.1 m turning radius).
+MAX_CURVATURE = 10.0
+#: Largest half-width of a track a planned CSV may carry [m].
+MAX_HALF_WIDTH_M = 100.0
+#: Largest heading change between two samples of a reference [rad]: coarser sampling is not a
+#: path (linear interpolation between samples cuts the corners; `plan --dt 10` on a 200 m ring).
+MAX_HEADING_STEP_RAD = 0.2
 
 CSV_HEADER = "t,x,y,theta,v,omega,kappa"
 _SIGNALS = ("t", "x", "y", "theta", "v", "omega", "kappa")
@@ -64,6 +79,7 @@ class Reference:
             object.__setattr__(self, name, a)
         if n is None or n < 2:
             raise DataFormatError("reference: needs at least 2 samples")
+        check_coordinates(self.x, self.y, "reference")
         d = np.diff(self.t)
         if np.any(d <= 0):
             raise DataFormatError("reference: time must be strictly increasing")
@@ -248,8 +264,14 @@ class Reference:
         meta = _parse_meta(lines[1:])
         rows = [ln for ln in lines[1:] if not ln.lstrip().startswith("#")]
         first = 1 + len(lines) - len(rows)  # line number of the first data row (1-based)
+        from tsmpc.textfile import number
+
+        for i, ln in enumerate(rows):
+            if ln.count(",") != 6:
+                raise DataFormatError(f"{p}: line {i + first}: expected 7 columns per row "
+                                      f"(t,x,y,theta,v,omega,kappa), got {ln.count(',') + 1}")
         try:
-            data = np.array([[float(v) for v in ln.split(",")] for ln in rows])
+            data = np.array([[number(v) for v in ln.split(",")] for ln in rows])
         except ValueError as err:
             raise DataFormatError(f"{p}: non-numeric value ({err})") from None
         if data.ndim != 2 or data.shape[1] != 7:
@@ -257,6 +279,12 @@ class Reference:
         if not np.all(np.isfinite(data)):
             r, c = np.argwhere(~np.isfinite(data))[0]
             raise DataFormatError(f"{p}: line {r + first}: {_SIGNALS[c]} is {data[r, c]} (must be finite)")
+        big = np.flatnonzero(np.abs(data[:, 6]) > MAX_CURVATURE)
+        if big.size:
+            r = int(big[0])
+            raise DataFormatError(f"{p}: line {r + first}: kappa = {data[r, 6]:.4g} 1/m; |kappa| must "
+                                  f"be <= {MAX_CURVATURE:g} 1/m (a {1 / MAX_CURVATURE:g} m radius)")
+        _check_meta(meta, p)
         if closed is None:
             closed = meta.get("closed", "false").strip().lower() == "true"
         try:
@@ -265,6 +293,37 @@ class Reference:
             raise DataFormatError(f"{p}: {err}") from None
         check_consistency(ref, str(p), first_sample=first, what="line")
         return ref
+
+
+def _check_meta(meta: dict[str, str], p: Path) -> None:
+    """The metadata a run acts on must be valid: ``closed`` true/false, ``half_width_m`` a finite
+    half-width in (0, MAX_HALF_WIDTH_M] (an ``inf`` would switch the divergence check off)."""
+    closed = meta.get("closed")
+    if closed is not None and closed.strip().lower() not in ("true", "false"):
+        raise DataFormatError(f"{p}: metadata closed={closed[:40]!r}: must be true or false")
+    hw = meta.get("half_width_m")
+    if hw is not None:
+        from tsmpc.textfile import number
+
+        try:
+            w = number(hw)
+        except ValueError:
+            w = float("nan")
+        if not 0.0 < w <= MAX_HALF_WIDTH_M:  # also refuses nan and inf
+            raise DataFormatError(f"{p}: metadata half_width_m={hw[:40]!r}: must be a finite "
+                                  f"half-width in (0, {MAX_HALF_WIDTH_M:g}] m")
+
+
+def check_coordinates(x: NDArray[np.float64], y: NDArray[np.float64], source: str) -> None:
+    """|x|, |y| <= :data:`MAX_COORDINATE_M` (refused beyond: see there). Raises
+    :class:`DataFormatError` naming ``source`` and the first offending point (1-based)."""
+    big = np.flatnonzero((np.abs(x) > MAX_COORDINATE_M) | (np.abs(y) > MAX_COORDINATE_M))
+    if big.size:
+        k = int(big[0])
+        raise DataFormatError(
+            f"{source}: point {k + 1} at ({x[k]:.4g}, {y[k]:.4g}) m lies beyond "
+            f"±{MAX_COORDINATE_M:g} m (metres expected; shift the data to a local origin: "
+            "far from the origin doubles lose the precision the loop needs)")
 
 
 def _parse_meta(lines: list[str]) -> dict[str, str]:
@@ -280,10 +339,12 @@ def _parse_meta(lines: list[str]) -> dict[str, str]:
 
 def read_csv_meta(path: str | Path) -> dict[str, str]:
     """The ``# key=value`` metadata of a planned CSV (empty for files without any)."""
+    from tsmpc.errors import TsmpcError
+    from tsmpc.textfile import read_head
+
     try:
-        with Path(path).open(encoding="utf-8") as fh:
-            lines = [fh.readline() for _ in range(4)]
-    except (OSError, UnicodeDecodeError):
+        lines = read_head(path, "reference").splitlines()[:4]
+    except TsmpcError:
         return {}
     return _parse_meta(lines[1:])
 
@@ -333,6 +394,13 @@ def check_consistency(ref: Reference, source: str, *, first_sample: int = 1,
             f"{where(k)}: theta changes {dth[k - 1]:.4g} rad in one step but omega*T = "
             f"{ref.omega[k] * dt:.4g} rad (tolerance {tol[k - 1]:.3g} rad): theta and omega "
             "are inconsistent")
+    turn = np.abs(dth)
+    if turn.size and turn.max() > MAX_HEADING_STEP_RAD:
+        k = int(np.argmax(turn)) + 1
+        raise DataFormatError(
+            f"{where(k)}: theta turns {turn[k - 1]:.3g} rad in one sample (at most "
+            f"{MAX_HEADING_STEP_RAD:g}): the sampling ({dt:g} s) is too coarse for the geometry; "
+            "plan the reference with a smaller --dt")
     moving = np.flatnonzero(step > 0.1)
     if moving.size:
         hd = np.arctan2(np.diff(ref.y), np.diff(ref.x))[moving]

@@ -22,7 +22,11 @@ from tsmpc.config import PlannerSettings
 from tsmpc.errors import DataFormatError
 from tsmpc.planning.reference import Reference
 
-__all__ = ["TUMFTM_HEADER", "Track", "is_tumftm", "lateral_offset", "load_tumftm", "off_track", "plan_track"]
+#: Largest width from the centre line to a border [m] (the widest circuits are ~20 m wide in all).
+MAX_WIDTH_M = 100.0
+
+__all__ = ["MAX_WIDTH_M", "TUMFTM_HEADER", "Track", "is_tumftm", "lateral_offset", "load_tumftm",
+           "off_track", "plan_track"]
 
 TUMFTM_HEADER = "# x_m,y_m,w_tr_right_m,w_tr_left_m"
 
@@ -59,6 +63,15 @@ class Track:
             raise DataFormatError(f"track {self.name}: needs at least 4 centre-line points")
         if np.any(self.w_right <= 0) or np.any(self.w_left <= 0):
             raise DataFormatError(f"track {self.name}: track widths must be positive")
+        wide = np.flatnonzero(np.maximum(self.w_right, self.w_left) > MAX_WIDTH_M)
+        if wide.size:
+            k = int(wide[0])
+            raise DataFormatError(f"track {self.name}: point {k + 1}: a width of "
+                                  f"{max(self.w_right[k], self.w_left[k]):.4g} m; widths must be "
+                                  f"<= {MAX_WIDTH_M:g} m")
+        from tsmpc.planning.reference import check_coordinates
+
+        check_coordinates(self.x, self.y, f"track {self.name}")
 
     @property
     def centre(self) -> NDArray[np.float64]:
@@ -82,17 +95,19 @@ class Track:
 
 def is_tumftm(path: str | Path) -> bool:
     """True if the file starts with the TUMFTM header (spaces ignored)."""
-    try:
-        with Path(path).open(encoding="utf-8") as fh:
-            first = fh.readline()
-    except (OSError, UnicodeDecodeError):
+    from tsmpc.errors import TsmpcError
+    from tsmpc.textfile import first_line
+
+    try:  # never opens a FIFO or a device: the loader then names what the path is
+        first = first_line(path, "track")
+    except TsmpcError:
         return False
     return first.replace(" ", "").strip() == TUMFTM_HEADER.replace(" ", "")
 
 
 def load_tumftm(path: str | Path) -> Track:
     """Load a TUMFTM track CSV; malformed files raise :class:`DataFormatError` naming the problem."""
-    from tsmpc.textfile import read_text
+    from tsmpc.textfile import number, read_text
 
     p = Path(path)
     lines = read_text(p, "track (TUMFTM CSV)").splitlines()
@@ -106,7 +121,7 @@ def load_tumftm(path: str | Path) -> Track:
         if len(parts) != 4:
             raise DataFormatError(f"{p}:{no}: expected 4 values x,y,w_right,w_left, got {len(parts)}")
         try:
-            rows.append([float(v) for v in parts])
+            rows.append([number(v) for v in parts])
         except ValueError:
             raise DataFormatError(f"{p}:{no}: non-numeric value in {line.strip()!r}") from None
     if len(rows) < 4:

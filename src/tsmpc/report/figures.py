@@ -20,6 +20,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from tsmpc.config import Config
+from tsmpc.io import atomic_savefig
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.metrics import tracking_errors
 
@@ -277,11 +278,11 @@ def save_all(logs: dict[str, RunLog], out_dir: str | Path, cfg: Config | None = 
     written: list[Path] = []
     for name, make in FIGURES.items():
         fig = make(logs, cfg) if make is control_figure else make(logs)
-        for ext in ("png", "pdf"):
-            path = out / f"{name}.{ext}"
-            tmp = path.with_name(f".{path.name}.tmp.{ext}")
-            fig.savefig(tmp, dpi=130)
-            tmp.replace(path)
-            written.append(path)
-        plt.close(fig)
+        try:
+            for ext in ("png", "pdf"):
+                path = out / f"{name}.{ext}"
+                atomic_savefig(fig, path, dpi=130)  # interrupted, disk full: no partial file
+                written.append(path)
+        finally:
+            plt.close(fig)
     return written

@@ -197,12 +197,14 @@ def write_report(out_dir: str | Path, metrics: dict[str, Any], files: Iterable[P
     written by this run (its PNG figures are embedded, the rest linked); returns its path.
 
     Only this run's files are used: stale figures of an earlier run in the folder are ignored."""
+    from tsmpc.textfile import read_bytes, read_text
+
     out = Path(out_dir)
-    figures = {Path(p).stem: Path(p).read_bytes() for p in files
+    figures = {Path(p).stem: read_bytes(p, "figure (PNG)") for p in files
                if Path(p).suffix == ".png" and Path(p).parent == out}
     names = [Path(f).name for f in files if Path(f).parent == out and Path(f).suffix != ".png"]
     cfg_path = out / "config.toml"
-    config_toml = cfg_path.read_text(encoding="utf-8") if cfg_path.is_file() else None
+    config_toml = read_text(cfg_path, "config file (TOML)") if cfg_path.is_file() else None
     path = out / "report.html"
     atomic_write_text(path, render_report(metrics, figures, names, config_toml))
     return path

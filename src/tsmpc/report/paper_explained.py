@@ -25,12 +25,15 @@ __all__ = [
     "ExplainedReport",
     "as_run_table",
     "attribution_text",
+    "counterfactual_table",
+    "design_points_table",
     "estimator_forms_figure",
     "evidence_text",
     "generate",
     "outside_table",
     "sensitivity_table",
     "startup_figure",
+    "trends_text",
     "update_block",
     "walk_table",
 ]
@@ -44,6 +47,11 @@ def _f(key: str, v: float) -> str:
     if v is None or (isinstance(v, float) and math.isnan(v)):
         return "—"
     return f"{v:.4f}" if key in ("theta", "omega") else f"{v:.3f}"
+
+
+def _cell(text: str) -> str:
+    """``text`` safe inside a Markdown table cell (``|`` escaped)."""
+    return text.replace("|", "\\|")
 
 
 def _ratio(v: float, p: float) -> str:
@@ -145,16 +153,22 @@ def outside_table(results: Sequence[RowResult], start_s: float, end_s: float) ->
 
 
 def evidence_text(headroom: Any, stretch: Any, as_run: Sequence[RowResult],
-                  sens: Sequence[RowResult]) -> str:
-    """The measured facts behind the columns that leave the ½–2× band (a Markdown list)."""
+                  sens: Sequence[RowResult], counterfactual: Sequence[RowResult] = (),
+                  onset: tuple[float, float] | None = None) -> str:
+    """The measured facts behind the columns that leave the ½–2× band (a Markdown list):
+    the speed headroom (x, v), NL's divergence (``onset``: when NL's e_y first departs from
+    REF's, :func:`~tsmpc.sim.paper_explained.divergence_onset`; ``counterfactual``: the runs of
+    :func:`~tsmpc.sim.paper_explained.headroom_counterfactuals`) and the start-up transient."""
     h = headroom
     short = h.force_needed_N - h.force_at_bound_N
+    need = h.v_ref_bound + short / h.gain_N_per_mps
     lines = [
-        f"* **x (and what follows from it).** With the gains this design returns, the as-run law's "
-        f"steady force at {h.v:.2f} m/s (the fastest reference sample, 1 % slower for the time-base "
-        f"drift) is {h.force_at_bound_N:.0f} N with v_ref at the MPC's bound of {h.v_ref_bound:g} m/s "
-        f"({h.gain_N_per_mps:.0f} N per m/s of v_ref); the plant needs {h.force_needed_N:.0f} N there "
-        f"(dry asphalt, no compensation): {short:.0f} N short."]
+        f"* **x, v (the speed headroom).** With the gains of the preset's design, the as-run "
+        f"law's steady force at {h.v:.2f} m/s (the fastest reference sample, 1 % slower for the "
+        f"time-base drift) is {h.force_at_bound_N:.0f} N with v_ref at the MPC's bound of "
+        f"{h.v_ref_bound:g} m/s ({h.gain_N_per_mps:.0f} N per m/s of v_ref); the plant needs "
+        f"{h.force_needed_N:.0f} N there (dry asphalt, no compensation): {short:.0f} N short — "
+        f"holding that speed would take v_ref ≈ {need:.1f} m/s, above the bound."]
     if stretch is not None:
         lines.append(
             f"  So |e_x| exceeds {stretch.threshold_m:g} m from {stretch.start_s:.1f} s to "
@@ -163,15 +177,152 @@ def evidence_text(headroom: Any, stretch: Any, as_run: Sequence[RowResult],
             "outside it (Table 5: 0.501 m).")
     for r in as_run:
         if r.metrics["termination"] != "completed":
-            lines.append(f"* **{r.method}** {r.metrics['termination']} — on that stretch.")
+            ev = r.metrics.get("events", {})
+            fails = ", ".join(f"{k} = {ev.get(k, 0)}" for k in ("mpc_soft", "mpc_fallback",
+                                                                "step_errors"))
+            text = (f"* **{r.method} {r.metrics['termination']}** — on that stretch, with no solver "
+                    f"failure ({fails}).")
+            if onset is not None:
+                from tsmpc.config import Config
+
+                q = Config.preset("paper-as-run").mpc.Q
+                text += (f" Its lateral error follows REF's to within 0.1 m until {onset[0]:.1f} s, "
+                         f"when |e_x| is {onset[1]:.1f} m: from there the NL-MPC, whose model "
+                         "couples e_x and e_y through ω (ė_x = ω e_y − v + v_d cos e_θ, "
+                         "ė_y = −ω e_x + v_d sin e_θ), plans to close the heavily weighted e_x "
+                         f"(Q = {q[0]:g}) by cutting the curve at the price of the cheap e_y "
+                         f"(Q = {q[1]:g}), on the premise that the car reaches v_ref = "
+                         f"{h.v_ref_bound:g} m/s. The car does not, so every step re-plans the "
+                         "same cut and e_y accumulates. The TS-MPC schedules that coupling on ω_d "
+                         "(REF) or the current ω (FZN), fixed over the horizon, and cannot trade it.")
+            lines.append(text)
+    done = [r for r in counterfactual if r.metrics["termination"] == "completed"]
+    if counterfactual:
+        by_label: dict[str, list[RowResult]] = {}
+        for r in counterfactual:
+            by_label.setdefault(r.label, []).append(r)
+        parts = []
+        for label, rs in by_label.items():
+            xs = ", ".join(f"{r.method} {r.metrics['rmse_paper_run']['x']:.3f} m"
+                           if r.metrics["termination"] == "completed" else f"{r.method} diverged"
+                           for r in rs)
+            parts.append(f"{label}: {xs}")
+        lines.append(
+            "* **Test of that explanation** (the runs of “Testing the explanation” in docs/paper.md): "
+            "removing the shortfall either way — the "
+            "MPC's bound raised, or the gains' speed entry scaled — gives RMSE_x (paper-run) "
+            + "; ".join(parts) + f"; {len(done)} of {len(counterfactual)} runs complete.")
     if len(sens) > 1:
         s0, s1 = sens[0], sens[-1]
         lines.append(
-            f"* **The start-up transient (y, θ, ω).** The steering row of the gains obtained has "
+            f"* **y, θ, ω (the start-up transient).** The steering row of the preset's gains has "
             f"{s0.what.split('steering row ', 1)[-1]}: the e_y peak is {abs(s0.transient.ey_peak_m):.2f} m "
             f"at {s0.transient.ey_peak_t_s:.1f} s; with the ζ entry × {s1.label.rsplit(' ', 1)[-1]} "
             f"({s1.what.split('steering row ', 1)[-1]}) it is {abs(s1.transient.ey_peak_m):.2f} m at "
-            f"{s1.transient.ey_peak_t_s:.1f} s (published: ≈ 1.9 m at ≈ 4 s).")
+            f"{s1.transient.ey_peak_t_s:.1f} s (published: ≈ 1.9 m at ≈ 4 s). Which point of the "
+            "feasible set the published solver returned is unknown (the design points of “What the gains "
+            "decide” in docs/paper.md).")
+    return "\n".join(lines) + "\n"
+
+
+def _spread(values: Sequence[float]) -> float:
+    """(max / min − 1) in percent."""
+    return 100.0 * (max(values) / max(min(values), 1e-12) - 1.0)
+
+
+def _trend_check(e: dict[str, dict[str, float]]) -> str:
+    """'REF ≤ FZN …; NL …' for the RMSE dicts ``e`` by method (FZN, REF and maybe NL)."""
+    fails = [_COLUMN[k][0] for k in RMSE_KEYS if e["REF"][k] > e["FZN"][k]]
+    out = "REF ≤ FZN in every column" if not fails else f"REF ≤ FZN except {', '.join(fails)}"
+    if "NL" in e:
+        low_y = e["NL"]["y"] < min(e["FZN"]["y"], e["REF"]["y"])
+        hi = [k for k in ("x", "v") if e["NL"][k] > max(e["FZN"][k], e["REF"][k])]
+        out += (f"; NL {'lowest' if low_y else 'not lowest'} in y, "
+                + ("highest in x and v" if len(hi) == 2 else
+                   f"highest in {hi[0]} only" if hi else "not highest in x or v"))
+    spread = ", ".join(f"{_COLUMN[k][0]} {_spread([v[k] for v in e.values()]):.1f} %"
+                       for k in RMSE_KEYS)
+    return f"{out} (spread between the methods: {spread})"
+
+
+def trends_text(sets: dict[str, Sequence[RowResult]], after_s: float = 10.0) -> str:
+    """The paper's trends (REF ≤ FZN in every column; NL lowest in y, highest in x and v) checked
+    on each set of runs (FZN, REF, NL of one configuration; paper-run RMSE), with the spread
+    between the methods, and again over the run after the start-up (t ≥ ``after_s``, our RMSE
+    convention; when the runs kept their logs): one line per set, Table 5's last."""
+    lines = []
+    for name, rs in sets.items():
+        by = {r.method: r for r in rs}
+        if not {"FZN", "REF"} <= by.keys():
+            continue
+        ok = {m: r.metrics["termination"] == "completed" for m, r in by.items()}
+        if not (ok["FZN"] and ok["REF"]):
+            continue
+        done = {m: r for m, r in by.items() if ok[m]}
+        text = f"* {name}: {_trend_check({m: r.metrics['rmse_paper_run'] for m, r in done.items()})}"
+        if not ok.get("NL", True):
+            text += "; NL diverged"
+        logs = {m: r.log for m, r in done.items() if r.log is not None}
+        if len(logs) == len(done):
+            after = {}
+            for m, log in logs.items():
+                err = tracking_errors(log)
+                t = log.t_outer - log.t_outer[0]
+                keep = t >= after_s
+                after[m] = {k: float(np.sqrt(np.mean(err[k][keep] ** 2))) if keep.any()
+                            else float("nan") for k in RMSE_KEYS}
+            if all(np.isfinite(v).all() for e in after.values() for v in e.values()):
+                text += f". After the start-up (t ≥ {after_s:g} s): {_trend_check(after)}"
+        lines.append(text + ".")
+    spread = ", ".join(f"{_COLUMN[k][0]} {_spread([v[k] for v in PAPER_TABLE5.values()]):.0f} %"
+                       for k in RMSE_KEYS)
+    lines.append(f"* Table 5: REF ≤ FZN in every column; NL lowest in y, highest in x and v "
+                 f"(spread: {spread}).")
+    return "\n".join(lines) + "\n"
+
+
+def design_points_table(points: Sequence[Any]) -> str:
+    """The feasibility LMI's points (:func:`~tsmpc.sim.paper_explained.design_points`): solver,
+    certificates, the two gain properties that decide the misses, and the REF run (paper-run
+    RMSE; a shortened run for an uncertified point)."""
+    lines = ["| point of the feasible set | solver | certificates (worst relative margin) "
+             "| δ_f / ζ | speed gain [N per m/s] | force at v_ref = 18 m/s (needed) [N] "
+             "| e_y peak [m] at [s] | x | y | θ | v | ω | run |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for p in points:
+        r = p.result
+        tr, h = r.transient, p.headroom
+        e = r.metrics["rmse_paper_run"]
+        cols = (" | ".join(_f(k, e[k]) for k in RMSE_KEYS) if p.certified
+                else " | ".join("—" for _ in RMSE_KEYS))
+        run = _cell(r.metrics["termination"])
+        if p.max_steps is not None:
+            run = f"{run} (run limited to {p.max_steps} steps)"
+        cert = ("hold" if p.certified else "**fail**") + f" ({p.worst_relative:.1e})"
+        lines.append(f"| {p.label} | {p.status} | {cert} | {p.steering_ratio:.2f} "
+                     f"| {h.gain_N_per_mps:.0f} | {h.force_at_bound_N:.0f} ({h.force_needed_N:.0f}) "
+                     f"| {abs(tr.ey_peak_m):.2f} at {tr.ey_peak_t_s:.1f} | {cols} | {run} |")
+    return "\n".join(lines) + "\n"
+
+
+def counterfactual_table(as_run: Sequence[RowResult], rows: Sequence[RowResult]) -> str:
+    """``paper-as-run`` and the counterfactuals of
+    :func:`~tsmpc.sim.paper_explained.headroom_counterfactuals` per method (paper-run RMSE and
+    its ratio to Table 5, max |e_x|)."""
+    lines = ["| change | method | run | x | y | θ | v | ω | ÷ Table 5 (x, y, θ, v, ω) "
+             "| max \\|e_x\\| [m] |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in [*as_run, *rows]:
+        label = "— (paper-as-run)" if r.kind == "as-run" else f"{r.label}: {r.what}"
+        if r.metrics["termination"] != "completed":
+            lines.append(f"| {label} | {r.method} | {_cell(r.metrics['termination'])} | — | — | — | — | — "
+                         f"| — | {r.max_abs_longitudinal_m:.2f} |")
+            continue
+        e = r.metrics["rmse_paper_run"]
+        paper = PAPER_TABLE5.get(r.method, {})
+        ratios = ", ".join(_ratio(e[k], paper[k]) for k in RMSE_KEYS) if paper else "—"
+        lines.append(f"| {label} | {r.method} | completed | "
+                     + " | ".join(_f(k, e[k]) for k in RMSE_KEYS)
+                     + f" | {ratios} | {r.max_abs_longitudinal_m:.2f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -323,7 +474,15 @@ def generate(reference: Path, img_dir: Path | None = None, *, max_steps: int | N
     """Measure every row (:mod:`tsmpc.sim.paper_explained`), format the tables and, with
     ``img_dir``, write ``paper_explained_startup.png`` and ``paper_explained_estimator.png``.
     ``max_steps`` shortens every run (tests)."""
-    from tsmpc.sim.paper_explained import ablation_rows, gain_sensitivity, measure, walk_rows
+    from tsmpc.sim.paper_explained import (
+        ablation_rows,
+        design_points,
+        divergence_onset,
+        gain_sensitivity,
+        headroom_counterfactuals,
+        measure,
+        walk_rows,
+    )
     from tsmpc.sim.simulator import Method
 
     walk = walk_rows()
@@ -346,25 +505,42 @@ def generate(reference: Path, img_dir: Path | None = None, *, max_steps: int | N
     if progress is not None:
         progress("gain sensitivity")
     sens = gain_sensitivity(reference, max_steps=max_steps, keep_logs=True)
+    if progress is not None:
+        progress("design points of the feasibility LMI")
+    points = design_points(reference, as_run_ref, max_steps=max_steps)
+    cf = headroom_counterfactuals(reference, max_steps=max_steps, keep_logs=True, progress=progress)
+    by_method = {r.method: r for r in as_run}
+    onset = None
+    if "NL" in by_method and by_method["NL"].log is not None and as_run_ref.log is not None:
+        onset = divergence_onset(by_method["NL"].log, as_run_ref.log)
+    cf_sets: dict[str, list[RowResult]] = {"paper-as-run": list(as_run)}
+    for r in cf:
+        cf_sets.setdefault(f"{r.label} ({r.what})", []).append(r)
     blocks = {
         "as-run": as_run_table(as_run),
-        "evidence": evidence_text(headroom, stretch, as_run, sens)
+        "evidence": evidence_text(headroom, stretch, as_run, sens, cf, onset)
         + ("" if stretch is None else "\nThe same runs without that stretch "
            f"({stretch.start_s:.1f}–{stretch.end_s:.1f} s):\n\n"
            + outside_table(as_run, stretch.start_s, stretch.end_s)),
+        "counterfactual": counterfactual_table(as_run, cf),
+        "trends": trends_text(cf_sets),
         "walk": walk_table(rows),
         "attribution": attribution_text(rows),
         "walk-paper-run": walk_table(rows, convention="rmse_paper_run"),
+        "design-points": design_points_table(points),
         "sensitivity": sensitivity_table(sens),
     }
-    results: dict[str, list[RowResult]] = {"as-run": as_run, "walk": rows, "sensitivity": sens}
+    results: dict[str, list[RowResult]] = {"as-run": as_run, "walk": rows, "sensitivity": sens,
+                                           "counterfactual": cf,
+                                           "design-points": [p.result for p in points]}
     figures: list[Path] = []
     if img_dir is not None:
         import matplotlib.pyplot as plt
 
         img_dir.mkdir(parents=True, exist_ok=True)
         picks = {"paper-as-run": as_run_ref.log,
-                 "paper-as-run, steering ζ gain × 0.3 (study)": sens[-1].log,
+                 f"paper-as-run, steering ζ gain × {sens[-1].label.rsplit(' ', 1)[-1]} (study)":
+                     sens[-1].log,
                  "− steering bias": next(r.log for r in rows if r.label.startswith("− steering bias")),
                  "paper preset": next(r.log for r in rows if r.kind == "paper")}
         fig = startup_figure({k: v for k, v in picks.items() if v is not None})

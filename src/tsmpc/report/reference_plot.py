@@ -55,7 +55,9 @@ def save_reference_figure(ref: Reference, path: str | Path, track: Track | None 
     """Write :func:`reference_figure` as a PNG (parent directories created)."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    reference_figure(ref, track, title).savefig(out, dpi=110)
+    from tsmpc.io import atomic_savefig
+
+    atomic_savefig(reference_figure(ref, track, title), out, dpi=110)
     return out
 
 

@@ -14,6 +14,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from tsmpc.io import atomic_savefig
 from tsmpc.sweep_axes import AXES
 
 __all__ = ["colour_axis", "save_sweep_plots"]
@@ -150,13 +151,17 @@ def save_sweep_plots(table: Any, out: str | Path, axes: Sequence[str] = AXES) ->
         if axis in table and table[axis].nunique(dropna=True) > 1:
             fig = _axis_figure(table, axis)
             path = out / f"by_{axis}.png"
-            fig.savefig(path, dpi=110)
-            plt.close(fig)
+            try:
+                atomic_savefig(fig, path, dpi=110)
+            finally:
+                plt.close(fig)
             files.append(path)
     if "mpc_median_ms" in table and table["mpc_median_ms"].notna().any():
         fig = _timing_figure(table)
         path = out / "solve_times.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
+        try:
+            atomic_savefig(fig, path, dpi=110)
+        finally:
+            plt.close(fig)
         files.append(path)
     return files

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from tsmpc.config import Config, Method, replace
-from tsmpc.errors import CertificateError, ConfigError, DesignError, SolverError
+from tsmpc.errors import ConfigError, DesignError
 from tsmpc.sim.compare import CompareResult, FigureFn, ProgressFactory, compare, load_scenario
 from tsmpc.sim.plant import Plant
 from tsmpc.sim.simulator import Scenario
@@ -163,7 +163,7 @@ def solve_designs(cfg: Config, status: StatusFn | None = None) -> tuple[Any, Any
 
     say = status or (lambda _text: None)
     out = []
-    for name, key, fn, fields in (
+    for name, key, fn, _inputs in (  # the inputs: tsmpc.diagnose.DESIGN_INPUTS
         ("kinematic", kinematic_key, load_or_design_kinematic,
          "kinematic_box, kinematic_lmi, rates.Tc"),
         ("dynamic", dynamic_key, load_or_design_dynamic,
@@ -175,9 +175,10 @@ def solve_designs(cfg: Config, status: StatusFn | None = None) -> tuple[Any, Any
         t0 = time.perf_counter()
         try:
             design = fn(cfg)
-        except (SolverError, CertificateError) as err:
-            raise DesignError(f"no certified {name} LMI design for this config ({fields}): "
-                              f"{err}") from None
+        except Exception as err:  # the solver's own exceptions too (issue 24): a result, not a crash
+            from tsmpc.diagnose import explain_design_failure
+
+            raise DesignError(explain_design_failure(name, cfg, err)) from None
         w = worst(design.certificates)
         say(f"LMI design: {name}: certified in {time.perf_counter() - t0:.1f} s (smallest relative "
             f"margin {w.relative:.2e}: {w.name})")

@@ -9,7 +9,10 @@ The runs behind the explained table of README.md and docs/paper.md, every row me
   removal lands exactly on the ``paper`` preset (checked by :func:`walk_rows`);
 * the ablation beyond the paper up to the default (the rows of ``examples/paper_ablation.py``);
 * a sensitivity study of the start-up transient to the steering row of the gains (not a preset:
-  the published gains are unknown, SPEC §14).
+  the published gains are unknown, SPEC §14);
+* the points of the feasibility LMI a solver could have returned (:func:`design_points`) and the
+  counterfactuals that test the speed-headroom explanation of x and of NL's divergence
+  (:func:`headroom_counterfactuals`): studies, not presets.
 
 Every row is a REF run of the paper window unless said otherwise. No matplotlib here.
 """
@@ -32,6 +35,7 @@ from tsmpc.sim.simulator import Method, Scenario, simulate
 
 __all__ = [
     "QUIRKS",
+    "DesignPoint",
     "ExplainedRow",
     "Quirk",
     "RowResult",
@@ -39,7 +43,10 @@ __all__ = [
     "Stretch",
     "Transient",
     "ablation_rows",
+    "design_points",
+    "divergence_onset",
     "gain_sensitivity",
+    "headroom_counterfactuals",
     "longitudinal_stretch",
     "measure",
     "run_row",
@@ -77,7 +84,7 @@ def _paper_value(section: str, field: str) -> Any:
 #: The published run's quirks in the order the walk removes them (SPEC §14). The order keeps every
 #: intermediate configuration valid: the as-run law's own switches go before the law, the 1 ms
 #: inner rate before the design formulation (ours does not certify at 1 ms), the 101-step time
-#: base before the 1 ms rate.
+#: base before the 1 ms rate, the feasible point before the formulation it belongs to.
 QUIRKS: tuple[Quirk, ...] = (
     Quirk("initial filter states", "lqr.initial_filter_state (4355.15 N, 0.52466 rad) → bumpless",
           _lqr(initial_filter_state=None)),
@@ -100,6 +107,11 @@ QUIRKS: tuple[Quirk, ...] = (
           lambda c: replace(c, rates=replace(c.rates, inner_steps_per_outer=None))),
     Quirk("inner loop and MHE at 1 ms", "rates.Td 0.001 → 0.01",
           lambda c: replace(c, rates=replace(c.rates, Td=_paper_value("rates", "Td")))),
+    # not a quirk of the published run but our reading of it (its solver's point is unknown)
+    Quirk("its analytic centre (our reading of the unknown point)",
+          "dynamic_lmi.feasible_point analytic-center → solver (Clarabel's answer)",
+          lambda c: replace(c, dynamic_lmi=replace(
+              c.dynamic_lmi, feasible_point=_paper_value("dynamic_lmi", "feasible_point")))),
     Quirk("feasibility LMI (8 vertices, Euler)", "dynamic_lmi.formulation feasibility-euler → "
           "guaranteed-cost", lambda c: replace(c, dynamic_lmi=replace(
               c.dynamic_lmi, formulation=_paper_value("dynamic_lmi", "formulation")))),
@@ -227,7 +239,7 @@ def measure(reference: Path, rows: Sequence[ExplainedRow], *, methods: Sequence[
     return out
 
 
-def gain_sensitivity(reference: Path, factors: Sequence[float] = (1.0, 0.5, 0.3), *,
+def gain_sensitivity(reference: Path, factors: Sequence[float] = (1.0, 0.7, 0.5), *,
                      max_steps: int | None = None, keep_logs: bool = False) -> list[RowResult]:
     """``paper-as-run`` (REF) with the ζ entry of the steering row of every vertex gain scaled by
     each factor: a study, not a switch. The published gains are unknown (SPEC §14); the δ_f / ζ
@@ -319,3 +331,118 @@ def longitudinal_stretch(log: RunLog, threshold_m: float = 1.0, after_s: float =
     rms = lambda e: float(np.sqrt(np.mean(e**2))) if e.size else float("nan")  # noqa: E731
     return Stretch(threshold_m, float(t[a]), float(t[b]), float(np.max(np.abs(ex[inside]))),
                    rms(ex[~inside]), rms(ex[inside]))
+
+
+def _as_run_design(cfg: Config) -> Any:
+    from tsmpc.synthesis.cache import load_or_design_dynamic
+
+    return load_or_design_dynamic(cfg)
+
+
+@dataclass(frozen=True)
+class DesignPoint:
+    """A point of the published run's feasibility LMI (SPEC §14) and what it does in the run.
+
+    Attributes:
+        label: which point ("analytic centre", "Clarabel's answer", ...).
+        status: the solver's status ("—" for the analytic centre's Newton).
+        certified: every recomputed vertex certificate holds (relative margin ≤ −1e-6).
+        worst_relative: the largest (least negative) relative certificate margin.
+        steering_ratio: mean over the vertices of the steering row's δ_f / ζ entries.
+        headroom: :class:`SpeedHeadroom` on the fastest reference sample.
+        result: the REF run with these gains (shortened for an uncertified point).
+        max_steps: the outer steps the run was limited to (None: the whole reference).
+    """
+
+    label: str
+    status: str
+    certified: bool
+    worst_relative: float
+    steering_ratio: float
+    headroom: SpeedHeadroom
+    result: RowResult
+    max_steps: int | None = None
+
+
+def design_points(reference: Path, centre: RowResult | None = None, *,
+                  max_steps: int | None = None, uncertified_steps: int = 150) -> list[DesignPoint]:
+    """The feasibility LMI's points and their REF runs (``paper-as-run`` otherwise):
+
+    * the analytic centre (the preset's; ``centre``: its run when already measured);
+    * Clarabel's answer in the scaled coordinates (``dynamic_lmi.feasible_point = "solver"``);
+    * Clarabel on the LMI in physical units as a MATLAB user would pose it
+      (:func:`~tsmpc.synthesis.paper_as_run.solve_unscaled`): its certificates fail, so it is
+      only run for the first ``uncertified_steps`` outer steps (a study of what the published
+      solver may have returned, never a design a run uses).
+    """
+    from tsmpc.synthesis.paper_as_run import solve_unscaled
+
+    cfg = Config.preset("paper-as-run")
+    sc = load_scenario(cfg, reference)
+    v_d_max = float(np.max(sc.reference.v))
+    out = []
+
+    def point(label: str, c: Config, design: Any, status: str, certs: Any, steps: int | None,
+              done: RowResult | None = None) -> DesignPoint:
+        K = np.asarray(design.K, dtype=float)
+        row = ExplainedRow(label, c, "", "study")
+        res = done or run_row(row, sc, max_steps=steps, dynamic_design=design)
+        return DesignPoint(label, status, all(x.holds for x in certs),
+                           max(x.relative for x in certs), float(np.mean(K[:, 1, 4] / K[:, 1, 5])),
+                           speed_headroom(c, design, v_d_max), res, steps)
+
+    dc = _as_run_design(cfg)
+    out.append(point("analytic centre (the preset)", cfg, dc, f"Newton, {dc.center_iterations} steps",
+                     dc.certificates, max_steps, centre))
+    cs = replace(cfg, dynamic_lmi=replace(cfg.dynamic_lmi, feasible_point="solver"))
+    ds = _as_run_design(cs)
+    out.append(point("Clarabel's answer, scaled coordinates", cs, ds, ds.status, ds.certificates,
+                     max_steps))
+    K, P, status, certs = solve_unscaled(cfg.dynamic_box, cfg.vehicle, cfg.dynamic_lmi, cfg.rates.Td)
+    steps = uncertified_steps if max_steps is None else min(uncertified_steps, max_steps)
+    out.append(point("Clarabel's answer, physical units (as posed in MATLAB)", cfg,
+                     dc_replace(dc, K=K, P=P, certificates=tuple(certs)), status, certs, steps))
+    return out
+
+
+def headroom_counterfactuals(reference: Path, methods: Sequence[Method] = (Method.FZN, Method.REF,
+                                                                           Method.NL), *,
+                             v_bound: float = 22.0, speed_factor: float = 2.5,
+                             max_steps: int | None = None, keep_logs: bool = False,
+                             progress: Callable[[str], None] | None = None) -> list[RowResult]:
+    """Two changes of ``paper-as-run`` that each remove the speed shortfall on the fastest
+    stretch, with every method: the MPC's upper bound on v_ref raised to ``v_bound`` (a config
+    change), and the force row's speed entry of every vertex gain scaled by ``speed_factor`` (a
+    study of the unknown gains, like :func:`gain_sensitivity`). If the shortfall explains RMSE_x
+    and NL's divergence, both rows bring x into the band and NL completes."""
+    cfg = Config.preset("paper-as-run")
+    bound = replace(cfg, mpc=replace(cfg.mpc, u_max=(v_bound, cfg.mpc.u_max[1])))
+    dd = _as_run_design(cfg)
+    K = np.array(dd.K, dtype=float)
+    K[:, 0, 0] *= speed_factor
+    fast = dc_replace(dd, K=K)
+    sc = load_scenario(cfg, reference)
+    rows = [(ExplainedRow(f"v_ref bound {v_bound:g} m/s", bound,
+                          f"mpc.u_max[0] {cfg.mpc.u_max[0]:g} → {v_bound:g}", "study"), None),
+            (ExplainedRow(f"speed gain × {speed_factor:g}", cfg,
+                          f"force row's v entry × {speed_factor:g} (gains study)", "study"), fast)]
+    out = []
+    for row, design in rows:
+        for method in methods:
+            if progress is not None:
+                progress(f"{row.label} [{method.value}]")
+            out.append(run_row(row, sc, method=method, max_steps=max_steps, keep_log=keep_logs,
+                               dynamic_design=design))
+    return out
+
+
+def divergence_onset(a: RunLog, b: RunLog, threshold_m: float = 0.1) -> tuple[float, float] | None:
+    """The first reference time [s] at which the lateral errors of two runs of the same scenario
+    differ by more than ``threshold_m``, and |e_x| of ``a`` then; None when they never do."""
+    n = min(a.n_outer, b.n_outer)
+    d = np.abs(a.errors[:n, 1] - b.errors[:n, 1])
+    idx = np.flatnonzero(d > threshold_m)
+    if idx.size == 0:
+        return None
+    k = int(idx[0])
+    return float(a.t_outer[k] - a.t_outer[0]), float(abs(a.errors[k, 0]))

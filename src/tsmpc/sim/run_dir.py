@@ -43,11 +43,32 @@ def load_logs_npz(path: str | Path, metrics: dict[str, Any] | None = None) -> di
     ``metrics`` (the ``metrics.json`` content) supplies the scenario name, the rates, the wall time,
     the termination and the events; without it the rates are inferred from the time stamps.
     """
+    import io
+    import zipfile
+
+    from tsmpc.textfile import read_bytes
+
     path = Path(path)
+    raw = read_bytes(path, "time-series file (NPZ)", limit=MAX_NPZ_BYTES)
     try:
-        data = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as err:
-        raise DataFormatError(f"{path}: not a readable NPZ file ({err})") from err
+        data = np.load(io.BytesIO(raw), allow_pickle=False)
+        if not hasattr(data, "files"):
+            raise ValueError("a single array, not an archive of time series")
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise DataFormatError(f"{path}: not a readable NPZ file ({err}); the run may have "
+                              "been cut short") from None
+    try:
+        return _logs_from(data, path, metrics)
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError, AttributeError, TypeError,
+            IndexError) as err:
+        raise DataFormatError(f"{path}: damaged NPZ file ({type(err).__name__}: {err})") from None
+
+
+#: Largest time-series file read [bytes].
+MAX_NPZ_BYTES = 4 * 1024**3
+
+
+def _logs_from(data: Any, path: Path, metrics: dict[str, Any] | None) -> dict[str, RunLog]:
     with data:
         # Every log has t_outer: the method is what precedes it (method names may hold "_").
         methods = [key[: -len("_t_outer")] for key in data.files if key.endswith("_t_outer")]
@@ -82,14 +103,25 @@ def load_run(run_dir: str | Path) -> RunDir:
         DataFormatError: the folder, its ``timeseries.npz`` or its ``metrics.json`` is missing or
             unreadable (the message names the file).
     """
+    from tsmpc.errors import TsmpcError
+    from tsmpc.textfile import read_text
+
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise DataFormatError(f"{run_dir}: not a folder (expected the --out folder of tsmpc compare/run)")
+    marker = run_dir / "PARTIAL"
+    if marker.exists():  # an unfinished run: its files are incomplete or from an earlier run
+        try:
+            status = json.loads(read_text(marker, "PARTIAL marker", limit=1 << 20)).get("status", "?")
+        except (TsmpcError, ValueError, AttributeError, RecursionError):
+            status = "unreadable"
+        raise DataFormatError(f"{run_dir}: holds an unfinished run (PARTIAL says {str(status)[:40]!r}); "
+                              "its files are incomplete: run it again")
     mpath = run_dir / "metrics.json"
     try:
-        metrics = json.loads(mpath.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise DataFormatError(f"{mpath}: cannot read the run's metrics ({err})") from err
+        metrics = json.loads(read_text(mpath, "run's metrics (JSON)", limit=256 << 20))
+    except (TsmpcError, ValueError, RecursionError) as err:
+        raise DataFormatError(f"{mpath}: cannot read the run's metrics ({err})") from None
     if not isinstance(metrics, dict):
         raise DataFormatError(f"{mpath}: expected a JSON object")
     cpath = run_dir / "config.toml"

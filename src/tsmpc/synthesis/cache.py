@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from dataclasses import asdict, fields
 from dataclasses import replace as dc_replace
 from pathlib import Path
@@ -42,9 +41,11 @@ FORMAT_VERSION = 4
 
 
 def cache_dir() -> Path:
-    """``$TSMPC_CACHE_DIR`` or ``~/.cache/tsmpc``."""
-    env = os.environ.get("TSMPC_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "tsmpc"
+    """``$TSMPC_CACHE_DIR`` or ``~/.cache/tsmpc`` (an empty HOME: an explicit private fallback,
+    :func:`tsmpc.paths.cache_root`)."""
+    from tsmpc.paths import cache_root
+
+    return cache_root()
 
 
 def _hash(kind: str, payload: dict[str, Any]) -> str:
@@ -63,6 +64,8 @@ def dynamic_key(cfg: Config) -> str:
     lmi = cfg.dynamic_lmi.model_dump(mode="json")
     if lmi.get("formulation") == "guaranteed-cost":  # ours: the keys of existing designs do not change
         del lmi["formulation"]
+    if lmi.get("feasible_point") == "solver":  # the default: earlier keys do not change
+        del lmi["feasible_point"]
     return _hash("dynamic", {"box": cfg.dynamic_box.model_dump(mode="json"),
                              "lmi": lmi,
                              # unset optional fields (per-axle stiffness) are left out, so the
@@ -71,7 +74,7 @@ def dynamic_key(cfg: Config) -> str:
                              "Td": cfg.rates.Td})
 
 
-def design_to_dict(design: KinematicDesign | DynamicDesign) -> dict[str, Any]:
+def design_to_dict(design: Any) -> dict[str, Any]:
     """JSON-ready dict: arrays as nested lists, certificates as {name, margin, holds}."""
     out: dict[str, Any] = {"type": type(design).__name__}
     for f in fields(design):
@@ -85,9 +88,13 @@ def design_to_dict(design: KinematicDesign | DynamicDesign) -> dict[str, Any]:
     return out
 
 
-def design_from_dict(data: dict[str, Any]) -> KinematicDesign | DynamicDesign:
-    """Inverse of :func:`design_to_dict`."""
-    cls = {"KinematicDesign": KinematicDesign, "DynamicDesign": DynamicDesign}[data["type"]]
+def design_from_dict(data: dict[str, Any], cls: type | None = None) -> Any:
+    """Inverse of :func:`design_to_dict` (``cls``: the design class the record must be; None:
+    a kinematic or dynamic design, as the record says). Raises ValueError for another type."""
+    if cls is None:
+        cls = {"KinematicDesign": KinematicDesign, "DynamicDesign": DynamicDesign}[data["type"]]
+    elif data.get("type") != cls.__name__:
+        raise ValueError(f"not a {cls.__name__} record")
     kwargs: dict[str, Any] = {}
     for f in fields(cls):
         value = data[f.name]
@@ -120,12 +127,16 @@ def _load_or_design(cfg: Config, kind: str, directory: Path | None, use_cache: b
     key = kinematic_key(cfg) if kind == "kinematic" else dynamic_key(cfg)
     path = (directory or cache_dir()) / f"{kind}-{key[:32]}.json"
     if use_cache and path.exists():
-        try:
-            design = design_from_dict(json.loads(path.read_text()))
+        try:  # a regular file of bounded size only (a folder, a FIFO: re-solved, never blocks)
+            from tsmpc.textfile import read_text
+
+            design = design_from_dict(json.loads(read_text(path, "design cache entry",
+                                                           limit=64 * 1024 * 1024)))
             if design.inputs_hash == key:
                 # the certificates reported are the ones recomputed here, not the stored ones
                 return dc_replace(design, certificates=_recheck(design, cfg))
-        except (TsmpcError, KeyError, ValueError, TypeError, json.JSONDecodeError):
+        except (TsmpcError, KeyError, ValueError, TypeError, AttributeError, RecursionError,
+                OSError):
             pass  # unreadable or stale entry: re-solve and overwrite it
     if kind == "kinematic":
         design = design_kinematic(cfg.kinematic_box, cfg.kinematic_lmi, cfg.rates.Tc, inputs_hash=key)
@@ -135,8 +146,11 @@ def _load_or_design(cfg: Config, kind: str, directory: Path | None, use_cache: b
     if use_cache:
         try:
             atomic_write_text(path, json.dumps(design_to_dict(design)))
-        except OSError:
-            pass  # a read-only home must not stop a run; the design is still returned
+        except OSError as err:  # a read-only home must not stop a run; the design is still returned
+            import sys
+
+            print(f"tsmpc: cannot cache the {kind} design in {path} ({err.strerror or err}); it "
+                  "will be solved again next time", file=sys.stderr)
     return design
 
 

@@ -47,7 +47,7 @@ from tsmpc.synthesis.certificates import (
     definite_certificate,
     lmi_certificate,
 )
-from tsmpc.synthesis.sdp import Infeasible, SDPSolver, solve, solve_with_margin
+from tsmpc.synthesis.sdp import LADDER_DOWN, LADDER_UP, Infeasible, SDPSolver, solve, solve_with_margin
 
 __all__ = ["KinematicDesign", "certify_kinematic", "design_kinematic"]
 
@@ -104,8 +104,10 @@ def design_kinematic(
         Y, K, _ = res
         return certify_kinematic(A, B, Q, R, Y, K, None, ubar2)
 
+    # SCS (first-order) answers to ≈ its eps, looser than Clarabel: its ladder starts stricter.
+    ladder = LADDER_UP if s == SDPSolver.SCS else LADDER_DOWN
     try:
-        (Y, K, st1), _, t_lqr = solve_with_margin(lqr, lqr_certs, "kinematic LQR-LMI")
+        (Y, K, st1), _, t_lqr = solve_with_margin(lqr, lqr_certs, "kinematic LQR-LMI", ladder)
     except Infeasible as exc:
         raise SolverError(
             f"kinematic LQR-LMI: no solution with a relative margin >= 3e-6 ({s.value}: "
@@ -123,7 +125,8 @@ def design_kinematic(
         return certify_kinematic(A, B, Q, R, Y, K, res[0], ubar2, P=P)
 
     try:
-        (Z, st2), certs, t_term = solve_with_margin(term, term_certs, "kinematic terminal set")
+        (Z, st2), certs, t_term = solve_with_margin(term, term_certs, "kinematic terminal set",
+                                                    ladder)
     except Infeasible as exc:
         raise SolverError(f"kinematic terminal-set LMI: no solution ({s.value}: {exc.status}); "
                           "raise kinematic_lmi.u_bar or narrow kinematic_box") from None

@@ -6,10 +6,23 @@ discretised by **Euler** at ``T_d`` (the published run: 1 ms) at the **8 vertice
 (δ, v, α) only, one common ``Y = P⁻¹`` and one ``W_i`` per vertex, the paper's LQR-LMI at each
 vertex (the Schur form of ``(A_i + B K_i)ᵀ P (A_i + B K_i) − P + Q + K_iᵀ R K_i ≺ 0``,
 ``K_i = W_i Y⁻¹``, as in :mod:`tsmpc.synthesis.kinematic`) and **no objective**: a feasibility
-problem. Clarabel (interior point) returns a point deep inside the feasible set, so the answer is
-reproducible, but it is one point of many: the published gains are unknown (SPEC §14), and the
-gains this design returns are documented where they matter (the steering row's δ_f and ζ entries
-set the start-up transient of the ``paper-as-run`` preset).
+problem. It has no unique answer and the published gains are unknown (SPEC §14); which point is
+kept is its own switch (``dynamic_lmi.feasible_point``):
+
+* ``"analytic-center"`` (the ``paper-as-run`` preset): the analytic centre of the 8 vertex LMIs and
+  Y ≻ 0 (:mod:`tsmpc.synthesis.analytic_center`, Newton on the log-det barrier from Clarabel's
+  answer). It is what an interior-point solver converges to on a problem without objective, and it
+  is the same whatever units or scaling the LMIs are posed in (a change of variables adds a
+  constant to the barrier; the normalisation of Q and R below scales Y and the Schur complements
+  alike) — so it is also the centre of the problem as a MATLAB user would pose it, in physical
+  units, where Clarabel itself returns an inaccurate answer that fails the certificates
+  (:func:`solve_unscaled`, documented in docs/paper.md).
+* ``"solver"``: Clarabel's answer in the scaled coordinates — where the solver stopped, which
+  depends on that scaling.
+
+The gains decide the two places where the preset misses Table 5 (docs/paper.md, "What the gains
+decide"): the steering row's δ_f / ζ ratio sets the start-up transient, and the force row's speed
+gain sets the headroom on the fastest stretch.
 
 What is *not* certified, by construction of the published design: the interpolated loop between
 the vertices (the model is not affine in the premises, SPEC §6) and, with the as-run law's
@@ -27,17 +40,17 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tsmpc.config import Config, DynamicBox, DynamicLMISettings, VehicleParams
+from tsmpc.config import Config, DynamicBox, DynamicLMISettings, FeasiblePoint, VehicleParams
 from tsmpc.errors import SolverError, TsmpcError
 from tsmpc.models.dynamic import Discretization, augment_apkarian, continuous_matrices, discretize
 from tsmpc.models.polytope import SchedulingBox
+from tsmpc.synthesis.analytic_center import AffineLMI, analytic_center
 from tsmpc.synthesis.certificates import Certificate, check, definite_certificate, lmi_certificate
 from tsmpc.synthesis.dynamic import INPUT_SCALE, STATE_SCALE, check_grid
 from tsmpc.synthesis.sdp import LADDER_FLOOR, Infeasible, SDPSolver, solve, solve_with_margin
@@ -48,6 +61,8 @@ __all__ = [
     "design_feasibility",
     "grid_report",
     "load_or_design_feasibility",
+    "solve_unscaled",
+    "vertex_lmis",
     "vertex_models",
 ]
 
@@ -55,6 +70,10 @@ __all__ = [
 #: Margins tried for the published run's design: the smallest that certifies on any machine
 #: first (the published LMI was only marginally feasible: a larger margin moves its gains).
 AS_RUN_LADDER = (LADDER_FLOOR,)
+
+
+_FORMULATION = ("feasibility LMI (no objective), common P, 8 vertices, Euler (the published run's; "
+                "a quirk, not a recommendation)")
 
 
 @dataclass(frozen=True)
@@ -75,11 +94,12 @@ class FeasibilityDesign:
     grid_max_decrease: float  #: informational: largest λ(P⁻¹A_clᵀPA_cl) on the grid (< 1: decrease)
     solve_time_s: float
     status: str
-    formulation: str = ("feasibility LMI (no objective), common P, 8 vertices, Euler "
-                        "(the published run's; a quirk, not a recommendation)")
+    formulation: str = _FORMULATION
     inputs_hash: str = ""
     margin_imposed: float = 0.0  #: relative margin t of the vertex LMIs (sdp.solve_with_margin)
     solver: str = "CLARABEL"
+    feasible_point: str = FeasiblePoint.SOLVER.value  #: which point of the solution set was kept
+    center_iterations: int = 0  #: Newton steps from Clarabel's answer to the analytic centre
 
 
 def _premise_box(box: DynamicBox) -> SchedulingBox:
@@ -112,52 +132,127 @@ def _scaled_weights(settings: DynamicLMISettings) -> tuple[NDArray[np.float64], 
     return Q * s, R * s
 
 
+def _scaled_problem(A: NDArray[np.float64], B: NDArray[np.float64], settings: DynamicLMISettings,
+                    state_scale: NDArray[np.float64], input_scale: NDArray[np.float64]
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                               NDArray[np.float64]]:
+    """(A_s, B_s, Q^½, R^½) in the coordinates x = T_x x_s, u = T_u u_s, Q and R normalised."""
+    Tx, Tu = np.diag(state_scale), np.diag(input_scale)
+    Txi = np.diag(1.0 / state_scale)
+    Q = Tx @ np.diag(settings.Q) @ Tx
+    R = Tu @ np.diag(settings.R) @ Tu
+    s = 1.0 / max(Q.max(), R.max())
+    return Txi @ A @ Tx, Txi @ B @ Tu, np.sqrt(Q * s), np.sqrt(R * s)
+
+
+def _solve_clarabel(As: NDArray[np.float64], Bs: NDArray[np.float64], Qh: NDArray[np.float64],
+                    Rh: NDArray[np.float64], t: float, what: str, *, y_constraint: bool = False
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
+    """The paper's vertex LMIs with the certificates' relative margin t ((1 − t) Y in the corner,
+    see tsmpc.synthesis.sdp), no objective: (Y (6, 6), W (8, 2, 6), status) in the given
+    coordinates; ``y_constraint`` adds Y ⪰ 0 as a constraint of its own (implied by the vertex
+    LMIs). Raises :class:`Infeasible`."""
+    import cvxpy as cp
+
+    n, m = As.shape[-1], Bs.shape[-1]
+    Y = cp.Variable((n, n), symmetric=True)
+    W = [cp.Variable((m, n)) for _ in range(As.shape[0])]
+    Zn, Znm = np.zeros((n, n)), np.zeros((n, m))
+    cons = [Y >> 0] if y_constraint else []
+    for i in range(As.shape[0]):
+        AY = As[i] @ Y + Bs[i] @ W[i]
+        M = cp.bmat([
+            [(1.0 - t) * Y, AY.T, (Qh @ Y).T, (Rh @ W[i]).T],
+            [AY, Y, Zn, Znm],
+            [Qh @ Y, Zn, np.eye(n), Znm],
+            [Rh @ W[i], Znm.T, Znm.T, np.eye(m)],
+        ])
+        cons.append(0.5 * (M + M.T) >> 0)
+    status = solve(cp.Problem(cp.Minimize(0), cons), SDPSolver.CLARABEL, what)
+    if Y.value is None or any(w.value is None for w in W):
+        raise Infeasible(status)
+    return 0.5 * (Y.value + Y.value.T), np.array([w.value for w in W]), status
+
+
+def _physical(Ys: NDArray[np.float64], Ws: NDArray[np.float64], state_scale: NDArray[np.float64],
+              input_scale: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(K (8, 2, 6), P (6, 6)) in physical units from the scaled (Y, W): K_i = W_i Y⁻¹, P = Y⁻¹."""
+    Ps = np.linalg.inv(Ys)
+    Txi = np.diag(1.0 / state_scale)
+    K = np.diag(input_scale) @ (Ws @ Ps) @ Txi
+    P = Txi @ Ps @ Txi
+    return K, 0.5 * (P + P.T)
+
+
+def vertex_lmis(As: NDArray[np.float64], Bs: NDArray[np.float64], Qh: NDArray[np.float64],
+                Rh: NDArray[np.float64], t: float) -> list[AffineLMI]:
+    """The published LMIs as affine functions of x = [upper triangle of Y (21), W (8 · 2 · 6)]:
+    Y ≻ 0 and, per vertex, the Schur form with the relative margin t (as solved by Clarabel)."""
+    nv, n, m = As.shape[0], As.shape[-1], Bs.shape[-1]
+    iu = np.triu_indices(n)
+    ny, nw = iu[0].size, m * n
+    nx = ny + nv * nw
+    d = 3 * n + m
+    basis_Y = np.zeros((ny, n, n))
+    basis_Y[np.arange(ny), iu[0], iu[1]] = 1.0
+    basis_Y[np.arange(ny), iu[1], iu[0]] = 1.0
+    lmis = [AffineLMI(np.zeros((n, n)), np.concatenate([basis_Y, np.zeros((nv * nw, n, n))]))]
+    F0 = np.zeros((d, d))
+    F0[2 * n:, 2 * n:] = np.eye(n + m)
+    for i in range(nv):
+        F = np.zeros((nx, d, d))
+        for j, Yj in enumerate(basis_Y):  # Y enters the corner, the diagonal, A Y and Q^½ Y
+            AY, QY = As[i] @ Yj, Qh @ Yj
+            F[j, :n, :n] = (1.0 - t) * Yj
+            F[j, n:2 * n, n:2 * n] = Yj
+            F[j, n:2 * n, :n], F[j, :n, n:2 * n] = AY, AY.T
+            F[j, 2 * n:3 * n, :n], F[j, :n, 2 * n:3 * n] = QY, QY.T
+        for a in range(m):  # W_i enters B W and R^½ W
+            for b in range(n):
+                j = ny + i * nw + a * n + b
+                Wj = np.zeros((m, n))
+                Wj[a, b] = 1.0
+                BW, RW = Bs[i] @ Wj, Rh @ Wj
+                F[j, n:2 * n, :n], F[j, :n, n:2 * n] = BW, BW.T
+                F[j, 3 * n:, :n], F[j, :n, 3 * n:] = RW, RW.T
+        lmis.append(AffineLMI(F0, F))
+    return lmis
+
+
+def _center(As: NDArray[np.float64], Bs: NDArray[np.float64], Qh: NDArray[np.float64],
+            Rh: NDArray[np.float64], t: float, Ys: NDArray[np.float64], Ws: NDArray[np.float64]
+            ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    """The analytic centre of :func:`vertex_lmis` from the strictly feasible (Ys, Ws)."""
+    n = Ys.shape[0]
+    iu = np.triu_indices(n)
+    res = analytic_center(vertex_lmis(As, Bs, Qh, Rh, t), np.concatenate([Ys[iu], Ws.reshape(-1)]))
+    Y = np.zeros((n, n))
+    Y[iu] = res.x[:iu[0].size]
+    Y = Y + np.triu(Y, 1).T
+    return Y, res.x[iu[0].size:].reshape(Ws.shape), res.iterations
+
+
 def design_feasibility(
     box: DynamicBox, vehicle: VehicleParams, settings: DynamicLMISettings, Td: float,
     inputs_hash: str = "",
 ) -> FeasibilityDesign:
-    """Solve the published run's feasibility LMI with cvxpy + Clarabel and certify its vertices.
+    """Solve the published run's feasibility LMI with cvxpy + Clarabel (and, with
+    ``settings.feasible_point = "analytic-center"``, move to the LMIs' analytic centre), and
+    certify its vertices.
 
-    Raises :class:`SolverError` when Clarabel finds no feasible point and
-    :class:`~tsmpc.errors.CertificateError` when a recomputed vertex certificate fails.
+    Raises :class:`SolverError` when Clarabel finds no feasible point or Newton does not converge
+    and :class:`~tsmpc.errors.CertificateError` when a recomputed vertex certificate fails.
     """
-    import cvxpy as cp
-
     t0 = time.perf_counter()
     lam = settings.filter_bandwidth
     A, B = vertex_models(box, vehicle, Td, lam)
-    Tx, Tu = np.diag(STATE_SCALE), np.diag(INPUT_SCALE)
-    Txi = np.diag(1.0 / STATE_SCALE)
-    As, Bs = Txi @ A @ Tx, Txi @ B @ Tu
-    Qs, Rs = _scaled_weights(settings)
-    Qh, Rh = np.sqrt(Qs), np.sqrt(Rs)
-    n, m = 6, 2
+    As, Bs, Qh, Rh = _scaled_problem(A, B, settings, STATE_SCALE, INPUT_SCALE)
     what = f"feasibility TS-LMI-LQR at Td={Td}"
 
     def attempt(t: float) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
-        # The paper's vertex LMI with the certificates' relative margin t ((1 − t) Y in the
-        # corner, see tsmpc.synthesis.sdp): still a feasibility problem, no objective.
-        Y = cp.Variable((n, n), symmetric=True)
-        W = [cp.Variable((m, n)) for _ in range(A.shape[0])]
-        Zn, Znm = np.zeros((n, n)), np.zeros((n, m))
-        cons = []
-        for i in range(A.shape[0]):
-            AY = As[i] @ Y + Bs[i] @ W[i]
-            M = cp.bmat([
-                [(1.0 - t) * Y, AY.T, (Qh @ Y).T, (Rh @ W[i]).T],
-                [AY, Y, Zn, Znm],
-                [Qh @ Y, Zn, np.eye(n), Znm],
-                [Rh @ W[i], Znm.T, Znm.T, np.eye(m)],
-            ])
-            cons.append(0.5 * (M + M.T) >> 0)
-        status = solve(cp.Problem(cp.Minimize(0), cons), SDPSolver.CLARABEL, what)
-        if Y.value is None or any(w.value is None for w in W):
-            raise Infeasible(status)
-        Ys = 0.5 * (Y.value + Y.value.T)
-        Ps = np.linalg.inv(Ys)
-        K = Tu @ np.array([w.value @ Ps for w in W]) @ Txi
-        P = Txi @ Ps @ Txi
-        return K, 0.5 * (P + P.T), status
+        Ys, Ws, status = _solve_clarabel(As, Bs, Qh, Rh, t, what)
+        K, P = _physical(Ys, Ws, STATE_SCALE, INPUT_SCALE)
+        return K, P, status
 
     try:
         (K, P, status), certs, t_imp = solve_with_margin(
@@ -166,11 +261,44 @@ def design_feasibility(
     except Infeasible as exc:
         raise SolverError(f"{what}: Clarabel returned {exc.status!r} (the published run's LMI is "
                           "only marginally feasible)") from None
+    iterations = 0
+    if settings.feasible_point == FeasiblePoint.ANALYTIC_CENTER:
+        Tx, Tui = np.diag(STATE_SCALE), np.diag(1.0 / INPUT_SCALE)
+        Ys = np.linalg.inv(Tx @ P @ Tx)  # Clarabel's answer in the scaled coordinates
+        Ws = (Tui @ K @ Tx) @ Ys
+        Yc, Wc, iterations = _center(As, Bs, Qh, Rh, t_imp, 0.5 * (Ys + Ys.T), Ws)
+        K, P = _physical(Yc, Wc, STATE_SCALE, INPUT_SCALE)
+        certs = certify_vertices(A, B, settings, K, P)
+        check(certs, f"feasibility dynamic design, analytic centre (Td={Td})")
     rho, dec = grid_report(K, P, box, vehicle, Td, lam, settings.grid_points)
     return FeasibilityDesign(K=K, P=P, Td=float(Td), bandwidth=lam, certificates=tuple(certs),
                              grid_max_rho=rho, grid_max_decrease=dec,
                              solve_time_s=time.perf_counter() - t0, status=status,
-                             inputs_hash=inputs_hash, margin_imposed=t_imp)
+                             inputs_hash=inputs_hash, margin_imposed=t_imp,
+                             feasible_point=FeasiblePoint(settings.feasible_point).value,
+                             center_iterations=iterations,
+                             formulation=_FORMULATION + f"; point kept: {settings.feasible_point}")
+
+
+def solve_unscaled(
+    box: DynamicBox, vehicle: VehicleParams, settings: DynamicLMISettings, Td: float,
+    margin: float = 0.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], str, list[Certificate]]:
+    """The published LMI posed as a MATLAB user would: physical units, no scaling, the paper's Q
+    and R as given, Y ⪰ 0 and the 8 vertex LMIs, no margin (``margin`` > 0 imposes the relative
+    margin of the designs). Clarabel's answer and its recomputed certificates, *not* checked (a
+    study of what the published solver may have returned; never used by a run). Returns (K, P, status,
+    certificates). Raises :class:`SolverError` when Clarabel returns nothing."""
+    A, B = vertex_models(box, vehicle, Td, settings.filter_bandwidth)
+    ones_x, ones_u = np.ones(A.shape[-1]), np.ones(B.shape[-1])
+    Qh, Rh = np.sqrt(np.diag(settings.Q)), np.sqrt(np.diag(settings.R))
+    what = f"feasibility TS-LMI-LQR in physical units at Td={Td}"
+    try:
+        Ys, Ws, status = _solve_clarabel(A, B, Qh, Rh, margin, what, y_constraint=True)
+    except Infeasible as exc:
+        raise SolverError(f"{what}: Clarabel returned {exc.status!r}") from None
+    K, P = _physical(Ys, Ws, ones_x, ones_u)
+    return K, P, status, certify_vertices(A, B, settings, K, P)
 
 
 def certify_vertices(
@@ -217,35 +345,6 @@ def grid_report(
     return rho, dec
 
 
-# -- cache (the files of tsmpc.synthesis.cache, own record type) ------------------------------
-def _to_dict(d: FeasibilityDesign) -> dict[str, Any]:
-    out: dict[str, Any] = {"type": type(d).__name__}
-    for f in fields(d):
-        value = getattr(d, f.name)
-        if isinstance(value, np.ndarray):
-            out[f.name] = value.tolist()
-        elif f.name == "certificates":
-            out[f.name] = [{**asdict(c), "holds": c.holds} for c in value]
-        else:
-            out[f.name] = value
-    return out
-
-
-def _from_dict(data: dict[str, Any]) -> FeasibilityDesign:
-    if data.get("type") != FeasibilityDesign.__name__:
-        raise ValueError("not a feasibility design")
-    kw: dict[str, Any] = {}
-    for f in fields(FeasibilityDesign):
-        value = data[f.name]
-        if f.name == "certificates":
-            value = tuple(Certificate(c["name"], float(c["margin"]), float(c["relative"]))
-                          for c in value)
-        elif isinstance(value, list):
-            value = np.asarray(value, dtype=float)
-        kw[f.name] = value
-    return FeasibilityDesign(**kw)
-
-
 def load_or_design_feasibility(
     cfg: Config, directory: Path | None = None, *, use_cache: bool = True
 ) -> FeasibilityDesign:
@@ -253,25 +352,28 @@ def load_or_design_feasibility(
     :func:`tsmpc.synthesis.cache.dynamic_key`), solved and stored when missing. The vertex
     certificates are recomputed on load; a stale or tampered entry is re-solved."""
     from tsmpc.io import atomic_write_text
-    from tsmpc.synthesis.cache import cache_dir, dynamic_key
+    from tsmpc.synthesis.cache import cache_dir, design_from_dict, design_to_dict, dynamic_key
+    from tsmpc.textfile import read_text
 
     key = dynamic_key(cfg)
     path = (directory or cache_dir()) / f"dynamic-{key[:32]}.json"
     lmi = cfg.dynamic_lmi
     if use_cache and path.exists():
         try:
-            d = _from_dict(json.loads(path.read_text()))
+            # a regular file of bounded size only (a folder, a FIFO: re-solved, never blocks)
+            d = design_from_dict(json.loads(read_text(path, "design cache entry",
+                                                      limit=64 * 1024 * 1024)), FeasibilityDesign)
             if d.inputs_hash == key:
                 A, B = vertex_models(cfg.dynamic_box, cfg.vehicle, d.Td, d.bandwidth)
                 check(certify_vertices(A, B, lmi, d.K, d.P), "cached feasibility design")
                 return d
-        except (TsmpcError, KeyError, ValueError, TypeError, np.linalg.LinAlgError,
-                json.JSONDecodeError):
+        except (TsmpcError, KeyError, ValueError, TypeError, AttributeError, RecursionError, OSError,
+                np.linalg.LinAlgError):
             pass  # unreadable or stale entry: re-solve and overwrite it
     d = design_feasibility(cfg.dynamic_box, cfg.vehicle, lmi, cfg.rates.Td, inputs_hash=key)
     if use_cache:
         try:
-            atomic_write_text(path, json.dumps(_to_dict(d)))
+            atomic_write_text(path, json.dumps(design_to_dict(d)))
         except OSError:
             pass  # a read-only home must not stop a run
     return d
