@@ -691,9 +691,11 @@ class PurePursuitSettings(_Frozen):
     Defaults from the documented search on the built-in circuit (examples/tune_baselines.py)."""
 
     lookahead_time_s: NonNegFloat = Field(0.45, le=10.0, description="look-ahead time: L_d grows "
-                                           "with the speed as lookahead_time_s · v [s]")
-    lookahead_min_m: PositiveFloat = Field(5.0, description="shortest look-ahead distance [m]")
-    lookahead_max_m: PositiveFloat = Field(40.0, description="longest look-ahead distance [m]")
+                                           "with the speed as lookahead_time_s · v [s], 0 to 10")
+    lookahead_min_m: PositiveFloat = Field(5.0, le=1000.0, description="shortest look-ahead "
+                                           "distance [m], above 0 to 1000")
+    lookahead_max_m: PositiveFloat = Field(40.0, le=1000.0, description="longest look-ahead "
+                                           "distance [m], above 0 to 1000")
 
     @model_validator(mode="after")
     def _check(self) -> PurePursuitSettings:
@@ -707,12 +709,12 @@ class StanleySettings(_Frozen):
     Defaults from the documented search on the built-in circuit (examples/tune_baselines.py)."""
 
     heading_gain: PositiveFloat = Field(
-        0.3, le=2.0, description="k_ψ on the heading error (1 = the classic law; at T_c the heading "
-        "term's per-step loop gain is k_ψ v T_c / L)")
+        0.3, le=2.0, description="k_ψ on the heading error, above 0 to 2 (1 = the classic law; at "
+        "T_c the heading term's per-step loop gain is k_ψ v T_c / L)")
 
-    gain: PositiveFloat = Field(2.0, le=100.0, description="cross-track gain k [1/s]")
+    gain: PositiveFloat = Field(2.0, le=100.0, description="cross-track gain k [1/s], above 0 to 100")
     softening_speed: NonNegFloat = Field(
-        4.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s]")
+        4.0, le=100.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s], 0 to 100")
     curvature_feedforward: StrictBool = Field(
         True, description="feed-forward atan(L κ_d) − k_ψ atan(a κ_d): zero steady-state error on a "
         "circle for a CoG-referenced path (False = the classic law)")
@@ -727,7 +729,7 @@ class BaselineSettings(_Frozen):
     stanley: StanleySettings = StanleySettings()
     along_track_gain: NonNegFloat = Field(
         8.0, le=20.0, description="speed channel of the geometric laws: v_ref = v_d cos e_θ + "
-        "gain · e_x, proportional feedback on the along-track error [1/s]")
+        "gain · e_x, proportional feedback on the along-track error [1/s], 0 to 20")
 
 
 class Config(_Frozen):
