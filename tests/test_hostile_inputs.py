@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import enum
 import re
+from enum import Enum
 from pathlib import Path
 
 import numpy as np

@@ -95,8 +95,8 @@ def test_report_html_is_self_contained_with_every_figure_and_table(run_dir: Path
         png = base64.b64decode(src.split(",", 1)[1], validate=True)
         assert png.startswith(PNG_MAGIC)
         assert png == (run_dir / f"{img['alt']}.png").read_bytes()
-    assert set(page.tables) == {"table-rmse", "table-timing", "table-events", "table-scenario",
-                                "table-versions"}
+    assert set(page.tables) == {"table-rmse", "table-timing", "table-comfort", "table-events",
+                                "table-scenario", "table-versions"}
     # Nothing from the network, no script, no url() in the style sheet.
     assert page.external == []
     assert page.scripts == 0

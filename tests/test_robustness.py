@@ -48,6 +48,10 @@ def test_each_scenario_changes_what_it_names(cfg: Config) -> None:
     assert s.plant_vehicle.mass == pytest.approx(1.2 * cfg.vehicle.mass)
     assert s.plant_vehicle.cornering_stiffness == pytest.approx(0.8 * cfg.vehicle.cornering_stiffness)
     assert c.vehicle == cfg.vehicle  # the controllers keep the nominal model
+    c, s = apply_robustness("stiffness_mismatch", cfg, sc)
+    assert s.plant_vehicle.mass == cfg.vehicle.mass and c.vehicle == cfg.vehicle
+    assert s.plant_vehicle.C_f == pytest.approx(0.8 * cfg.vehicle.C_f)
+    assert s.plant_vehicle.C_r == pytest.approx(0.8 * cfg.vehicle.C_r)
     c, s = apply_robustness("ice_patch", cfg, sc, until_s=20.0)
     assert s.plant_tyre.scale_grip_with_road and min(s.friction.mu(0.0, d) for d in range(400)) == 0.1
     c, s = apply_robustness("wet_section", cfg, sc)

@@ -22,6 +22,7 @@ from tsmpc.errors import ConfigError
 
 __all__ = [
     "PRESETS",
+    "BaselineSettings",
     "Config",
     "DynamicBox",
     "DynamicLMIFormulation",
@@ -39,8 +40,10 @@ __all__ = [
     "MetricsSettings",
     "NoiseSettings",
     "PlannerSettings",
+    "PurePursuitSettings",
     "Rates",
     "SchedulingMode",
+    "StanleySettings",
     "StrictBool",
     "StrictInt",
     "TyreModel",
@@ -110,14 +113,20 @@ class TyreModel(StrEnum):
 
 
 class Method(StrEnum):
-    """The outer loop's method: the TS-MPC with one of its scheduling modes (the paper's TS-MPC), or the
-    NL-MPC baseline. One concept for runs (``tsmpc compare --methods``, logs, metrics keys) and
-    for the TS-MPC's scheduling (``mpc.mode``). Parsing is case-insensitive ("ref" = "REF")."""
+    """The outer loop's method: the TS-MPC with one of its scheduling modes (the paper's TS-MPC), the
+    NL-MPC baseline, or one of the guidance laws users pick instead (issue 26: pure pursuit,
+    Stanley, kinematic LQR, LTV-MPC; :mod:`tsmpc.control.baselines`). One concept for runs
+    (``tsmpc compare --methods``, logs, metrics keys) and for the TS-MPC's scheduling
+    (``mpc.mode``). Parsing is case-insensitive ("ref" = "REF", "pure_pursuit" = "PURE_PURSUIT")."""
 
     FZN = "FZN"  #: TS-MPC, frozen: current scheduling values for the whole horizon
     REF = "REF"  #: TS-MPC, planner references along the horizon (the paper's choice)
     ITER = "ITER"  #: TS-MPC, previous optimal prediction, re-solved until the schedule converges
     NL = "NL"  #: nonlinear MPC baseline (CasADi + IPOPT)
+    PURE_PURSUIT = "PURE_PURSUIT"  #: pure pursuit with a speed-scheduled look-ahead (geometric)
+    STANLEY = "STANLEY"  #: Stanley's front-axle law (geometric)
+    LQR = "LQR"  #: kinematic LQR: the TS-scheduled gains of the kinematic LMI design, no constraints
+    LTV = "LTV"  #: linear time-varying MPC, the error model linearised along the reference
 
     @classmethod
     def _missing_(cls, value: object) -> Method | None:
@@ -139,8 +148,8 @@ class Method(StrEnum):
 
     @property
     def is_ts_mpc(self) -> bool:
-        """True for the TS-MPC scheduling modes (FZN, REF, ITER)."""
-        return self is not Method.NL
+        """True for the TS-MPC scheduling modes (FZN, REF, ITER); False for NL and the baselines."""
+        return self in (Method.FZN, Method.REF, Method.ITER)
 
 
 #: The TS-MPC's scheduling modes are the methods FZN, REF and ITER (former name, kept).
@@ -676,6 +685,53 @@ class MetricsSettings(_Frozen):
         "end, K + 20 entries with 20 zeros) beside ours in the tables")
 
 
+class PurePursuitSettings(_Frozen):
+    """Pure pursuit (:mod:`tsmpc.control.pure_pursuit`): look-ahead distance
+    L_d = clip(lookahead_time_s · v, lookahead_min_m, lookahead_max_m) with v the commanded speed.
+    Defaults from the documented search on the built-in circuit (examples/tune_baselines.py)."""
+
+    lookahead_time_s: NonNegFloat = Field(0.45, le=10.0, description="look-ahead time: L_d grows "
+                                           "with the speed as lookahead_time_s · v [s], 0 to 10")
+    lookahead_min_m: PositiveFloat = Field(5.0, le=1000.0, description="shortest look-ahead "
+                                           "distance [m], above 0 to 1000")
+    lookahead_max_m: PositiveFloat = Field(40.0, le=1000.0, description="longest look-ahead "
+                                           "distance [m], above 0 to 1000")
+
+    @model_validator(mode="after")
+    def _check(self) -> PurePursuitSettings:
+        _interval(self.lookahead_min_m, self.lookahead_max_m, "lookahead_min_m/lookahead_max_m")
+        return self
+
+
+class StanleySettings(_Frozen):
+    """Stanley's law (:mod:`tsmpc.control.stanley`):
+    δ = k_ψ ψ_e + atan(k e_fa / (k_soft + v)) (+ the curvature feed-forward when switched on).
+    Defaults from the documented search on the built-in circuit (examples/tune_baselines.py)."""
+
+    heading_gain: PositiveFloat = Field(
+        0.3, le=2.0, description="k_ψ on the heading error, above 0 to 2 (1 = the classic law; at "
+        "T_c the heading term's per-step loop gain is k_ψ v T_c / L)")
+
+    gain: PositiveFloat = Field(2.0, le=100.0, description="cross-track gain k [1/s], above 0 to 100")
+    softening_speed: NonNegFloat = Field(
+        4.0, le=100.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s], 0 to 100")
+    curvature_feedforward: StrictBool = Field(
+        True, description="feed-forward atan(L κ_d) − k_ψ atan(a κ_d): zero steady-state error on a "
+        "circle for a CoG-referenced path (False = the classic law)")
+
+
+class BaselineSettings(_Frozen):
+    """The outer-loop baselines users pick instead of TS-MPC (issue 26). The kinematic LQR uses the
+    kinematic LMI design's gains and the LTV-MPC the TS-MPC's weights and constraints (``mpc``):
+    only the geometric laws have settings of their own."""
+
+    pure_pursuit: PurePursuitSettings = PurePursuitSettings()
+    stanley: StanleySettings = StanleySettings()
+    along_track_gain: NonNegFloat = Field(
+        8.0, le=20.0, description="speed channel of the geometric laws: v_ref = v_d cos e_θ + "
+        "gain · e_x, proportional feedback on the along-track error [1/s], 0 to 20")
+
+
 class Config(_Frozen):
     """Everything a run needs. ``Config()`` is the paper's setting."""
 
@@ -692,6 +748,7 @@ class Config(_Frozen):
     noise: NoiseSettings = NoiseSettings()
     planner: PlannerSettings = PlannerSettings()
     metrics: MetricsSettings = MetricsSettings()
+    baselines: BaselineSettings = BaselineSettings()
     seed: StrictInt = Field(0, ge=0, lt=2**63, description="seed of every random draw of a run, "
                             "0 to 2^63 - 1")
     divergence_bound_m: PositiveFloat = Field(

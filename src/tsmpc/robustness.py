@@ -44,6 +44,8 @@ ROBUSTNESS_SCENARIOS: dict[str, str] = {
     "sensor_dropout": "every 5 s all measurements freeze for 0.2 s (last value held)",
     "nan_bursts": "every 7 s all measurements are NaN for 50 ms",
     "mass_stiffness_mismatch": "plant mass +20 % and cornering stiffness −20 % (controllers unchanged)",
+    "stiffness_mismatch": "plant cornering stiffness −20 % on both axles, mass unchanged (controllers "
+    "unchanged)",
     "actuator_lag": "steering servo (50 ms lag, 0.4 rad/s) and 50 ms drive-force lag; the applied "
     "steering angle is measured and given to the MHE (the delivered force is not)",
     "offset_start": "start 2 m left of the path with a 0.2 rad (11.5°) heading error: the e_θ premise "
@@ -148,6 +150,9 @@ def apply_robustness(
         base = scenario.plant_vehicle or cfg.vehicle
         veh = replace(base.with_stiffness_scaled(0.8), mass=base.mass * 1.2)
         return RobustnessCase(cfg, dc_replace(sc, plant_vehicle=veh))
+    if name == "stiffness_mismatch":
+        base = scenario.plant_vehicle or cfg.vehicle
+        return RobustnessCase(cfg, dc_replace(sc, plant_vehicle=base.with_stiffness_scaled(0.8)))
     if name == "actuator_lag":
         act = Actuators(SteeringServo(0.05, 0.4), ForceLag(0.05))
         return RobustnessCase(cfg, dc_replace(sc, actuators=act, measured_steering=True))

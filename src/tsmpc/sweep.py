@@ -50,7 +50,16 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
-from tsmpc.config import MAX_CONFIG_BYTES, Config, StrictBool, StrictInt, parse_toml, resolve_preset, validate
+from tsmpc.config import (
+    MAX_CONFIG_BYTES,
+    Config,
+    Method,
+    StrictBool,
+    StrictInt,
+    parse_toml,
+    resolve_preset,
+    validate,
+)
 from tsmpc.errors import ConfigError
 from tsmpc.io import atomic_write_bytes, atomic_write_text
 from tsmpc.robustness import ROBUSTNESS_SCENARIOS
@@ -81,7 +90,7 @@ FRICTIONS: dict[str, str] = {
     "wet": "wet asphalt, μ = 0.6",
 }
 _FRICTION_MU = {"dry": 0.9, "earth": 0.68, "wet": 0.6}
-_METHODS = ("FZN", "REF", "ITER", "NL")
+_METHODS = tuple(m.value for m in Method)  # the TS-MPC modes, NL and the baselines (issue 26)
 #: Allowed (exclusive lower, inclusive upper) bounds of the numeric axes.
 AXIS_LIMITS: dict[str, tuple[float, float]] = {
     "noise_scale": (0.0, 1000.0), "mass_scale": (0.0, 10.0), "inertia_scale": (0.0, 10.0),

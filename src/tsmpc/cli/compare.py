@@ -39,7 +39,8 @@ def _parse_window(text: str | None) -> tuple[int, int] | None:
 
 
 #: Files a compare/run writes into --out (figures: FIGURES names as .png and .pdf).
-_OUTPUT_FILES = ("metrics.json", "rmse.csv", "rmse.md", "rmse.tex", "config.toml", "versions.json",
+_OUTPUT_FILES = ("metrics.json", "rmse.csv", "rmse.md", "rmse.tex", "comfort.csv", "comfort.md",
+                 "config.toml", "versions.json",
                  "timeseries.npz", "timeseries.mat", "report.html", PARTIAL_MARKER)
 
 
@@ -197,6 +198,7 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
                    f"{m['max_abs_lateral_m']:.3f}", f"{m['friction_rmse_N']:.0f}",
                    f"{m['realtime_factor']:.1f}", ev)
     console.print(tt)
+    _print_comfort(console, metrics)
     for name, m in metrics["methods"].items():
         if m.get("max_abs_lateral_per_lap_m"):
             laps = ", ".join(f"{v:.3f}" for v in m["max_abs_lateral_per_lap_m"])
@@ -205,8 +207,25 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
             console.print(f"[red]{name}: {escape(m['termination'])}[/red]")
 
 
+def _print_comfort(console: Any, metrics: dict[str, Any]) -> None:
+    """The comfort and effort table (tsmpc.sim.comfort) below the timing table."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from tsmpc.report.tables import COMFORT_COLUMNS, comfort_cell, comfort_rows
+
+    t = Table(title=escape("Comfort and effort (5 Hz zero-phase low-pass before each derivative)"))
+    t.add_column("method", no_wrap=True)
+    for _, head, _ in COMFORT_COLUMNS:
+        t.add_column(escape(head), justify="right")
+    for label, vals in comfort_rows(metrics):
+        cells = [comfort_cell(v, d) for v, (_, _, d) in zip(vals, COMFORT_COLUMNS, strict=True)]
+        t.add_row(label, *cells, style="bold red" if label.endswith("(diverged)") else None)
+    console.print(t)
+
+
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
-                  "nan_bursts, mass_stiffness_mismatch, offset_start, actuator_lag (see "
+                  "nan_bursts, mass_stiffness_mismatch, stiffness_mismatch, offset_start, actuator_lag (see "
                   "tsmpc.robustness).")
 _PLANT_HELP = ("Plant: tsmpc (the built-in nonlinear single-track), commonroad-st or commonroad-mb "
                "(CommonRoad's single-track / multi-body model behind a steering servo; needs the "
@@ -249,7 +268,8 @@ _OPT_OVERWRITE = typer.Option(False, "--overwrite", help="Write into a non-empty
 def compare_cmd(
     reference: Path | None = _OPT_REFERENCE,
     window: str | None = _OPT_WINDOW,
-    methods: str = typer.Option("fzn,ref,iter,nl", "--methods", help="Comma-separated: fzn,ref,iter,nl."),
+    methods: str = typer.Option("fzn,ref,iter,nl", "--methods", help="Comma-separated: fzn,ref,iter,nl "
+                                "(TS-MPC modes, NL-MPC) and the baselines pure_pursuit,stanley,lqr,ltv."),
     out: Path | None = typer.Option(None, "--out", help="Output folder (new or empty; default: a new "
                                     "folder results/compare, results/compare-2, …)."),
     seed: int | None = _OPT_SEED,
@@ -273,7 +293,8 @@ def compare_cmd(
 
 @app.command("run")
 def run_cmd(
-    method: str = typer.Option("ref", "--method", help="One of fzn, ref, iter, nl."),
+    method: str = typer.Option("ref", "--method", help="One of fzn, ref, iter, nl, pure_pursuit, "
+                               "stanley, lqr, ltv."),
     reference: Path | None = _OPT_REFERENCE,
     window: str | None = _OPT_WINDOW,
     out: Path | None = typer.Option(None, "--out", help="Output folder (new or empty; default: a new "

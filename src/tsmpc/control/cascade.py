@@ -148,10 +148,18 @@ class Command:
         return np.array([self.F_xR, self.delta])
 
 
-def build_outer_controller(cfg: Config, method: Method, P: np.ndarray, S: np.ndarray) -> Any:
-    """The outer MPC of ``method`` with the terminal ingredients (P, S) of the kinematic design."""
+def build_outer_controller(
+    cfg: Config, method: Method, P: np.ndarray, S: np.ndarray, K: np.ndarray | None = None
+) -> Any:
+    """The outer MPC of ``method`` with the terminal ingredients (P, S) of the kinematic design;
+    a baseline (pure pursuit, Stanley, LQR, LTV: :mod:`tsmpc.control.baselines`) for the others
+    (``K``: the design's vertex gains, needed by the kinematic LQR)."""
     from tsmpc.models.kinematic import KinematicTS
 
+    if not method.is_ts_mpc and method != Method.NL:
+        from tsmpc.control.baselines import build_baseline
+
+        return build_baseline(cfg, method, P, S, K)
     model = KinematicTS(cfg.kinematic_box, cfg.rates.Tc)
     if method == Method.NL:
         from tsmpc.control.nl_mpc import NLMPC
@@ -171,7 +179,8 @@ class Cascade:
 
     Args:
         cfg: configuration (rates, vehicle, MPC, MHE, LQR settings).
-        method: outer-loop method (FZN, REF, ITER: TS-MPC scheduling; NL: NL-MPC).
+        method: outer-loop method (FZN, REF, ITER: TS-MPC scheduling; NL: NL-MPC; PURE_PURSUIT,
+            STANLEY, LQR, LTV: the baselines of :mod:`tsmpc.control.baselines`).
         reference: the reference to track; resampled to T_c if needed. Call ``step`` with
             ``t`` = time since the reference's first sample: the MPC tracks sample ``t / T_c``.
         kinematic_design: kinematic LMI design; loaded from the design cache if None.
@@ -208,7 +217,7 @@ class Cascade:
         self._mpc_reference = ref.step_averages() if cfg.mpc.step_average_reference else ref
         kd = kinematic_design or load_or_design_kinematic(cfg)
         dd = dynamic_design or load_or_design_dynamic(cfg)
-        self.mpc = build_outer_controller(cfg, self.method, kd.P, kd.S)
+        self.mpc = build_outer_controller(cfg, self.method, kd.P, kd.S, K=kd.K)
         dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, self.Td)
         if cfg.lqr.law == InnerLaw.AS_RUN:  # the published run's law: a quirk
             from tsmpc.control.paper_as_run import AsRunLQR

@@ -42,6 +42,11 @@ _STYLES = {
     "REF": ("tab:orange", "--", "s"),
     "ITER": ("tab:green", "-.", "^"),
     "NL": ("tab:red", ":", "D"),
+    # the baselines of issue 26 (tsmpc.control.baselines)
+    "PURE_PURSUIT": ("tab:purple", "-", "v"),
+    "STANLEY": ("tab:brown", "--", "P"),
+    "LQR": ("tab:pink", "-.", "X"),
+    "LTV": ("tab:olive", ":", "*"),
 }
 _EXTRA = [("tab:purple", "-", "v"), ("tab:brown", "--", "P"), ("tab:pink", "-.", "X")]
 

@@ -15,7 +15,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from tsmpc.report.tables import rmse_rows
+from tsmpc.report.tables import COMFORT_COLUMNS, comfort_cell, comfort_rows, rmse_rows
 from tsmpc.sim.log import atomic_write_text
 
 __all__ = ["FIGURE_CAPTIONS", "render_report", "write_report"]
@@ -102,6 +102,13 @@ def _timing_table(metrics: dict[str, Any]) -> str:
     return _table("table-timing", head, rows)
 
 
+def _comfort_table(metrics: dict[str, Any]) -> str:
+    rows = [([_e(lab), *(comfort_cell(v, d) for v, (_, _, d) in zip(vals, COMFORT_COLUMNS, strict=True))],
+             "bad" if lab.endswith("(diverged)") else "")
+            for lab, vals in comfort_rows(metrics)]
+    return _table("table-comfort", ("method", *(h for _, h, _ in COMFORT_COLUMNS)), rows)
+
+
 def _events_table(metrics: dict[str, Any]) -> str:
     names: list[str] = []
     for m in metrics["methods"].values():
@@ -165,6 +172,11 @@ def render_report(
         "<h2>Solve times, tracking and real-time factor</h2>",
         "<p>Per-step wall times measured inside the closed loop.</p>",
         _timing_table(metrics),
+        "<h2>Comfort and effort</h2><p>From the true plant state and the commands every T_d: body-frame "
+        "lateral acceleration and jerk, longitudinal jerk, steering and force-command rates (each "
+        "derivative after a 5 Hz zero-phase low-pass), and the settling time of |e_y| into 0.10 m "
+        "(definitions: <code>tsmpc.sim.comfort</code>).</p>",
+        _comfort_table(metrics),
         "<h2>Events</h2><p>Counted inside <code>step()</code>: solver fallbacks, soft terminal sets, "
         "clipped scheduling variables, rejected measurements, saturations.</p>",
         _events_table(metrics),

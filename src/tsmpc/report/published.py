@@ -41,7 +41,7 @@ __all__ = [
 ]
 
 #: Table columns holding timings (machine-dependent): regenerated, never drift-checked.
-TIMING_COLUMNS = ("[ms]", "real-time", "wall")
+TIMING_COLUMNS = ("[ms]", "real-time", "wall", "step ÷")
 #: Text lines holding timings: regenerated, never drift-checked.
 TIMING_LINES = ("load average",)
 
@@ -897,6 +897,37 @@ def paper_explained(ctx: Context) -> Produced:
     return p
 
 
+# -- baselines (issue 26's producers: examples/baseline_table.py, examples/tune_baselines.py) ----
+
+def _example(ctx: Context, name: str) -> Any:
+    """An example script as a module (the examples are scripts, not a package)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(f"tsmpc_example_{name}", ctx.root / "examples" / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def baselines(ctx: Context) -> Produced:
+    """Every outer-loop method, the TS-MPC's and the baselines', on five cases (README, baselines.md)."""
+    p = Produced()
+    ctx.progress("examples/baseline_table.py (6 compares of 8 methods)")
+    text = _example(ctx, "baseline_table").baseline_table(ctx.scratch / "baselines", shared=ctx.root.parent / "shared",
+                                                          max_steps=ctx.max_steps)
+    p.add("baselines", "table", text.rstrip("\n"))
+    return p
+
+
+def baseline_tuning(ctx: Context) -> Produced:
+    """The search behind the baselines' defaults (docs/baselines.md)."""
+    p = Produced()
+    ctx.progress("examples/tune_baselines.py (a coordinate search, ≈ 700 runs)")
+    p.add("baseline-tuning", "search", _example(ctx, "tune_baselines").tuning_text())
+    return p
+
+
 # -- benchmarks (timings) ----------------------------------------------------------------------
 
 def _bench(ctx: Context, name: str, *args: str) -> dict[str, Any]:
@@ -1023,6 +1054,8 @@ PRODUCERS: tuple[Producer, ...] = (
     Producer("robustness", robustness, "the robustness scenarios (docs/sweeps.md)"),
     Producer("sweep-example", sweep_example, "the example sweep: figure and time"),
     Producer("paper-explained", paper_explained, "Table 5 explained (≈ 25 runs, 10–15 min)"),
+    Producer("baselines", baselines, "the baselines against the TS-MPC on five cases (6 compares)"),
+    Producer("baseline-tuning", baseline_tuning, "the baselines' tuning search (≈ 700 runs)"),
     Producer("benchmarks", benchmarks, "benchmarks/*.py timing tables (never drift-checked)"),
 )
 

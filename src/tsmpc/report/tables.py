@@ -1,4 +1,5 @@
-"""RMSE and timing tables in the paper's Table 5 layout: CSV, Markdown and LaTeX."""
+"""RMSE and timing tables in the paper's Table 5 layout: CSV, Markdown and LaTeX; the
+comfort and effort table (issue 26, :mod:`tsmpc.sim.comfort`): CSV and Markdown."""
 
 from __future__ import annotations
 
@@ -7,7 +8,8 @@ from typing import Any
 
 from tsmpc.sim.metrics import PAPER_TABLE5, RMSE_KEYS
 
-__all__ = ["is_diverged", "rmse_csv", "rmse_latex", "rmse_markdown", "rmse_rows", "timing_rows"]
+__all__ = ["COMFORT_COLUMNS", "comfort_cell", "comfort_csv", "comfort_markdown", "comfort_rows",
+           "is_diverged", "rmse_csv", "rmse_latex", "rmse_markdown", "rmse_rows", "timing_rows"]
 
 _HEAD = ("approach", "x [m]", "y [m]", "theta [rad]", "v [m/s]", "omega [rad/s]")
 
@@ -77,3 +79,61 @@ def timing_rows(metrics: dict[str, Any]) -> list[tuple[str, dict[str, float], di
     """(method, mpc_ms stats, mhe_ms stats, realtime factor) per method."""
     return [(name, m["mpc_ms"], m["mhe_ms"], m["realtime_factor"])
             for name, m in metrics["methods"].items()]
+
+
+#: (metrics.json key under ``comfort``, column head, decimals) of the comfort table.
+COMFORT_COLUMNS: tuple[tuple[str, str, int], ...] = (
+    ("lat_accel_max", "max |a_y| [m/s²]", 2),
+    ("lat_accel_rms", "RMS a_y [m/s²]", 3),
+    ("lat_jerk_max", "max |jerk_y| [m/s³]", 2),
+    ("lat_jerk_rms", "RMS jerk_y [m/s³]", 3),
+    ("lon_jerk_max", "max |jerk_x| [m/s³]", 1),
+    ("lon_jerk_rms", "RMS jerk_x [m/s³]", 2),
+    ("steering_rate_max", "max |δ̇| [rad/s]", 3),
+    ("steering_rate_rms", "RMS δ̇ [rad/s]", 4),
+    ("force_rate_max", "max |Ḟ| [kN/s]", 1),
+    ("force_rate_rms", "RMS Ḟ [kN/s]", 2),
+    ("settling_time_s", "settling [s]", 1),
+)
+_KILO = {"force_rate_max", "force_rate_rms"}  # N/s shown as kN/s
+
+
+def comfort_rows(metrics: dict[str, Any]) -> list[tuple[str, list[float]]]:
+    """Rows (method, values in :data:`COMFORT_COLUMNS` order, force rates in kN/s). A run without
+    comfort metrics (older metrics.json) has NaN values; a diverged run is labelled so."""
+    rows = []
+    for name, m in metrics["methods"].items():
+        c = m.get("comfort", {})
+        vals = [float(c.get(k, float("nan"))) / (1e3 if k in _KILO else 1.0)
+                for k, _, _ in COMFORT_COLUMNS]
+        rows.append((f"{name} (diverged)" if is_diverged(m) else name, vals))
+    return rows
+
+
+def comfort_csv(metrics: dict[str, Any]) -> str:
+    """CSV ``method,<comfort keys>`` (SI units; force rates in N/s as in metrics.json)."""
+    lines = ["method," + ",".join(k for k, _, _ in COMFORT_COLUMNS)]
+    for name, m in metrics["methods"].items():
+        c = m.get("comfort", {})
+        label = f"{name} (diverged)" if is_diverged(m) else name
+        lines.append(label + "," + ",".join(f"{float(c.get(k, float('nan'))):.6g}"
+                                            for k, _, _ in COMFORT_COLUMNS))
+    return "\n".join(lines) + "\n"
+
+
+def comfort_cell(v: float, decimals: int) -> str:
+    """A comfort value: '—' when undefined (NaN), 'never' for a settling time that is infinite."""
+    if math.isnan(v):
+        return "—"
+    return "never" if math.isinf(v) else f"{v:.{decimals}f}"
+
+
+def comfort_markdown(metrics: dict[str, Any]) -> str:
+    """Markdown comfort table (definitions and filtering: :mod:`tsmpc.sim.comfort`)."""
+    head = ("method", *(h for _, h, _ in COMFORT_COLUMNS))
+    out = ["| " + " | ".join(h.replace("|", "\\|") for h in head) + " |", "|" + "---|" * len(head)]
+    for lab, vals in comfort_rows(metrics):
+        cells = [comfort_cell(v, d) for v, (_, _, d) in zip(vals, COMFORT_COLUMNS,
+                                                                               strict=True)]
+        out.append(f"| {lab} | " + " | ".join(cells) + " |")
+    return "\n".join(out) + "\n"

@@ -251,9 +251,9 @@ def write_outputs(
     cfg: Config, metrics: dict[str, Any], logs: dict[str, RunLog], out: Path, *, plots: bool,
     figures: FigureFn | None = None,
 ) -> list[Path]:
-    """metrics.json, rmse.{csv,md,tex}, timeseries.{npz,mat}, config.toml, versions.json, figures,
-    and last report.html (one self-contained page of all of it)."""
-    from tsmpc.report.tables import rmse_csv, rmse_latex, rmse_markdown
+    """metrics.json, rmse.{csv,md,tex}, comfort.{csv,md}, timeseries.{npz,mat}, config.toml,
+    versions.json, figures, and last report.html (one self-contained page of all of it)."""
+    from tsmpc.report.tables import comfort_csv, comfort_markdown, rmse_csv, rmse_latex, rmse_markdown
 
     out.mkdir(parents=True, exist_ok=True)
     with_paper = bool(metrics["scenario"].get("paper_reference"))
@@ -262,6 +262,8 @@ def write_outputs(
         "rmse.csv": rmse_csv(metrics, with_paper),
         "rmse.md": rmse_markdown(metrics, with_paper),
         "rmse.tex": rmse_latex(metrics, with_paper),
+        "comfort.csv": comfort_csv(metrics),
+        "comfort.md": comfort_markdown(metrics),
         "config.toml": _config_toml(cfg, list(logs)),
         "versions.json": json.dumps(metrics["versions"], indent=2),
     }

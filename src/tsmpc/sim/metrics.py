@@ -16,6 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tsmpc.errors import DataFormatError
 from tsmpc.models.kinematic import pose_to_errors
+from tsmpc.sim.comfort import ComfortMetrics, run_comfort
 from tsmpc.sim.log import RunLog
 
 __all__ = [
@@ -146,6 +147,7 @@ class RunMetrics:
     realtime_factor: float
     termination: str
     events: dict[str, int]
+    comfort: ComfortMetrics | None = None  #: comfort and effort (tsmpc.sim.comfort)
 
     def to_dict(self) -> dict[str, Any]:
         """The metrics.json entry of one method (schema of issue 7, names kept stable)."""
@@ -171,6 +173,7 @@ class RunMetrics:
             "realtime_factor": self.realtime_factor,
             "termination": self.termination,
             "events": dict(self.events),
+            **({"comfort": self.comfort.as_dict()} if self.comfort is not None else {}),
         }
 
 
@@ -278,6 +281,7 @@ def run_metrics(log: RunLog) -> RunMetrics:
         realtime_factor=sim_s / log.wall_s if log.wall_s > 0 else float("inf"),
         termination=log.termination,
         events=dict(log.events),
+        comfort=run_comfort(log),
     )
 
 

@@ -70,11 +70,8 @@ MAX_NPZ_BYTES = 4 * 1024**3
 
 def _logs_from(data: Any, path: Path, metrics: dict[str, Any] | None) -> dict[str, RunLog]:
     with data:
-        methods: list[str] = []
-        for key in data.files:
-            m = key.split("_", 1)[0]
-            if m not in methods:
-                methods.append(m)
+        # Every log has t_outer: the method is what precedes it (method names may hold "_").
+        methods = [key[: -len("_t_outer")] for key in data.files if key.endswith("_t_outer")]
         if not methods:
             raise DataFormatError(f"{path}: no time series inside")
         metrics = metrics or {}
