@@ -19,10 +19,9 @@ fresh output path.
 
 from __future__ import annotations
 
-import math
 import enum
+import math
 import re
-from enum import Enum
 from pathlib import Path
 
 import numpy as np

@@ -903,7 +903,8 @@ def _example(ctx: Context, name: str) -> Any:
     """An example script as a module (the examples are scripts, not a package)."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location(f"tsmpc_example_{name}", ctx.root / "examples" / f"{name}.py")
+    path = ctx.root / "examples" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"tsmpc_example_{name}", path)
     assert spec is not None and spec.loader is not None
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
@@ -914,8 +915,8 @@ def baselines(ctx: Context) -> Produced:
     """Every outer-loop method, the TS-MPC's and the baselines', on five cases (README, baselines.md)."""
     p = Produced()
     ctx.progress("examples/baseline_table.py (6 compares of 8 methods)")
-    text = _example(ctx, "baseline_table").baseline_table(ctx.scratch / "baselines", shared=ctx.root.parent / "shared",
-                                                          max_steps=ctx.max_steps)
+    table = _example(ctx, "baseline_table").baseline_table
+    text = table(ctx.scratch / "baselines", shared=ctx.root.parent / "shared", max_steps=ctx.max_steps)
     p.add("baselines", "table", text.rstrip("\n"))
     return p
 
