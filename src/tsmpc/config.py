@@ -247,6 +247,18 @@ class TyreParams(_Frozen):
         False, description="beyond the paper: mu_tyre scales with mu(road)/mu_dry"
     )
     mu_dry: PositiveFloat = Field(0.9, description="road mu at which the tyre has mu_tyre [-]")
+    combined_slip: bool = Field(
+        False, description="beyond the paper's plant (issue 21): the rear tyre's traction force and "
+        "its lateral force share its grip D = mu F_zR (friction ellipse); the traction saturates at "
+        "+-D and the lateral force shrinks by sqrt(1 - (F_t/D)^2). Pacejka tyres only "
+        "(tsmpc.vehicle.plant)")
+
+    @model_validator(mode="after")
+    def _combined_needs_pacejka(self) -> TyreParams:
+        if self.combined_slip and self.model != TyreModel.PACEJKA:
+            raise ConfigError("tyre.combined_slip: needs tyre.model = \"pacejka\" (the linear tyre "
+                              "is the control model's, without a grip limit)")
+        return self
 
 
 class Rates(_Frozen):
