@@ -194,6 +194,9 @@ class Cascade:
             self.mhe = MHEUIO(cfg.mhe, dyn, cfg.vehicle, self.Td)
         self.max_age_s = self.Tc if max_age_s is None else float(max_age_s)
         self._slip_gate = SlipGate(self.Tc, cfg.noise.position * cfg.noise.scale)
+        from tsmpc.estimation.fusion import Fusion
+
+        self._fusion = Fusion(cfg)  # beyond the paper: cfg.fusion's switches (issue 21)
         self.reset(x0)
 
     # -------------------------------------------------------------------------- state
@@ -209,6 +212,7 @@ class Cascade:
         self.mhe.reset(None if self._x0 is None else self._x0[3:6].copy())
         self.lqr.reset()
         self._slip_gate.reset()
+        self._fusion.reset(None if self._x0 is None else self._x0[:3])
         self.mpc.reset()
         self._calls = 0
         self._pose = None if self._x0 is None else self._x0[:3].copy()
@@ -219,6 +223,7 @@ class Cascade:
         self._events = dict.fromkeys(EVENT_NAMES, 0)
         self._events["stale_rejected"] = 0
         self._events["step_errors"] = 0
+        self._events["repeated_rejected"] = 0  # fusion.reject_repeated_samples (issue 21)
         self.last_error: str | None = None
 
     @property
@@ -280,6 +285,13 @@ class Cascade:
             self.reset(np.nan_to_num(np.array([X, Y, th, v, 0.0, om])))
         ev = self._events
         fresh = self._fresh(t, m)
+        fu, fs = self._fusion, self.cfg.fusion  # issue 21: estimation/fusion.py
+        if fs.reject_repeated_samples and fu.guard.repeated((X, Y, th, v, om)):
+            fresh = False  # a stalled bus re-delivering the last sample: missing, like NaN
+            ev["repeated_rejected"] += 1
+        pose_ok = fresh and _finite(X, Y, th)
+        if pose_ok:
+            fu.pose.measured(np.array([X, Y, th]))
         plan = e_meas = None
         t_mpc = 0.0
         if self._calls % self.n_inner == 0:
@@ -287,6 +299,10 @@ class Cascade:
                 self._pose = np.array([X, Y, th])
             else:  # keep the last good pose: the MPC never sees NaN
                 ev["pose_rejected"] += 1
+                if fs.predict_pose and fu.pose.pose is not None:  # or the dead-reckoned one
+                    self._pose = fu.pose.pose.copy()
+            if fu.any_course:  # an MPC step closes the course fusion's interval
+                fu.course.close(np.array([X, Y, th]) if pose_ok else None, v if fresh else math.nan)
             if self.cfg.rates.inner_steps_per_outer is None:
                 k = max(math.floor(t / self.Tc + 1e-6), 0)
             else:  # a fixed number of calls per reference sample (the published run's time base)
@@ -299,6 +315,8 @@ class Cascade:
             if mpc_cfg.slip_aware or mpc_cfg.tangent_heading:  # beyond the paper: slip_aware.py
                 last = self._last
                 a_hat = float(last.estimate.x[1]) if mpc_cfg.slip_aware and last is not None else 0.0
+                if mpc_cfg.slip_aware and last is not None:  # the course-fitted model error
+                    a_hat += fu.slip_correction(float(last.estimate.x[0] * last.estimate.x[2]))
                 if mpc_cfg.slip_aware:  # α̂ bounded by the measured course over ground
                     a_hat = self._slip_gate(p, a_hat)
                 th_d = self._theta_tangent[kk] if mpc_cfg.tangent_heading else ref.theta[kk]
@@ -319,7 +337,7 @@ class Cascade:
             ev["mpc_fallback"] += plan.status == MPCStatus.FALLBACK
             ev["mpc_scheduling_clipped"] += int(plan.n_clipped)
         v_ref, w_ref = float(self._u_prev[0]), float(self._u_prev[1])
-        y = np.array([v, om]) if fresh else np.full(2, np.nan)
+        y = np.array([v - fu.speed_offset(), om]) if fresh else np.full(2, np.nan)
         u_mhe = self._u_applied
         if m.force is not None or m.steering is not None:
             u_mhe = np.array([self._u_applied[0] if m.force is None else float(m.force),
@@ -334,8 +352,17 @@ class Cascade:
             est = Estimate(x_hat, last.F_fr if last is not None else 0.0, 0.0,
                            EstimatorStatus.FAILED, time.perf_counter() - t1)
         t2 = time.perf_counter()
+        if fs.predict_pose:
+            fu.pose.advance(est.x)
+        if fu.any_course:
+            fu.course.sample(fresh, th, v, float(est.x[1]), float(est.x[0] * est.x[2]))
         if m.state is None:
             inner = est
+            if fs.mass_estimate:  # the mass error's inertia is not friction (fusion.py)
+                dF = fu.inertia_terms(float(est.x[0]), float(est.F_fr), v_ref)
+                if dF != 0.0:
+                    inner = Estimate(est.x, est.F_fr + dF, est.F_fr_raw + dF, est.status,
+                                     est.solve_time_s)
         elif self.cfg.lqr.true_state_feedback:  # the published run: true state, F̂ as configured
             inner = Estimate(np.asarray(m.state, dtype=float).reshape(3).copy(), est.F_fr,
                              est.F_fr_raw, est.status, est.solve_time_s)
