@@ -720,6 +720,10 @@ class FusionSettings(_Frozen):
     course_speed: bool = Field(
         True, description="the speed sensor's offset is estimated from the speed over ground "
         "(chord of the measured positions) and removed before the MHE and the inner loop")
+    stiffness_estimate: bool = Field(
+        True, description="the axle cornering stiffnesses of the MHE's and the inner loop's models "
+        "are fitted online (least squares F_y = C alpha per axle, the slip from the course over "
+        "ground, the forces from the measured lateral and yaw accelerations); the LMI gains stay")
     mass_estimate: bool = Field(
         True, description="the part of the friction estimate that follows the acceleration is the "
         "inertia of a mass error: estimated online (high-passed least squares), removed from the "
@@ -775,7 +779,7 @@ T = TypeVar("T", bound=BaseModel)
 
 #: Every switch of :class:`FusionSettings` off (the paper has none of them).
 _FUSION_OFF = {"reject_repeated_samples": False, "predict_pose": False, "course_slip": False,
-               "course_speed": False, "mass_estimate": False}
+               "course_speed": False, "stiffness_estimate": False, "mass_estimate": False}
 
 #: Named configurations: overrides of ``Config()`` (SPEC §13). Select with ``Config.preset(name)``,
 #: ``preset = "paper"`` at the top of a TOML file, or ``--preset paper`` on the command line.

@@ -213,6 +213,9 @@ class Cascade:
         self.lqr.reset()
         self._slip_gate.reset()
         self._fusion.reset(None if self._x0 is None else self._x0[:3])
+        if getattr(self, "_stiffness_applied", None):  # back to the config's stiffnesses
+            _apply_stiffness_to((self.mhe, self.lqr), (self.cfg.vehicle.C_f, self.cfg.vehicle.C_r), [])
+        self._stiffness_applied: list[float] = []
         self.mpc.reset()
         self._calls = 0
         self._pose = None if self._x0 is None else self._x0[:3].copy()
@@ -272,6 +275,11 @@ class Cascade:
         return Command(last.F_xR, last.delta, last.saturated, last.v_ref, last.omega_ref,
                        last.estimate, held=True)
 
+    def _apply_stiffness(self, C: tuple[float, float] | None) -> None:
+        """fusion.stiffness_estimate: the fitted axle stiffnesses reach the MHE and the TS-LQR."""
+        if C is not None:
+            _apply_stiffness_to((self.mhe, self.lqr), C, self._stiffness_applied)
+
     def _fresh(self, t: float, m: Measurement) -> bool:
         if m.stamp is None or t - float(m.stamp) <= self.max_age_s + 1e-12:
             return True
@@ -302,7 +310,10 @@ class Cascade:
                 if fs.predict_pose and fu.pose.pose is not None:  # or the dead-reckoned one
                     self._pose = fu.pose.pose.copy()
             if fu.any_course:  # an MPC step closes the course fusion's interval
-                fu.course.close(np.array([X, Y, th]) if pose_ok else None, v if fresh else math.nan)
+                fu.course.close(np.array([X, Y, th]) if pose_ok else None, v if fresh else math.nan,
+                                om if fresh else math.nan)
+                if fs.stiffness_estimate:
+                    self._apply_stiffness(fu.course.stiffness)
             if self.cfg.rates.inner_steps_per_outer is None:
                 k = max(math.floor(t / self.Tc + 1e-6), 0)
             else:  # a fixed number of calls per reference sample (the published run's time base)
@@ -315,8 +326,10 @@ class Cascade:
             if mpc_cfg.slip_aware or mpc_cfg.tangent_heading:  # beyond the paper: slip_aware.py
                 last = self._last
                 a_hat = float(last.estimate.x[1]) if mpc_cfg.slip_aware and last is not None else 0.0
-                if mpc_cfg.slip_aware and last is not None:  # the course-fitted model error
-                    a_hat += fu.slip_correction(float(last.estimate.x[0] * last.estimate.x[2]))
+                if mpc_cfg.slip_aware and last is not None:
+                    # the course-fitted model error at the reference's lateral acceleration (a
+                    # feed-forward: the measured one would close a fast loop through ω, fusion.py)
+                    a_hat += fu.slip_correction(float(ref.v[kk] * ref.omega[kk]))
                 if mpc_cfg.slip_aware:  # α̂ bounded by the measured course over ground
                     a_hat = self._slip_gate(p, a_hat)
                 th_d = self._theta_tangent[kk] if mpc_cfg.tangent_heading else ref.theta[kk]
@@ -355,7 +368,8 @@ class Cascade:
         if fs.predict_pose:
             fu.pose.advance(est.x)
         if fu.any_course:
-            fu.course.sample(fresh, th, v, float(est.x[1]), float(est.x[0] * est.x[2]))
+            fu.course.sample(fresh, th, v, float(est.x[1]), float(est.x[0] * est.x[2]), om,
+                             float(u_mhe[1]), float(u_mhe[0]))
         if m.state is None:
             inner = est
             if fs.mass_estimate:  # the mass error's inertia is not friction (fusion.py)
@@ -376,6 +390,17 @@ class Cascade:
         ev["inner_saturated"] += bool(out.saturated)
         return Command(out.F_xR, out.delta, bool(out.saturated), v_ref, w_ref, est, plan, e_meas,
                        t_mpc, t2 - t1, t3 - t2)
+
+
+def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> None:
+    """Give the fitted (C_f, C_r) to the blocks that take them, when they moved by over 1 %."""
+    if applied and all(abs(c - a) <= 0.01 * abs(a) for c, a in zip(C, applied, strict=True)):
+        return
+    for b in blocks:
+        setter = getattr(b, "set_cornering_stiffness", None)
+        if setter is not None:
+            setter(*C)
+    applied[:] = list(C)
 
 
 def _oracle_estimate(state: ArrayLike) -> Estimate:

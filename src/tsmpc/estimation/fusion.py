@@ -23,9 +23,21 @@ MHE's estimate; nothing reads the plant (docs/robustness.md lists the sources).
   - the slip: ᾱ_course − ᾱ̂ = κ ā_y + β (ā_y = v̂ ω̂ the lateral acceleration). A stiffness or mass
     error biases the MHE's α̂ in proportion to the lateral force (steady state of SPEC §3: α depends
     on C_r and M through M a_y / C_r), so κ carries the model error and β a heading-sensor offset.
-    The outer loop uses α̂ + κ̂ a_y + β̂ (issue 21: 5 mrad of α̂ bias cost 0.08 m of RMSE y);
+    The outer loop uses α̂ + κ̂ a_y,d + β̂ with a_y,d = v_d ω_d the *reference's* lateral
+    acceleration (issue 21: 5 mrad of α̂ bias cost 0.08 m of RMSE y). The measured a_y would close
+    a loop ω → a_y → slip → e_θ → ω without the tyres' lag, fast enough to destabilise a car
+    whose rear grip is 30 % below the model's (it did, in a trial); the reference's is exogenous;
   - the speed sensor's offset: v̄_measured − v_ground, removed from v before the MHE and the inner
     loop.
+
+  - the axle cornering stiffnesses (``stiffness_estimate``): with the chord's slip ᾱ from the
+    course, the axle forces from the measured lateral and yaw accelerations and the slips of the
+    single-track model (SPEC §3, §5), F_yF = C_f (δ − α − a ω/v) and F_yR = C_r (b ω/v − α) are
+    fitted per axle (least squares through the origin, the model's C as prior, forgetting over
+    ``STIFF_MEMORY_S``). The fitted C_f, C_r replace the model's in the MHE and in the inner loop's
+    reference gain N̄ (the LMI gains stay): with them α̂ and the steering feed-forward are right
+    (issue 21: the stiffness error was worth 0.08 m of RMSE y; with the true C in both blocks the
+    loss disappears, in the LMI gains alone it does not).
 
   The fits compare like with like (means over the same chord), so the chord's lag in a transient
   does not bias them; only chords of measured (not predicted) poses count.
@@ -49,7 +61,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from tsmpc.config import Config, FusionSettings
+from tsmpc.config import Config, FusionSettings, VehicleParams
 
 __all__ = ["BASELINE", "CourseFusion", "Fusion", "MassEstimator", "PosePredictor", "RepeatGuard"]
 
@@ -77,6 +89,14 @@ MASS_MEMORY_S = 100.0
 MASS_EXCITATION = 50.0
 #: Bounds of the mass correction, as fractions of the model mass.
 MASS_RANGE = (-0.4, 0.6)
+#: Prior weight of the stiffness fits [rad²]: the model's C counts as this much Σ α².
+STIFF_PRIOR = 1e-4
+#: Σ α² [rad²] beyond the prior before the fitted stiffnesses are used.
+STIFF_EXCITATION = 0.0
+#: Memory of the stiffness fits [s].
+STIFF_MEMORY_S = 100.0
+#: Bounds of the fitted stiffnesses, as multiples of the model's.
+STIFF_RANGE = (0.5, 2.0)
 
 
 def _wrap(a: float) -> float:
@@ -146,6 +166,11 @@ class _Interval:
     sv_alpha: float = 0.0  #: Σ v α̂
     sv_ay: float = 0.0  #: Σ v â_y
     sv_full: float = 0.0  #: Σ v, every sample in full (the weights of α̂ and â_y)
+    s_delta: float = 0.0  #: Σ δ (applied steering)
+    s_w_v: float = 0.0  #: Σ ω / v
+    s_vw: float = 0.0  #: Σ v ω (measured lateral acceleration, α̇ aside)
+    s_F: float = 0.0  #: Σ F_xR (applied force)
+    w_first: float = 0.0  #: ω of the opening sample
 
 
 class CourseFusion:
@@ -153,20 +178,28 @@ class CourseFusion:
     (see the module docstring). Call :meth:`sample` every T_d and :meth:`close` at every MPC
     step, before the MPC runs."""
 
-    def __init__(self, Tc: float, position_sigma: float) -> None:
+    def __init__(self, Tc: float, position_sigma: float, vehicle: VehicleParams | None = None) -> None:
         self.Tc = float(Tc)
         self.sigma = max(float(position_sigma), 1e-4)
+        self.vehicle = vehicle
         self.reset()
 
     def reset(self) -> None:
         """Forget everything: corrections back to zero."""
         self._iv: deque[_Interval] = deque(maxlen=BASELINE)
         self._cur: _Interval | None = None
+        self._omega_now = 0.0
         self._theta = np.zeros(2)  # [κ, β]
         self._P = np.diag(np.square(SLIP_PRIOR))
         self._sv = 0.0  # speed-offset fit: Σ w b, Σ w
         self._sw = 0.0
         self.n_chords = 0
+        # stiffness fits F_y = C α per axle: Σ α F, Σ α² (prior: the model's C over STIFF_PRIOR)
+        p = self.vehicle
+        c0 = (p.C_f, p.C_r) if p is not None else (1.0, 1.0)
+        self._cnum = np.array(c0) * STIFF_PRIOR
+        self._cden = np.full(2, STIFF_PRIOR)
+        self._alpha_prev: float | None = None
 
     @property
     def slip_params(self) -> tuple[float, float]:
@@ -187,28 +220,50 @@ class CourseFusion:
             return 0.0
         return min(max(self._sv / self._sw, -SPEED_OFFSET_MAX), SPEED_OFFSET_MAX)
 
-    def sample(self, ok: bool, theta: float, v: float, alpha_hat: float, a_y: float) -> None:
-        """One T_d sample: measured heading θ and speed v (raw), the estimate's α̂ and
-        â_y = v̂ ω̂; ``ok`` False for a missing or rejected sample (spoils the interval)."""
+    @property
+    def stiffness(self) -> tuple[float, float] | None:
+        """(Ĉ_f, Ĉ_r) [N/rad] once each axle's fit holds ``STIFF_EXCITATION`` beyond its prior,
+        within ``STIFF_RANGE`` × the model's; None before."""
+        p = self.vehicle
+        if p is None or np.any(self._cden < STIFF_PRIOR + STIFF_EXCITATION):
+            return None
+        lo, hi = STIFF_RANGE
+        c = self._cnum / self._cden
+        return (min(max(float(c[0]), lo * p.C_f), hi * p.C_f),
+                min(max(float(c[1]), lo * p.C_r), hi * p.C_r))
+
+    def sample(self, ok: bool, theta: float, v: float, alpha_hat: float, a_y: float,
+               omega: float = 0.0, delta: float = 0.0, force: float = 0.0) -> None:
+        """One T_d sample: measured heading θ, speed v (raw) and yaw rate ω, the estimate's α̂
+        and â_y = v̂ ω̂, the applied steering δ and force F_xR; ``ok`` False for a missing or
+        rejected sample (spoils the interval)."""
         cur = self._cur
         if cur is None:
             return
         if not (ok and math.isfinite(theta) and math.isfinite(v) and math.isfinite(alpha_hat)
-                and math.isfinite(a_y)):
+                and math.isfinite(a_y) and math.isfinite(omega) and math.isfinite(delta)
+                and math.isfinite(force)):
             cur.ok = False
             return
         dth = _wrap(theta - cur.start[2])
         w = 0.5 if cur.n == 0 else 1.0  # trapezoid: the opening sample counts half
+        if cur.n == 0:
+            cur.w_first = omega
         cur.n += 1
         cur.sv_full += v
+        cur.s_delta += delta
+        cur.s_w_v += omega / max(v, 1.0)
+        cur.s_vw += v * omega
+        cur.s_F += force
         cur.sv += w * v
         cur.sv_dth += w * v * dth
         cur.sv_alpha += v * alpha_hat
         cur.sv_ay += v * a_y
 
-    def close(self, pose: NDArray[np.float64] | None, v: float) -> None:
-        """An MPC step: ``pose`` the measured pose now (None if missing: no chord ends here) and
-        ``v`` the measured speed now (the closing sample of the trapezoid)."""
+    def close(self, pose: NDArray[np.float64] | None, v: float, omega: float = 0.0) -> None:
+        """An MPC step: ``pose`` the measured pose now (None if missing: no chord ends here),
+        ``v`` and ``omega`` the measured speed and yaw rate now (the closing sample)."""
+        self._omega_now = omega
         cur = self._cur
         good = pose is not None and bool(np.all(np.isfinite(pose))) and math.isfinite(v)
         if cur is not None:
@@ -261,6 +316,31 @@ class CourseFusion:
         g = 1.0 - self.Tc / SPEED_MEMORY_S
         self._sv = g * self._sv + w * (v_meas - v_ground)
         self._sw = g * self._sw + w
+        # axle stiffnesses from the course's slip (quasi-steady single track, SPEC §3/§5):
+        # lateral force S = M v (ω + α̇) + F_x α and yaw moment T = I ω̇ give F_yF = (b S + T)/L,
+        # F_yR = (a S − T)/L; slips α_F = δ − α − a ω/v, α_R = b ω/v − α (chord means)
+        p = self.vehicle
+        if p is not None and math.isfinite(self._omega_now):
+            span = BASELINE * self.Tc
+            a_prev = self._alpha_prev
+            self._alpha_prev = a_course
+            if a_prev is not None:
+                al_dot = (a_course - a_prev) / self.Tc
+                vw = sum(i.s_vw for i in self._iv) / n
+                S = p.mass * (vw + v_meas * al_dot) + sum(i.s_F for i in self._iv) / n * a_course
+                T = p.inertia * (self._omega_now - self._iv[0].w_first) / span
+                L = p.a + p.b
+                w_v = sum(i.s_w_v for i in self._iv) / n
+                delta = sum(i.s_delta for i in self._iv) / n
+                slips = np.array([delta - a_course - p.a * w_v, p.b * w_v - a_course])
+                forces = np.array([(p.b * S + T) / L, (p.a * S - T) / L])
+                g2 = 1.0 - self.Tc / STIFF_MEMORY_S
+                prior = np.array([p.C_f, p.C_r]) * STIFF_PRIOR
+                # forgetting towards the prior (a fit without excitation returns to the model)
+                self._cnum = g2 * self._cnum + (1.0 - g2) * prior + slips * forces
+                self._cden = g2 * self._cden + (1.0 - g2) * STIFF_PRIOR + slips * slips
+        else:
+            self._alpha_prev = a_course
 
 
 class MassEstimator:
@@ -322,7 +402,7 @@ class Fusion:
         self.Td, self.Tc = cfg.rates.Td, cfg.rates.Tc
         self.guard = RepeatGuard()
         self.pose = PosePredictor(self.Td)
-        self.course = CourseFusion(self.Tc, cfg.noise.position * cfg.noise.scale)
+        self.course = CourseFusion(self.Tc, cfg.noise.position * cfg.noise.scale, cfg.vehicle)
         self.mass = MassEstimator(cfg.vehicle.mass, self.Td, cfg.mhe.N)
         self.tau = cfg.lqr.speed_time_constant
         self.speed_feedback = cfg.lqr.speed_feedback
@@ -336,8 +416,9 @@ class Fusion:
 
     @property
     def any_course(self) -> bool:
-        """The course fusion runs (for the slip or the speed)."""
-        return self.settings.course_slip or self.settings.course_speed
+        """The course fusion runs (for the slip, the speed or the stiffnesses)."""
+        s = self.settings
+        return s.course_slip or s.course_speed or s.stiffness_estimate
 
     def speed_offset(self) -> float:
         """The speed-sensor offset to remove (0 with ``course_speed`` off)."""
