@@ -49,6 +49,7 @@ __all__ = [
     "TyreModel",
     "TyreParams",
     "VehicleParams",
+    "apply_overrides",
     "format_validation_error",
     "load_config",
     "replace",
@@ -694,8 +695,9 @@ class ScenarioSettings(_Frozen):
     actuators: ScenarioActuators = ScenarioActuators()
     oracle_tuned: bool = Field(
         False, description="the controllers' vehicle is the plant's (scales applied): models and "
-        "LMI designs built from the true parameters (the oracle-tuned comparison row; never a "
-        "deployable setting)")
+        "LMI designs built from the true parameters, and the sensors calibrated (biases and drifts "
+        "removed); dropouts, delay and noise stay (the oracle-tuned comparison row, issue 21; "
+        "never a deployable setting)")
     replan_for_force_budget: bool = Field(
         False, description="the reference is re-timed along its path so that it never asks for "
         "more acceleration than the plant vehicle's force budget allows ((F_max - mu M g - drag)/M "
@@ -887,3 +889,32 @@ def resolve_preset(data: dict[str, Any], preset: str | None = None, source: str 
         preset = name
     base = _preset_dict(preset) if preset is not None else {}
     return _merge(base, data)
+
+
+def apply_overrides(cfg: Config, assignments: list[str], source: str = "--set") -> Config:
+    """``cfg`` with ``KEY=VALUE`` assignments (dotted keys into the config, e.g.
+    ``scenario.plant.mass_scale=1.2``; VALUE a TOML value — ``0.3``, ``true``, ``[1, 2]``,
+    ``[{at_s = 60, mu = 0.3}]`` — or else a bare string such as ``uio``), validated like a config
+    file. Raises :class:`ConfigError` naming the assignment or the field."""
+    data = cfg.model_dump(mode="json")
+    for text in assignments:
+        key, sep, raw = text.partition("=")
+        key = key.strip()
+        parts = key.split(".")
+        if not sep or not key or any(not p.strip() for p in parts):
+            raise ConfigError(f"{source} {text!r}: expected KEY=VALUE with a dotted key, e.g. "
+                              "scenario.plant.mass_scale=1.2")
+        try:
+            value: Any = tomllib.loads(f"v = {raw.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw.strip()  # a bare word: an enum value or a name
+        node = data
+        for p in parts[:-1]:
+            nxt = node.get(p) if isinstance(node, dict) else None
+            if not isinstance(nxt, dict):
+                if isinstance(node, dict) and p not in node:
+                    raise ConfigError(f"{source} {text!r}: {key}: unknown field {p!r}")
+                raise ConfigError(f"{source} {text!r}: {key}: {p!r} is not a section")
+            node = nxt
+        node[parts[-1]] = value
+    return validate(Config, data, source=source)

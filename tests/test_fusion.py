@@ -1,0 +1,140 @@
+"""Fusion and adaptation beyond the paper (issue 21; tsmpc.estimation.fusion): each mechanism on
+synthetic signals with a known answer (closed-form dead reckoning, a slip bias κ a_y + β, a speed
+offset, linear-tyre axle forces, a mass error hidden in a drifting friction force)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tsmpc.config import Config, replace
+from tsmpc.control.ts_lqr import equilibrium
+from tsmpc.estimation.fusion import CourseFusion, MassEstimator, PosePredictor, RepeatGuard
+
+
+def test_repeated_samples_are_recognised_and_nan_is_not_a_repeat() -> None:
+    g = RepeatGuard()
+    s = (1.0, 2.0, 0.1, 10.0, 0.01)
+    assert not g.repeated(s)
+    assert g.repeated(s)
+    assert not g.repeated((1.0, 2.0, 0.1, 10.0 + 1e-12, 0.01))
+    nan = (math.nan,) * 5
+    assert not g.repeated(nan) and not g.repeated(nan)
+    assert g.n_repeated == 1
+
+
+def test_dead_reckoning_is_the_kinematics_of_the_estimate() -> None:
+    p = PosePredictor(0.01)
+    p.measured(np.array([1.0, 2.0, 0.3]))
+    for _ in range(10):
+        p.advance(np.array([10.0, 0.05, 0.0]))  # straight at 10 m/s with 0.05 rad of body slip
+    np.testing.assert_allclose(p.pose, [1.0 + math.cos(0.35), 2.0 + math.sin(0.35), 0.3], atol=1e-12)
+    p.advance(np.array([math.nan, 0.0, 0.0]))  # a non-finite estimate leaves the pose alone
+    np.testing.assert_allclose(p.pose, [1.0 + math.cos(0.35), 2.0 + math.sin(0.35), 0.3], atol=1e-12)
+
+
+def _drive(fusion: CourseFusion, segments, *, kappa: float, beta: float, v_offset: float,
+           true_vehicle=None, model_vehicle=None, Tc: float = 0.1, Td: float = 0.01) -> None:
+    """Drive arcs of constant (v, ω) [segment = (v, ω, seconds)] with the true slip α and the
+    model's α̂ = α − (κ v ω + β); the speed sensor reads v + v_offset. With vehicles given, α and δ
+    are the linear single-track's steady state of the true vehicle (SPEC §5)."""
+    X = Y = th = 0.0
+    n_in = round(Tc / Td)
+    first = True
+    for v, w, secs in segments:
+        if true_vehicle is not None:
+            alpha, _F, delta = equilibrium(v, w, true_vehicle)
+        else:
+            alpha, delta = 0.01 * w, 0.0
+        alpha_hat = alpha - (kappa * v * w + beta)
+        for k in range(round(secs / Td)):
+            if k % n_in == 0:
+                fusion.close(np.array([X, Y, th]), v + v_offset, w)
+                first = False
+            fusion.sample(True, th, v + v_offset, alpha_hat, v * w, w, delta, 0.0)
+            # exact motion over T_d: heading θ + α of the velocity turns at ω (α constant)
+            chi0 = th + alpha
+            th += w * Td
+            chi1 = th + alpha
+            if abs(w) > 1e-12:
+                X += v / w * (math.sin(chi1) - math.sin(chi0))
+                Y += -v / w * (math.cos(chi1) - math.cos(chi0))
+            else:
+                X += v * math.cos(chi0) * Td
+                Y += v * math.sin(chi0) * Td
+    assert not first
+
+
+SEGMENTS = [(10.0, 0.0, 4.0), (10.0, 0.15, 6.0), (12.0, -0.2, 6.0), (8.0, 0.3, 6.0), (10.0, 0.0, 4.0)]
+
+
+def test_course_fusion_recovers_a_slip_bias_linear_in_the_lateral_acceleration() -> None:
+    f = CourseFusion(0.1, 0.0)
+    _drive(f, SEGMENTS, kappa=0.004, beta=-0.002, v_offset=0.0)
+    k, b = f.slip_params
+    assert k == pytest.approx(0.004, abs=2e-4) and b == pytest.approx(-0.002, abs=2e-4)
+    assert f.slip_correction(2.0) == pytest.approx(0.004 * 2.0 - 0.002, abs=5e-4)
+    assert f.n_chords > 200
+
+
+def test_course_fusion_recovers_the_speed_sensor_offset() -> None:
+    f = CourseFusion(0.1, 0.0)
+    _drive(f, SEGMENTS, kappa=0.0, beta=0.0, v_offset=0.2)
+    assert f.speed_offset == pytest.approx(0.2, abs=0.005)
+    g = CourseFusion(0.1, 0.0)
+    _drive(g, SEGMENTS, kappa=0.0, beta=0.0, v_offset=0.0)
+    assert abs(g.speed_offset) < 0.005
+
+
+def test_course_fusion_fits_the_axle_stiffnesses_of_the_true_vehicle(cfg: Config) -> None:
+    model = cfg.vehicle
+    true = replace(model, cornering_stiffness_front=0.7 * model.C_f, cornering_stiffness_rear=1.3 * model.C_r)
+    f = CourseFusion(0.1, 0.0, model)
+    _drive(f, SEGMENTS * 2, kappa=0.0, beta=0.0, v_offset=0.0, true_vehicle=true)
+    C = f.stiffness
+    assert C is not None
+    assert C[0] == pytest.approx(true.C_f, rel=0.03) and C[1] == pytest.approx(true.C_r, rel=0.03)
+    # the model's own vehicle: the fit stays at the model
+    g = CourseFusion(0.1, 0.0, model)
+    _drive(g, SEGMENTS * 2, kappa=0.0, beta=0.0, v_offset=0.0, true_vehicle=model)
+    assert g.stiffness[0] == pytest.approx(model.C_f, rel=0.03)
+    assert g.stiffness[1] == pytest.approx(model.C_r, rel=0.03)
+
+
+def test_a_missing_pose_spoils_its_chords_only() -> None:
+    f = CourseFusion(0.1, 0.0)
+    f.close(np.array([0.0, 0.0, 0.0]), 10.0)
+    for k in range(1, 12):
+        for _ in range(10):
+            f.sample(True, 0.0, 10.0, 0.0, 0.0)
+        f.close(None if k == 3 else np.array([1.0 * k, 0.0, 0.0]), 10.0)
+    # a chord spans 5 measured intervals: those ending at steps 5…8 contain the gap at step 3,
+    # the first whole one runs from step 4 to 9
+    assert f.n_chords == 3
+
+
+def test_mass_estimate_separates_inertia_from_a_drifting_friction_force() -> None:
+    Td, M = 0.01, 683.0
+    for dM in (136.6, -136.6, 0.0):
+        est = MassEstimator(M, Td, 30)
+        t = np.arange(0.0, 60.0, Td)
+        v = 10.0 + 2.0 * np.sin(0.5 * t) + 1.0 * np.sin(1.3 * t)
+        a_true = 1.0 * np.cos(0.5 * t) + 1.3 * np.cos(1.3 * t)
+        F0 = 1000.0 + 20.0 * t  # the road's resistance drifts slowly
+        hist = []
+        for k in range(t.size):
+            # the MHE's F̂ is the window-constant fit: F0 + ΔM × the window's mean acceleration
+            j = max(k - 30, 0)
+            a_win = (v[k] - v[j]) / ((k - j) * Td) if k > j else a_true[0]
+            est.update(v[k], F0[k] + dM * a_win)
+            hist.append(est.delta_mass)
+        assert est.delta_mass == pytest.approx(dM, abs=0.03 * 136.6)
+
+
+def test_mass_estimate_waits_for_speed_and_excitation() -> None:
+    est = MassEstimator(683.0, 0.01, 30)
+    for k in range(3000):  # 2 m/s: below MASS_MIN_SPEED, nothing is learnt
+        est.update(2.0 + 0.5 * math.sin(0.01 * k), 5000.0 * math.cos(0.01 * k))
+    assert est.delta_mass == 0.0
