@@ -138,3 +138,50 @@ def test_mass_estimate_waits_for_speed_and_excitation() -> None:
     for k in range(3000):  # 2 m/s: below MASS_MIN_SPEED, nothing is learnt
         est.update(2.0 + 0.5 * math.sin(0.01 * k), 5000.0 * math.cos(0.01 * k))
     assert est.delta_mass == 0.0
+
+
+# -- in the loop (built-in circuit, a few seconds) ---------------------------------------------
+def _short_run(cfg: Config, fault, seconds: float = 8.0):
+    from tsmpc.planning.circuit import builtin_circuit
+    from tsmpc.sim.simulator import Scenario, simulate
+
+    sc = Scenario("circuit", builtin_circuit(dt=cfg.rates.Tc), sensor_fault=fault)
+    return simulate(cfg, "ref", sc, max_steps=round(seconds / cfg.rates.Tc))
+
+
+class _LoseAt:
+    """NaN for the samples at the given times (a lost sample: the bus delivered nothing)."""
+
+    def __init__(self, times: tuple[float, ...]) -> None:
+        self.times = times
+
+    def __call__(self, t: float, y: np.ndarray) -> np.ndarray:
+        return np.full_like(y, np.nan) if any(abs(t - s) < 1e-9 for s in self.times) else y
+
+
+def test_a_lost_pose_is_dead_reckoned_not_held(cfg: Config) -> None:
+    """The MPC's errors at a step without a pose: from the dead-reckoned pose they are the true
+    ones to millimetres; from the held pose e_x is off by the distance driven in T_c (issue 21)."""
+    k = 60  # 6 s: about 8 m/s
+    out = {}
+    for on in (True, False):
+        c = replace(cfg, fusion=replace(cfg.fusion, predict_pose=on))
+        log = _short_run(c, _LoseAt((k * c.rates.Tc,)))
+        out[on] = float(log.errors_measured[k, 0] - log.errors[k, 0])
+        v = float(log.state_outer[k, 3])
+    assert abs(out[True]) < 0.02
+    assert out[False] == pytest.approx(v * cfg.rates.Tc, rel=0.1)
+
+
+def test_a_stalled_bus_is_rejected_like_a_lost_sample(cfg: Config) -> None:
+    from tsmpc.robustness import DropoutFault
+
+    for on in (True, False):
+        c = replace(cfg, fusion=replace(cfg.fusion, reject_repeated_samples=on))
+        log = _short_run(c, DropoutFault(period_s=100.0, duration_s=0.2, start_s=5.0))
+        held = log.events["repeated_rejected"]
+        if on:
+            assert held == 20  # 0.2 s of T_d samples repeat the one before the stall
+            assert log.events["mhe_rejected"] >= held
+        else:
+            assert held == 0 and log.events["mhe_rejected"] == 0
