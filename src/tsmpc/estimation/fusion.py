@@ -89,10 +89,9 @@ MASS_MEMORY_S = 100.0
 MASS_EXCITATION = 50.0
 #: Bounds of the mass correction, as fractions of the model mass.
 MASS_RANGE = (-0.4, 0.6)
-#: Prior weight of the stiffness fits [rad²]: the model's C counts as this much Σ α².
-STIFF_PRIOR = 1e-4
-#: Σ α² [rad²] beyond the prior before the fitted stiffnesses are used.
-STIFF_EXCITATION = 0.0
+#: Prior weight of the compliance fits [N²]: the model's 1/C counts as this much Σ F² (one chord
+#: at 500 N of axle force: a weak prior that data outweigh within a corner).
+STIFF_PRIOR = 2.5e5
 #: Memory of the stiffness fits [s].
 STIFF_MEMORY_S = 100.0
 #: Bounds of the fitted stiffnesses, as multiples of the model's.
@@ -194,12 +193,13 @@ class CourseFusion:
         self._sv = 0.0  # speed-offset fit: Σ w b, Σ w
         self._sw = 0.0
         self.n_chords = 0
-        # stiffness fits F_y = C α per axle: Σ α F, Σ α² (prior: the model's C over STIFF_PRIOR)
+        # compliance fits α = F / C per axle: Σ F α, Σ F² (prior: the model's 1/C over STIFF_PRIOR)
         p = self.vehicle
-        c0 = (p.C_f, p.C_r) if p is not None else (1.0, 1.0)
-        self._cnum = np.array(c0) * STIFF_PRIOR
+        c0 = np.array((p.C_f, p.C_r) if p is not None else (1.0, 1.0))
+        self._prior_num = STIFF_PRIOR / c0
+        self._cnum = self._prior_num.copy()
         self._cden = np.full(2, STIFF_PRIOR)
-        self._alpha_prev: float | None = None
+        self._alpha_hat_prev: float | None = None
 
     @property
     def slip_params(self) -> tuple[float, float]:
@@ -222,13 +222,14 @@ class CourseFusion:
 
     @property
     def stiffness(self) -> tuple[float, float] | None:
-        """(Ĉ_f, Ĉ_r) [N/rad] once each axle's fit holds ``STIFF_EXCITATION`` beyond its prior,
-        within ``STIFF_RANGE`` × the model's; None before."""
+        """(Ĉ_f, Ĉ_r) [N/rad]: the inverse of the fitted compliances (the model's until data
+        outweigh the prior), within ``STIFF_RANGE`` × the model's; None without a vehicle."""
         p = self.vehicle
-        if p is None or np.any(self._cden < STIFF_PRIOR + STIFF_EXCITATION):
+        if p is None:
             return None
         lo, hi = STIFF_RANGE
-        c = self._cnum / self._cden
+        comp = self._cnum / self._cden
+        c = np.where(comp > 0.0, 1.0 / np.maximum(comp, 1e-12), np.inf)
         return (min(max(float(c[0]), lo * p.C_f), hi * p.C_f),
                 min(max(float(c[1]), lo * p.C_r), hi * p.C_r))
 
@@ -318,29 +319,29 @@ class CourseFusion:
         self._sw = g * self._sw + w
         # axle stiffnesses from the course's slip (quasi-steady single track, SPEC §3/§5):
         # lateral force S = M v (ω + α̇) + F_x α and yaw moment T = I ω̇ give F_yF = (b S + T)/L,
-        # F_yR = (a S − T)/L; slips α_F = δ − α − a ω/v, α_R = b ω/v − α (chord means)
+        # F_yR = (a S − T)/L; slips α_F = δ − α − a ω/v, α_R = b ω/v − α (chord means). The fit
+        # is of the compliance 1/C with the force as regressor (slip = F / C): the forces come
+        # from v, ω (precise), the slips carry the course's noise — as the response, noise does not
+        # bias the fit (as a regressor it would pull C towards 0 on every straight).
         p = self.vehicle
         if p is not None and math.isfinite(self._omega_now):
             span = BASELINE * self.Tc
-            a_prev = self._alpha_prev
-            self._alpha_prev = a_course
-            if a_prev is not None:
-                al_dot = (a_course - a_prev) / self.Tc
-                vw = sum(i.s_vw for i in self._iv) / n
-                S = p.mass * (vw + v_meas * al_dot) + sum(i.s_F for i in self._iv) / n * a_course
-                T = p.inertia * (self._omega_now - self._iv[0].w_first) / span
-                L = p.a + p.b
-                w_v = sum(i.s_w_v for i in self._iv) / n
-                delta = sum(i.s_delta for i in self._iv) / n
-                slips = np.array([delta - a_course - p.a * w_v, p.b * w_v - a_course])
-                forces = np.array([(p.b * S + T) / L, (p.a * S - T) / L])
-                g2 = 1.0 - self.Tc / STIFF_MEMORY_S
-                prior = np.array([p.C_f, p.C_r]) * STIFF_PRIOR
-                # forgetting towards the prior (a fit without excitation returns to the model)
-                self._cnum = g2 * self._cnum + (1.0 - g2) * prior + slips * forces
-                self._cden = g2 * self._cden + (1.0 - g2) * STIFF_PRIOR + slips * slips
-        else:
-            self._alpha_prev = a_course
+            vw = sum(i.s_vw for i in self._iv) / n
+            # α̇ from the model's α̂ over consecutive chords (smooth; the course's own α would put
+            # its noise through a 1/T_c difference into the force)
+            ah_prev, self._alpha_hat_prev = self._alpha_hat_prev, alpha_hat
+            al_dot = 0.0 if ah_prev is None else (alpha_hat - ah_prev) / self.Tc
+            S = p.mass * (vw + v_meas * al_dot) + sum(i.s_F for i in self._iv) / n * a_course
+            T = p.inertia * (self._omega_now - self._iv[0].w_first) / span
+            L = p.a + p.b
+            w_v = sum(i.s_w_v for i in self._iv) / n
+            delta = sum(i.s_delta for i in self._iv) / n
+            slips = np.array([delta - a_course - p.a * w_v, p.b * w_v - a_course])
+            forces = np.array([(p.b * S + T) / L, (p.a * S - T) / L])
+            g2 = 1.0 - self.Tc / STIFF_MEMORY_S
+            # forgetting towards the prior (a fit without excitation returns to the model)
+            self._cnum = g2 * self._cnum + (1.0 - g2) * self._prior_num + forces * slips
+            self._cden = g2 * self._cden + (1.0 - g2) * STIFF_PRIOR + forces * forces
 
 
 class MassEstimator:
