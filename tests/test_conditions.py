@@ -209,3 +209,32 @@ def test_a_run_starting_again_gets_the_same_draws() -> None:
     b = [m(k * 0.01, _truth(k)) for k in range(200)]  # time went back to 0: a new run
     for u, w in zip(a, b, strict=True):
         np.testing.assert_array_equal(u, w)
+
+
+# -- the command line: --set KEY=VALUE ----------------------------------------------------------
+def test_set_assignments_reach_the_config_and_bad_ones_are_refused(cfg: Config) -> None:
+    from tsmpc.config import apply_overrides
+
+    c = apply_overrides(cfg, ["scenario.plant.mass_scale=1.2", "lqr.friction_estimate=uio",
+                              "scenario.friction=[{at_s = 60, mu = 0.3}]", "fusion.predict_pose=false"])
+    assert c.scenario.plant.mass_scale == 1.2 and c.lqr.friction_estimate == "uio"
+    assert c.scenario.friction[0].at_s == 60.0 and not c.fusion.predict_pose
+    for bad, msg in [("scenario.plant.mass_scale=9", "scenario.plant.mass_scale"),
+                     ("scenario.plant.mas=1", "scenario.plant.mas: unknown field"),
+                     ("scenario.plnt.mass_scale=1", "unknown field 'plnt'"),
+                     ("mass_scale", "expected KEY=VALUE"),
+                     ("fusion.predict_pose=yes", "fusion.predict_pose")]:
+        with pytest.raises(ConfigError, match=msg):
+            apply_overrides(cfg, [bad])
+
+
+def test_cli_set_exits_2_naming_the_field(tmp_path) -> None:
+    from typer.testing import CliRunner
+
+    from tsmpc.cli import app
+
+    res = CliRunner().invoke(app, ["run", "--set", "scenario.sensors.dropout_probability=0.9",
+                                   "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2
+    assert "scenario.sensors.dropout_probability" in res.output
+    assert not (tmp_path / "o").exists()  # refused before any work

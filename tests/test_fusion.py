@@ -185,3 +185,48 @@ def test_a_stalled_bus_is_rejected_like_a_lost_sample(cfg: Config) -> None:
             assert log.events["mhe_rejected"] >= held
         else:
             assert held == 0 and log.events["mhe_rejected"] == 0
+
+
+# -- the fitted stiffnesses reach both blocks alike (numpy oracle vs compiled kernel) -------------
+def test_set_cornering_stiffness_changes_numpy_and_kernel_alike(cfg: Config) -> None:
+    from types import SimpleNamespace
+
+    from tsmpc.control.ts_lqr import TSLQR
+    from tsmpc.estimation.mhe_uio import MHEUIO
+    from tsmpc.models.dynamic import DynamicTS
+    from tsmpc.synthesis.cache import load_or_design_dynamic
+
+    Td = cfg.rates.Td
+    dyn = DynamicTS(cfg.dynamic_box, cfg.vehicle, Td)
+    K = load_or_design_dynamic(cfg).K
+    lq = [TSLQR(K, dyn, cfg.vehicle, cfg.lqr, Td, jit=j) for j in (True, False)]
+    mh = [MHEUIO(cfg.mhe, dyn, cfg.vehicle, Td, np.array([10.0, 0.0, 0.1]), jit=j) for j in (True, False)]
+    assert lq[0]._kern is not None and mh[0]._kern is not None
+    Cf, Cr = 0.7 * cfg.vehicle.C_f, 1.3 * cfg.vehicle.C_r
+    before = []
+    for k in range(300):
+        if k == 100:
+            for b in (*lq, *mh):
+                b.set_cornering_stiffness(Cf, Cr)
+        y = np.array([10.0 + 0.01 * np.sin(0.1 * k), 0.1 + 0.01 * np.cos(0.07 * k)])
+        u = np.array([3000.0, 0.02 + 0.01 * np.sin(0.05 * k)])
+        ea, eb = mh[0].step(y, u), mh[1].step(y, u)
+        np.testing.assert_allclose(ea.x, eb.x, rtol=0, atol=1e-8)
+        est = SimpleNamespace(x=eb.x, F_fr=eb.F_fr, F_fr_raw=eb.F_fr_raw)
+        ca, cb = lq[0].step(est, 10.0, 0.1), lq[1].step(est, 10.0, 0.1)
+        assert ca.F_xR == pytest.approx(cb.F_xR, rel=1e-10, abs=1e-10)
+        assert ca.delta == pytest.approx(cb.delta, rel=1e-10, abs=1e-12)
+        if k == 99:
+            before = [lq[1].reference_gain(0.02, 10.0, K[0])]
+    # and the change is real: the reference gain (the steering feed-forward) moved
+    after = lq[1].reference_gain(0.02, 10.0, K[0])
+    assert not np.allclose(before[0], after, rtol=1e-3)
+    assert mh[1].vehicle.C_f == Cf and mh[1].model.params.C_r == Cr
+
+
+def test_the_paper_presets_have_every_fusion_switch_off(cfg: Config) -> None:
+    names = type(cfg.fusion).model_fields
+    assert all(getattr(cfg.fusion, n) for n in names)
+    for preset in ("paper", "paper-as-run"):
+        f = Config.preset(preset).fusion
+        assert not any(getattr(f, n) for n in names), preset

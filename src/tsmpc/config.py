@@ -16,7 +16,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
 from tsmpc.errors import ConfigError
 
@@ -560,31 +560,37 @@ class MetricsSettings(_Frozen):
 
 
 # -- the vehicle the controllers meet (issue 21): scenario vocabulary and the fusion switches -----
+#: Strict field types of this section: a number is a number (never a bool or a string), a flag is
+#: true or false (never "yes" or 1).
+_Num = Annotated[float, Strict()]
+_Flag = Annotated[bool, Strict()]
+_Count = Annotated[int, Strict()]
+
 class PlantScales(_Frozen):
     """The plant's parameters as scales of the config's vehicle (the controllers keep the config's
     unless ``scenario.oracle_tuned``): 1 = as the controllers assume. Plausible ranges: a car
     loaded or emptied (mass ×0.5–2), tyres of another make or pressure (stiffness ×0.3–3)."""
 
-    mass_scale: float = Field(1.0, ge=0.5, le=2.0, allow_inf_nan=False,
+    mass_scale: _Num = Field(1.0, ge=0.5, le=2.0, allow_inf_nan=False,
                               description="plant mass = scale × vehicle.mass [-], 0.5 to 2")
-    inertia_scale: float = Field(1.0, ge=0.5, le=2.0, allow_inf_nan=False,
+    inertia_scale: _Num = Field(1.0, ge=0.5, le=2.0, allow_inf_nan=False,
                                  description="plant yaw inertia = scale × vehicle.inertia [-], 0.5 to 2")
-    cornering_front_scale: float = Field(
+    cornering_front_scale: _Num = Field(
         1.0, ge=0.3, le=3.0, allow_inf_nan=False,
         description="plant front cornering stiffness = scale × vehicle C_f [-], 0.3 to 3")
-    cornering_rear_scale: float = Field(
+    cornering_rear_scale: _Num = Field(
         1.0, ge=0.3, le=3.0, allow_inf_nan=False,
         description="plant rear cornering stiffness = scale × vehicle C_r [-], 0.3 to 3")
-    cog_to_front_scale: float = Field(
+    cog_to_front_scale: _Num = Field(
         1.0, ge=0.5, le=1.5, allow_inf_nan=False,
         description="plant CoG-to-front-axle distance a = scale × vehicle.a, the wheelbase kept "
         "(b = a + b − scale a: the CoG moves, e.g. with the load) [-], 0.5 to 1.5")
-    mu_tyre: float | None = Field(None, ge=0.1, le=2.0, allow_inf_nan=False,
+    mu_tyre: _Num | None = Field(None, ge=0.1, le=2.0, allow_inf_nan=False,
                                   description="peak grip of the plant's tyres [-], 0.1 to 2; None = "
                                   "tyre.mu_tyre")
-    combined_slip: bool = Field(False, description="the plant's rear tyre has a friction ellipse "
+    combined_slip: _Flag = Field(False, description="the plant's rear tyre has a friction ellipse "
                                 "(tyre.combined_slip)")
-    grip_scales_with_road: bool = Field(False, description="the plant's tyre grip scales with "
+    grip_scales_with_road: _Flag = Field(False, description="the plant's tyre grip scales with "
                                         "mu(road) (tyre.scale_grip_with_road)")
 
 
@@ -592,28 +598,28 @@ class SensorFaults(_Frozen):
     """What the sensors deliver instead of the truth (issue 21), on top of the seeded noise of
     ``noise`` (SPEC §10). Biases and drifts add to [v, ω, θ]; drifts grow linearly from t = 0."""
 
-    dropout_probability: float = Field(
+    dropout_probability: _Num = Field(
         0.0, ge=0.0, le=0.5, allow_inf_nan=False,
         description="each T_d sample is lost with this probability (seeded from the run's seed) "
         "[-], 0 to 0.5: delivered as NaN, or as the previous sample with dropout_hold")
-    dropout_hold: bool = Field(False, description="a lost sample repeats the previous one (a "
+    dropout_hold: _Flag = Field(False, description="a lost sample repeats the previous one (a "
                                "stalled bus) instead of arriving as NaN")
-    v_bias: float = Field(0.0, ge=-2.0, le=2.0, allow_inf_nan=False,
+    v_bias: _Num = Field(0.0, ge=-2.0, le=2.0, allow_inf_nan=False,
                           description="speed-sensor offset [m/s], -2 to 2")
-    omega_bias: float = Field(0.0, ge=-0.2, le=0.2, allow_inf_nan=False,
+    omega_bias: _Num = Field(0.0, ge=-0.2, le=0.2, allow_inf_nan=False,
                               description="yaw-rate sensor offset [rad/s], -0.2 to 0.2")
-    theta_bias: float = Field(0.0, ge=-0.2, le=0.2, allow_inf_nan=False,
+    theta_bias: _Num = Field(0.0, ge=-0.2, le=0.2, allow_inf_nan=False,
                               description="heading sensor offset [rad], -0.2 to 0.2")
-    v_drift: float = Field(0.0, ge=-0.05, le=0.05, allow_inf_nan=False,
+    v_drift: _Num = Field(0.0, ge=-0.05, le=0.05, allow_inf_nan=False,
                            description="speed-offset growth [m/s per s], -0.05 to 0.05")
-    omega_drift: float = Field(0.0, ge=-0.005, le=0.005, allow_inf_nan=False,
+    omega_drift: _Num = Field(0.0, ge=-0.005, le=0.005, allow_inf_nan=False,
                                description="yaw-rate offset growth [rad/s per s], -0.005 to 0.005")
-    theta_drift: float = Field(0.0, ge=-0.005, le=0.005, allow_inf_nan=False,
+    theta_drift: _Num = Field(0.0, ge=-0.005, le=0.005, allow_inf_nan=False,
                                description="heading offset growth [rad per s], -0.005 to 0.005")
-    delay_s: float = Field(0.0, ge=0.0, le=0.5, allow_inf_nan=False,
+    delay_s: _Num = Field(0.0, ge=0.0, le=0.5, allow_inf_nan=False,
                            description="every sample arrives this late (rounded to whole T_d) [s], "
                            "0 to 0.5")
-    gnss_noise_scale: float = Field(
+    gnss_noise_scale: _Num = Field(
         1.0, ge=1.0, le=100.0, allow_inf_nan=False,
         description="the position (X, Y) noise sigma is this multiple of noise.position × "
         "noise.scale [-], 1 to 100 (the controllers keep assuming the configured sigma)")
@@ -625,23 +631,23 @@ class FrictionEvent(_Frozen):
     of ``at_s``, ``at_m``, ``at_corner``. Time triggers take ``ramp_s`` / ``duration_s``, the
     distance trigger ``ramp_m`` / ``length_m``. Events apply in order over the base profile."""
 
-    mu: float = Field(ge=0.0, le=1.5, allow_inf_nan=False, description="mu(road) of the surface "
+    mu: _Num = Field(ge=0.0, le=1.5, allow_inf_nan=False, description="mu(road) of the surface "
                       "[-], 0 to 1.5")
-    at_s: float | None = Field(None, ge=0.0, le=1e5, allow_inf_nan=False,
+    at_s: _Num | None = Field(None, ge=0.0, le=1e5, allow_inf_nan=False,
                                description="start time [s] since the run's start, 0 to 1e5")
-    at_m: float | None = Field(None, ge=0.0, le=1e7, allow_inf_nan=False,
+    at_m: _Num | None = Field(None, ge=0.0, le=1e7, allow_inf_nan=False,
                                description="start at this travelled distance [m], 0 to 1e7")
-    at_corner: int | None = Field(
+    at_corner: _Count | None = Field(
         None, ge=1, le=1000, description="start at the apex of the k-th corner of the reference "
         "(1-based): the k-th run of samples with |omega_d| above half the reference's largest, at "
         "its largest |omega_d|")
-    ramp_s: float | None = Field(None, ge=0.0, le=600.0, allow_inf_nan=False,
+    ramp_s: _Num | None = Field(None, ge=0.0, le=600.0, allow_inf_nan=False,
                                  description="transition time [s] (time and corner triggers), 0 to 600")
-    duration_s: float | None = Field(None, gt=0.0, le=1e5, allow_inf_nan=False,
+    duration_s: _Num | None = Field(None, gt=0.0, le=1e5, allow_inf_nan=False,
                                      description="how long the surface lasts [s]; None = to the end")
-    ramp_m: float | None = Field(None, ge=0.0, le=1e4, allow_inf_nan=False,
+    ramp_m: _Num | None = Field(None, ge=0.0, le=1e4, allow_inf_nan=False,
                                  description="transition length [m] (distance trigger), 0 to 1e4")
-    length_m: float | None = Field(None, gt=0.0, le=1e7, allow_inf_nan=False,
+    length_m: _Num | None = Field(None, gt=0.0, le=1e7, allow_inf_nan=False,
                                    description="how long the surface lasts [m]; None = to the end")
 
     @model_validator(mode="after")
@@ -664,13 +670,13 @@ class ScenarioActuators(_Frozen):
     """Actuator dynamics between the controllers' command and the plant (issue 21;
     :mod:`tsmpc.vehicle.actuators`); all zero = ideal actuators."""
 
-    steering_time_constant_s: float = Field(0.0, ge=0.0, le=1.0, allow_inf_nan=False,
+    steering_time_constant_s: _Num = Field(0.0, ge=0.0, le=1.0, allow_inf_nan=False,
                                             description="steering servo lag [s], 0 to 1")
-    steering_rate_limit: float | None = Field(None, gt=0.0, le=20.0, allow_inf_nan=False,
+    steering_rate_limit: _Num | None = Field(None, gt=0.0, le=20.0, allow_inf_nan=False,
                                               description="steering rate limit [rad/s]; None = none")
-    force_time_constant_s: float = Field(0.0, ge=0.0, le=2.0, allow_inf_nan=False,
+    force_time_constant_s: _Num = Field(0.0, ge=0.0, le=2.0, allow_inf_nan=False,
                                          description="drive-force lag [s], 0 to 2")
-    measured_steering: bool = Field(False, description="the platform measures the applied steering "
+    measured_steering: _Flag = Field(False, description="the platform measures the applied steering "
                                     "angle and gives it to the MHE")
 
     @property
@@ -689,16 +695,16 @@ class ScenarioSettings(_Frozen):
     plant: PlantScales = PlantScales()
     sensors: SensorFaults = SensorFaults()
     friction: tuple[FrictionEvent, ...] = Field((), description="mu(road) events over the base profile")
-    base_mu: float | None = Field(None, ge=0.0, le=1.5, allow_inf_nan=False,
+    base_mu: _Num | None = Field(None, ge=0.0, le=1.5, allow_inf_nan=False,
                                   description="constant mu(road) instead of the scenario's profile "
                                   "(the paper's by time) [-]; None = the profile")
     actuators: ScenarioActuators = ScenarioActuators()
-    oracle_tuned: bool = Field(
+    oracle_tuned: _Flag = Field(
         False, description="the controllers' vehicle is the plant's (scales applied): models and "
         "LMI designs built from the true parameters, and the sensors calibrated (biases and drifts "
         "removed); dropouts, delay and noise stay (the oracle-tuned comparison row, issue 21; "
         "never a deployable setting)")
-    replan_for_force_budget: bool = Field(
+    replan_for_force_budget: _Flag = Field(
         False, description="the reference is re-timed along its path so that it never asks for "
         "more acceleration than the plant vehicle's force budget allows ((F_max - mu M g - drag)/M "
         "at the base mu, 90 %): the planner knows the real vehicle")
@@ -709,24 +715,24 @@ class FusionSettings(_Frozen):
     on by default, off in the ``paper`` and ``paper-as-run`` presets (SPEC §13). Where each signal
     comes from: docs/robustness.md."""
 
-    reject_repeated_samples: bool = Field(
+    reject_repeated_samples: _Flag = Field(
         True, description="a sample bit-identical to the previous one (a stalled sensor bus "
         "re-delivering it) is treated as missing, like NaN")
-    predict_pose: bool = Field(
+    predict_pose: _Flag = Field(
         True, description="a missing pose (NaN, stale, repeated) is replaced by the last good pose "
         "dead-reckoned with the estimate (v, alpha, omega), not held")
-    course_slip: bool = Field(
+    course_slip: _Flag = Field(
         True, description="the slip the outer loop uses is corrected by the course over ground: "
         "alpha_hat + kappa a_y + beta, fitted online (least squares) to the measured course minus "
         "heading over a chord of the last MPC poses")
-    course_speed: bool = Field(
+    course_speed: _Flag = Field(
         True, description="the speed sensor's offset is estimated from the speed over ground "
         "(chord of the measured positions) and removed before the MHE and the inner loop")
-    stiffness_estimate: bool = Field(
+    stiffness_estimate: _Flag = Field(
         True, description="the axle cornering stiffnesses of the MHE's and the inner loop's models "
         "are fitted online (least squares F_y = C alpha per axle, the slip from the course over "
         "ground, the forces from the measured lateral and yaw accelerations); the LMI gains stay")
-    mass_estimate: bool = Field(
+    mass_estimate: _Flag = Field(
         True, description="the part of the friction estimate that follows the acceleration is the "
         "inertia of a mass error: estimated online (high-passed least squares), removed from the "
         "compensation and given to the speed feedback's mass")
