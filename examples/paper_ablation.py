@@ -36,8 +36,12 @@ def ablation_rows() -> list[tuple[str, Config, bool, str]]:
         ("+ speed-error feedback", fb, False, "adds M (v_ref − v̂)/τ, τ = 0.3 s"),
         ("+ MHE-window friction estimate", replace(fb, lqr=replace(fb.lqr, friction_estimate="window")),
          False, "compensates the MHE's window fit of F_fr instead of the one-step formula"),
-        ("+ slip-aware outer loop, tangent heading (= default)", Config(), False,
+        ("+ slip-aware outer loop, tangent heading, step-average reference",
+         replace(Config(), fusion=paper.fusion), False,
          "MPC errors of the velocity pose θ + α̂ against the path tangent θ_d + ω_d T_c/2"),
+        ("+ fusion and adaptation (= default)", Config(), False,
+         "stalled samples rejected, lost poses dead-reckoned, slip / speed offset / stiffness "
+         "fitted to the course over ground, mass error's inertia separated (fusion.*)"),
         ("oracle (default, true state, no compensation)", Config(), True,
          "inner loop gets the plant state; F̂_fr not added"),
     ]
