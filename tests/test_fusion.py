@@ -23,6 +23,8 @@ def test_repeated_samples_are_recognised_and_nan_is_not_a_repeat() -> None:
     nan = (math.nan,) * 5
     assert not g.repeated(nan) and not g.repeated(nan)
     assert g.n_repeated == 1
+    # with a stamp (the cascade appends it; −inf without one) a new stamp is a new sample
+    assert not g.repeated((*s, 0.01)) and not g.repeated((*s, 0.02)) and g.repeated((*s, 0.02))
 
 
 def test_dead_reckoning_is_the_kinematics_of_the_estimate() -> None:
@@ -50,8 +52,8 @@ def _drive(fusion: CourseFusion, segments, *, kappa: float, beta: float, v_offse
             alpha, delta = 0.01 * w, 0.0
         alpha_hat = alpha - (kappa * v * w + beta)
         for k in range(round(secs / Td)):
-            if k % n_in == 0:
-                fusion.close(np.array([X, Y, th]), v + v_offset, w)
+            if k % n_in == 0:  # the reference turns as the car does (its v_d ω_d)
+                fusion.close(np.array([X, Y, th]), v + v_offset, w, v * w)
                 first = False
             fusion.sample(True, th, v + v_offset, alpha_hat, v * w, w, delta, 0.0)
             # exact motion over T_d: heading θ + α of the velocity turns at ω (α constant)
@@ -101,6 +103,25 @@ def test_course_fusion_fits_the_axle_stiffnesses_of_the_true_vehicle(cfg: Config
     _drive(g, SEGMENTS * 2, kappa=0.0, beta=0.0, v_offset=0.0, true_vehicle=model)
     assert g.stiffness[0] == pytest.approx(model.C_f, rel=0.03)
     assert g.stiffness[1] == pytest.approx(model.C_r, rel=0.03)
+
+
+def test_the_stiffness_fit_ignores_straights_and_unsteady_chords(cfg: Config) -> None:
+    """Where the reference does not turn (a car weaving on a straight) or the yaw rate changes by
+    more than QUASI_STEADY_OMEGA along the chord, the fit keeps the model's stiffnesses."""
+    model = cfg.vehicle
+    true = replace(model, cornering_stiffness_front=0.7 * model.C_f)
+    f = CourseFusion(0.1, 0.0, model)
+    X = Y = th = 0.0
+    for k in range(3000):  # 30 s of a ±0.15 rad/s yaw oscillation on a straight reference
+        w = 0.15 * math.sin(2 * math.pi * 1.5 * k * 0.01)
+        alpha, _F, delta = equilibrium(12.0, w, true)
+        if k % 10 == 0:
+            f.close(np.array([X, Y, th]), 12.0, w, 0.0)
+        f.sample(True, th, 12.0, alpha, 12.0 * w, w, delta, 0.0)
+        X += 12.0 * math.cos(th + alpha) * 0.01
+        Y += 12.0 * math.sin(th + alpha) * 0.01
+        th += w * 0.01
+    assert f.stiffness == pytest.approx((model.C_f, model.C_r))
 
 
 def test_a_missing_pose_spoils_its_chords_only() -> None:

@@ -53,7 +53,8 @@ def test_cases_and_controllers_expand_into_each_runs_config(tmp_path: Path) -> N
 @pytest.mark.parametrize(("change", "message"), [
     ('[cases.bad]\nplant = { mass_scale = 9.0 }\n', "cases.bad: .*scenario.plant.mass_scale"),
     ('[cases.bad]\nplnt = { mass_scale = 1.2 }\n', "cases.bad: .*scenario.plnt: unknown field"),
-    ('[controllers.bad]\nlqr = { speed_time_constant = -1.0 }\n', "controllers.bad: .*lqr.speed_time_constant"),
+    ('[controllers.bad]\nlqr = { speed_time_constant = -1.0 }\n',
+     "controllers.bad: .*lqr.speed_time_constant"),
     ('[controllers.bad]\npreset = "fast"\n', "controllers.bad: .*unknown preset 'fast'"),
 ])
 def test_a_bad_named_case_or_controller_fails_before_any_task(tmp_path: Path, change: str,

@@ -294,7 +294,8 @@ class Cascade:
         ev = self._events
         fresh = self._fresh(t, m)
         fu, fs = self._fusion, self.cfg.fusion  # issue 21: estimation/fusion.py
-        if fs.reject_repeated_samples and fu.guard.repeated((X, Y, th, v, om)):
+        stamp = -math.inf if m.stamp is None else float(m.stamp)  # a new stamp is a new sample
+        if fs.reject_repeated_samples and fu.guard.repeated((X, Y, th, v, om, stamp)):
             fresh = False  # a stalled bus re-delivering the last sample: missing, like NaN
             ev["repeated_rejected"] += 1
         pose_ok = fresh and _finite(X, Y, th)
@@ -310,8 +311,10 @@ class Cascade:
                 if fs.predict_pose and fu.pose.pose is not None:  # or the dead-reckoned one
                     self._pose = fu.pose.pose.copy()
             if fu.any_course:  # an MPC step closes the course fusion's interval
+                kc = min(max(math.floor(t / self.Tc + 1e-6), 0), len(self.reference) - 1)
                 fu.course.close(np.array([X, Y, th]) if pose_ok else None, v if fresh else math.nan,
-                                om if fresh else math.nan)
+                                om if fresh else math.nan,
+                                float(self.reference.v[kc] * self.reference.omega[kc]))
                 if fs.stiffness_estimate:
                     self._apply_stiffness(fu.course.stiffness)
             if self.cfg.rates.inner_steps_per_outer is None:

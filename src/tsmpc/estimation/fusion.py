@@ -6,6 +6,7 @@ Every signal here comes from the sensor samples the cascade is given (pose, v, �
 MHE's estimate; nothing reads the plant (docs/robustness.md lists the sources).
 
 * :class:`RepeatGuard` (``reject_repeated_samples``) — a sample bit-identical to the previous one
+  (its five numbers and its stamp, when the platform stamps samples: a new stamp is a new sample)
   is a stalled sensor bus re-delivering it: with any sensor noise, or a moving car, two real
   samples never agree in all five numbers. It is treated as missing (like NaN), so the MHE
   predicts instead of fitting a frozen speed (which it would explain as a friction jump).
@@ -33,11 +34,12 @@ MHE's estimate; nothing reads the plant (docs/robustness.md lists the sources).
   - the axle cornering stiffnesses (``stiffness_estimate``): with the chord's slip ᾱ from the
     course, the axle forces from the measured lateral and yaw accelerations and the slips of the
     single-track model (SPEC §3, §5), F_yF = C_f (δ − α − a ω/v) and F_yR = C_r (b ω/v − α) are
-    fitted per axle (least squares through the origin, the model's C as prior, forgetting over
-    ``STIFF_MEMORY_S``). The fitted C_f, C_r replace the model's in the MHE and in the inner loop's
-    reference gain N̄ (the LMI gains stay): with them α̂ and the steering feed-forward are right
-    (issue 21: the stiffness error was worth 0.08 m of RMSE y; with the true C in both blocks the
-    loss disappears, in the LMI gains alone it does not).
+    fitted per axle (least squares through the origin on the compliance 1/C, the model's C as
+    prior, forgetting over ``STIFF_MEMORY_S``), from chords in a steady corner of the reference
+    only (``CORNER_ACCEL``, ``QUASI_STEADY_OMEGA``). The fitted C_f, C_r replace the model's in
+    the MHE and in the inner loop's reference gain N̄ (the LMI gains stay): with them α̂ and the
+    steering feed-forward are right (issue 21: the stiffness error was worth 0.08 m of RMSE y;
+    with the true C in both blocks the loss disappears, in the LMI gains alone it does not).
 
   The fits compare like with like (means over the same chord), so the chord's lag in a transient
   does not bias them; only chords of measured (not predicted) poses count.
@@ -96,6 +98,12 @@ STIFF_PRIOR = 2.5e5
 STIFF_MEMORY_S = 100.0
 #: Bounds of the fitted stiffnesses, as multiples of the model's.
 STIFF_RANGE = (0.5, 2.0)
+#: Largest spread of ω along a chord [rad/s] for it to count in the stiffness fit (quasi-steady:
+#: 0.1 rad/s over the 0.5 s chord is a slow corner entry; a yaw oscillation is far beyond).
+QUASI_STEADY_OMEGA = 0.1
+#: Smallest lateral acceleration of the *reference* v_d ω_d [m/s²] all along a chord for it to count
+#: in the stiffness fit (the reference, not the car: a car weaving on a straight is no corner).
+CORNER_ACCEL = 0.2
 
 
 def _wrap(a: float) -> float:
@@ -114,8 +122,9 @@ class RepeatGuard:
         self.n_repeated = 0
 
     def repeated(self, sample: tuple[float, ...]) -> bool:
-        """True (counted) when ``sample`` equals the previous finite sample in every number."""
-        if not all(math.isfinite(c) for c in sample):
+        """True (counted) when ``sample`` equals the previous finite sample in every number (an
+        infinite entry, e.g. a missing stamp as −inf, counts as finite here)."""
+        if any(math.isnan(c) for c in sample):
             return False
         same = self._last is not None and sample == self._last
         self._last = sample
@@ -170,6 +179,9 @@ class _Interval:
     s_vw: float = 0.0  #: Σ v ω (measured lateral acceleration, α̇ aside)
     s_F: float = 0.0  #: Σ F_xR (applied force)
     w_first: float = 0.0  #: ω of the opening sample
+    w_min: float = math.inf  #: smallest and largest ω of the interval
+    w_max: float = -math.inf
+    ay_ref: float = 0.0  #: smallest |v_d ω_d| of the reference at the interval's ends
 
 
 class CourseFusion:
@@ -250,6 +262,7 @@ class CourseFusion:
         w = 0.5 if cur.n == 0 else 1.0  # trapezoid: the opening sample counts half
         if cur.n == 0:
             cur.w_first = omega
+        cur.w_min, cur.w_max = min(cur.w_min, omega), max(cur.w_max, omega)
         cur.n += 1
         cur.sv_full += v
         cur.s_delta += delta
@@ -261,13 +274,17 @@ class CourseFusion:
         cur.sv_alpha += v * alpha_hat
         cur.sv_ay += v * a_y
 
-    def close(self, pose: NDArray[np.float64] | None, v: float, omega: float = 0.0) -> None:
+    def close(self, pose: NDArray[np.float64] | None, v: float, omega: float = 0.0,
+              ay_ref: float = 0.0) -> None:
         """An MPC step: ``pose`` the measured pose now (None if missing: no chord ends here),
-        ``v`` and ``omega`` the measured speed and yaw rate now (the closing sample)."""
+        ``v`` and ``omega`` the measured speed and yaw rate now (the closing sample), ``ay_ref``
+        the reference's lateral acceleration v_d ω_d now."""
         self._omega_now = omega
+        ay = abs(ay_ref) if math.isfinite(ay_ref) else 0.0
         cur = self._cur
         good = pose is not None and bool(np.all(np.isfinite(pose))) and math.isfinite(v)
         if cur is not None:
+            cur.ay_ref = min(cur.ay_ref, ay)
             if good and cur.n > 0 and cur.ok:
                 assert pose is not None
                 dth = _wrap(float(pose[2]) - cur.start[2])
@@ -279,7 +296,7 @@ class CourseFusion:
             if good and len(self._iv) == BASELINE and all(i.ok for i in self._iv):
                 assert pose is not None
                 self._chord(np.asarray(pose, dtype=float))
-        self._cur = _Interval(start=tuple(float(c) for c in pose)) if good else None  # type: ignore[arg-type]
+        self._cur = _Interval(start=tuple(float(c) for c in pose), ay_ref=ay) if good else None  # type: ignore[arg-type]
 
     def _chord(self, end: NDArray[np.float64]) -> None:
         first = self._iv[0].start
@@ -324,9 +341,19 @@ class CourseFusion:
         # from v, ω (precise), the slips carry the course's noise — as the response, noise does not
         # bias the fit (as a regressor it would pull C towards 0 on every straight).
         p = self.vehicle
-        if p is not None and math.isfinite(self._omega_now):
+        w_lo = min(min(i.w_min for i in self._iv), self._omega_now)
+        w_hi = max(max(i.w_max for i in self._iv), self._omega_now)
+        # chord means stand for the instantaneous relation only where the motion is steady along
+        # the chord: a car oscillating in yaw would feed the fit means of products that are not
+        # products of means (found on Monza with 30 % less rear stiffness: the fit ran away)
+        steady = w_hi - w_lo <= QUASI_STEADY_OMEGA
+        vw = sum(i.s_vw for i in self._iv) / n
+        # and only where the reference turns: a straight carries no information on C (slips and
+        # forces ≈ 0), only the traces of a lightly damped yaw motion (the same Monza case drifted
+        # there); the reference's turn, not the car's, so that weaving does not count as a corner
+        cornering = min(i.ay_ref for i in self._iv) >= CORNER_ACCEL
+        if p is not None and math.isfinite(self._omega_now) and steady and cornering:
             span = BASELINE * self.Tc
-            vw = sum(i.s_vw for i in self._iv) / n
             # α̇ from the model's α̂ over consecutive chords (smooth; the course's own α would put
             # its noise through a 1/T_c difference into the force)
             ah_prev, self._alpha_hat_prev = self._alpha_hat_prev, alpha_hat

@@ -101,8 +101,8 @@ def acceptance(table: Any, track: str, cases: list[str], default: str = "default
         physics = not o_done or any(float(o[k]) > PHYSICS_FACTOR * float(nom[k]) for k in RATIO_COLUMNS)
         diverged = str(d["status"]) != "completed"
         bounds_ok = None if physics else all(float(d[k]) <= b for k, b in BOUNDS.items())
-        passed = (not diverged or not o_done) and ratios[worst] <= RATIO and sat <= SAT_RATIO \
-            and bounds_ok is not False
+        # a run that leaves the road never meets the criteria, even beside an oracle that does too
+        passed = not diverged and ratios[worst] <= RATIO and sat <= SAT_RATIO and bounds_ok is not False
         out.append(Verdict(case, ratios[worst], worst, sat, physics, bounds_ok, diverged, passed))
     return out
 
@@ -114,8 +114,9 @@ def verdict_table(verdicts: list[Verdict]) -> str:
              "bounds (y ≤ 0.04, max abs e_y ≤ 0.25, v ≤ 0.15) | met |", "|---|---|---|---|---|---|---|"]
     for v in verdicts:
         bounds = "n/a (physics)" if v.bounds_ok is None else ("yes" if v.bounds_ok else "**no**")
+        met = "yes" if v.passed else ("**no** (diverged)" if v.diverged else "**no**")
         lines.append(f"| {v.case} | {v.worst_ratio:.2f} | {names[v.worst_column]} | {v.sat_ratio:.2f} | "
-                     f"{'yes' if v.physics else 'no'} | {bounds} | {'yes' if v.passed else '**no**'} |")
+                     f"{'yes' if v.physics else 'no'} | {bounds} | {met} |")
     return "\n".join(lines)
 
 
