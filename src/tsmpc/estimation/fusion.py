@@ -35,8 +35,8 @@ MHE's estimate; nothing reads the plant (docs/robustness.md lists the sources).
     course, the axle forces from the measured lateral and yaw accelerations and the slips of the
     single-track model (SPEC §3, §5), F_yF = C_f (δ − α − a ω/v) and F_yR = C_r (b ω/v − α) are
     fitted per axle (least squares through the origin on the compliance 1/C, the model's C as
-    prior, forgetting over ``STIFF_MEMORY_S``), from chords in a steady corner of the reference
-    only (``CORNER_ACCEL``, ``QUASI_STEADY_OMEGA``). The fitted C_f, C_r replace the model's in
+    prior, forgetting over ``STIFF_MEMORY_S``), from chords where the reference turns only
+    (``CORNER_ACCEL``). The fitted C_f, C_r replace the model's in
     the MHE and in the inner loop's reference gain N̄ (the LMI gains stay): with them α̂ and the
     steering feed-forward are right (issue 21: the stiffness error was worth 0.08 m of RMSE y;
     with the true C in both blocks the loss disappears, in the LMI gains alone it does not).
@@ -98,9 +98,6 @@ STIFF_PRIOR = 2.5e5
 STIFF_MEMORY_S = 100.0
 #: Bounds of the fitted stiffnesses, as multiples of the model's.
 STIFF_RANGE = (0.5, 2.0)
-#: Largest spread of ω along a chord [rad/s] for it to count in the stiffness fit (quasi-steady:
-#: 0.1 rad/s over the 0.5 s chord is a slow corner entry; a yaw oscillation is far beyond).
-QUASI_STEADY_OMEGA = 0.1
 #: Smallest lateral acceleration of the *reference* v_d ω_d [m/s²] all along a chord for it to count
 #: in the stiffness fit (the reference, not the car: a car weaving on a straight is no corner).
 CORNER_ACCEL = 0.2
@@ -179,8 +176,6 @@ class _Interval:
     s_vw: float = 0.0  #: Σ v ω (measured lateral acceleration, α̇ aside)
     s_F: float = 0.0  #: Σ F_xR (applied force)
     w_first: float = 0.0  #: ω of the opening sample
-    w_min: float = math.inf  #: smallest and largest ω of the interval
-    w_max: float = -math.inf
     ay_ref: float = 0.0  #: smallest |v_d ω_d| of the reference at the interval's ends
 
 
@@ -262,7 +257,6 @@ class CourseFusion:
         w = 0.5 if cur.n == 0 else 1.0  # trapezoid: the opening sample counts half
         if cur.n == 0:
             cur.w_first = omega
-        cur.w_min, cur.w_max = min(cur.w_min, omega), max(cur.w_max, omega)
         cur.n += 1
         cur.sv_full += v
         cur.s_delta += delta
@@ -341,18 +335,12 @@ class CourseFusion:
         # from v, ω (precise), the slips carry the course's noise — as the response, noise does not
         # bias the fit (as a regressor it would pull C towards 0 on every straight).
         p = self.vehicle
-        w_lo = min(min(i.w_min for i in self._iv), self._omega_now)
-        w_hi = max(max(i.w_max for i in self._iv), self._omega_now)
-        # chord means stand for the instantaneous relation only where the motion is steady along
-        # the chord: a car oscillating in yaw would feed the fit means of products that are not
-        # products of means (found on Monza with 30 % less rear stiffness: the fit ran away)
-        steady = w_hi - w_lo <= QUASI_STEADY_OMEGA
         vw = sum(i.s_vw for i in self._iv) / n
         # and only where the reference turns: a straight carries no information on C (slips and
         # forces ≈ 0), only the traces of a lightly damped yaw motion (the same Monza case drifted
         # there); the reference's turn, not the car's, so that weaving does not count as a corner
         cornering = min(i.ay_ref for i in self._iv) >= CORNER_ACCEL
-        if p is not None and math.isfinite(self._omega_now) and steady and cornering:
+        if p is not None and math.isfinite(self._omega_now) and cornering:
             span = BASELINE * self.Tc
             # α̇ from the model's α̂ over consecutive chords (smooth; the course's own α would put
             # its noise through a 1/T_c difference into the force)
