@@ -216,13 +216,15 @@ def test_mhe_kernel_equals_the_dense_qp_on_random_windows(cfg: Config) -> None:
 
 
 # -- plant block -------------------------------------------------------------------------------
-@pytest.mark.parametrize("tyre", ["pacejka", "linear"])
+@pytest.mark.parametrize(("tyre", "combined"), [("pacejka", False), ("linear", False),
+                                                ("pacejka", True)])
 @pytest.mark.parametrize("scale_grip", [False, True])
-def test_plant_block_equals_the_float_rk4(cfg: Config, tyre: str, scale_grip: bool) -> None:
+def test_plant_block_equals_the_float_rk4(cfg: Config, tyre: str, scale_grip: bool,
+                                          combined: bool) -> None:
     from tsmpc.config import TyreParams
     from tsmpc.vehicle.plant import Plant
 
-    tp = TyreParams(model=tyre, scale_grip_with_road=scale_grip)
+    tp = TyreParams(model=tyre, scale_grip_with_road=scale_grip, combined_slip=combined)
     a = Plant(cfg.vehicle, tp, cfg.rates.h, jit=True)
     b = Plant(cfg.vehicle, tp, cfg.rates.h, jit=False)
     assert a._kern is not None and b._kern is None

@@ -38,7 +38,11 @@ def test_paper_preset_is_the_published_cascade() -> None:
     assert not any(getattr(paper.mpc, f) for f in outer)
     assert all(getattr(default.mpc, f) for f in outer)
     # only the named switches differ (not the whole lqr section: force limits, compensation, ...)
-    beyond = {"lqr": {"speed_feedback", "friction_estimate"}, "mpc": set(outer)}
+    # the fusion and adaptation switches (issue 21) likewise
+    fusion = set(type(default.fusion).model_fields)
+    assert not any(getattr(paper.fusion, f) for f in fusion)
+    assert all(getattr(default.fusion, f) for f in fusion)
+    beyond = {"lqr": {"speed_feedback", "friction_estimate"}, "mpc": set(outer), "fusion": fusion}
     assert paper.model_dump(exclude=beyond) == default.model_dump(exclude=beyond)
     assert Config.preset("default") == default
 

@@ -29,6 +29,8 @@ __all__ = [
     "DynamicLMISettings",
     "FeasiblePoint",
     "FrictionEstimate",
+    "FrictionEvent",
+    "FusionSettings",
     "InnerLaw",
     "KinematicBox",
     "KinematicLMISettings",
@@ -40,15 +42,20 @@ __all__ = [
     "MetricsSettings",
     "NoiseSettings",
     "PlannerSettings",
+    "PlantScales",
     "PurePursuitSettings",
     "Rates",
+    "ScenarioActuators",
+    "ScenarioSettings",
     "SchedulingMode",
+    "SensorFaults",
     "StanleySettings",
     "StrictBool",
     "StrictInt",
     "TyreModel",
     "TyreParams",
     "VehicleParams",
+    "apply_overrides",
     "format_validation_error",
     "load_config",
     "replace",
@@ -317,6 +324,18 @@ class TyreParams(_Frozen):
     )
     mu_dry: PositiveFloat = Field(0.9, le=3.0, description="road mu at which the tyre has mu_tyre "
                                   "[-], (0, 3]")
+    combined_slip: StrictBool = Field(
+        False, description="beyond the paper's plant (issue 21): the rear tyre's traction force and "
+        "its lateral force share its grip D = mu F_zR (friction ellipse); the traction saturates at "
+        "+-D and the lateral force shrinks by sqrt(1 - (F_t/D)^2). Pacejka tyres only "
+        "(tsmpc.vehicle.plant)")
+
+    @model_validator(mode="after")
+    def _combined_needs_pacejka(self) -> TyreParams:
+        if self.combined_slip and self.model != TyreModel.PACEJKA:
+            raise ConfigError("tyre.combined_slip: needs tyre.model = \"pacejka\" (the linear tyre "
+                              "is the control model's, without a grip limit)")
+        return self
 
 
 class Rates(_Frozen):
@@ -732,6 +751,186 @@ class BaselineSettings(_Frozen):
         "gain · e_x, proportional feedback on the along-track error [1/s], 0 to 20")
 
 
+# -- the vehicle the controllers meet (issue 21): scenario vocabulary and the fusion switches -----
+#: Strict field types of this section: a number is a number (never a bool or a string), a flag is
+#: true or false (never "yes" or 1).
+_Num = Annotated[float, Strict()]
+_Flag = Annotated[bool, Strict()]
+_Count = Annotated[int, Strict()]
+
+class PlantScales(_Frozen):
+    """The plant's parameters as scales of the config's vehicle (the controllers keep the config's
+    unless ``scenario.oracle_tuned``): 1 = as the controllers assume. Plausible ranges: a car
+    loaded or emptied (mass ×0.5–2), tyres of another make or pressure (stiffness ×0.3–3)."""
+
+    mass_scale: _Num = Field(1.0, ge=0.5, le=2.0, allow_inf_nan=False,
+                              description="plant mass = scale × vehicle.mass [-], 0.5 to 2")
+    inertia_scale: _Num = Field(1.0, ge=0.5, le=2.0, allow_inf_nan=False,
+                                 description="plant yaw inertia = scale × vehicle.inertia [-], 0.5 to 2")
+    cornering_front_scale: _Num = Field(
+        1.0, ge=0.3, le=3.0, allow_inf_nan=False,
+        description="plant front cornering stiffness = scale × vehicle C_f [-], 0.3 to 3")
+    cornering_rear_scale: _Num = Field(
+        1.0, ge=0.3, le=3.0, allow_inf_nan=False,
+        description="plant rear cornering stiffness = scale × vehicle C_r [-], 0.3 to 3")
+    cog_to_front_scale: _Num = Field(
+        1.0, ge=0.5, le=1.5, allow_inf_nan=False,
+        description="plant CoG-to-front-axle distance a = scale × vehicle.a, the wheelbase kept "
+        "(b = a + b − scale a: the CoG moves, e.g. with the load) [-], 0.5 to 1.5")
+    mu_tyre: _Num | None = Field(None, ge=0.1, le=2.0, allow_inf_nan=False,
+                                  description="peak grip of the plant's tyres [-], 0.1 to 2; None = "
+                                  "tyre.mu_tyre")
+    combined_slip: _Flag = Field(False, description="the plant's rear tyre has a friction ellipse "
+                                "(tyre.combined_slip)")
+    grip_scales_with_road: _Flag = Field(False, description="the plant's tyre grip scales with "
+                                        "mu(road) (tyre.scale_grip_with_road)")
+
+
+class SensorFaults(_Frozen):
+    """What the sensors deliver instead of the truth (issue 21), on top of the seeded noise of
+    ``noise``. Biases and drifts add to [v, ω, θ]; drifts grow linearly from t = 0."""
+
+    dropout_probability: _Num = Field(
+        0.0, ge=0.0, le=0.5, allow_inf_nan=False,
+        description="each T_d sample is lost with this probability (seeded from the run's seed) "
+        "[-], 0 to 0.5: delivered as NaN, or as the previous sample with dropout_hold")
+    dropout_hold: _Flag = Field(False, description="a lost sample repeats the previous one (a "
+                               "stalled bus) instead of arriving as NaN")
+    v_bias: _Num = Field(0.0, ge=-2.0, le=2.0, allow_inf_nan=False,
+                          description="speed-sensor offset [m/s], -2 to 2")
+    omega_bias: _Num = Field(0.0, ge=-0.2, le=0.2, allow_inf_nan=False,
+                              description="yaw-rate sensor offset [rad/s], -0.2 to 0.2")
+    theta_bias: _Num = Field(0.0, ge=-0.2, le=0.2, allow_inf_nan=False,
+                              description="heading sensor offset [rad], -0.2 to 0.2")
+    v_drift: _Num = Field(0.0, ge=-0.05, le=0.05, allow_inf_nan=False,
+                           description="speed-offset growth [m/s per s], -0.05 to 0.05")
+    omega_drift: _Num = Field(0.0, ge=-0.005, le=0.005, allow_inf_nan=False,
+                               description="yaw-rate offset growth [rad/s per s], -0.005 to 0.005")
+    theta_drift: _Num = Field(0.0, ge=-0.005, le=0.005, allow_inf_nan=False,
+                               description="heading offset growth [rad per s], -0.005 to 0.005")
+    delay_s: _Num = Field(0.0, ge=0.0, le=0.5, allow_inf_nan=False,
+                           description="every sample arrives this late (rounded to whole T_d) [s], "
+                           "0 to 0.5")
+    gnss_noise_scale: _Num = Field(
+        1.0, ge=1.0, le=100.0, allow_inf_nan=False,
+        description="the position (X, Y) noise sigma is this multiple of noise.position × "
+        "noise.scale [-], 1 to 100 (the controllers keep assuming the configured sigma)")
+
+
+class FrictionEvent(_Frozen):
+    """A change of μ(road) during a run (issue 21): from a time, a travelled distance or
+    a corner's apex, as a step (ramp 0) or a linear ramp, for a while or to the end. Exactly one
+    of ``at_s``, ``at_m``, ``at_corner``. Time triggers take ``ramp_s`` / ``duration_s``, the
+    distance trigger ``ramp_m`` / ``length_m``. Events apply in order over the base profile."""
+
+    mu: _Num = Field(ge=0.0, le=1.5, allow_inf_nan=False, description="mu(road) of the surface "
+                      "[-], 0 to 1.5")
+    at_s: _Num | None = Field(None, ge=0.0, le=1e5, allow_inf_nan=False,
+                               description="start time [s] since the run's start, 0 to 1e5")
+    at_m: _Num | None = Field(None, ge=0.0, le=1e7, allow_inf_nan=False,
+                               description="start at this travelled distance [m], 0 to 1e7")
+    at_corner: _Count | None = Field(
+        None, ge=1, le=1000, description="start at the apex of the k-th corner of the reference "
+        "(1-based): the k-th run of samples with |omega_d| above half the reference's largest, at "
+        "its largest |omega_d|")
+    ramp_s: _Num | None = Field(None, ge=0.0, le=600.0, allow_inf_nan=False,
+                                 description="transition time [s] (time and corner triggers), 0 to 600")
+    duration_s: _Num | None = Field(None, gt=0.0, le=1e5, allow_inf_nan=False,
+                                     description="how long the surface lasts [s]; None = to the end")
+    ramp_m: _Num | None = Field(None, ge=0.0, le=1e4, allow_inf_nan=False,
+                                 description="transition length [m] (distance trigger), 0 to 1e4")
+    length_m: _Num | None = Field(None, gt=0.0, le=1e7, allow_inf_nan=False,
+                                   description="how long the surface lasts [m]; None = to the end")
+
+    @model_validator(mode="after")
+    def _trigger(self) -> FrictionEvent:
+        given = [n for n in ("at_s", "at_m", "at_corner") if getattr(self, n) is not None]
+        if len(given) != 1:
+            raise ConfigError("scenario.friction: give exactly one of at_s, at_m, at_corner "
+                              f"(got {', '.join(given) or 'none'})")
+        by_distance = self.at_m is not None
+        wrong = [n for n in (("ramp_s", "duration_s") if by_distance else ("ramp_m", "length_m"))
+                 if getattr(self, n) is not None]
+        if wrong:
+            unit = "metres (ramp_m, length_m)" if by_distance else "seconds (ramp_s, duration_s)"
+            raise ConfigError(f"scenario.friction: {', '.join(wrong)} does not fit the trigger "
+                              f"{given[0]}: it takes {unit}")
+        return self
+
+
+class ScenarioActuators(_Frozen):
+    """Actuator dynamics between the controllers' command and the plant (issue 21;
+    :mod:`tsmpc.vehicle.actuators`); all zero = ideal actuators."""
+
+    steering_time_constant_s: _Num = Field(0.0, ge=0.0, le=1.0, allow_inf_nan=False,
+                                            description="steering servo lag [s], 0 to 1")
+    steering_rate_limit: _Num | None = Field(None, gt=0.0, le=20.0, allow_inf_nan=False,
+                                              description="steering rate limit [rad/s]; None = none")
+    force_time_constant_s: _Num = Field(0.0, ge=0.0, le=2.0, allow_inf_nan=False,
+                                         description="drive-force lag [s], 0 to 2")
+    measured_steering: _Flag = Field(False, description="the platform measures the applied steering "
+                                    "angle and gives it to the MHE")
+
+    @property
+    def active(self) -> bool:
+        """Any actuator dynamics at all."""
+        return (self.steering_time_constant_s > 0 or self.steering_rate_limit is not None
+                or self.force_time_constant_s > 0)
+
+
+class ScenarioSettings(_Frozen):
+    """The conditions a run meets beyond the reference (issue 21), written without Python:
+    the plant's parameters, μ(road) events, sensor faults and actuators. Applied by
+    :func:`tsmpc.conditions.apply_conditions` (``tsmpc compare/run`` and sweeps); the defaults
+    change nothing."""
+
+    plant: PlantScales = PlantScales()
+    sensors: SensorFaults = SensorFaults()
+    friction: tuple[FrictionEvent, ...] = Field((), description="mu(road) events over the base profile")
+    base_mu: _Num | None = Field(None, ge=0.0, le=1.5, allow_inf_nan=False,
+                                  description="constant mu(road) instead of the scenario's profile "
+                                  "(the paper's by time) [-]; None = the profile")
+    actuators: ScenarioActuators = ScenarioActuators()
+    oracle_tuned: _Flag = Field(
+        False, description="the controllers' vehicle is the plant's (scales applied): models and "
+        "LMI designs built from the true parameters, and the sensors calibrated (biases and drifts "
+        "removed); dropouts, delay and noise stay (the oracle-tuned comparison row, issue 21; "
+        "never a deployable setting)")
+    replan_for_force_budget: _Flag = Field(
+        False, description="the reference is re-timed along its path so that it never asks for "
+        "more acceleration than the plant vehicle's force budget allows ((F_max - mu M g - drag)/M "
+        "at the base mu, 90 %): the planner knows the real vehicle")
+
+
+class FusionSettings(_Frozen):
+    """Measurement fusion and online adaptation beyond the paper (issue 21): each a named switch,
+    on by default, off in the ``paper`` and ``paper-as-run`` presets. Where each signal
+    comes from: docs/mismatch.md."""
+
+    reject_repeated_samples: _Flag = Field(
+        True, description="a sample bit-identical to the previous one (a stalled sensor bus "
+        "re-delivering it) is treated as missing, like NaN")
+    predict_pose: _Flag = Field(
+        True, description="a missing pose (NaN, stale, repeated) is replaced by the last good pose "
+        "dead-reckoned with the estimate (v, alpha, omega), not held")
+    course_slip: _Flag = Field(
+        True, description="the slip the outer loop uses is corrected by the course over ground: "
+        "alpha_hat + kappa a_y + beta, fitted online (least squares) to the measured course minus "
+        "heading over a chord of the last MPC poses")
+    course_speed: _Flag = Field(
+        True, description="the speed sensor's offset is estimated from the speed over ground "
+        "(chord of the measured positions) and removed before the MHE and the inner loop")
+    stiffness_estimate: _Flag = Field(
+        True, description="the axle cornering stiffnesses of the MHE's and the inner loop's models "
+        "are fitted online (least squares F_y = C alpha per axle, the slip from the course over "
+        "ground, the forces from the measured lateral and yaw accelerations); the LMI gains stay")
+    mass_estimate: _Flag = Field(
+        True, description="the part of the friction estimate that follows the acceleration is the "
+        "inertia of a mass error: estimated online (high-passed least squares), removed from the "
+        "compensation and given to the speed feedback's mass")
+
+
+
 class Config(_Frozen):
     """Everything a run needs. ``Config()`` is the paper's setting."""
 
@@ -749,6 +948,8 @@ class Config(_Frozen):
     planner: PlannerSettings = PlannerSettings()
     metrics: MetricsSettings = MetricsSettings()
     baselines: BaselineSettings = BaselineSettings()
+    scenario: ScenarioSettings = ScenarioSettings()  # the conditions a run meets (issue 21)
+    fusion: FusionSettings = FusionSettings()  # fusion and adaptation beyond the paper (issue 21)
     seed: StrictInt = Field(0, ge=0, lt=2**63, description="seed of every random draw of a run, "
                             "0 to 2^63 - 1")
     divergence_bound_m: PositiveFloat = Field(
@@ -791,6 +992,10 @@ class Config(_Frozen):
 
 T = TypeVar("T", bound=BaseModel)
 
+#: Every switch of :class:`FusionSettings` off (the paper has none of them).
+_FUSION_OFF = {"reject_repeated_samples": False, "predict_pose": False, "course_slip": False,
+               "course_speed": False, "stiffness_estimate": False, "mass_estimate": False}
+
 #: Named configurations: overrides of ``Config()`` (beyond the paper). Select with ``Config.preset(name)``,
 #: ``preset = "paper"`` at the top of a TOML file, or ``--preset paper`` on the command line.
 PRESETS: dict[str, dict[str, Any]] = {
@@ -800,7 +1005,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     # no speed-error feedback, the body-frame kinematic error model against the reference heading
     # as given (no slip-aware loop, no tangent heading). The weights are the paper's already.
     "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio"},
-              "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False}},
+              "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False},
+              "fusion": _FUSION_OFF},
     # The paper as it was run (the published run): the ``paper`` preset plus every quirk of the published
     # simulation, each its own switch. Quirks of that run, not recommendations; never the default.
     "paper-as-run": {
@@ -819,6 +1025,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False},
         "noise": {"scale": 0.0},  # the noise model existed but was not called
         "metrics": {"paper_run_rmse": True},
+        "fusion": _FUSION_OFF,
     },
 }
 
@@ -926,3 +1133,32 @@ def resolve_preset(data: dict[str, Any], preset: str | None = None, source: str 
         preset = name
     base = _preset_dict(preset) if preset is not None else {}
     return _merge(base, data)
+
+
+def apply_overrides(cfg: Config, assignments: list[str], source: str = "--set") -> Config:
+    """``cfg`` with ``KEY=VALUE`` assignments (dotted keys into the config, e.g.
+    ``scenario.plant.mass_scale=1.2``; VALUE a TOML value — ``0.3``, ``true``, ``[1, 2]``,
+    ``[{at_s = 60, mu = 0.3}]`` — or else a bare string such as ``uio``), validated like a config
+    file. Raises :class:`ConfigError` naming the assignment or the field."""
+    data = cfg.model_dump(mode="json")
+    for text in assignments:
+        key, sep, raw = text.partition("=")
+        key = key.strip()
+        parts = key.split(".")
+        if not sep or not key or any(not p.strip() for p in parts):
+            raise ConfigError(f"{source} {text!r}: expected KEY=VALUE with a dotted key, e.g. "
+                              "scenario.plant.mass_scale=1.2")
+        try:
+            value: Any = tomllib.loads(f"v = {raw.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw.strip()  # a bare word: an enum value or a name
+        node = data
+        for p in parts[:-1]:
+            nxt = node.get(p) if isinstance(node, dict) else None
+            if not isinstance(nxt, dict):
+                if isinstance(node, dict) and p not in node:
+                    raise ConfigError(f"{source} {text!r}: {key}: unknown field {p!r}")
+                raise ConfigError(f"{source} {text!r}: {key}: {p!r} is not a section")
+            node = nxt
+        node[parts[-1]] = value
+    return validate(Config, data, source=source)

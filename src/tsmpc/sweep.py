@@ -11,6 +11,10 @@ A sweep file (TOML) names a base configuration, the axes and how long each run l
     method = ["ref", "fzn"]
     scenario = ["nominal", "noise_x10"]
     seed = [1, 2]
+    [cases.heavy]                     # optional named cases: [scenario] tables (issue 21)
+    plant = { mass_scale = 1.2 }
+    [controllers.oracle]              # optional named controllers: config overrides (a preset too)
+    scenario = { oracle_tuned = true }
     [random]                          # optional: n samples per grid point, from a seed
     n = 4
     seed = 7
@@ -131,6 +135,8 @@ class RunParams(_Strict):
     speed_scale: _Speed = 1.0
     track: _Text = "builtin"
     seed: _Seed | None = None  #: None: the base config's seed
+    case: str = "nominal"  #: a named case of the sweep file (its [scenario] table), issue 21
+    controller: str = "default"  #: a named controller (config overrides or a preset), issue 21
 
 
 def _check_method(v: str) -> str:
@@ -159,6 +165,8 @@ class GridAxes(_Strict):
     speed_scale: list[_Speed] | None = None
     track: list[_Text] | None = None
     seed: list[_Seed] | None = None
+    case: list[str] | None = None
+    controller: list[str] | None = None
 
     @property
     def size(self) -> int:
@@ -239,6 +247,13 @@ class SweepSpec(_Strict):
     retries: StrictInt = Field(2, ge=0, le=10, description="re-runs of a task whose worker failed")
     max_lateral_m: _Real = Field(5.0, gt=0.0, le=1e3,
                                  description="|e_y| beyond which a run has diverged")
+    cases: dict[str, dict[str, Any]] = Field(
+        default_factory=dict, description="named cases of the 'case' axis: each a [scenario] table "
+        "(tsmpc.config.ScenarioSettings); 'nominal' (no change) is built in")
+    controllers: dict[str, dict[str, Any]] = Field(
+        default_factory=dict, description="named controllers of the 'controller' axis: config "
+        "overrides (a 'preset' key starts from that preset); 'default', 'paper' and 'paper-as-run' "
+        "are built in")
     #: Folder the relative paths of the file are resolved against (set by load_sweep).
     root: str = "."
 
@@ -273,6 +288,8 @@ class RunTask:
     #: (kinematic, dynamic) LMI designs solved and certified once by the client; None: the
     #: worker loads them from its design cache.
     designs: tuple[Any, Any] | None = None
+    #: the config ``designs`` were made for (a run whose controller differs loads its own)
+    designs_config: dict[str, Any] | None = None
 
 
 @dataclass
@@ -310,6 +327,16 @@ def load_sweep(path: str | Path, *, max_runs: int = MAX_RUNS) -> SweepSpec:
                           f"points × {spec.random.n if spec.random else 1} random draws), more "
                           f"than {max_runs:,}; raise the limit with --max-runs, or shrink the axes")
     cfg = base_config(spec, source=str(p))
+    for name in spec.cases:  # every named case and controller, used or not, before any task
+        try:
+            run_config(spec, name, "default")
+        except ConfigError as err:
+            raise ConfigError(f"{p}: cases.{name}: {err}") from None
+    for name in spec.controllers:
+        try:
+            run_config(spec, "nominal", name)
+        except ConfigError as err:
+            raise ConfigError(f"{p}: controllers.{name}: {err}") from None
     for t in dict.fromkeys(_track_values(spec)):
         _check_track(t, spec, cfg, source=str(p))
     try:
@@ -420,15 +447,53 @@ def expand(spec: SweepSpec) -> list[RunTask]:
             raise ConfigError("random.choices: " + format_validation_error(err, "run")) from None
         except ValueError as err:
             raise ConfigError(f"random.choices: {err}") from None
-        payload = json.dumps({"params": params.model_dump(), "config": cfg_dict,
+        run_cfg = cfg_dict
+        if (params.case, params.controller) != ("nominal", "default"):
+            run_cfg = run_config(spec, params.case, params.controller, cfg_dict)
+        payload = json.dumps({"params": params.model_dump(), "config": run_cfg,
                               "duration_s": spec.duration_s, "max_lateral_m": spec.max_lateral_m},
                              sort_keys=True)
         rid = hashlib.sha256(payload.encode()).hexdigest()[:16]
         if rid in seen:  # the same point twice (e.g. a repeated grid value) is one run
             continue
         seen.add(rid)
-        tasks.append(RunTask(rid, params, cfg_dict, spec.duration_s, spec.max_lateral_m, spec.root))
+        tasks.append(RunTask(rid, params, run_cfg, spec.duration_s, spec.max_lateral_m, spec.root))
     return tasks
+
+
+#: Built-in controllers of the ``controller`` axis (presets).
+BUILTIN_CONTROLLERS = ("default", "paper", "paper-as-run")
+
+
+def run_config(spec: SweepSpec, case: str, controller: str, base: dict[str, Any] | None = None
+               ) -> dict[str, Any]:
+    """The validated config (as a dict) of a run with the named ``case`` and ``controller``
+    (issue 21): the base config, the controller's overrides (a built-in name or a ``preset`` key
+    puts that preset's fields over the base), the case as its ``[scenario]`` section.
+    Raises :class:`ConfigError` naming an unknown name or a bad field."""
+    from tsmpc.config import _merge as merge_config
+    from tsmpc.config import _preset_dict
+
+    data = dict(base if base is not None else base_config(spec).model_dump(mode="json"))
+    if controller in spec.controllers:
+        over = dict(spec.controllers[controller])
+        name = over.pop("preset", None)
+        if name is not None:
+            if not isinstance(name, str):
+                raise ConfigError(f"controllers.{controller}.preset: must be a preset name")
+            data = merge_config(data, _preset_dict(name))
+        data = merge_config(data, over)
+    elif controller in BUILTIN_CONTROLLERS:
+        data = merge_config(data, _preset_dict(controller))
+    else:
+        allowed = ", ".join([*BUILTIN_CONTROLLERS, *spec.controllers])
+        raise ConfigError(f"controller: unknown {controller!r}; allowed: {allowed}")
+    if case in spec.cases:
+        data = merge_config(data, {"scenario": spec.cases[case]})
+    elif case != "nominal":
+        raise ConfigError(f"case: unknown {case!r}; allowed: nominal, {', '.join(spec.cases)}")
+    return validate(Config, data, source=f"case {case!r}, controller {controller!r}").model_dump(
+        mode="json")
 
 
 # -- one run (executes on a worker) ---------------------------------------------------------
@@ -513,7 +578,12 @@ def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
             v.with_stiffness_scaled(p.cornering_scale), mass=v.mass * p.mass_scale,
             inertia=v.inertia * p.inertia_scale))
     cfg, sc = apply_robustness(p.scenario, cfg, sc, until_s=task.duration_s)
-    kd, dd = task.designs or (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
+    from tsmpc.conditions import apply_conditions  # the config's [scenario] section (issue 21)
+
+    cfg, sc = apply_conditions(cfg, sc)
+    kd, dd = task.designs or (None, None)
+    if kd is None or not _same_designs(task.designs_config, cfg):
+        kd, dd = load_or_design_kinematic(cfg), load_or_design_dynamic(cfg)  # this run's controller
     max_steps = None if task.duration_s is None else max(1, round(task.duration_s / Tc))
     log = simulate(cfg, p.method, sc, kinematic_design=kd, dynamic_design=dd, max_steps=max_steps)
     metrics = compute_metrics(log)
@@ -644,12 +714,13 @@ def run_sweep(
             # with the tasks — remote workers need no shared disk and solve nothing.
             cfg = base_config(spec)
             designs = design_fn(cfg) if design_fn is not None else _designs(cfg)
+            _solve_run_designs(pending, cfg, design_fn)  # the controllers the axes name
             if scheduler is None:  # local workers share this machine's kernel cache: fill it once
                 from tsmpc import kernels
 
                 kernels.warmup()
             pending = [RunTask(t.id, t.params, t.config, t.duration_s, t.max_lateral_m, t.root,
-                               designs) for t in pending]
+                               designs, cfg.model_dump(mode="json")) for t in pending]
     except BaseException:
         if client is not None:
             client.close()
@@ -694,6 +765,35 @@ def run_sweep(
             from tsmpc.report.sweep_plots import save_sweep_plots as plotter
         files += plotter(table, out, AXES)
     return SweepResult(out, len(tasks), len(written), skipped, failed, duplicates, table, files)
+
+
+def _same_designs(a: dict[str, Any] | None, cfg: Config) -> bool:
+    """Do the designs made for config ``a`` serve ``cfg`` (same design inputs)?"""
+    if a is None:
+        return False
+    from tsmpc.synthesis.cache import dynamic_key, kinematic_key
+
+    base = validate(Config, a, source="sweep designs")
+    return kinematic_key(base) == kinematic_key(cfg) and dynamic_key(base) == dynamic_key(cfg)
+
+
+def _solve_run_designs(tasks: list[RunTask], base: Config,
+                       design_fn: Callable[[Config], tuple[Any, Any]] | None) -> None:
+    """Solve (or load) once, into the design cache, the designs of every controller the runs use
+    beyond the base config's (other presets, oracle-tuned vehicles), so workers only load them."""
+    from tsmpc.conditions import plant_vehicle
+    from tsmpc.config import replace
+    from tsmpc.synthesis.cache import dynamic_key, kinematic_key
+
+    seen = {(kinematic_key(base), dynamic_key(base))}
+    for t in tasks:
+        cfg = validate(Config, t.config, source="sweep run")
+        if cfg.scenario.oracle_tuned:
+            cfg = replace(cfg, vehicle=plant_vehicle(cfg))
+        key = (kinematic_key(cfg), dynamic_key(cfg))
+        if key not in seen:
+            seen.add(key)
+            (design_fn or _designs)(cfg)
 
 
 def _designs(cfg: Config) -> tuple[Any, Any]:

@@ -7,6 +7,6 @@ from __future__ import annotations
 __all__ = ["AXES"]
 
 _FLOAT_AXES = ("noise_scale", "mass_scale", "inertia_scale", "cornering_scale", "speed_scale")
-_CHOICE_AXES = ("method", "friction", "scenario", "track", "seed")
+_CHOICE_AXES = ("method", "friction", "scenario", "track", "seed", "case", "controller")
 #: Every axis, in the order of tables and plots.
-AXES = ("method", "friction", "scenario", *_FLOAT_AXES, "track", "seed")
+AXES = ("method", "friction", "scenario", *_FLOAT_AXES, "track", "seed", "case", "controller")

@@ -63,6 +63,7 @@ def _execute(
     overwrite: bool = False, preset: str | None = None,
     laps: int = 1, dt: float | None = None, strict_box: bool = False,
     plant: str = "tsmpc", cr_vehicle: int = 2, command: str = "compare",
+    sets: list[str] | None = None,
 ) -> None:
     """The body of ``compare`` and ``run``: a thin shell over :mod:`tsmpc.sim.experiment`
     (``prepare`` validates every input before any work, ``run`` solves the designs and runs).
@@ -86,6 +87,13 @@ def _execute(
     if seed is not None and seed < 0:
         fail(ConfigError(f"--seed = {seed}: must be an integer >= 0"))
     cfg = load_config_or_exit(config, preset)
+    if sets:  # --set KEY=VALUE over the config (issue 21: the scenario vocabulary on the CLI)
+        from tsmpc.config import apply_overrides
+
+        try:
+            cfg = apply_overrides(cfg, list(sets))
+        except TsmpcError as err:
+            fail(err)
     methods = [m for m in methods_text.split(",") if m.strip()]
     if not methods:
         fail(ConfigError("--methods is empty"))
@@ -262,6 +270,9 @@ _OPT_PLANT = typer.Option("tsmpc", "--plant", help=_PLANT_HELP)
 _OPT_CR_VEHICLE = typer.Option(2, "--cr-vehicle", help="CommonRoad parameter set (1, 2, 3).")
 _OPT_OVERWRITE = typer.Option(False, "--overwrite", help="Write into a non-empty --out folder, "
                               "replacing tsmpc's outputs of an earlier run (other files are kept).")
+_OPT_SET = typer.Option(None, "--set", help="KEY=VALUE over the config, repeatable: a dotted field "
+                        "and a TOML value, e.g. --set scenario.plant.mass_scale=1.2 --set "
+                        "scenario.sensors.dropout_probability=0.05 (docs/mismatch.md).")
 
 
 @app.command("compare")
@@ -285,6 +296,7 @@ def compare_cmd(
     strict_box: bool = _OPT_STRICT,
     plant: str = _OPT_PLANT,
     cr_vehicle: int = _OPT_CR_VEHICLE,
+    sets: list[str] | None = _OPT_SET,
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
     options = dict(locals())
@@ -312,6 +324,7 @@ def run_cmd(
     strict_box: bool = _OPT_STRICT,
     plant: str = _OPT_PLANT,
     cr_vehicle: int = _OPT_CR_VEHICLE,
+    sets: list[str] | None = _OPT_SET,
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
     options = dict(locals())

@@ -245,6 +245,9 @@ class Cascade:
         self._w_limit = max(4.0, 2.0 * w_bound) + 5.0 * nz.omega * nz.scale
         self._pose_noise = 5.0 * nz.position * nz.scale
         self._heading_noise = 5.0 * nz.theta * nz.scale
+        from tsmpc.estimation.fusion import Fusion
+
+        self._fusion = Fusion(cfg)  # beyond the paper: cfg.fusion's switches (issue 21)
         self.reset(x0)
 
     # -------------------------------------------------------------------------- state
@@ -260,10 +263,15 @@ class Cascade:
         self.mhe.reset(None if self._x0 is None else self._x0[3:6].copy())
         self.lqr.reset()
         self._slip_gate.reset()
+        self._fusion.reset(None if self._x0 is None else self._x0[:3])
+        if getattr(self, "_stiffness_applied", None):  # back to the config's stiffnesses
+            _apply_stiffness_to((self.mhe, self.lqr), (self.cfg.vehicle.C_f, self.cfg.vehicle.C_r), [])
+        self._stiffness_applied: list[float] = []
         self.mpc.reset()
         self._calls = 0
         self._t_last: float | None = None
         self._pose = None if self._x0 is None else self._x0[:3].copy()
+        self._pose_held = self._pose
         self._pose_t = 0.0  # time of the last accepted pose
         self._pose_fresh = False
         self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
@@ -273,6 +281,7 @@ class Cascade:
         self._events = dict.fromkeys(EVENT_NAMES, 0)
         self._events["stale_rejected"] = 0
         self._events["step_errors"] = 0
+        self._events["repeated_rejected"] = 0  # fusion.reject_repeated_samples (issue 21)
         self.last_error: str | None = None
 
     @property
@@ -340,6 +349,11 @@ class Cascade:
         self._t_last = tt
         return tt
 
+    def _apply_stiffness(self, C: tuple[float, float] | None) -> None:
+        """fusion.stiffness_estimate: the fitted axle stiffnesses reach the MHE and the TS-LQR."""
+        if C is not None:
+            _apply_stiffness_to((self.mhe, self.lqr), C, self._stiffness_applied)
+
     def _fresh(self, t: float, m: Measurement) -> bool:
         if m.stamp is None:
             return True
@@ -405,28 +419,47 @@ class Cascade:
         ev = self._events
         fresh = self._fresh(t, m)
         speeds_ok = self._plausible_speeds(v, om)
+        fu, fs = self._fusion, self.cfg.fusion  # issue 21: estimation/fusion.py
+        stamp = -math.inf if m.stamp is None else float(m.stamp)  # a new stamp is a new sample
+        if fs.reject_repeated_samples and fu.guard.repeated((X, Y, th, v, om, stamp)):
+            fresh = False  # a stalled bus re-delivering the last sample: missing, like NaN
+            ev["repeated_rejected"] += 1
         # The pose, every call: accepted when fresh, finite and where the car can be; else the
-        # dead-reckoned pose stands (advanced at the end of the call).
+        # dead-reckoned pose stands (advanced at the end of the call) for the plausibility gate.
         pose_ok = fresh and _finite(X, Y, th) and self._accept_pose(t, X, Y, th)
         if pose_ok:
             self._pose, self._pose_t = np.array([X, Y, th]), t
+            self._pose_held = self._pose.copy()
         plan = e_meas = None
         t_mpc = 0.0
         if self._calls % self.n_inner == 0:
             if not pose_ok:  # the MPC never sees NaN nor a jump: the dead-reckoned pose
                 ev["pose_rejected"] += 1
+            if fu.any_course:  # an MPC step closes the course fusion's interval
+                kc = min(max(math.floor(t / self.Tc + 1e-6), 0), len(self.reference) - 1)
+                fu.course.close(np.array([X, Y, th]) if pose_ok else None, v if fresh else math.nan,
+                                om if fresh else math.nan,
+                                float(self.reference.v[kc] * self.reference.omega[kc]))
+                if fs.stiffness_estimate:
+                    self._apply_stiffness(fu.course.stiffness)
             if self.cfg.rates.inner_steps_per_outer is None:
                 k = max(math.floor(t / self.Tc + 1e-6), 0)
             else:  # a fixed number of calls per reference sample (the published run's time base)
                 k = self._calls // self.n_inner
             ref = self.reference
             kk = min(k, len(ref) - 1)
-            p = self._pose
+            # fusion.predict_pose: a missing pose is dead-reckoned on the estimate; off (the
+            # paper), the MPC sees the last accepted pose, held
+            p = self._pose if pose_ok or fs.predict_pose else self._pose_held
             window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
             mpc_cfg = self.cfg.mpc
             if mpc_cfg.slip_aware or mpc_cfg.tangent_heading:  # beyond the paper: slip_aware.py
                 last = self._last
                 a_hat = float(last.estimate.x[1]) if mpc_cfg.slip_aware and last is not None else 0.0
+                if mpc_cfg.slip_aware and last is not None:
+                    # the course-fitted model error at the reference's lateral acceleration (a
+                    # feed-forward: the measured one would close a fast loop through ω, fusion.py)
+                    a_hat += fu.slip_correction(float(ref.v[kk] * ref.omega[kk]))
                 if mpc_cfg.slip_aware:  # α̂ bounded by the measured course over ground
                     a_hat = self._slip_gate(p, a_hat)
                 th_d = self._theta_tangent[kk] if mpc_cfg.tangent_heading else ref.theta[kk]
@@ -447,7 +480,7 @@ class Cascade:
             ev["mpc_fallback"] += plan.status == MPCStatus.FALLBACK
             ev["mpc_scheduling_clipped"] += int(plan.n_clipped)
         v_ref, w_ref = float(self._u_prev[0]), float(self._u_prev[1])
-        y = np.array([v, om]) if fresh and speeds_ok else np.full(2, np.nan)
+        y = np.array([v - fu.speed_offset(), om]) if fresh and speeds_ok else np.full(2, np.nan)
         u_mhe = self._u_applied
         if m.force is not None or m.steering is not None:
             u_mhe = np.array([self._u_applied[0] if m.force is None else float(m.force),
@@ -463,8 +496,16 @@ class Cascade:
                            EstimatorStatus.FAILED, time.perf_counter() - t1)
         t2 = time.perf_counter()
         self._dead_reckon(est)
+        if fu.any_course:
+            fu.course.sample(fresh, th, v, float(est.x[1]), float(est.x[0] * est.x[2]), om,
+                             float(u_mhe[1]), float(u_mhe[0]))
         if m.state is None:
             inner = est
+            if fs.mass_estimate:  # the mass error's inertia is not friction (fusion.py)
+                dF = fu.inertia_terms(float(est.x[0]), float(est.F_fr), v_ref)
+                if dF != 0.0:
+                    inner = Estimate(est.x, est.F_fr + dF, est.F_fr_raw + dF, est.status,
+                                     est.solve_time_s)
         elif self.cfg.lqr.true_state_feedback:  # the published run: true state, F̂ as configured
             inner = Estimate(np.asarray(m.state, dtype=float).reshape(3).copy(), est.F_fr,
                              est.F_fr_raw, est.status, est.solve_time_s)
@@ -478,6 +519,17 @@ class Cascade:
         ev["inner_saturated"] += bool(out.saturated)
         return Command(out.F_xR, out.delta, bool(out.saturated), v_ref, w_ref, est, plan, e_meas,
                        t_mpc, t2 - t1, t3 - t2)
+
+
+def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> None:
+    """Give the fitted (C_f, C_r) to the blocks that take them, when they moved by over 1 %."""
+    if applied and all(abs(c - a) <= 0.01 * abs(a) for c, a in zip(C, applied, strict=True)):
+        return
+    for b in blocks:
+        setter = getattr(b, "set_cornering_stiffness", None)
+        if setter is not None:
+            setter(*C)
+    applied[:] = list(C)
 
 
 def _oracle_estimate(state: ArrayLike) -> Estimate:

@@ -161,6 +161,18 @@ class TSLQR:
         """Sample time T_d [s] (the runtime protocol's name)."""
         return self.Td
 
+    def set_cornering_stiffness(self, C_f: float, C_r: float) -> None:
+        """Use axle stiffnesses C_f, C_r [N/rad] in the reference gain N̄ (the model of the
+        feed-forward) from the next step on (an online estimate, ``fusion.stiffness_estimate``);
+        the LMI gains K_i and the controller state are kept."""
+        from tsmpc.config import replace
+
+        self.vehicle = replace(self.vehicle, cornering_stiffness_front=float(C_f),
+                               cornering_stiffness_rear=float(C_r))
+        if self._kern is not None:
+            prm = self._kargs[4]  # [M, I, C_f, C_r, a, b, μ_o g, d], read by every kernel step
+            prm[2], prm[3] = float(C_f), float(C_r)
+
     def reset(self) -> None:
         """Filter states at rest, integrator cleared."""
         self._s[:] = 0.0

@@ -176,6 +176,22 @@ class MHEUIO:
         """Sample time T_d [s] (the runtime protocol's name)."""
         return self.Td
 
+    def set_cornering_stiffness(self, C_f: float, C_r: float) -> None:
+        """Use axle stiffnesses C_f, C_r [N/rad] in the window model from the next step on (an
+        online estimate, ``fusion.stiffness_estimate``): the numpy model and the kernel's
+        parameters alike; the window and the estimate are kept."""
+        from tsmpc.config import replace
+
+        veh = replace(self.vehicle, cornering_stiffness_front=float(C_f),
+                      cornering_stiffness_rear=float(C_r))
+        m = self.model
+        self.model = DynamicTS(m.box, veh, m.Td, m.method)
+        self.vehicle = veh
+        if self._kern is not None:
+            k = list(self._kargs)
+            k[10], k[11] = float(C_f), float(C_r)  # phys = (M, I, C_f, C_r, a, b, μ_o g, d) from 8
+            self._kargs = tuple(k)
+
     def reset(self, x0: NDArray[np.float64] | None = None) -> None:
         """Empty the window; start from ``x0`` (or rest) with F̂ = 0."""
         self._x = np.zeros(3) if x0 is None else np.asarray(x0, dtype=float).copy()

@@ -12,7 +12,7 @@ from numba import njit
 __all__ = ["pack", "rk4_block", "warm"]
 
 # Layout of the constants vector (see pack()).
-_M, _I, _A, _B, _CF, _KD, _VF, _VE, _MG, _FZF, _FZR, _CC, _EE, _MUT0, _SCALE, _LIN, _CR = range(17)
+_M, _I, _A, _B, _CF, _KD, _VF, _VE, _MG, _FZF, _FZR, _CC, _EE, _MUT0, _SCALE, _LIN, _CR, _COMB = range(18)
 
 
 def pack(plant) -> np.ndarray:
@@ -25,7 +25,8 @@ def pack(plant) -> np.ndarray:
     cr = getattr(p, "C_r", p.cornering_stiffness)
     return np.array([p.mass, p.inertia, p.a, p.b, cf, p.drag_factor, k.v_floor,
                      k.v_eps, p.mass * p.g, fzf, fzr, t.shape_c, t.curvature_e, t.mu_tyre, scale,
-                     1.0 if plant._linear else 0.0, cr])
+                     1.0 if plant._linear else 0.0, cr,
+                     1.0 if (getattr(t, "combined_slip", False) and not plant._linear) else 0.0])
 
 
 @njit(cache=True, fastmath=False, inline="always")
@@ -34,6 +35,7 @@ def _rhs(cst, th, v, al, om, F, d, mu, cosd):
     v_floor = cst[_VF]
     ve = v if v > v_floor else v_floor
     sa, ca = math.sin(al), math.cos(al)
+    f_res = mu * cst[_MG] * math.tanh(v / cst[_VE])
     if cst[_LIN] != 0.0:
         fyf = Cf * (d - al - a * om / ve)
         fyr = Cr * (b * om / ve - al)
@@ -51,8 +53,18 @@ def _rhs(cst, th, v, al, om, F, d, mu, cosd):
         else:
             fyf = 0.0
             fyr = 0.0
+        if cst[_COMB] != 0.0:  # friction ellipse of the rear tyre (as Plant._make_rhs)
+            ft = F - f_res
+            if Dr > 0.0:
+                ft = -Dr if ft < -Dr else (Dr if ft > Dr else ft)
+                rr = ft / Dr
+                fyr *= math.sqrt(1.0 - rr * rr)
+            else:
+                ft = 0.0
+            F = ft
+            f_res = 0.0
     sda, cda = math.sin(d - al), math.cos(d - al)
-    vdot = (F * ca - fyf * sda + fyr * sa - cst[_KD] * v * v - mu * cst[_MG] * math.tanh(v / cst[_VE])) / M
+    vdot = (F * ca - fyf * sda + fyr * sa - cst[_KD] * v * v - f_res) / M
     adot = (-F * sa + fyf * cda + fyr * ca) / (M * ve) - om
     wdot = (a * fyf * cosd - b * fyr) / I
     return v * math.cos(th + al), v * math.sin(th + al), om, vdot, adot, wdot
@@ -95,5 +107,5 @@ def rk4_block(x, F, d, mu, n, h, cst):
 def warm() -> None:
     """Compile (or load from the cache) the signature the plant uses."""
     cst = np.array([683.0, 560.0, 0.7, 1.0, 25000.0, 0.4, 0.5, 0.05, 6700.0, 3800.0, 2900.0, 1.3, -1.0,
-                    0.9, 0.0, 0.0, 25000.0])
+                    0.9, 0.0, 0.0, 25000.0, 0.0])
     rk4_block(np.array([0.0, 0.0, 0.0, 10.0, 0.0, 0.0]), 100.0, 0.01, 0.9, 2, 0.001, cst)

@@ -357,7 +357,8 @@ def ablation_rows() -> list[tuple[str, Any, bool]]:
         ("+ speed-error feedback", fb, False),
         ("+ MHE-window friction estimate", replace(fb, lqr=replace(fb.lqr, friction_estimate="window")),
          False),
-        ("+ outer-loop mechanisms (**= default**)", Config(), False),
+        ("+ outer-loop mechanisms", replace(Config(), fusion=paper.fusion), False),
+        ("+ fusion and adaptation (**= default**)", Config(), False),
         ("oracle (`--oracle`)", Config(), True),
         ("paper preset, compensation off", replace(paper, lqr=replace(paper.lqr,
                                                                       friction_compensation=False)),
@@ -929,6 +930,41 @@ def baseline_tuning(ctx: Context) -> Produced:
     return p
 
 
+# -- mismatch, faults and race speeds (issue 21's producers: examples/mismatch_table.py,
+# examples/fusion_ablation.py, examples/race_tracks.py) -------------------------------------------
+
+def mismatch(ctx: Context) -> Produced:
+    """The mismatch benchmark (examples/mismatch.toml, 135 runs): tables, verdicts, figure."""
+    p = Produced()
+    ctx.progress("examples/mismatch_table.py (the sweep of examples/mismatch.toml)")
+    img = ctx.figure("mismatch.png")
+    blocks = _example(ctx, "mismatch_table").mismatch_blocks(ctx.scratch / "mismatch", img=img,
+                                                             steps=ctx.max_steps)
+    for name, body in blocks.items():
+        p.add("mismatch", name, body)
+    p.figures.append(img)
+    return p
+
+
+def fusion_ablation(ctx: Context) -> Produced:
+    """Each fusion switch off in turn under the conditions that motivated it (docs/mismatch.md)."""
+    p = Produced()
+    ctx.progress("examples/fusion_ablation.py (63 runs)")
+    for name, body in _example(ctx, "fusion_ablation").fusion_blocks(ctx.paper_reference,
+                                                                      ctx.max_steps).items():
+        p.add("fusion-ablation", name, body)
+    return p
+
+
+def race_speeds(ctx: Context) -> Produced:
+    """The public tracks at 22 and 25 m/s and three S-bends (docs/mismatch.md)."""
+    p = Produced()
+    ctx.progress("examples/race_tracks.py (13 runs)")
+    p.add("race-speeds", "table", _example(ctx, "race_tracks").race_block(ctx.shared / "tracks",
+                                                                          ctx.max_steps))
+    return p
+
+
 # -- benchmarks (timings) ----------------------------------------------------------------------
 
 def _bench(ctx: Context, name: str, *args: str) -> dict[str, Any]:
@@ -1055,6 +1091,9 @@ PRODUCERS: tuple[Producer, ...] = (
     Producer("robustness", robustness, "the robustness scenarios (docs/sweeps.md)"),
     Producer("sweep-example", sweep_example, "the example sweep: figure and time"),
     Producer("paper-explained", paper_explained, "Table 5 explained (≈ 25 runs, 10–15 min)"),
+    Producer("mismatch", mismatch, "the mismatch benchmark: 135 runs, 10–20 min"),
+    Producer("fusion-ablation", fusion_ablation, "the fusion switches' ablation (63 runs)"),
+    Producer("race-speeds", race_speeds, "the public tracks at 22 and 25 m/s, S-bends"),
     Producer("baselines", baselines, "the baselines against the TS-MPC on five cases (6 compares)"),
     Producer("baseline-tuning", baseline_tuning, "the baselines' tuning search (≈ 700 runs)"),
     Producer("benchmarks", benchmarks, "benchmarks/*.py timing tables (never drift-checked)"),

@@ -121,6 +121,9 @@ def prepare(
         from tsmpc.robustness import apply_robustness
 
         cfg, scenario = apply_robustness(robustness, cfg, scenario, until_s=duration)
+    from tsmpc.conditions import apply_conditions  # the config's [scenario] section (issue 21)
+
+    cfg, scenario = apply_conditions(cfg, scenario)
     name = plant.strip().lower()
     if name not in PLANTS:
         raise ConfigError(f"unknown plant {plant!r}; allowed: {', '.join(PLANTS)}")

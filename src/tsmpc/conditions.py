@@ -1,0 +1,291 @@
+"""The conditions a run meets, from the ``[scenario]`` section of a config (issue 21; the schema is
+:class:`~tsmpc.config.ScenarioSettings`): the plant's parameters, μ(road) events, sensor faults
+and actuators, written in TOML or on the command line (``--set scenario.plant.mass_scale=1.2``)
+without Python::
+
+    [scenario.plant]
+    mass_scale = 1.2                 # a loaded car
+    cornering_rear_scale = 0.7       # other tyres at the back
+    [scenario.sensors]
+    dropout_probability = 0.05       # 5 % of the samples lost, at random (seeded)
+    v_bias = 0.2                     # the speed sensor reads 0.2 m/s high
+    [[scenario.friction]]
+    at_corner = 2                    # μ(road) drops to 0.3 at the apex of the second corner
+    mu = 0.3
+
+:func:`apply_conditions` turns them into the run's :class:`~tsmpc.sim.simulator.Scenario` (and,
+for ``oracle_tuned``, the controllers' config). Everything is deterministic given the run's seed;
+the stateful parts (sensor faults) restart when a run starts again at t = 0.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+from dataclasses import replace as dc_replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tsmpc.config import (
+    Config,
+    FrictionEvent,
+    ScenarioSettings,
+    SensorFaults,
+    TyreParams,
+    VehicleParams,
+    replace,
+)
+from tsmpc.errors import ConfigError
+from tsmpc.planning.reference import Reference
+from tsmpc.robustness import RobustnessCase
+from tsmpc.scenarios import ConstantFriction, FrictionProfile
+from tsmpc.sim.simulator import Scenario, SensorFault
+
+__all__ = [
+    "EventFriction",
+    "ResolvedEvent",
+    "SensorModel",
+    "apply_conditions",
+    "corner_apexes",
+    "plant_tyre",
+    "plant_vehicle",
+    "resolve_events",
+]
+
+
+def plant_vehicle(cfg: Config, base: VehicleParams | None = None) -> VehicleParams:
+    """The plant's vehicle: ``base`` (default: the config's) with ``cfg.scenario.plant``'s scales.
+    Raises :class:`ConfigError` when the CoG would leave the wheelbase."""
+    p = cfg.scenario.plant
+    v = base or cfg.vehicle
+    a = v.a * p.cog_to_front_scale
+    b = v.a + v.b - a
+    if b < 0.05 * (v.a + v.b):
+        raise ConfigError(f"scenario.plant.cog_to_front_scale = {p.cog_to_front_scale:g}: the CoG "
+                          f"would sit {a:.3f} m behind the front axle of a {v.a + v.b:.3f} m wheelbase")
+    return replace(v, mass=v.mass * p.mass_scale, inertia=v.inertia * p.inertia_scale, a=a, b=b,
+                   cornering_stiffness_front=v.C_f * p.cornering_front_scale,
+                   cornering_stiffness_rear=v.C_r * p.cornering_rear_scale)
+
+
+def plant_tyre(cfg: Config, base: TyreParams | None = None) -> TyreParams:
+    """The plant's tyre: ``base`` (default: the config's) with ``cfg.scenario.plant``'s grip."""
+    p = cfg.scenario.plant
+    t = base or cfg.tyre
+    changes: dict[str, object] = {}
+    if p.mu_tyre is not None:
+        changes["mu_tyre"] = p.mu_tyre
+    if p.combined_slip:
+        changes["combined_slip"] = True
+    if p.grip_scales_with_road:
+        changes["scale_grip_with_road"] = True
+    return replace(t, **changes) if changes else t
+
+
+def corner_apexes(ref: Reference) -> list[int]:
+    """Sample indices of the reference's corner apexes: each run of samples with |ω_d| above half
+    the largest |ω_d|, at its largest |ω_d| (the ``at_corner`` trigger)."""
+    w = np.abs(np.asarray(ref.omega, dtype=float))
+    if w.size == 0 or not np.max(w) > 0.0:
+        return []
+    inside = w > 0.5 * float(np.max(w))
+    out, k, n = [], 0, w.size
+    while k < n:
+        if inside[k]:
+            j = k
+            while j < n and inside[j]:
+                j += 1
+            out.append(k + int(np.argmax(w[k:j])))
+            k = j
+        else:
+            k += 1
+    return out
+
+
+@dataclass(frozen=True)
+class ResolvedEvent:
+    """A friction event on one axis: time [s] (``by_time``) or travelled distance [m]."""
+
+    by_time: bool
+    start: float
+    ramp: float
+    end: float  #: end of the surface (inf: to the end of the run)
+    mu: float
+
+    def weight(self, t: float, s: float) -> float:
+        """0 before, ramps to 1 over ``ramp``, 1 until ``end``, back to 0 over ``ramp`` after."""
+        x = t if self.by_time else s
+        if x < self.start:
+            return 0.0
+        r = self.ramp
+        if x < self.end:
+            return 1.0 if r <= 0.0 or x >= self.start + r else (x - self.start) / r
+        if r <= 0.0 or x >= self.end + r:
+            return 0.0
+        return 1.0 - (x - self.end) / r
+
+
+def resolve_events(events: Sequence[FrictionEvent], ref: Reference) -> tuple[ResolvedEvent, ...]:
+    """The events on their axes; ``at_corner`` becomes the apex's time since the reference's start.
+    Raises :class:`ConfigError` for a corner the reference does not have."""
+    out = []
+    apexes: list[int] | None = None
+    for i, e in enumerate(events):
+        if e.at_m is not None:
+            length = math.inf if e.length_m is None else e.length_m
+            out.append(ResolvedEvent(False, e.at_m, e.ramp_m or 0.0, e.at_m + length, e.mu))
+            continue
+        if e.at_corner is not None:
+            apexes = corner_apexes(ref) if apexes is None else apexes
+            if e.at_corner > len(apexes):
+                raise ConfigError(f"scenario.friction[{i}].at_corner = {e.at_corner}: the reference "
+                                  f"has {len(apexes)} corner(s)")
+            start = apexes[e.at_corner - 1] * ref.dt
+        else:
+            assert e.at_s is not None
+            start = e.at_s
+        dur = math.inf if e.duration_s is None else e.duration_s
+        out.append(ResolvedEvent(True, start, e.ramp_s or 0.0, start + dur, e.mu))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class EventFriction:
+    """μ(road) of a base profile with events applied in order: each blends
+    from the μ before it to its own with its weight (a step takes effect at its start)."""
+
+    base: FrictionProfile
+    events: tuple[ResolvedEvent, ...]
+
+    def mu(self, t: float, s: float = 0.0) -> float:
+        m = self.base.mu(t, s)
+        for e in self.events:
+            w = e.weight(t, s)
+            if w > 0.0:
+                m = (1.0 - w) * m + w * e.mu
+        return m
+
+
+class SensorModel:
+    """Sensor faults of ``[scenario.sensors]`` on the noisy sample [X, Y, θ, v, ω] (a
+    :class:`~tsmpc.sim.simulator.SensorFault`), after an optional ``inner`` fault. In order:
+    biases and drifts, extra GNSS noise, delay, dropouts. Seeded; restarts when time goes back
+    (the next method of a comparison starts its run at t = 0 with the same draws).
+
+    Args:
+        faults: the settings.
+        Td: sample period of the calls [s] (the delay is rounded to whole samples).
+        position_sigma: σ of the configured position noise [m] (the GNSS scale multiplies it).
+        seed: the run's seed.
+        inner: a fault applied first (e.g. a named robustness scenario's).
+    """
+
+    def __init__(self, faults: SensorFaults, Td: float, position_sigma: float, seed: int,
+                 inner: SensorFault | None = None) -> None:
+        self.faults = faults
+        self.Td = float(Td)
+        self.delay_n = round(faults.delay_s / self.Td)
+        s = faults.gnss_noise_scale
+        self.extra_sigma = position_sigma * math.sqrt(max(s * s - 1.0, 0.0))
+        self.seed = int(seed)
+        self.inner = inner
+        self._reset()
+
+    def _reset(self) -> None:
+        self._drop = np.random.default_rng([self.seed, 21, 1])
+        self._gnss = np.random.default_rng([self.seed, 21, 2])
+        self._fifo: deque[NDArray[np.float64]] = deque(maxlen=self.delay_n + 1)
+        self._last: NDArray[np.float64] | None = None
+        self._t: float | None = None
+
+    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
+        if self._t is not None and t < self._t - 1e-12:
+            self._reset()
+        self._t = t
+        if self.inner is not None:
+            y = self.inner(t, y)
+        f = self.faults
+        out = np.array(y, dtype=float)
+        out[2] += f.theta_bias + f.theta_drift * t
+        out[3] += f.v_bias + f.v_drift * t
+        out[4] += f.omega_bias + f.omega_drift * t
+        if self.extra_sigma > 0.0:
+            out[0:2] += self.extra_sigma * self._gnss.standard_normal(2)
+        self._fifo.append(out)
+        out = self._fifo[0].copy()  # delay_n samples ago (the oldest until the FIFO is full)
+        if f.dropout_probability > 0.0 and self._drop.random() < f.dropout_probability:
+            out = self._last.copy() if f.dropout_hold and self._last is not None else np.full(5, np.nan)
+        self._last = out
+        return out
+
+
+def _budget_mu(scenario: Scenario, cfg: Config, duration: float) -> float:
+    """The highest μ(road) of the base profile (sampled every T_c; events aside): the largest road
+    resistance, and the grip the planner plans with (it plans for the dry road, not the ice)."""
+    if cfg.scenario.base_mu is not None:
+        return cfg.scenario.base_mu
+    ts = np.arange(0.0, max(duration, cfg.rates.Tc), cfg.rates.Tc)
+    return float(max(scenario.friction.mu(float(t), 0.0) for t in ts))
+
+
+def apply_conditions(cfg: Config, scenario: Scenario) -> RobustnessCase:
+    """(config, scenario) with ``cfg.scenario`` applied; unchanged when it is the default.
+
+    Plant scales and tyre options act on the scenario's plant (on top of a plant the scenario
+    already changed); friction events on its μ(road) profile (``base_mu`` replaces the profile);
+    sensor faults after its own; actuators in front of the plant. ``oracle_tuned`` gives the
+    controllers the plant's vehicle; ``replan_for_force_budget`` re-times the reference for it
+    (:func:`tsmpc.planning.retime.retime_for_force_budget`). Raises :class:`ConfigError` for
+    conditions that cannot be applied (a corner the reference does not have, a CoG off the car).
+    """
+    sc: ScenarioSettings = cfg.scenario
+    if sc == ScenarioSettings():
+        return RobustnessCase(cfg, scenario)
+    changes: dict[str, object] = {}
+    veh = plant_vehicle(cfg, scenario.plant_vehicle)
+    if veh != (scenario.plant_vehicle or cfg.vehicle):
+        changes["plant_vehicle"] = veh
+    tyre = plant_tyre(cfg, scenario.plant_tyre)
+    if tyre != (scenario.plant_tyre or cfg.tyre):
+        changes["plant_tyre"] = tyre
+    ref = scenario.reference
+    friction = scenario.friction if sc.base_mu is None else ConstantFriction(sc.base_mu)
+    if sc.replan_for_force_budget:
+        from tsmpc.planning.retime import retime_for_force_budget
+
+        mu = _budget_mu(dc_replace(scenario, friction=friction), cfg, ref.duration)
+        ref = retime_for_force_budget(ref, veh, cfg.lqr, mu, tyre=tyre)
+        changes["reference"] = ref
+    if sc.friction:
+        friction = EventFriction(friction, resolve_events(sc.friction, ref))
+    if friction is not scenario.friction:
+        changes["friction"] = friction
+    faults = sc.sensors
+    if sc.oracle_tuned:  # the oracle's sensors are calibrated: known offsets and drifts removed
+        faults = replace(faults, v_bias=0.0, omega_bias=0.0, theta_bias=0.0, v_drift=0.0,
+                         omega_drift=0.0, theta_drift=0.0)
+    if faults != SensorFaults():
+        changes["sensor_fault"] = SensorModel(faults, cfg.rates.Td,
+                                              cfg.noise.position * cfg.noise.scale, cfg.seed,
+                                              inner=scenario.sensor_fault)
+    act = sc.actuators
+    if act.active:
+        from tsmpc.vehicle.actuators import Actuators, ForceLag, SteeringServo
+
+        steer = None
+        if act.steering_time_constant_s > 0 or act.steering_rate_limit is not None:
+            steer = SteeringServo(act.steering_time_constant_s,
+                                  math.inf if act.steering_rate_limit is None else act.steering_rate_limit)
+        force = ForceLag(act.force_time_constant_s) if act.force_time_constant_s > 0 else None
+        changes["actuators"] = Actuators(steer, force)
+    if act.measured_steering:
+        changes["measured_steering"] = True
+    if sc.oracle_tuned:  # the scales are now in the vehicle: reset, so the config re-runs alike
+        unit = {"mass_scale": 1.0, "inertia_scale": 1.0, "cornering_front_scale": 1.0,
+                "cornering_rear_scale": 1.0, "cog_to_front_scale": 1.0}
+        cfg = replace(cfg, vehicle=veh, scenario=replace(sc, plant=replace(sc.plant, **unit)))
+    meta = {**scenario.meta, "conditions": sc.model_dump(mode="json", exclude_defaults=True)}
+    return RobustnessCase(cfg, dc_replace(scenario, meta=meta, **changes))  # type: ignore[arg-type]

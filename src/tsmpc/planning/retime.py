@@ -1,0 +1,93 @@
+"""Re-timing a reference along its own path (issue 21): the same (x, y) samples, a speed profile
+that never asks for more acceleration than a vehicle can give.
+
+A reference planned for one car can be infeasible for another: the paper's run accelerates at up to
+4.4 m/s², while a car 20 % heavier has (10 kN − μ M g − drag)/M ≈ 3.4 m/s² left on dry asphalt
+(the paper's road resistance μ M g is 7.2 kN there). Tracking such a reference measures the force
+limit, not the controller. :func:`retime` keeps the path and lowers the speed profile where the
+acceleration limit binds (a forward pass ``w_k = min(v_k, sqrt(w_{k−1}² + 2 a(w_{k−1}) Δs_k))``;
+braking is never harder than the original's, since ``w ≤ v`` and w only meets v from below), then
+resamples it in time. :func:`retime_for_force_budget` takes the limit from the force budget:
+``a(v) = (η F_max − μ M g − ½ρC_dA_r v²)/M`` with the headroom η (90 %: the inner loop keeps room
+for its feedback) and, for a plant whose rear tyre has a friction ellipse, a traction of at most
+η μ_t F_zR (the grip of the driven axle).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from tsmpc.config import LQRSettings, TyreParams, VehicleParams
+from tsmpc.errors import ConfigError
+from tsmpc.planning.reference import Reference
+
+__all__ = ["FORCE_HEADROOM", "force_budget_acceleration", "retime", "retime_for_force_budget"]
+
+#: Share of the upper force limit a re-timed reference may use for acceleration and resistance.
+FORCE_HEADROOM = 0.9
+
+
+def force_budget_acceleration(vehicle: VehicleParams, lqr: LQRSettings, mu_road: float,
+                              headroom: float = FORCE_HEADROOM, tyre: TyreParams | None = None
+                              ) -> Callable[[float], float]:
+    """a(v) [m/s²]: what ``headroom`` × the upper force limit leaves for acceleration at speed v
+    against the road resistance μ(road) M g and the drag; with a ``tyre`` that has
+    ``combined_slip``, also at most ``headroom`` × the rear tyre's grip μ_t F_zR as traction.
+    Raises :class:`ConfigError` when nothing is left at standstill."""
+    f_max = headroom * lqr.force_limits(vehicle)[1]
+    res = mu_road * vehicle.mass * vehicle.g
+    if f_max <= res:
+        raise ConfigError(f"scenario: a {vehicle.mass:g} kg vehicle needs {res:.0f} N against "
+                          f"mu(road) = {mu_road:g}, more than {headroom:g} x its force limit")
+    traction = f_max - res
+    if tyre is not None and tyre.combined_slip:
+        mu_t = mu_road * tyre.mu_tyre / tyre.mu_dry if tyre.scale_grip_with_road else tyre.mu_tyre
+        traction = min(traction, headroom * mu_t * vehicle.static_loads[1])
+    d, m = vehicle.drag_factor, vehicle.mass
+
+    def a(v: float) -> float:
+        return max((traction - d * v * v) / m, 0.0)
+
+    return a
+
+
+def retime(ref: Reference, a_max: Callable[[float], float]) -> Reference:
+    """``ref``'s path with its speed profile lowered where accelerating from sample k−1 to k would
+    need more than ``a_max(speed)``; resampled at ``ref.dt`` (the result is longer in time). A
+    reference that already complies is returned unchanged. Closed laps are re-timed cyclically."""
+    x, y = np.asarray(ref.x), np.asarray(ref.y)
+    v = np.maximum(np.asarray(ref.v, dtype=float), 0.0)
+    n = v.size
+    # ds[k]: the step into sample k (ds[0]: from the last sample, a closed lap's wrap)
+    ds = np.hypot(np.diff(x, prepend=x[-1]), np.diff(y, prepend=y[-1]))
+    w = v.copy()
+    order = [k % n for k in range(1, 2 * n)] if ref.closed else list(range(1, n))
+    for k in order:  # a closed lap twice round, so its start sees the end of the lap
+        prev = w[k - 1]
+        w[k] = min(v[k], float(np.sqrt(prev * prev + 2.0 * a_max(prev) * ds[k])))
+    if np.all(w >= v - 1e-9):
+        return ref
+    # Time of each step: the original T where neither end changed (so the unchanged stretches keep
+    # their time base exactly), else the step at the mean of its end speeds, 2 Δs / (w_{k−1} + w_k),
+    # which makes the acceleration along the changed stretches exactly a_max.
+    dt = ref.dt
+    same = (w[1:] >= v[1:] - 1e-9) & (w[:-1] >= v[:-1] - 1e-9)
+    step = np.where(same, dt, 2.0 * ds[1:] / np.maximum(w[:-1] + w[1:], 1e-6))
+    tau = np.concatenate([[0.0], np.cumsum(step)])
+    m = int(np.floor(tau[-1] / dt + 1e-9)) + 1
+    t_new = np.arange(m) * dt
+    kappa = np.where(v > 0.1, np.asarray(ref.omega) / np.maximum(v, 0.1), np.asarray(ref.kappa))
+    vv = np.interp(t_new, tau, w)
+    out = Reference(ref.t[0] + t_new, np.interp(t_new, tau, x), np.interp(t_new, tau, y),
+                    np.interp(t_new, tau, np.asarray(ref.theta)), vv, np.interp(t_new, tau, kappa) * vv,
+                    np.interp(t_new, tau, kappa), closed=ref.closed)
+    return out
+
+
+def retime_for_force_budget(ref: Reference, vehicle: VehicleParams, lqr: LQRSettings,
+                            mu_road: float, tyre: TyreParams | None = None) -> Reference:
+    """:func:`retime` with :func:`force_budget_acceleration` of ``vehicle`` (and ``tyre``) at
+    ``mu_road``."""
+    return retime(ref, force_budget_acceleration(vehicle, lqr, mu_road, tyre=tyre))
