@@ -23,7 +23,8 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
 
   - the slip: ᾱ_course − ᾱ̂ = κ ā_y + β (ā_y = v̂ ω̂ the lateral acceleration). A stiffness or mass
     error biases the MHE's α̂ in proportion to the lateral force (steady state of the single-track
-    model: α depends on C_r and M through M a_y / C_r), so κ carries the model error and β a heading-sensor offset.
+    model: α depends on C_r and M through M a_y / C_r), so κ carries the model error and β a
+    heading-sensor offset.
     The outer loop uses α̂ + κ̂ a_y,d + β̂ with a_y,d = v_d ω_d the *reference's* lateral
     acceleration (issue 21: 5 mrad of α̂ bias cost 0.08 m of RMSE y). The measured a_y would close
     a loop ω → a_y → slip → e_θ → ω without the tyres' lag, fast enough to destabilise a car
