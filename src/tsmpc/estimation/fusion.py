@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -129,6 +130,7 @@ class RepeatGuard:
         return same
 
 
+@dataclass
 class _Interval:
     """Sums of one MPC interval (speed-weighted where the course needs it)."""
 
