@@ -429,7 +429,6 @@ class Cascade:
         pose_ok = fresh and _finite(X, Y, th) and self._accept_pose(t, X, Y, th)
         if pose_ok:
             self._pose, self._pose_t = np.array([X, Y, th]), t
-            self._pose_held = self._pose.copy()
         plan = e_meas = None
         t_mpc = 0.0
         if self._calls % self.n_inner == 0:
@@ -437,8 +436,9 @@ class Cascade:
                 ev["pose_rejected"] += 1
             if fu.any_course:  # an MPC step closes the course fusion's interval
                 kc = min(max(math.floor(t / self.Tc + 1e-6), 0), len(self.reference) - 1)
-                fu.course.close(np.array([X, Y, th]) if pose_ok else None, v if fresh else math.nan,
-                                om if fresh else math.nan,
+                fu.course.close(np.array([X, Y, th]) if pose_ok else None,
+                                v if fresh and speeds_ok else math.nan,
+                                om if fresh and speeds_ok else math.nan,
                                 float(self.reference.v[kc] * self.reference.omega[kc]))
                 if fs.stiffness_estimate:
                     self._apply_stiffness(fu.course.stiffness)
@@ -449,7 +449,9 @@ class Cascade:
             ref = self.reference
             kk = min(k, len(ref) - 1)
             # fusion.predict_pose: a missing pose is dead-reckoned on the estimate; off (the
-            # paper), the MPC sees the last accepted pose, held
+            # paper), the MPC sees the pose of its last step, held
+            if pose_ok:
+                self._pose_held = self._pose.copy()
             p = self._pose if pose_ok or fs.predict_pose else self._pose_held
             window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
             mpc_cfg = self.cfg.mpc
@@ -497,7 +499,8 @@ class Cascade:
         t2 = time.perf_counter()
         self._dead_reckon(est)
         if fu.any_course:
-            fu.course.sample(fresh, th, v, float(est.x[1]), float(est.x[0] * est.x[2]), om,
+            # only samples the gates accepted: a rejected heading or speed is garbage
+            fu.course.sample(pose_ok and speeds_ok, th, v, float(est.x[1]), float(est.x[0] * est.x[2]), om,
                              float(u_mhe[1]), float(u_mhe[0]))
         if m.state is None:
             inner = est
