@@ -32,6 +32,7 @@ METHODS = (Method.FZN, Method.REF, Method.ITER, Method.NL, Method.PURE_PURSUIT, 
 TRACKS = ("Monza", "Silverstone")
 V_MAX, A_LAT = 22.0, 5.0
 PAPER_FILE = Path("data/paper/planner_references_100ms.csv")
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @dataclass(frozen=True)
@@ -159,7 +160,7 @@ def settling_markdown(metrics: dict[str, Any]) -> str:
             + "\n| settling time [s] | " + " | ".join(vals) + " |\n")
 
 
-def baseline_table(out: Path, *, shared: Path = Path("../shared"), methods: tuple[Method, ...] = METHODS,
+def baseline_table(out: Path, *, shared: Path = ROOT.parent / "shared", methods: tuple[Method, ...] = METHODS,
                    max_steps: int | None = None, run: bool = True) -> str:
     """Run every case (``run``; else read the metrics.json files an earlier run left under
     ``out``), write ``out/baseline_table.md`` and return the Markdown."""
@@ -196,7 +197,7 @@ def baseline_table(out: Path, *, shared: Path = Path("../shared"), methods: tupl
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("results/baselines"))
-    ap.add_argument("--shared", type=Path, default=Path("../shared"),
+    ap.add_argument("--shared", type=Path, default=ROOT.parent / "shared",
                     help="folder holding data/paper and data/tracks (not bundled)")
     ap.add_argument("--markdown", type=Path, default=None,
                     help="also write the table here (docs/generated/baseline_table.md for the docs)")

@@ -91,7 +91,8 @@ def fusion_blocks(ref: Path, steps: int | None = None) -> dict[str, str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("reference", nargs="?", default="../shared/data/paper/planner_references_100ms.csv")
+    ap.add_argument("reference", nargs="?",
+                    default=ROOT.parent / "shared" / "data" / "paper" / "planner_references_100ms.csv")
     args = ap.parse_args()
     steps = int(os.environ.get("TSMPC_EXAMPLE_STEPS", "0")) or None  # shortened runs (tests)
     t0 = time.perf_counter()

@@ -94,7 +94,7 @@ def race_block(tracks: Path, steps: int | None = None) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("tracks", nargs="?", default="../shared/data/tracks", type=Path)
+    ap.add_argument("tracks", nargs="?", default=ROOT.parent / "shared" / "data" / "tracks", type=Path)
     args = ap.parse_args()
     steps = int(os.environ.get("TSMPC_EXAMPLE_STEPS", "0")) or None  # shortened runs (tests)
     t0 = time.perf_counter()

@@ -864,8 +864,9 @@ class ScenarioActuators(_Frozen):
 
     steering_time_constant_s: _Num = Field(0.0, ge=0.0, le=1.0, allow_inf_nan=False,
                                             description="steering servo lag [s], 0 to 1")
-    steering_rate_limit: _Num | None = Field(None, gt=0.0, le=20.0, allow_inf_nan=False,
-                                              description="steering rate limit [rad/s]; None = none")
+    steering_rate_limit: _Num | None = Field(
+        None, gt=0.0, le=20.0, allow_inf_nan=False,
+        description="steering rate limit [rad/s], above 0 to 20; None = none")
     force_time_constant_s: _Num = Field(0.0, ge=0.0, le=2.0, allow_inf_nan=False,
                                          description="drive-force lag [s], 0 to 2")
     measured_steering: _Flag = Field(False, description="the platform measures the applied steering "
@@ -889,7 +890,7 @@ class ScenarioSettings(_Frozen):
     friction: tuple[FrictionEvent, ...] = Field((), description="mu(road) events over the base profile")
     base_mu: _Num | None = Field(None, ge=0.0, le=1.5, allow_inf_nan=False,
                                   description="constant mu(road) instead of the scenario's profile "
-                                  "(the paper's by time) [-]; None = the profile")
+                                  "(the paper's by time) [-], 0 to 1.5; None = the profile")
     actuators: ScenarioActuators = ScenarioActuators()
     oracle_tuned: _Flag = Field(
         False, description="the controllers' vehicle is the plant's (scales applied): models and "

@@ -402,8 +402,8 @@ def ablation(ctx: Context) -> Produced:
     # two narrow tables rather than one wide one: each fits a page at 1400 px
     p.add("ablation", "table", _table(["row", "x", "y", "θ", "v", "ω", "max \\|e_y\\| [m]"], rows))
     p.add("ablation", "effort", _table(["row", "soft / fallback MPC steps", "σ(ΔF_xR) [N]"], effort))
-    paper, fb, win, dflt, oracle, _off = ms
-    (_, _, log_paper), (_, _, log_fb), (_, _, log_win), _, _, (_, _, log_off) = runs
+    paper, fb, win, mech, dflt, oracle, _off = ms
+    (_, _, log_paper), (_, _, log_fb), (_, _, log_win), _, _, _, (_, _, log_off) = runs
 
     def ratios(m: dict[str, Any]) -> str:
         return ", ".join(f"{_d(m['rmse'][k] / t5[k], 2)}× ({_SYM[k]})" for k in RMSE_KEYS)
@@ -426,10 +426,14 @@ def ablation(ctx: Context) -> Produced:
         f"RMSE v {_d(fb['rmse']['v'], 3)} → {_d(win['rmse']['v'], 3)} m/s; σ(ΔF_xR) {_d(fb['dF_std'], 0)} → "
         f"{_d(win['dF_std'], 0)} N; RMS error of the friction estimate {_d(err_rms(log_fb, True), 0)} N "
         f"(one-step formula) → {_d(err_rms(log_win, False), 0)} N (window).",
-        f"* **+ outer-loop mechanisms (= default)**: RMSE y {_d(win['rmse']['y'], 3)} → "
-        f"{_d(dflt['rmse']['y'], 3)} m, max \\|e_y\\| {_d(win['max_abs_lateral_m'], 2)} → "
-        f"{_d(dflt['max_abs_lateral_m'], 2)} m, RMSE θ {_d(win['rmse']['theta'], 4)} → "
-        f"{_d(dflt['rmse']['theta'], 4)} rad.",
+        f"* **+ outer-loop mechanisms**: RMSE y {_d(win['rmse']['y'], 3)} → "
+        f"{_d(mech['rmse']['y'], 3)} m, max \\|e_y\\| {_d(win['max_abs_lateral_m'], 2)} → "
+        f"{_d(mech['max_abs_lateral_m'], 2)} m, RMSE θ {_d(win['rmse']['theta'], 4)} → "
+        f"{_d(mech['rmse']['theta'], 4)} rad.",
+        f"* **+ fusion and adaptation (= default)**: on the nominal vehicle RMSE x "
+        f"{_d(mech['rmse']['x'], 4)} → {_d(dflt['rmse']['x'], 4)} m, y {_d(mech['rmse']['y'], 4)} → "
+        f"{_d(dflt['rmse']['y'], 4)} m, v {_d(mech['rmse']['v'], 3)} → {_d(dflt['rmse']['v'], 3)} m/s "
+        "(what they are for shows under mismatch and faults: the page *Mismatch, faults and race speeds*).",
         f"* **oracle**: RMSE x {_d(oracle['rmse']['x'], 3)} m against the default's "
         f"{_d(dflt['rmse']['x'], 3)} m.",
         f"* **compensation off**: e_x is {_d(log_off.errors[k10, 0], 1)} m at t = "
