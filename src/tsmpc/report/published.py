@@ -912,6 +912,7 @@ def _example(ctx: Context, name: str) -> Any:
     spec = importlib.util.spec_from_file_location(f"tsmpc_example_{name}", path)
     assert spec is not None and spec.loader is not None
     mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod  # dataclasses resolve their module's names through sys.modules
     spec.loader.exec_module(mod)
     return mod
 

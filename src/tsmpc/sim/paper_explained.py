@@ -164,8 +164,12 @@ def ablation_rows() -> list[ExplainedRow]:
         ExplainedRow("+ speed-error feedback", fb, "lqr.speed_feedback false → true", "ablation"),
         ExplainedRow("+ MHE-window friction estimate", win, "lqr.friction_estimate uio → window",
                      "ablation"),
-        ExplainedRow("+ slip-aware outer loop, tangent heading (= default)", Config(),
-                     "mpc.slip_aware, mpc.tangent_heading false → true", "ablation"),
+        ExplainedRow("+ slip-aware outer loop, tangent heading, step-average reference",
+                     replace(Config(), fusion=paper.fusion),
+                     "mpc.slip_aware, mpc.tangent_heading, mpc.step_average_reference false → true",
+                     "ablation"),
+        ExplainedRow("+ fusion and adaptation (= default)", Config(), "fusion.* false → true",
+                     "ablation"),
     ]
 
 

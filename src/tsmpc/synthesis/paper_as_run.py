@@ -71,6 +71,18 @@ __all__ = [
 #: first (the published LMI was only marginally feasible: a larger margin moves its gains).
 AS_RUN_LADDER = (LADDER_FLOOR,)
 
+#: Ways of posing the same feasibility SDP to Clarabel, tried in order when the previous one ends
+#: in a numerical failure (not infeasibility): the published LMI is so marginal that whether
+#: Clarabel's default path converges depends on the CPU (seen: an AMD Zen 5 fails where Intel
+#: machines succeed, μ 0.5 at 1 ms). The redundant ``Y ⪰ 0`` and Clarabel without equilibration
+#: converge there; the analytic centre kept by the ``paper-as-run`` preset is the same whichever
+#: variant found the first feasible point. (y_constraint, Clarabel options, label)
+CLARABEL_VARIANTS: tuple[tuple[bool, dict[str, object], str], ...] = (
+    (False, {}, ""),
+    (True, {}, " (with Y ⪰ 0)"),
+    (False, {"equilibrate_enable": False}, " (no equilibration)"),
+)
+
 
 _FORMULATION = ("feasibility LMI (no objective), common P, 8 vertices, Euler (the published run's; "
                 "a quirk, not a recommendation)")
@@ -146,7 +158,8 @@ def _scaled_problem(A: NDArray[np.float64], B: NDArray[np.float64], settings: Dy
 
 
 def _solve_clarabel(As: NDArray[np.float64], Bs: NDArray[np.float64], Qh: NDArray[np.float64],
-                    Rh: NDArray[np.float64], t: float, what: str, *, y_constraint: bool = False
+                    Rh: NDArray[np.float64], t: float, what: str, *, y_constraint: bool = False,
+                    options: dict[str, object] | None = None,
                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
     """The paper's vertex LMIs with the certificates' relative margin t ((1 − t) Y in the corner,
     see tsmpc.synthesis.sdp), no objective: (Y (6, 6), W (8, 2, 6), status) in the given
@@ -168,7 +181,7 @@ def _solve_clarabel(As: NDArray[np.float64], Bs: NDArray[np.float64], Qh: NDArra
             [Rh @ W[i], Znm.T, Znm.T, np.eye(m)],
         ])
         cons.append(0.5 * (M + M.T) >> 0)
-    status = solve(cp.Problem(cp.Minimize(0), cons), SDPSolver.CLARABEL, what)
+    status = solve(cp.Problem(cp.Minimize(0), cons), SDPSolver.CLARABEL, what, options)
     if Y.value is None or any(w.value is None for w in W):
         raise Infeasible(status)
     return 0.5 * (Y.value + Y.value.T), np.array([w.value for w in W]), status
@@ -250,9 +263,20 @@ def design_feasibility(
     what = f"feasibility TS-LMI-LQR at Td={Td}"
 
     def attempt(t: float) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
-        Ys, Ws, status = _solve_clarabel(As, Bs, Qh, Rh, t, what)
-        K, P = _physical(Ys, Ws, STATE_SCALE, INPUT_SCALE)
-        return K, P, status
+        failure: Infeasible | None = None
+        for y_constraint, options, label in CLARABEL_VARIANTS:
+            try:
+                Ys, Ws, status = _solve_clarabel(As, Bs, Qh, Rh, t, what, y_constraint=y_constraint,
+                                                 options=options)
+            except Infeasible as exc:
+                if "failed" not in exc.status:  # a status (infeasible, …), not a numerical failure
+                    raise
+                failure = failure or exc
+                continue
+            K, P = _physical(Ys, Ws, STATE_SCALE, INPUT_SCALE)
+            return K, P, status + label
+        assert failure is not None
+        raise failure
 
     try:
         (K, P, status), certs, t_imp = solve_with_margin(

@@ -54,17 +54,17 @@ class Infeasible(Exception):  # internal control flow of the ladder, never escap
         self.status = status
 
 
-def solve(prob: Any, solver: SDPSolver | str, what: str) -> str:
+def solve(prob: Any, solver: SDPSolver | str, what: str, options: dict[str, Any] | None = None) -> str:
     """Solve a cvxpy problem; returns its status. Any solver exception (a crash, NaN/inf in the
     data) becomes :class:`SolverError` naming ``what``; an infeasible or unsolved problem raises
-    :class:`Infeasible`."""
+    :class:`Infeasible`. ``options`` are added to the solver's defaults of this module."""
     import cvxpy as cp
 
     s = SDPSolver(str(solver).upper())
     try:
         with warnings.catch_warnings():  # the status is reported; certificates decide
             warnings.simplefilter("ignore", UserWarning)
-            prob.solve(solver=getattr(cp, s.value), **_OPTIONS[s])
+            prob.solve(solver=getattr(cp, s.value), **{**_OPTIONS[s], **(options or {})})
     except cp.error.SolverError as exc:
         raise Infeasible(f"{s.value} failed ({exc})") from None
     except (ValueError, ArithmeticError, OverflowError) as exc:  # NaN/inf in the problem data
