@@ -37,10 +37,11 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     single-track model, F_yF = C_f (δ − α − a ω/v) and F_yR = C_r (b ω/v − α) are
     fitted per axle (least squares through the origin on the compliance 1/C, the model's C as
     prior, forgetting over ``STIFF_MEMORY_S``), from chords where the reference turns only
-    (``CORNER_ACCEL``). The fitted C_f, C_r replace the model's in
-    the MHE and in the inner loop's reference gain N̄ (the LMI gains stay): with them α̂ and the
-    steering feed-forward are right (issue 21: the stiffness error was worth 0.08 m of RMSE y;
-    with the true C in both blocks the loss disappears, in the LMI gains alone it does not).
+    (``CORNER_ACCEL``). The fitted C_f, C_r replace the model's in the inner loop's reference
+    gain N̄, and their common factor scales the model's in the MHE (the front/rear balance stays
+    the model's there: :func:`tsmpc.control.cascade._apply_stiffness_to` says why); the LMI gains
+    stay. With them the steering feed-forward and α̂'s scale are right (issue 21: the stiffness
+    error was worth 0.08 m of RMSE y).
 
   The fits compare like with like (means over the same chord), so the chord's lag in a transient
   does not bias them; only chords of measured (not predicted) poses count.
