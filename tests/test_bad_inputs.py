@@ -383,7 +383,7 @@ def test_bad_input_exits_2_with_one_line_naming_it(files: Path, tmp_path: Path, 
     errors = [ln for ln in text.splitlines() if ln.lstrip(" │").lower().startswith("error:")]
     assert len(errors) == 1, text
     # Validation comes before any work: no output was written.
-    assert not out.exists() or not any(out.iterdir())
+    assert not out.exists(), "a refused command left its output folder behind"
     assert not Path(f"{out}.csv").exists() and not Path(f"{out}.png").exists()
 
 

@@ -82,6 +82,9 @@ def sweep_cmd(
         from tsmpc.cli._outdir import claim_default_out
 
         out = claim_default_out("sweep")
+        created = True
+    else:
+        created = not out.exists()
     if resume:
         check_out_dir(out, overwrite=True)  # records on disk are kept and skipped
     else:
@@ -115,6 +118,8 @@ def sweep_cmd(
                                 retry_failed=retry_failed)
             except ConfigError as err:  # e.g. no scheduler answered: nothing ran
                 (out / PARTIAL_MARKER).unlink(missing_ok=True)
+                if created and not any(out.iterdir()):  # leave no trace of a sweep that never ran
+                    out.rmdir()
                 fail(err)
             progress.stop()
             _summary(con, spec.name, res, out)

@@ -152,7 +152,8 @@ def solve_designs(cfg: Config, status: StatusFn | None = None) -> tuple[Any, Any
     and certified on this machine either way.
 
     ``status`` gets "LMI design: NAME: solving and certifying…" (or "loading…" for a cached one)
-    before, and "LMI design: NAME: certified in S s (smallest relative margin M: CERTIFICATE)"
+    before, and "LMI design: NAME: certified in S s (every LMI holds with a relative margin ≥ M, …;
+    tightest: CERTIFICATE)"
     after the certificates hold. Raises :class:`~tsmpc.errors.DesignError` (a bad input: no
     certified design exists for these settings) with the solver's diagnosis."""
     from tsmpc.synthesis.cache import (
@@ -162,7 +163,7 @@ def solve_designs(cfg: Config, status: StatusFn | None = None) -> tuple[Any, Any
         load_or_design_dynamic,
         load_or_design_kinematic,
     )
-    from tsmpc.synthesis.certificates import worst
+    from tsmpc.synthesis.certificates import MIN_RELATIVE_MARGIN, worst
 
     say = status or (lambda _text: None)
     out = []
@@ -183,8 +184,10 @@ def solve_designs(cfg: Config, status: StatusFn | None = None) -> tuple[Any, Any
 
             raise DesignError(explain_design_failure(name, cfg, err)) from None
         w = worst(design.certificates)
-        say(f"LMI design: {name}: certified in {time.perf_counter() - t0:.1f} s (smallest relative "
-            f"margin {w.relative:.2e}: {w.name})")
+        # the certificate's number is λmax of a matrix that must be ≺ 0, relative: the margin is −it
+        say(f"LMI design: {name}: certified in {time.perf_counter() - t0:.1f} s (every LMI holds with "
+            f"a relative margin ≥ {-w.relative:.1e}, {MIN_RELATIVE_MARGIN:g} required; tightest: "
+            f"{w.name})")
         out.append(design)
     return out[0], out[1]
 

@@ -38,7 +38,8 @@ __all__ = ["COMMONROAD_MODELS", "CommonRoadPlant", "commonroad_config", "commonr
 #: computation per simulated second at h = 1 ms, converged: h = 0.5 ms changes v by 1e-5 m/s).
 COMMONROAD_MODELS = {"commonroad-st": "st", "commonroad-mb": "mb"}
 
-_INSTALL = 'the CommonRoad plant needs the extra: pip install "tsmpc[commonroad]"'
+_INSTALL = ('the CommonRoad plant needs the extra: pip install "tsmpc[commonroad]" '
+            '(from a checkout: pip install -e ".[commonroad]")')
 
 
 def _vehiclemodels(module: str) -> Any:
