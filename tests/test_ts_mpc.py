@@ -247,3 +247,23 @@ def test_bad_inputs_give_a_flagged_fallback_not_an_exception(cfg: Config, design
     assert np.allclose(bad.u, ok.u_pred[1])  # the shifted previous plan
     short = mpc.step(np.zeros(3), np.array([10.0, 0.0]), SimpleNamespace(v=np.ones(3), omega=np.zeros(3)))
     assert short.status == MPCStatus.FALLBACK
+
+
+@pytest.mark.parametrize("mode", ["fzn", "ref", "iter"])
+def test_compiled_step_decides_like_the_numpy_path_on_garbage(cfg: Config, design, mode: str) -> None:
+    """The compiled step does the input checks, the clipping and the previous plan's schedule
+    itself (issue 25: fewer Python steps): on good and bad inputs alike its status and plan equal
+    the numpy path's (an infinite u_prev is clipped into the box, not refused, as np.clip does)."""
+    fast, slow = _mpc(cfg, design, mode), _mpc(cfg, design, mode)
+    slow._kern = None
+    good = SimpleNamespace(v=np.full(N + 1, 10.0), omega=np.full(N + 1, 0.05))
+    nan_ref = SimpleNamespace(v=np.r_[np.full(N - 1, 10.0), np.nan], omega=np.zeros(N))
+    cases = [((0.1, 0.2, 0.01), (10.0, 0.0), good), ((0.0, 0.1, 0.0), (np.inf, 0.05), good),
+             ((0.0, 0.1, 0.0), (10.0, np.nan), good), ((np.inf, 0.0, 0.0), (10.0, 0.0), good),
+             ((0.0, 0.05, 0.0), (10.0, 0.0), nan_ref), ((0.2, -0.1, 0.02), (10.0, 0.05), good),
+             ((0.0, 0.0, 0.0), (10.0, 0.0), SimpleNamespace(v=np.ones(3), omega=np.zeros(3))),
+             ((0.3, 0.0, -0.01), (9.0, -0.01), good)]
+    for e, u, ref in cases:
+        a, b = fast.step(np.array(e), np.array(u), ref), slow.step(np.array(e), np.array(u), ref)
+        assert a.status == b.status, (e, u)
+        np.testing.assert_allclose(a.u_pred, b.u_pred, rtol=1e-7, atol=1e-9, err_msg=str((e, u)))

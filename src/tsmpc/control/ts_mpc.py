@@ -274,6 +274,13 @@ class TSMPC:
         self._dummy = np.zeros(N)
         # C-ordered copies for the kernel (one compiled signature whatever the caller passed)
         self._Pc, self._Sc = np.ascontiguousarray(self.P), np.ascontiguousarray(self.S)
+        # The constants of kernels.mpc.guarded_step, packed once (see its docstring)
+        n_iter = settings.iter_max if self.mode == SchedulingMode.ITER else 1
+        self._ints = np.array([self._mode_id, N, int(settings.terminal_constraint), n_iter], dtype=np.int64)
+        self._prm = np.concatenate([[model.Tc, settings.iter_tol], self._lo, self._hi, self._q, self._r,
+                                    du, self._umin, self._umax]).astype(float)
+        self._PS = np.ascontiguousarray(np.stack([self._Pc, self._Sc]))
+        self._no_X, self._no_U = np.zeros((0, 3)), np.zeros((0, 2))
         self.reset()
 
     @property
@@ -415,6 +422,23 @@ class TSMPC:
         t0 = time.perf_counter()
         N = self.N
         x0 = np.asarray(errors, dtype=float).reshape(3)
+        if self._kern is not None:
+            # Fast path: the checks, the schedule and the Riccati recursion in one compiled call;
+            # accepted when its answer satisfies every constraint, else the condensed QP path below.
+            prev = self._prev
+            u_raw = np.asarray(u_prev, dtype=float).reshape(2)
+            code, U, du, X, cost, n_clip, up = self._kern.guarded_step(
+                self._ints, self._prm, self._PS, x0, u_raw, np.asarray(reference.v, dtype=float),
+                np.asarray(reference.omega, dtype=float), self._no_X if prev is None else prev.x_pred,
+                self._no_U if prev is None else prev.u_pred)
+            if code == 0:
+                res = MPCResult(u=U[0].copy(), x_pred=X, u_pred=U, du=du, cost=cost,
+                                status=MPCStatus.OPTIMAL, iterations=0, qp_iterations=0,
+                                solve_time_s=time.perf_counter() - t0, n_clipped=n_clip)
+                self._prev = res
+                return res
+            if code == 2:
+                return self._fallback(x0, up, t0, 0, 0, 0)
         up = np.clip(np.asarray(u_prev, dtype=float).reshape(2), self._umin, self._umax)
         v_d = np.asarray(reference.v, dtype=float)[:N]
         w_d = np.asarray(reference.omega, dtype=float)[:N]
@@ -434,21 +458,6 @@ class TSMPC:
                 omega[:-1] = prev.u_pred[1:, 1]
                 omega[-1] = prev.u_pred[-1, 1]
         n_iter = self.settings.iter_max if self.mode == SchedulingMode.ITER else 1
-        if self._kern is not None:
-            # Fast path: Riccati recursion of every scheduling iteration, compiled; accepted when
-            # its answer satisfies every constraint, else the condensed QP path below decides.
-            dummy = self._dummy
-            code, U, du, X, cost, n_clip = self._kern.fast_step(
-                self._mode_id, x0, up, v_d, w_d, dummy if omega is None else omega, omega is not None,
-                dummy if e_th is None else e_th, e_th is not None, self._lo, self._hi, self.model.Tc,
-                self._q, self._Pc, self._r, self._Sc, self._du, self._umin, self._umax,
-                self.settings.terminal_constraint, n_iter, self.settings.iter_tol)
-            if code == 0:
-                res = MPCResult(u=U[0].copy(), x_pred=X, u_pred=U, du=du, cost=cost,
-                                status=MPCStatus.OPTIMAL, iterations=0, qp_iterations=0,
-                                solve_time_s=time.perf_counter() - t0, n_clipped=n_clip)
-                self._prev = res
-                return res
         n_qp = n_it = n_clip = 0
         z = None
         for _ in range(n_iter):

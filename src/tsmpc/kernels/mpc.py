@@ -22,7 +22,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["fast_step", "warm"]
+__all__ = ["fast_step", "guarded_step", "warm"]
 
 FZN, REF, ITER = 0, 1, 2
 
@@ -83,36 +83,29 @@ def riccati(x0, up, c, s, r, Tc, q, P, rd, U, DU, X):
     for a in range(3):
         for b in range(3):
             Pm[a, b] = P[a, b]
-    Ab = np.zeros((5, 5))
-    for a in range(5):
-        Ab[a, a] = 1.0
-    Ab[0, 3] = -Tc
-    Ab[2, 4] = -Tc
     # B̄ columns: Δv → [−Tc, 0, 0, 1, 0], Δω → [0, 0, −Tc, 0, 1]
     PA = np.empty((5, 5))
     PB = np.empty((5, 2))
-    d = np.zeros(5)
     Pd = np.empty(5)
     Hux = np.empty((2, 5))
     for i in range(N - 1, -1, -1):
         ci = c[i]
-        Ab[0, 1] = ci
-        Ab[1, 0] = -ci
-        Ab[1, 2] = s[i]
-        d[0] = Tc * r[i, 0]
-        d[2] = Tc * r[i, 1]
+        si = s[i]
+        d0 = Tc * r[i, 0]
+        d2 = Tc * r[i, 1]
+        # Ā = I + (Ā₀₁ = c, Ā₁₀ = −c, Ā₁₂ = s, Ā₀₃ = Ā₂₄ = −T_c): the products below take only its
+        # non-zero entries, in the order of the dense sums they replace (bit-identical results:
+        # the dense sums only added exact zeros).
         for a in range(5):
-            for b in range(5):
-                acc = 0.0
-                for m in range(5):
-                    acc += Pm[a, m] * Ab[m, b]
-                PA[a, b] = acc
-            PB[a, 0] = -Tc * Pm[a, 0] + Pm[a, 3]
-            PB[a, 1] = -Tc * Pm[a, 2] + Pm[a, 4]
-            acc = pv[a]
-            for m in range(5):
-                acc += Pm[a, m] * d[m]
-            Pd[a] = acc
+            p0, p1, p2, p3, p4 = Pm[a, 0], Pm[a, 1], Pm[a, 2], Pm[a, 3], Pm[a, 4]
+            PA[a, 0] = p0 + p1 * -ci
+            PA[a, 1] = p0 * ci + p1
+            PA[a, 2] = p1 * si + p2
+            PA[a, 3] = p0 * -Tc + p3
+            PA[a, 4] = p2 * -Tc + p4
+            PB[a, 0] = -Tc * p0 + p3
+            PB[a, 1] = -Tc * p2 + p4
+            Pd[a] = pv[a] + p0 * d0 + p2 * d2
         h00 = rd[0] + (-Tc * PB[0, 0] + PB[3, 0])
         h01 = -Tc * PB[0, 1] + PB[3, 1]
         h11 = rd[1] + (-Tc * PB[2, 1] + PB[4, 1])
@@ -130,18 +123,35 @@ def riccati(x0, up, c, s, r, Tc, q, P, rd, U, DU, X):
             K[i, 1, b] = -(i01 * Hux[0, b] + i11 * Hux[1, b])
         kf[i, 0] = -(i00 * hu0 + i01 * hu1)
         kf[i, 1] = -(i01 * hu0 + i11 * hu1)
-        # P ← Q + ĀᵀPĀ + HuxᵀK,  p ← Āᵀ(P d + p) + Huxᵀ k
+        # P ← Q + ĀᵀPĀ + HuxᵀK,  p ← Āᵀ(P d + p) + Huxᵀ k  (column a of Ā: its non-zeros in order)
         for a in range(5):
+            ka, kb = Hux[0, a], Hux[1, a]
             for b in range(a, 5):
-                acc = Hux[0, a] * K[i, 0, b] + Hux[1, a] * K[i, 1, b]
-                for m in range(5):
-                    acc += Ab[m, a] * PA[m, b]
+                acc = ka * K[i, 0, b] + kb * K[i, 1, b]
+                if a == 0:
+                    acc = acc + PA[0, b] + -ci * PA[1, b]
+                elif a == 1:
+                    acc = acc + ci * PA[0, b] + PA[1, b]
+                elif a == 2:
+                    acc = acc + si * PA[1, b] + PA[2, b]
+                elif a == 3:
+                    acc = acc + -Tc * PA[0, b] + PA[3, b]
+                else:
+                    acc = acc + -Tc * PA[2, b] + PA[4, b]
                 if a == b and a < 3:
                     acc += q[a]
                 Pm[a, b] = acc
-            acc = Hux[0, a] * kf[i, 0] + Hux[1, a] * kf[i, 1]
-            for m in range(5):
-                acc += Ab[m, a] * Pd[m]
+            acc = ka * kf[i, 0] + kb * kf[i, 1]
+            if a == 0:
+                acc = acc + Pd[0] + -ci * Pd[1]
+            elif a == 1:
+                acc = acc + ci * Pd[0] + Pd[1]
+            elif a == 2:
+                acc = acc + si * Pd[1] + Pd[2]
+            elif a == 3:
+                acc = acc + -Tc * Pd[0] + Pd[3]
+            else:
+                acc = acc + -Tc * Pd[2] + Pd[4]
             pv[a] = acc
         for a in range(5):
             for b in range(a):
@@ -245,6 +255,56 @@ def fast_step(mode, x0, up, v_d, w_d, omega, has_omega, e_th, has_eth, lo, hi, T
     return 0, U, DU, X, cost, n_clip
 
 
+@njit(cache=True, fastmath=False)
+def guarded_step(ints, prm, PS, x0, u_raw, v_all, w_all, prev_X, prev_U):
+    """:func:`fast_step` with what ``TSMPC.step`` did around it in Python: the inputs' sizes and
+    finiteness, u_prev clipped into the input box, the horizon's slices of the reference and the
+    previous plan's schedule (e_θ for REF/ITER, ω for ITER). Few arguments (the constants packed
+    once by the controller): numba's dispatch checks every argument's type on each call.
+
+    ``ints`` = [mode, N, use_term, n_iter]; ``prm`` = [T_c, iter_tol, lo (3), hi (3), Q (3),
+    R (2), Δu_max (2), u_min (2), u_max (2)]; ``PS`` = [P, S] (2, 3, 3); ``prev_X`` (N+1, 3) and
+    ``prev_U`` (N, 2), or empty without a previous plan.
+
+    Returns (code, U, ΔU, X, cost, n_clipped, u_prev clipped): code 0 = accepted, 1 = the caller
+    runs the condensed QP path, 2 = a non-finite or missing input (the caller falls back)."""
+    mode, N, use_term, n_iter = ints[0], ints[1], ints[2] != 0, ints[3]
+    up = np.empty(2)
+    U = np.empty((0, 2))
+    X = np.empty((0, 3))
+    if x0.size != 3 or u_raw.size != 2 or v_all.size < N or w_all.size < N:
+        return 2, U, U, X, np.nan, 0, up
+    total = 0.0  # one finiteness test for all inputs, as the numpy path
+    for j in range(2):
+        uj = u_raw[j]
+        up[j] = prm[15 + j] if uj < prm[15 + j] else (prm[17 + j] if uj > prm[17 + j] else uj)
+        total += up[j]
+    for j in range(3):
+        total += x0[j]
+    for i in range(N):
+        total += v_all[i] + w_all[i]
+    if not math.isfinite(total):
+        return 2, U, U, X, np.nan, 0, up
+    v_d = v_all[:N]
+    w_d = w_all[:N]
+    has_prev = prev_X.shape[0] > N and mode != FZN
+    eth = np.empty(N)
+    om = np.empty(N)
+    if has_prev:
+        eth[0] = x0[2]
+        for i in range(1, N):
+            eth[i] = prev_X[i + 1, 2]
+    has_om = has_prev and mode == ITER
+    if has_om:
+        for i in range(N - 1):
+            om[i] = prev_U[i + 1, 1]
+        om[N - 1] = prev_U[N - 1, 1]
+    code, U, DU, X, cost, n_clip = fast_step(
+        mode, x0, up, v_d, w_d, om, has_om, eth, has_prev, prm[2:5], prm[5:8], prm[0], prm[8:11],
+        PS[0], prm[11:13], PS[1], prm[13:15], prm[15:17], prm[17:19], use_term, n_iter, prm[1])
+    return code, U, DU, X, cost, n_clip, up
+
+
 def warm() -> None:
     """Compile (or load from the cache) the signatures the controller uses."""
     N = 4
@@ -255,3 +315,7 @@ def warm() -> None:
     for vd in (zN, ro):
         fast_step(1, z3, z2, vd, vd, zN, True, zN, True, -np.ones(3), np.ones(3), 0.1, np.ones(3), eye3,
                   np.ones(2), eye3, np.ones(2), -np.ones(2), np.ones(2), True, 1, 1e-3)
+        prm = np.zeros(19)
+        prm[0], prm[5:8], prm[15:17], prm[17:19] = 0.1, 1.0, -1.0, 1.0
+        for prev in ((np.zeros((0, 3)), np.zeros((0, 2))), (np.zeros((N + 1, 3)), np.zeros((N, 2)))):
+            guarded_step(np.array([1, N, 1, 1]), prm, np.stack([eye3, eye3]), z3, z2, vd, vd, *prev)
