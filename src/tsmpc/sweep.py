@@ -244,7 +244,9 @@ class SweepSpec(_Strict):
     config: dict[str, Any] = Field(default_factory=dict)
     grid: GridAxes = GridAxes()
     random: RandomSpec | None = None
-    retries: StrictInt = Field(2, ge=0, le=10, description="re-runs of a task whose worker failed")
+    retries: StrictInt = Field(2, ge=0, le=10, description=(
+        "Dask retries of a task that raised (a run never raises: its failures are records; "
+        "worker deaths are retried by Dask's distributed.scheduler.allowed-failures), 0 to 10"))
     max_lateral_m: _Real = Field(5.0, gt=0.0, le=1e3,
                                  description="|e_y| beyond which a run has diverged")
     cases: dict[str, dict[str, Any]] = Field(
