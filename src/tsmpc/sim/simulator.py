@@ -182,7 +182,7 @@ def _measurement(y: NDArray[np.float64], x: NDArray[np.float64], plant: Plant, o
 def simulate(
     cfg: Config, method: Method | str, scenario: Scenario, *, oracle: bool = False,
     plant: Plant | None = None, kinematic_design: Any = None, dynamic_design: Any = None,
-    progress: ProgressFn | None = None, max_steps: int | None = None,
+    progress: ProgressFn | None = None, max_steps: int | None = None, engine: bool | None = None,
 ) -> RunLog:
     """Run ``method`` on ``scenario``: ``plant`` (any :class:`~tsmpc.sim.plant.Plant`; None:
     :func:`default_plant`) ↔ :class:`~tsmpc.control.cascade.Cascade` every T_d, all logged.
@@ -192,10 +192,23 @@ def simulate(
     ``scenario.divergence_bound_m`` (the track's half-width; None: the config's) ends the run
     (``termination`` says why); closed laps run to their end (:func:`tracked_steps`); block
     failures are counted in ``events``, never raised. One BLAS thread unless
-    ``TSMPC_BLAS_THREADS`` says otherwise (:mod:`tsmpc.blas`)."""
+    ``TSMPC_BLAS_THREADS`` says otherwise (:mod:`tsmpc.blas`). ``engine``: run the whole run in
+    the compiled engine where it applies (:mod:`tsmpc.sim.engine`; None = unless
+    ``TSMPC_ENGINE=0``), False = this Python loop."""
     from tsmpc.blas import limit_blas_threads
 
     limit_blas_threads()
+    from tsmpc.sim import engine as eng  # (imports this module: not at the top)
+
+    if (eng.enabled() if engine is None else engine) and eng.applicability(
+            cfg, method, scenario, oracle=oracle, plant=plant) is None:
+        try:
+            log = eng.run(cfg, method, scenario, kinematic_design=kinematic_design,
+                          dynamic_design=dynamic_design, progress=progress, max_steps=max_steps)
+        except eng.EngineFallback:  # a block raised: the Python loop reproduces the cascade's catch
+            log = None
+        if log is not None:
+            return log
     oracle = oracle or cfg.lqr.oracle
     true_state = cfg.lqr.true_state_feedback  # the published run's quirk
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=kinematic_design,

@@ -1,0 +1,1035 @@
+"""Whole-run engine: the simulator's loop (:func:`tsmpc.sim.simulator.simulate`) with the cascade
+(:class:`tsmpc.control.cascade.Cascade`) and the built-in plant in one compiled call.
+
+Every T_d the kernel does what one iteration of ``simulate`` does — the sensor sample (noise drawn
+beforehand by the caller with the same generator calls, sensor faults as data), the outer-step
+log and the divergence test, ``Cascade.step`` (sample gates, dead reckoning, the course fusion and
+its fits, the slip-aware outer-loop errors, the TS-MPC every T_c/T_d calls, the MHE-UIO, the
+mass-error terms, the TS-LQR) and the plant's T_d/h RK4 steps — and logs into preallocated arrays.
+The blocks are the compiled kernels the Python wrappers call (:func:`~tsmpc.kernels.mpc.fast_step`,
+:func:`~tsmpc.kernels.mhe.window_step`, :func:`~tsmpc.kernels.lqr.lqr_step`,
+:func:`~tsmpc.kernels.plant.rk4_block`); the glue between them is ported operation by operation
+(same order, same rounding), so the engine reproduces the Python loop to the last bit.
+
+Where a block's compiled fast path does not decide a step (the MPC's condensed QP / SOCP path, the
+MHE's dense QP with an active state bound, a singular reference gain of the TS-LQR, a non-finite
+plant state) the kernel *returns* with a code and the state of the step in its arrays; the caller
+(:mod:`tsmpc.sim.engine`) runs that block's Python path, writes its answer back and calls the
+kernel again, which resumes where it stopped (``si[SI_PHASE]``).
+
+The state lives in flat arrays indexed by the module constants below (numba compiles them as
+constants): ``fp``/``ip`` parameters, ``sf``/``si`` state, ``sc`` the current step's intermediate
+values.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from llvmlite import ir
+from numba import njit
+from numba.core import cgutils, types
+from numba.extending import intrinsic
+
+from tsmpc.kernels.lqr import lqr_step
+from tsmpc.kernels.mhe import window_step
+from tsmpc.kernels.mpc import fast_step
+from tsmpc.kernels.plant import rk4_block
+
+__all__ = ["friction_mu", "hypot_py", "run", "ticks", "warm"]
+
+# ---------------------------------------------------------------------------- return codes
+DONE, NEED_MPC, NEED_MHE, NEED_LQR, NEED_PLANT, DIVERGED = range(6)
+# phases of a step (where a resumed call continues)
+PH_START, PH_PLAN, PH_MHE, PH_POST_MHE, PH_POST_LQR, PH_POST_PLANT = range(6)
+# MHE statuses (EstimatorStatus) and MPC statuses (MPCStatus) as codes
+ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP = 1, 2, 3, 4
+MPC_OPTIMAL, MPC_SOFT, MPC_FALLBACK = 1, 2, 3
+# event counters, in the order of Cascade.events
+(EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_MHE_REJ, EV_MHE_FAIL, EV_SAT, EV_POSE_REJ, EV_TIME_REJ,
+ EV_STAMP_REJ, EV_SPEED_REJ, EV_JUMP_REJ, EV_STALE_REJ, EV_STEP_ERR, EV_REPEATED) = range(14)
+N_EVENTS = 14
+
+# ---------------------------------------------------------------------------- float parameters
+(FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_V_LO, FP_V_HI, FP_W_LIM, FP_POSE_NOISE, FP_HEAD_NOISE,
+ FP_GATE_SIGMA, FP_COURSE_SIGMA, FP_CF0, FP_CR0, FP_VM, FP_VI, FP_VA, FP_VB, FP_TAU, FP_MHE_MASS,
+ FP_ITER_TOL, FP_BOUND,
+ FP_F_THB, FP_F_THD, FP_F_VB, FP_F_VD, FP_F_WB, FP_F_WD, FP_F_ESIG, FP_F_PDROP,
+ FP_I_PERIOD, FP_I_DUR, FP_I_START,
+ FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU) = range(41)
+N_FP = 41
+# ---------------------------------------------------------------------------- integer parameters
+(IP_NIN, IP_NSUB, IP_K, IP_N, IP_MODE, IP_NITER, IP_TERM, IP_NW, IP_REFLEN,
+ IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
+ IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
+ IP_FMA, IP_F_MODEL, IP_F_DELAY, IP_F_HOLD, IP_F_INNER, IP_F_GNSS, IP_F_DROP) = range(32)
+N_IP = 32
+# inner sensor faults (robustness scenarios), IP_F_INNER
+FAULT_NONE, FAULT_HOLD_BURST, FAULT_NAN_BURST = 0, 1, 2
+# ---------------------------------------------------------------------------- MHE parameters
+# mp = [q(3), r(2), p(3), p_F, x_min(3), x_max(3), box lo(3), box hi(3), M, I, C_f, C_r, a, b, μ_o g,
+#       drag, T_d]: MHEUIO's kernel arguments in its order (C_f, C_r change with the stiffness fit)
+MP_Q, MP_R, MP_P, MP_PF, MP_XMIN, MP_XMAX, MP_LO, MP_HI = 0, 3, 5, 8, 9, 12, 15, 18
+MP_M, MP_I, MP_CF, MP_CR, MP_A, MP_B, MP_MUG, MP_KD, MP_TD = range(21, 30)
+N_MP = 30
+# ---------------------------------------------------------------------------- float state
+(SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, SF_HELD, _H1, _H2, SF_UPREV, _U1, SF_UAPP, _A1,
+ SF_PLANTU, _PU1, SF_LASTA, SF_GUARD, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
+ SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_PRIOR, _R1, SF_AHPREV,
+ SF_LF, SF_LA, SF_SXY, SF_SXX, SF_ACCEL, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
+ SF_ARR, _AR1, _AR2, SF_FHELD, _FH1, _FH2, _FH3, _FH4, SF_FLAST, _FL1, _FL2, _FL3, _FL4) = range(60)
+N_SF = 60
+# ---------------------------------------------------------------------------- integer state
+(SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_HASCUR, SI_NCHORDS,
+ SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
+ SI_FIFON, SI_FLASTHAS, SI_FHELDHAS,
+ SI_FRESH, SI_SPOK, SI_POSEOK, SI_MPCSTEP, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
+ SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0) = range(35)
+N_SI = 35
+# ---------------------------------------------------------------------------- step scratch
+(SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
+ SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
+ SC_XN, _XN1, _XN2, _XN3, _XN4, _XN5, SC_PU, _PU2) = range(34)
+N_SC = 34
+# ---------------------------------------------------------------------------- course intervals
+(IV_SX, IV_SY, IV_STH, IV_OK, IV_N, IV_SV, IV_SVDTH, IV_SVALPHA, IV_SVAY, IV_SVFULL, IV_SDELTA,
+ IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF) = range(16)
+N_IV = 16
+# ---------------------------------------------------------------------------- inner log columns
+(LI_X, _LX1, _LX2, _LX3, _LX4, _LX5, LI_EST, _LE1, _LE2, LI_MEAS, _LM1, LI_FHAT, LI_FRAW,
+ LI_FTRUE, LI_MU, LI_CMD, _LC1, LI_TMHE, LI_TLQR) = range(19)
+N_LI = 19
+# outer log columns
+(LO_X, _OX1, _OX2, _OX3, _OX4, _OX5, LO_ERR, _OE1, _OE2, LO_EMEAS, _OM1, _OM2, LO_UC, _OU1,
+ LO_TMPC) = range(15)
+N_LO = 15
+# integer outer log columns
+LOI_STATUS, LOI_IT, LOI_QPIT, LOI_CLIP = range(4)
+
+# Constants of the blocks ported here (their modules: tsmpc.control.cascade, .slip_aware,
+# tsmpc.estimation.fusion); sim.engine checks at import that they still agree.
+POSE_JUMP_M, POSE_DRIFT_M_PER_S, HEADING_JUMP_RAD, HEADING_DRIFT_RAD_PER_S = 1.0, 2.0, 0.3, 0.5
+GATE_RAD, GATE_MIN_CHORD_M, GATE_BASELINE = 0.01, 0.3, 5
+BASELINE, MIN_CHORD_M, SLIP_MEMORY_S, SPEED_MEMORY_S = 5, 2.0, 30.0, 10.0
+SLIP_CORRECTION_MAX, SPEED_OFFSET_MAX = 0.05, 2.0
+MASS_MIN_SPEED, MASS_HIGHPASS_S, MASS_MEMORY_S, MASS_EXCITATION = 3.0, 2.0, 100.0, 50.0
+MASS_RANGE_LO, MASS_RANGE_HI = -0.4, 0.6
+STIFF_PRIOR, STIFF_MEMORY_S, STIFF_RANGE_LO, STIFF_RANGE_HI, CORNER_ACCEL = 2.5e5, 100.0, 0.5, 2.0, 0.2
+# friction programs (the profiles of tsmpc.scenarios / tsmpc.conditions as data)
+FR_CONST, FR_PAPER, FR_PATCH = 0, 1, 2
+
+_VELTKAMP = 134217729.0  # 2**27 + 1: splits a double into two halves with exact products
+
+
+# ============================================================================ primitives
+@intrinsic
+def _ticks(typingctx):  # noqa: ARG001 (numba's intrinsic signature)
+    """The CPU's cycle counter (rdtsc on x86): the block timings, converted to seconds by the
+    caller against the call's wall time."""
+    def codegen(context, builder, signature, args):  # noqa: ARG001
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.IntType(64), []),
+                                            "llvm.readcyclecounter")
+        return builder.call(fn, [])
+    return types.int64(), codegen
+
+
+@intrinsic
+def _fma(typingctx, a, b, c):  # noqa: ARG001
+    """a·b + c with one rounding (what the BLAS of numpy's ``P @ φ`` does on FMA machines)."""
+    def codegen(context, builder, signature, args):  # noqa: ARG001
+        d = ir.DoubleType()
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(d, [d, d, d]),
+                                            "llvm.fma.f64")
+        return builder.call(fn, args)
+    return types.float64(types.float64, types.float64, types.float64), codegen
+
+
+@njit(cache=True, fastmath=False)
+def _pmax(a, b):
+    """Python's ``max(a, b)`` (the first argument unless the second is greater)."""
+    return b if b > a else a
+
+
+@njit(cache=True, fastmath=False)
+def _pmin(a, b):
+    """Python's ``min(a, b)``."""
+    return b if b < a else a
+
+
+@njit(cache=True, fastmath=False)
+def _clamp(x, lo, hi):
+    """``min(max(x, lo), hi)`` with Python's min/max."""
+    return _pmin(_pmax(x, lo), hi)
+
+
+@njit(cache=True, fastmath=False)
+def _npclip(x, lo, hi):
+    """``np.clip`` of one float (NaN stays NaN)."""
+    if x != x:
+        return x
+    y = x if x >= lo else lo
+    return y if y <= hi else hi
+
+
+@njit(cache=True, fastmath=False)
+def _wrap(a):
+    """Angle to [−π, π) exactly as ``(a + π) % 2π − π`` in Python/numpy."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@njit(cache=True, fastmath=False)
+def hypot_py(a, b):
+    """``math.hypot(a, b)`` of CPython ≤ 3.11 to the last bit (libm's hypot rounds differently):
+    the arguments scaled by a power of two, squared exactly through Veltkamp splits into
+    compensated sums, the root corrected once by the residual (CPython's ``vector_norm``)."""
+    x0, x1 = abs(a), abs(b)
+    if math.isinf(x0) or math.isinf(x1):
+        return math.inf
+    if x0 != x0 or x1 != x1:
+        return math.nan
+    mx = x1 if x1 > x0 else x0
+    if mx == 0.0:
+        return mx
+    e = math.frexp(mx)[1]
+    if e < -1021:  # subnormal range: never met by positions in metres
+        return math.sqrt(x0 * x0 + x1 * x1)
+    scale = math.ldexp(1.0, -e)
+    csum, f1, f2, f3 = 1.0, 0.0, 0.0, 0.0
+    for i in range(2):
+        x = (x0 if i == 0 else x1) * scale
+        t = x * _VELTKAMP
+        hi = t - (t - x)
+        lo = x - hi
+        x = hi * hi
+        old = csum
+        csum += x
+        f1 += (old - csum) + x
+        x = 2.0 * hi * lo
+        old = csum
+        csum += x
+        f2 += (old - csum) + x
+        f3 += lo * lo
+    h = math.sqrt(csum - 1.0 + (f1 + f2 + f3))
+    t = h * _VELTKAMP
+    hi = t - (t - h)
+    lo = h - hi
+    x = -hi * hi
+    old = csum
+    csum += x
+    f1 += (old - csum) + x
+    x = -2.0 * hi * lo
+    old = csum
+    csum += x
+    f2 += (old - csum) + x
+    x = -lo * lo
+    old = csum
+    csum += x
+    f3 += (old - csum) + x
+    x = csum - 1.0 + (f1 + f2 + f3)
+    return (h + x / (2.0 * h)) / scale
+
+
+@njit(cache=True, fastmath=False)
+def _matvec2(p00, p01, x0, x1, fma_mode):
+    """One row of numpy's 2×2 ``P @ x``: plain, or fused as the BLAS does (``fma_mode``)."""
+    if fma_mode == 1:
+        return _fma(p00, x0, p01 * x1)
+    if fma_mode == 2:
+        return _fma(p01, x1, p00 * x0)
+    return p00 * x0 + p01 * x1
+
+
+@njit(cache=True, fastmath=False)
+def _in_burst(t, start, period, duration):
+    """``tsmpc.robustness._in_burst``."""
+    return t >= start - 1e-9 and np.fmod(t - start + 1e-9, period) < duration
+
+
+# ============================================================================ scenario as data
+@njit(cache=True, fastmath=False)
+def _ramp(t, a, b, c, d, base, level):
+    if t < b:
+        w = (t - a) / (b - a)
+    elif t <= c:
+        w = 1.0
+    else:
+        w = (d - t) / (d - c)
+    return (1.0 - w) * base + w * level
+
+
+@njit(cache=True, fastmath=False)
+def friction_mu(t, s, frb, patches, events):
+    """μ(road) at time t and travelled distance s: ``frb`` = [kind, …] the base profile
+    (ConstantFriction [value], PaperFriction [dry, ripple, earth, ice, wet], PatchFriction [base,
+    lap length] with ``patches`` rows [start, end, μ, ramp]), then the ``events`` of an
+    EventFriction, rows [by time, start, ramp, end, μ], applied in order."""
+    kind = int(frb[0])
+    if kind == FR_CONST:
+        m = frb[1]
+    elif kind == FR_PAPER:
+        dry = frb[1] + frb[2] * math.sin(0.5 * t)
+        if 15.0 <= t < 40.0:
+            m = _ramp(t, 15.0, 16.0, 39.0, 40.0, dry, frb[3])
+        elif 70.0 <= t < 70.1:
+            m = frb[4]
+        elif 110.1 <= t < 120.0:
+            m = _ramp(t, 110.1, 111.1, 119.0, 120.0, dry, frb[5])
+        else:
+            m = dry
+    else:
+        base, lap = frb[1], frb[2]
+        if lap > 0:
+            s = s % lap
+        m = base
+        for i in range(patches.shape[0]):
+            p0, p1, pm, pr = patches[i, 0], patches[i, 1], patches[i, 2], patches[i, 3]
+            if p0 <= s < p1:
+                r = _pmax(pr, 1e-9)
+                w = _pmin(_pmin(1.0, (s - p0) / r), (p1 - s) / r)
+                m = (1.0 - w) * base + w * pm
+                break
+    for i in range(events.shape[0]):
+        x = t if events[i, 0] != 0.0 else s
+        start, r, end = events[i, 1], events[i, 2], events[i, 3]
+        if x < start:
+            w = 0.0
+        elif x < end:
+            w = 1.0 if r <= 0.0 or x >= start + r else (x - start) / r
+        elif r <= 0.0 or x >= end + r:
+            w = 0.0
+        else:
+            w = 1.0 - (x - end) / r
+        if w > 0.0:
+            m = (1.0 - w) * m + w * events[i, 4]
+    return m
+
+
+@njit(cache=True, fastmath=False)
+def _sensor(m, tf, x, noise, u_drop, gnss, fp, ip, sf, si, fifo, y):
+    """The sample the sensors deliver at step m (``simulate``: state + noise, then the fault at
+    time ``tf``): inner fault (DropoutFault / NaNBurstFault), then SensorModel (biases, drifts,
+    extra GNSS noise, delay, dropouts). ``y`` (5,) in place."""
+    y[0] = x[0] + noise[m, 0]
+    y[1] = x[1] + noise[m, 1]
+    y[2] = x[2] + noise[m, 2]
+    y[3] = x[3] + noise[m, 3]
+    y[4] = x[5] + noise[m, 4]
+    inner = ip[IP_F_INNER]
+    if inner != FAULT_NONE:
+        burst = _in_burst(tf, fp[FP_I_START], fp[FP_I_PERIOD], fp[FP_I_DUR])
+        if inner == FAULT_NAN_BURST:
+            if burst:
+                for i in range(5):
+                    y[i] = math.nan
+        elif burst and si[SI_FHELDHAS] != 0:
+            for i in range(5):
+                y[i] = sf[SF_FHELD + i]
+        else:
+            for i in range(5):
+                sf[SF_FHELD + i] = y[i]
+            si[SI_FHELDHAS] = 1
+    if ip[IP_F_MODEL] == 0:
+        return
+    y[2] += fp[FP_F_THB] + fp[FP_F_THD] * tf
+    y[3] += fp[FP_F_VB] + fp[FP_F_VD] * tf
+    y[4] += fp[FP_F_WB] + fp[FP_F_WD] * tf
+    if ip[IP_F_GNSS] != 0:
+        es = fp[FP_F_ESIG]
+        y[0] += es * gnss[m, 0]
+        y[1] += es * gnss[m, 1]
+    # delay: a FIFO of delay_n + 1 samples, the oldest delivered
+    cap = ip[IP_F_DELAY] + 1
+    n = si[SI_FIFON]
+    if n == cap:
+        for r in range(cap - 1):
+            for i in range(5):
+                fifo[r, i] = fifo[r + 1, i]
+        n -= 1
+    for i in range(5):
+        fifo[n, i] = y[i]
+    si[SI_FIFON] = n + 1
+    for i in range(5):
+        y[i] = fifo[0, i]
+    if ip[IP_F_DROP] != 0 and u_drop[m] < fp[FP_F_PDROP]:
+        hold = ip[IP_F_HOLD] != 0 and si[SI_FLASTHAS] != 0
+        for i in range(5):
+            y[i] = sf[SF_FLAST + i] if hold else math.nan
+    for i in range(5):
+        sf[SF_FLAST + i] = y[i]
+    si[SI_FLASTHAS] = 1
+
+
+# ============================================================================ cascade glue
+@njit(cache=True, fastmath=False)
+def _pose_errors(X, Y, th, xd, yd, thd, out):
+    """``pose_to_errors`` of one pose: [e_x, e_y, e_θ] into ``out`` (3,)."""
+    dx = xd - X
+    dy = yd - Y
+    c, s = math.cos(th), math.sin(th)
+    out[0] = c * dx + s * dy
+    out[1] = -s * dx + c * dy
+    out[2] = _wrap(thd - th)
+
+
+@njit(cache=True, fastmath=False)
+def _slip_gate(px, py, pth, a_hat, gate, sf, si, fp):
+    """``SlipGate.__call__``: α̂ bounded by the course over the last BASELINE MPC poses
+    (``gate`` (BASELINE + 1, 3), oldest first)."""
+    a = a_hat if math.isfinite(a_hat) else 0.0
+    n = si[SI_GATEN]
+    if n == GATE_BASELINE + 1:
+        for r in range(n - 1):
+            gate[r, 0], gate[r, 1], gate[r, 2] = gate[r + 1, 0], gate[r + 1, 1], gate[r + 1, 2]
+        n -= 1
+    gate[n, 0], gate[n, 1], gate[n, 2] = px, py, pth
+    n += 1
+    si[SI_GATEN] = n
+    if n - 1 < 1:
+        return a
+    dx, dy = px - gate[0, 0], py - gate[0, 1]
+    chord = hypot_py(dx, dy)
+    if not chord >= GATE_MIN_CHORD_M:
+        return a
+    d_th = (pth - gate[0, 2] + math.pi) % (2 * math.pi) - math.pi
+    mean_th = gate[0, 2] + 0.5 * d_th
+    a_course = (math.atan2(dy, dx) - mean_th + math.pi) % (2 * math.pi) - math.pi
+    band = GATE_RAD + 4.0 * math.sqrt(2.0) * fp[FP_GATE_SIGMA] / chord
+    return _pmin(_pmax(a, a_course - band), a_course + band)
+
+
+@njit(cache=True, fastmath=False)
+def _course_sample(ok, theta, v, alpha_hat, a_y, omega, delta, force, cur, si):
+    """``CourseFusion.sample`` into the open interval ``cur``."""
+    if si[SI_HASCUR] == 0:
+        return
+    if not (ok and math.isfinite(theta) and math.isfinite(v) and math.isfinite(alpha_hat)
+            and math.isfinite(a_y) and math.isfinite(omega) and math.isfinite(delta)
+            and math.isfinite(force)):
+        cur[IV_OK] = 0.0
+        return
+    dth = _wrap(theta - cur[IV_STH])
+    w = 0.5 if cur[IV_N] == 0.0 else 1.0
+    if cur[IV_N] == 0.0:
+        cur[IV_WFIRST] = omega
+    cur[IV_N] += 1.0
+    cur[IV_SVFULL] += v
+    cur[IV_SDELTA] += delta
+    cur[IV_SWV] += omega / _pmax(v, 1.0)
+    cur[IV_SVW] += v * omega
+    cur[IV_SF] += force
+    cur[IV_SV] += w * v
+    cur[IV_SVDTH] += w * v * dth
+    cur[IV_SVALPHA] += v * alpha_hat
+    cur[IV_SVAY] += v * a_y
+
+
+@njit(cache=True, fastmath=False)
+def _chord(ex, ey, eth, ivs, sf, si, fp, ip):
+    """``CourseFusion._chord``: the slip, speed-offset and stiffness fits on the chord of the
+    BASELINE closed intervals ``ivs`` ending at the measured pose (ex, ey, eth)."""
+    fx, fy, fth = ivs[0, IV_SX], ivs[0, IV_SY], ivs[0, IV_STH]
+    dx, dy = ex - fx, ey - fy
+    chord = hypot_py(dx, dy)
+    if chord < MIN_CHORD_M:
+        return
+    sv = 0.0
+    for i in range(BASELINE):
+        sv += ivs[i, IV_SV]
+    if sv <= 0.0:
+        return
+    sv_th = 0.0
+    n = 0.0
+    sv_full = 0.0
+    s_alpha = 0.0
+    s_ay = 0.0
+    for i in range(BASELINE):
+        sv_th += ivs[i, IV_SVDTH] + _wrap(ivs[i, IV_STH] - fth) * ivs[i, IV_SV]
+    th_mean = fth + sv_th / sv
+    for i in range(BASELINE):
+        n += ivs[i, IV_N]
+    for i in range(BASELINE):
+        sv_full += ivs[i, IV_SVFULL]
+    a_course = _wrap(math.atan2(dy, dx) - th_mean)
+    for i in range(BASELINE):
+        s_alpha += ivs[i, IV_SVALPHA]
+    alpha_hat = s_alpha / sv_full
+    for i in range(BASELINE):
+        s_ay += ivs[i, IV_SVAY]
+    a_y = s_ay / sv_full
+    si[SI_NCHORDS] += 1
+    Tc = fp[FP_TC]
+    sigma = fp[FP_COURSE_SIGMA]
+    # slip: recursive least squares of z = κ a_y + β with forgetting (numpy's 2-vector algebra)
+    z = a_course - alpha_hat
+    sig = 2.0 * math.sqrt(2.0) * sigma / chord + 2e-4
+    lam = 1.0 - Tc / SLIP_MEMORY_S
+    phi0, phi1 = a_y, 1.0
+    P00, P01 = sf[SF_P] / lam, sf[SF_P + 1] / lam
+    P10, P11 = sf[SF_P + 2] / lam, sf[SF_P + 3] / lam
+    fm = ip[IP_FMA]
+    Pp0 = _matvec2(P00, P01, phi0, phi1, fm)
+    Pp1 = _matvec2(P10, P11, phi0, phi1, fm)
+    pP0 = phi0 * P00 + phi1 * P10  # φ @ P
+    pP1 = phi0 * P01 + phi1 * P11
+    den = sig * sig + (pP0 * phi0 + pP1 * phi1)
+    k0, k1 = Pp0 / den, Pp1 / den
+    th0, th1 = sf[SF_THETA], sf[SF_THETA + 1]
+    innov = z - (phi0 * th0 + phi1 * th1)
+    sf[SF_THETA] = th0 + k0 * innov
+    sf[SF_THETA + 1] = th1 + k1 * innov
+    sf[SF_P] = P00 - k0 * pP0
+    sf[SF_P + 1] = P01 - k0 * pP1
+    sf[SF_P + 2] = P10 - k1 * pP0
+    sf[SF_P + 3] = P11 - k1 * pP1
+    # speed over ground: the chord's arc over its time span
+    turn = abs(_wrap(eth - fth))
+    arc = chord * ((0.5 * turn) / math.sin(0.5 * turn) if turn > 1e-6 else 1.0)
+    v_ground = arc / (BASELINE * Tc)
+    v_meas = sv / n
+    w = (chord / (2.0 * sigma)) ** 2
+    g = 1.0 - Tc / SPEED_MEMORY_S
+    sf[SF_SV] = g * sf[SF_SV] + w * (v_meas - v_ground)
+    sf[SF_SW] = g * sf[SF_SW] + w
+    # axle stiffnesses (quasi-steady single track), only where the reference turns
+    s_vw = 0.0
+    for i in range(BASELINE):
+        s_vw += ivs[i, IV_SVW]
+    vw = s_vw / n
+    ay_min = ivs[0, IV_AYREF]
+    for i in range(1, BASELINE):
+        ay_min = _pmin(ay_min, ivs[i, IV_AYREF])
+    cornering = ay_min >= CORNER_ACCEL
+    if math.isfinite(sf[SF_OMNOW]) and cornering:
+        span = BASELINE * Tc
+        ah_prev = sf[SF_AHPREV]
+        has_prev = si[SI_HASAH] != 0
+        sf[SF_AHPREV] = alpha_hat
+        si[SI_HASAH] = 1
+        al_dot = 0.0 if not has_prev else (alpha_hat - ah_prev) / Tc
+        s_F = 0.0
+        for i in range(BASELINE):
+            s_F += ivs[i, IV_SF]
+        S = fp[FP_VM] * (vw + v_meas * al_dot) + s_F / n * a_course
+        T = fp[FP_VI] * (sf[SF_OMNOW] - ivs[0, IV_WFIRST]) / span
+        a, b = fp[FP_VA], fp[FP_VB]
+        L = a + b
+        s_wv = 0.0
+        for i in range(BASELINE):
+            s_wv += ivs[i, IV_SWV]
+        w_v = s_wv / n
+        s_d = 0.0
+        for i in range(BASELINE):
+            s_d += ivs[i, IV_SDELTA]
+        delta = s_d / n
+        sl0 = delta - a_course - a * w_v
+        sl1 = b * w_v - a_course
+        f0 = (b * S + T) / L
+        f1 = (a * S - T) / L
+        g2 = 1.0 - Tc / STIFF_MEMORY_S
+        sf[SF_CNUM] = g2 * sf[SF_CNUM] + (1.0 - g2) * sf[SF_PRIOR] + f0 * sl0
+        sf[SF_CNUM + 1] = g2 * sf[SF_CNUM + 1] + (1.0 - g2) * sf[SF_PRIOR + 1] + f1 * sl1
+        sf[SF_CDEN] = g2 * sf[SF_CDEN] + (1.0 - g2) * STIFF_PRIOR + f0 * f0
+        sf[SF_CDEN + 1] = g2 * sf[SF_CDEN + 1] + (1.0 - g2) * STIFF_PRIOR + f1 * f1
+
+
+@njit(cache=True, fastmath=False)
+def _course_close(good, px, py, pth, v, omega, ay_ref, cur, ivs, sf, si, fp, ip):
+    """``CourseFusion.close`` at an MPC step (``good``: a measured pose and speed)."""
+    sf[SF_OMNOW] = omega
+    ay = abs(ay_ref) if math.isfinite(ay_ref) else 0.0
+    good = good and math.isfinite(px) and math.isfinite(py) and math.isfinite(pth) \
+        and math.isfinite(v)
+    if si[SI_HASCUR] != 0:
+        cur[IV_AYREF] = _pmin(cur[IV_AYREF], ay)
+        if good and cur[IV_N] > 0.0 and cur[IV_OK] != 0.0:
+            dth = _wrap(pth - cur[IV_STH])
+            cur[IV_SV] += 0.5 * v
+            cur[IV_SVDTH] += 0.5 * v * dth
+        else:
+            cur[IV_OK] = 0.0
+        n = si[SI_IVN]
+        if n == BASELINE:  # the deque drops its oldest interval
+            for r in range(BASELINE - 1):
+                for c in range(N_IV):
+                    ivs[r, c] = ivs[r + 1, c]
+            n -= 1
+        for c in range(N_IV):
+            ivs[n, c] = cur[c]
+        n += 1
+        si[SI_IVN] = n
+        if good and n == BASELINE:
+            all_ok = True
+            for r in range(BASELINE):
+                if ivs[r, IV_OK] == 0.0:
+                    all_ok = False
+            if all_ok:
+                _chord(px, py, pth, ivs, sf, si, fp, ip)
+    if good:
+        for c in range(N_IV):
+            cur[c] = 0.0
+        cur[IV_SX], cur[IV_SY], cur[IV_STH] = px, py, pth
+        cur[IV_OK] = 1.0
+        cur[IV_AYREF] = ay
+        si[SI_HASCUR] = 1
+    else:
+        si[SI_HASCUR] = 0
+
+
+@njit(cache=True, fastmath=False)
+def _apply_stiffness(sf, si, fp, mp, prm):
+    """``Cascade._apply_stiffness`` with ``CourseFusion.stiffness``: the fitted (Ĉ_f, Ĉ_r) to the
+    TS-LQR's N̄ (both axles) and, scaled by their common factor, to the MHE's model."""
+    comp = sf[SF_CNUM] / sf[SF_CDEN]
+    c0 = 1.0 / (comp if comp >= 1e-12 else 1e-12) if comp > 0.0 else math.inf
+    comp = sf[SF_CNUM + 1] / sf[SF_CDEN + 1]
+    c1 = 1.0 / (comp if comp >= 1e-12 else 1e-12) if comp > 0.0 else math.inf
+    m0, m1 = fp[FP_CF0], fp[FP_CR0]
+    C0 = _pmin(_pmax(c0, STIFF_RANGE_LO * m0), STIFF_RANGE_HI * m0)
+    C1 = _pmin(_pmax(c1, STIFF_RANGE_LO * m1), STIFF_RANGE_HI * m1)
+    if si[SI_HASAPPLIED] != 0:
+        a0, a1 = sf[SF_APPLIED], sf[SF_APPLIED + 1]
+        if abs(C0 - a0) <= 0.01 * abs(a0) and abs(C1 - a1) <= 0.01 * abs(a1):
+            return
+    prm[2], prm[3] = C0, C1
+    common = math.sqrt((C0 / m0) * (C1 / m1))
+    mp[MP_CF], mp[MP_CR] = m0 * common, m1 * common
+    sf[SF_APPLIED], sf[SF_APPLIED + 1] = C0, C1
+    si[SI_HASAPPLIED] = 1
+
+
+@njit(cache=True, fastmath=False)
+def _mass_terms(v_hat, F_hat, v_ref, mv, sf, si, fp, ip):
+    """``Fusion.inertia_terms`` (with ``MassEstimator.update``): the force added to F̂."""
+    Td = fp[FP_TD]
+    W = ip[IP_NW]
+    if not (math.isfinite(v_hat) and math.isfinite(F_hat)):
+        si[SI_MASSOPEN] = 0
+        a = sf[SF_ACCEL]
+    else:
+        n = si[SI_MASSN]
+        if n == W + 1:
+            for r in range(W):
+                mv[r] = mv[r + 1]
+            n -= 1
+        mv[n] = v_hat
+        n += 1
+        si[SI_MASSN] = n
+        nn = n - 1
+        sf[SF_ACCEL] = (mv[n - 1] - mv[0]) / (nn * Td) if nn > 0 else 0.0
+        vmin = mv[0]
+        for r in range(1, n):
+            vmin = _pmin(vmin, mv[r])
+        if nn < W or vmin <= MASS_MIN_SPEED:
+            si[SI_MASSOPEN] = 0
+        else:
+            a = sf[SF_ACCEL]
+            if si[SI_MASSOPEN] == 0:
+                sf[SF_LF], sf[SF_LA] = F_hat, a
+                si[SI_MASSOPEN] = 1
+            g = Td / MASS_HIGHPASS_S
+            sf[SF_LF] += g * (F_hat - sf[SF_LF])
+            sf[SF_LA] += g * (a - sf[SF_LA])
+            yy, xx = F_hat - sf[SF_LF], a - sf[SF_LA]
+            lam = 1.0 - Td / MASS_MEMORY_S
+            sf[SF_SXY] = lam * sf[SF_SXY] + xx * yy
+            sf[SF_SXX] = lam * sf[SF_SXX] + xx * xx
+        a = sf[SF_ACCEL]
+    mass = fp[FP_VM]
+    if sf[SF_SXX] < MASS_EXCITATION:
+        dm = 0.0
+    else:
+        dm = _pmin(_pmax(sf[SF_SXY] / sf[SF_SXX], MASS_RANGE_LO * mass), MASS_RANGE_HI * mass)
+    if dm == 0.0 or not (math.isfinite(v_hat) and math.isfinite(v_ref)):
+        return 0.0
+    out = -dm * a
+    if ip[IP_SPEEDFB] != 0:
+        out += dm * (v_ref - v_hat) / fp[FP_TAU]
+    return out
+
+
+# ============================================================================ MHE wrapper
+@njit(cache=True, fastmath=False)
+def _mhe_begin(y0, y1, u0, u1, mass, mY, mW, mU, mXS, mA, mB, mX, mp, sf, si, sc, ip):
+    """``MHEUIO.step`` up to the window solve's answer. Returns 0 with the estimate in
+    ``sc``/``si[SI_ESTSTAT]``, or 1 when the dense QP must decide (the window is ready for
+    ``MHEUIO._step_dense``; ``sc[SC_FRAW]`` holds F̂_raw)."""
+    N = ip[IP_NW]
+    xmin, xmax = mp[MP_XMIN:MP_XMIN + 3], mp[MP_XMAX:MP_XMAX + 3]
+    sc[SC_UMHE], sc[SC_UMHE + 1] = u0, u1  # what the cascade gave (the course fusion's δ, F)
+    first = si[SI_NY] == 0
+    ok = math.isfinite(y0) and math.isfinite(y1)
+    if not (math.isfinite(u0) and math.isfinite(u1)):
+        u0, u1 = 0.0, 0.0
+        ok = False
+    if not ok:
+        si[SI_NREJ] += 1
+    # _push
+    ny = si[SI_NY]
+    if ny == N + 1:
+        for r in range(N):
+            mY[r, 0], mY[r, 1] = mY[r + 1, 0], mY[r + 1, 1]
+            mW[r] = mW[r + 1]
+            mXS[r, 0], mXS[r, 1], mXS[r, 2] = mXS[r + 1, 0], mXS[r + 1, 1], mXS[r + 1, 2]
+        for r in range(N - 1):
+            mU[r, 0], mU[r, 1] = mU[r + 1, 0], mU[r + 1, 1]
+        ny -= 1
+    mY[ny, 0], mY[ny, 1] = (y0, y1) if ok else (0.0, 0.0)
+    mW[ny] = 1.0 if ok else 0.0
+    ny += 1
+    if not first:
+        mU[ny - 2, 0], mU[ny - 2, 1] = u0, u1
+    si[SI_NY] = ny
+    n = ny - 1
+    si[SI_MHEN] = n
+    si[SI_MHEOK] = 1 if ok else 0
+    if first:
+        for i in range(3):
+            mXS[0, i] = sf[SF_MX + i]
+        if not ok:
+            _est_out(sf, sc, si, ST_REJECTED, 0.0)
+            return 0
+        mXS[0, 0], mXS[0, 2] = y0, y1
+        for i in range(3):
+            sf[SF_MX + i] = _npclip(mXS[0, i], xmin[i], xmax[i])
+        _est_out(sf, sc, si, ST_WARMUP, 0.0)
+        return 0
+    full = n == N
+    si[SI_MHEFULL] = 1 if full else 0
+    x = sf[SF_MX:SF_MX + 3]
+    u = np.empty(2)
+    u[0], u[1] = u0, u1
+    code, F, pred_v = window_step(
+        mY[:n + 1], mW[:n + 1], mU[:n], mXS[:n + 1], n, x, sf[SF_MF], u, ok, full,
+        sf[SF_ARR:SF_ARR + 3], mp[MP_Q:MP_Q + 3], mp[MP_R:MP_R + 2], mp[MP_P:MP_P + 3], mp[MP_PF],
+        xmin, xmax, mp[MP_LO:MP_LO + 3], mp[MP_HI:MP_HI + 3], mp[MP_M], mp[MP_I], mp[MP_CF],
+        mp[MP_CR], mp[MP_A], mp[MP_B], mp[MP_MUG], mp[MP_KD], mp[MP_TD], True, mA[:n], mB[:n],
+        mX[:n + 1])
+    F_raw = (pred_v - y0) * mass / mp[MP_TD] if ok else 0.0
+    sc[SC_FRAW] = F_raw
+    if code == 3 or not math.isfinite(F_raw):  # _failed
+        si[SI_NFAIL] += 1
+        finite = math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2])
+        if not finite:
+            for i in range(3):
+                xi = x[i]
+                if xi != xi:
+                    xi = 0.0
+                elif xi == math.inf:
+                    xi = 1.7976931348623157e308
+                elif xi == -math.inf:
+                    xi = -1.7976931348623157e308
+                x[i] = _npclip(xi, xmin[i], xmax[i])
+        _est_out(sf, sc, si, ST_FAILED, F_raw if math.isfinite(F_raw) else 0.0)
+        return 0
+    if code == 2:
+        for i in range(3):
+            x[i] = _npclip(mXS[n, i], xmin[i], xmax[i])
+        _est_out(sf, sc, si, ST_WARMUP if ok else ST_REJECTED, F_raw)
+        return 0
+    if code == 1:
+        return 1
+    for i in range(3):
+        x[i] = mXS[n, i]
+    sf[SF_MF] = F
+    _est_out(sf, sc, si, ST_OK if full else ST_WARMUP, F_raw)
+    return 0
+
+
+@njit(cache=True, fastmath=False)
+def _est_out(sf, sc, si, status, F_raw):
+    """The estimate of this step: x̂ = the MHE's state, F̂ = its window force."""
+    for i in range(3):
+        sc[SC_EST + i] = sf[SF_MX + i]
+    sc[SC_ESTF] = sf[SF_MF]
+    sc[SC_ESTFR] = F_raw
+    si[SI_ESTSTAT] = status
+
+
+# ============================================================================ the run
+@njit(cache=True, fastmath=False)
+def run(m_end, x, fp, ip, sf, si, sc, ev,
+        noise, u_drop, gnss, fifo, frb, patches, events,
+        ref_x, ref_y, ref_th, ref_v, ref_w, th_tan, mv, mw,
+        gate, cur, ivs, mass_v,
+        mY, mW, mU, mXS, mA, mB, mX, mp,
+        ls, Kv, zlo, zhi, bits, prm,
+        mlo, mhi, mq, mP, mr, mS, mdu, mumin, mumax, prevX, prevU, pX, pU,
+        cst, lo, loi, lxp, li, lstat, lsat):
+    """Run steps ``si[SI_M]`` … ``m_end − 1`` (see the module docstring). Returns DONE when
+    ``m_end`` is reached, else the code of the block the caller must run (NEED_*) or DIVERGED.
+    ``x`` (6,) is the plant state at the start of step ``si[SI_M]``."""
+    Td, Tc = fp[FP_TD], fp[FP_TC]
+    n_in = ip[IP_NIN]
+    N = ip[IP_N]
+    mode = ip[IP_MODE]
+    y = sc[SC_Y:SC_Y + 5]
+    e_meas = sc[SC_EMEAS:SC_EMEAS + 3]
+    tmp3 = np.empty(3)
+    eth = np.zeros(N)
+    om = np.zeros(N)
+    up = np.empty(2)
+    while si[SI_M] < m_end:
+        m = si[SI_M]
+        k = m // n_in
+        j = m - k * n_in
+        t = m * Td
+        phase = si[SI_PHASE]
+        if phase == PH_START:
+            # ---- sensors and the outer-step log (simulate)
+            _sensor(m, k * Tc if j == 0 else t, x, noise, u_drop, gnss, fp, ip, sf, si, fifo, y)
+            if j == 0:
+                for i in range(6):
+                    lo[k, LO_X + i] = x[i]
+                _pose_errors(x[0], x[1], x[2], ref_x[k], ref_y[k], ref_th[k], tmp3)
+                for i in range(3):
+                    lo[k, LO_ERR + i] = tmp3[i]
+                if ip[IP_HASBOUND] != 0 and abs(tmp3[1]) > fp[FP_BOUND]:
+                    sc[SC_EY] = tmp3[1]
+                    return DIVERGED
+            # ---- Cascade._step: gates
+            X, Y, th, v, omv = y[0], y[1], y[2], y[3], y[4]
+            fresh = True
+            if not (math.isfinite(v) and math.isfinite(omv)):
+                speeds_ok = True
+            elif fp[FP_V_LO] <= v <= fp[FP_V_HI] and abs(omv) <= fp[FP_W_LIM]:
+                speeds_ok = True
+            else:
+                ev[EV_SPEED_REJ] += 1
+                speeds_ok = False
+            if ip[IP_REPEAT] != 0 and not (X != X or Y != Y or th != th or v != v or omv != omv):
+                same = si[SI_GUARDHAS] != 0 and X == sf[SF_GUARD] and Y == sf[SF_GUARD + 1] \
+                    and th == sf[SF_GUARD + 2] and v == sf[SF_GUARD + 3] and omv == sf[SF_GUARD + 4]
+                sf[SF_GUARD], sf[SF_GUARD + 1], sf[SF_GUARD + 2] = X, Y, th
+                sf[SF_GUARD + 3], sf[SF_GUARD + 4] = v, omv
+                si[SI_GUARDHAS] = 1
+                if same:
+                    fresh = False
+                    ev[EV_REPEATED] += 1
+            pose_ok = fresh and math.isfinite(X) and math.isfinite(Y) and math.isfinite(th)
+            if pose_ok:  # Cascade._accept_pose against the dead-reckoned pose
+                dt = _pmax(t - sf[SF_POSET], 0.0)
+                far = hypot_py(X - sf[SF_POSE], Y - sf[SF_POSE + 1]) > \
+                    POSE_JUMP_M + POSE_DRIFT_M_PER_S * dt + fp[FP_POSE_NOISE]
+                dth = (th - sf[SF_POSE + 2] + math.pi) % (2.0 * math.pi) - math.pi
+                turned = abs(dth) > HEADING_JUMP_RAD + HEADING_DRIFT_RAD_PER_S * dt + fp[FP_HEAD_NOISE]
+                if far or turned:
+                    ev[EV_JUMP_REJ] += 1
+                    pose_ok = False
+            if pose_ok:
+                sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2] = X, Y, th
+                sf[SF_POSET] = t
+            si[SI_FRESH] = 1 if fresh else 0
+            si[SI_SPOK] = 1 if speeds_ok else 0
+            si[SI_POSEOK] = 1 if pose_ok else 0
+            mpc_step = si[SI_CALLS] % n_in == 0
+            si[SI_MPCSTEP] = 1 if mpc_step else 0
+            phase = PH_MHE
+            if mpc_step:
+                if not pose_ok:
+                    ev[EV_POSE_REJ] += 1
+                kr = math.floor(t / Tc + 1e-6)
+                kw = kr if kr > 0 else 0
+                kc = kw if kw < ip[IP_REFLEN] - 1 else ip[IP_REFLEN] - 1
+                if ip[IP_ANYCOURSE] != 0:
+                    meas_ok = fresh and speeds_ok
+                    _course_close(pose_ok, X, Y, th, v if meas_ok else math.nan,
+                                  omv if meas_ok else math.nan, ref_v[kc] * ref_w[kc], cur, ivs,
+                                  sf, si, fp, ip)
+                    if ip[IP_STIFF] != 0:
+                        _apply_stiffness(sf, si, fp, mp, prm)
+                if pose_ok:
+                    for i in range(3):
+                        sf[SF_HELD + i] = sf[SF_POSE + i]
+                src = SF_POSE if pose_ok or ip[IP_PREDICT] != 0 else SF_HELD
+                px, py, pth = sf[src], sf[src + 1], sf[src + 2]
+                if ip[IP_SLIP] != 0 or ip[IP_TANGENT] != 0:
+                    slip = ip[IP_SLIP] != 0
+                    has_last = si[SI_HASLAST] != 0
+                    a_hat = sf[SF_LASTA] if slip and has_last else 0.0
+                    if slip and has_last:
+                        corr = 0.0
+                        if ip[IP_CSLIP] != 0:  # CourseFusion.slip_correction
+                            ay = ref_v[kc] * ref_w[kc]
+                            if not math.isfinite(ay):
+                                ay = 0.0
+                            corr = _pmin(_pmax(sf[SF_THETA] * ay + sf[SF_THETA + 1],
+                                               -SLIP_CORRECTION_MAX), SLIP_CORRECTION_MAX)
+                        a_hat += corr
+                    if slip:
+                        a_hat = _slip_gate(px, py, pth, a_hat, gate, sf, si, fp)
+                    th_d = th_tan[kc] if ip[IP_TANGENT] != 0 else ref_th[kc]
+                    a = a_hat if math.isfinite(a_hat) else 0.0
+                    _pose_errors(px, py, pth + a, ref_x[kc], ref_y[kc], th_d + 0.5 * 0.0, e_meas)
+                else:
+                    _pose_errors(px, py, pth, ref_x[kc], ref_y[kc], ref_th[kc], e_meas)
+                # ---- TSMPC.step: the compiled fast path, else the caller's condensed QP path
+                tick = _ticks()
+                si[SI_KW] = kw
+                for i in range(2):
+                    up[i] = _npclip(sf[SF_UPREV + i], mumin[i], mumax[i])
+                ok_in = kw + N <= mv.size
+                if ok_in:
+                    acc = e_meas[0] + e_meas[1] + e_meas[2] + up[0] + up[1]
+                    for i in range(N):
+                        acc += mv[kw + i] + mw[kw + i]
+                    ok_in = math.isfinite(acc)
+                code = 1
+                if ok_in:
+                    has_eth = False
+                    has_om = False
+                    if si[SI_HASPREV] != 0 and mode != 0:
+                        eth[0] = e_meas[2]
+                        for i in range(1, N):
+                            eth[i] = prevX[i + 1, 2]
+                        has_eth = True
+                        if mode == 2:
+                            for i in range(N - 1):
+                                om[i] = prevU[i + 1, 1]
+                            om[N - 1] = prevU[N - 1, 1]
+                            has_om = True
+                    n_iter = ip[IP_NITER] if mode == 2 else 1
+                    code, U, du, Xp, cost, n_clip = fast_step(
+                        mode, e_meas, up, mv[kw:kw + N], mw[kw:kw + N], om, has_om, eth, has_eth,
+                        mlo, mhi, Tc, mq, mP, mr, mS, mdu, mumin, mumax, ip[IP_TERM] != 0, n_iter,
+                        fp[FP_ITER_TOL])
+                    if code == 0:
+                        for i in range(N):
+                            pU[i, 0], pU[i, 1] = U[i, 0], U[i, 1]
+                        for i in range(N + 1):
+                            pX[i, 0], pX[i, 1], pX[i, 2] = Xp[i, 0], Xp[i, 1], Xp[i, 2]
+                        sc[SC_PU], sc[SC_PU + 1] = U[0, 0], U[0, 1]
+                        si[SI_PSTAT], si[SI_PIT], si[SI_PQPIT], si[SI_PCLIP] = MPC_OPTIMAL, 0, 0, n_clip
+                lo[k, LO_TMPC] = float(_ticks() - tick)
+                if code != 0:
+                    si[SI_PHASE] = PH_PLAN
+                    return NEED_MPC
+                phase = PH_PLAN
+        if phase == PH_PLAN:
+            # the plan of this MPC step (fast path or the caller's): u_prev, events, log
+            sf[SF_UPREV], sf[SF_UPREV + 1] = sc[SC_PU], sc[SC_PU + 1]
+            for i in range(N):
+                prevU[i, 0], prevU[i, 1] = pU[i, 0], pU[i, 1]
+            for i in range(N + 1):
+                prevX[i, 0], prevX[i, 1], prevX[i, 2] = pX[i, 0], pX[i, 1], pX[i, 2]
+            si[SI_HASPREV] = 1
+            st = si[SI_PSTAT]
+            ev[EV_SOFT] += 1 if st == MPC_SOFT else 0
+            ev[EV_FALLBACK] += 1 if st == MPC_FALLBACK else 0
+            ev[EV_CLIPPED] += si[SI_PCLIP]
+            for i in range(3):
+                lo[k, LO_EMEAS + i] = e_meas[i]
+            lo[k, LO_UC], lo[k, LO_UC + 1] = sc[SC_PU], sc[SC_PU + 1]
+            for i in range(N + 1):
+                lxp[k, i, 0], lxp[k, i, 1], lxp[k, i, 2] = pX[i, 0], pX[i, 1], pX[i, 2]
+            loi[k, LOI_STATUS], loi[k, LOI_IT] = st, si[SI_PIT]
+            loi[k, LOI_QPIT], loi[k, LOI_CLIP] = si[SI_PQPIT], si[SI_PCLIP]
+            phase = PH_MHE
+        if phase == PH_MHE:
+            fresh, speeds_ok = si[SI_FRESH] != 0, si[SI_SPOK] != 0
+            sc[SC_VREF], sc[SC_WREF] = sf[SF_UPREV], sf[SF_UPREV + 1]
+            if fresh and speeds_ok:
+                off = 0.0
+                if ip[IP_CSPEED] != 0 and sf[SF_SW] > 0.0:  # CourseFusion.speed_offset
+                    off = _pmin(_pmax(sf[SF_SV] / sf[SF_SW], -SPEED_OFFSET_MAX), SPEED_OFFSET_MAX)
+                sc[SC_YM], sc[SC_YM + 1] = y[3] - off, y[4]
+            else:
+                sc[SC_YM], sc[SC_YM + 1] = math.nan, math.nan
+            u0 = sf[SF_PLANTU] if ip[IP_MFORCE] != 0 else sf[SF_UAPP]
+            u1 = sf[SF_PLANTU + 1] if ip[IP_MSTEER] != 0 else sf[SF_UAPP + 1]
+            si[SI_TICK0] = _ticks()
+            if _mhe_begin(sc[SC_YM], sc[SC_YM + 1], u0, u1, fp[FP_MHE_MASS], mY, mW, mU, mXS, mA, mB, mX, mp, sf,
+                          si, sc, ip) != 0:
+                si[SI_PHASE] = PH_POST_MHE
+                return NEED_MHE
+            li[m, LI_TMHE] = float(_ticks() - si[SI_TICK0])
+            phase = PH_POST_MHE
+        if phase == PH_POST_MHE:
+            tick = _ticks()
+            # Cascade._dead_reckon
+            ev0, ev1, ev2 = sc[SC_EST], sc[SC_EST + 1], sc[SC_EST + 2]
+            if math.isfinite(ev0) and math.isfinite(ev1) and math.isfinite(ev2):
+                vv = _pmin(_pmax(ev0, 0.0), fp[FP_V_HI])
+                heading = sf[SF_POSE + 2] + ev1
+                sf[SF_POSE] = sf[SF_POSE] + vv * math.cos(heading) * Td
+                sf[SF_POSE + 1] = sf[SF_POSE + 1] + vv * math.sin(heading) * Td
+                sf[SF_POSE + 2] = sf[SF_POSE + 2] + ev2 * Td
+            if ip[IP_ANYCOURSE] != 0:
+                _course_sample(si[SI_POSEOK] != 0 and si[SI_SPOK] != 0, y[2], y[3], ev1, ev0 * ev2,
+                               y[4], sc[SC_UMHE + 1], sc[SC_UMHE], cur, si)
+            F_in, Fr_in = sc[SC_ESTF], sc[SC_ESTFR]
+            if ip[IP_MASSEST] != 0:
+                dF = _mass_terms(ev0, F_in, sc[SC_VREF], mass_v, sf, si, fp, ip)
+                if dF != 0.0:
+                    F_in, Fr_in = F_in + dF, Fr_in + dF
+            sc[SC_INF], sc[SC_INFR] = F_in, Fr_in
+            # TSLQR.step (compiled law; a singular N̄ goes to the caller's numpy step)
+            if not (math.isfinite(ev0) and math.isfinite(ev1) and math.isfinite(ev2)):
+                sc[SC_OF], sc[SC_OD] = ls[4], ls[5]
+                si[SI_SAT] = 1
+            else:
+                comp = 0.0
+                if ip[IP_COMP] != 0:
+                    Fh = Fr_in if ip[IP_UIO] != 0 else F_in
+                    comp = Fh if math.isfinite(Fh) else 0.0
+                o0, o1, sat, ok = lqr_step(
+                    ls, ev0, ev1, ev2, comp, sc[SC_VREF], sc[SC_WREF], Kv, zlo, zhi, bits, prm,
+                    fp[FP_L_LAM], fp[FP_L_AF], fp[FP_L_TD], fp[FP_L_FMIN], fp[FP_L_FMAX],
+                    fp[FP_L_DMIN], fp[FP_L_DMAX], ip[IP_LQR_SFB] != 0, fp[FP_L_TAU])
+                if not ok:
+                    li[m, LI_TLQR] = float(_ticks() - tick)
+                    si[SI_PHASE] = PH_POST_LQR
+                    return NEED_LQR
+                sc[SC_OF], sc[SC_OD] = o0, o1
+                si[SI_SAT] = 1 if sat else 0
+            li[m, LI_TLQR] = float(_ticks() - tick)
+            phase = PH_POST_LQR
+        if phase == PH_POST_LQR:
+            # the command's bookkeeping (Cascade), the inner log and the plant (simulate)
+            sf[SF_UAPP], sf[SF_UAPP + 1] = sc[SC_OF], sc[SC_OD]
+            st = si[SI_ESTSTAT]
+            ev[EV_MHE_REJ] += 1 if st == ST_REJECTED else 0
+            ev[EV_MHE_FAIL] += 1 if st == ST_FAILED else 0
+            ev[EV_SAT] += si[SI_SAT]
+            si[SI_CALLS] += 1
+            si[SI_HASLAST] = 1
+            sf[SF_LASTA] = sc[SC_EST + 1]
+            mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events)
+            sc[SC_MU] = mu
+            for i in range(6):
+                li[m, LI_X + i] = x[i]
+            for i in range(3):
+                li[m, LI_EST + i] = sc[SC_EST + i]
+            li[m, LI_MEAS], li[m, LI_MEAS + 1] = y[3], y[4]
+            li[m, LI_FHAT], li[m, LI_FRAW] = sc[SC_ESTF], sc[SC_ESTFR]
+            li[m, LI_FTRUE] = (mu - fp[FP_MU_NOM]) * fp[FP_MG]
+            li[m, LI_MU] = mu
+            li[m, LI_CMD], li[m, LI_CMD + 1] = sc[SC_OF], sc[SC_OD]
+            lstat[m] = st
+            lsat[m] = si[SI_SAT] != 0
+            sf[SF_PLANTU], sf[SF_PLANTU + 1] = sc[SC_OF], sc[SC_OD]
+            xn, ok = rk4_block(x, sc[SC_OF], sc[SC_OD], mu, ip[IP_NSUB], fp[FP_H], cst)
+            if not ok:
+                si[SI_PHASE] = PH_POST_PLANT
+                return NEED_PLANT
+            for i in range(6):
+                x[i] = xn[i]
+            phase = PH_POST_PLANT
+        # PH_POST_PLANT: the travelled distance, next step
+        sf[SF_STRAVEL] += _pmax(x[3], 0.0) * Td
+        si[SI_M] = m + 1
+        si[SI_PHASE] = PH_START
+    return DONE
+
+
+def warm() -> None:
+    """Compile (or load from the cache) the helpers the caller probes outside ``run`` (``run``
+    itself compiles for the caller's arrays on its first, empty call)."""
+    hypot_py(3.0, 4.0)
+    ticks()
+
+
+@njit(cache=True, fastmath=False)
+def ticks():
+    """The cycle counter, for the caller's calibration of the block timings."""
+    return _ticks()

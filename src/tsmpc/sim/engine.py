@@ -1,0 +1,696 @@
+"""The compiled whole-run engine behind :func:`~tsmpc.sim.simulator.simulate` (issue 25, item 1).
+
+``simulate()`` loops in Python: every T_d it calls :meth:`Cascade.step
+<tsmpc.control.cascade.Cascade.step>` (MHE-UIO and TS-LQR every call, the TS-MPC every T_c/T_d
+calls) and the plant. For the runs it can express as data, :func:`run` does the same in one
+compiled call (:func:`tsmpc.kernels.engine.run`): the built-in plant, the TS-MPC (FZN, REF, ITER),
+the MHE-UIO in its window form and the TS-LQR with the static reference gain, the sample gates,
+dead reckoning and the fusion switches of ``cfg.fusion``, the scenario's friction profile and
+sensor faults. It returns the same :class:`~tsmpc.sim.log.RunLog`, equal to the Python loop's
+(the tests compare both; the blocks are the same compiled kernels, the glue is ported with the
+same operations in the same order).
+
+What this module does:
+
+* :func:`applicability` — the explicit test, with the reason when the engine does not apply
+  (foreign plants, actuators, NL-MPC and the baselines, the oracle, the ``paper-as-run`` quirks,
+  the paper's UIO form of the MHE, friction profiles or sensor faults it has no data form for);
+* the data: the sensor noise drawn with the generator calls :class:`~tsmpc.scenarios.SensorNoise`
+  makes (blocks of 4096 samples, in order), the sensor model's dropout and GNSS draws likewise,
+  the friction profile as a small program, the blocks' parameters read from a :class:`Cascade`
+  built exactly as ``simulate`` builds it;
+* the slow paths: where a block's compiled fast path does not decide a step, the kernel returns
+  and this module runs that block's Python path on the same state (the MPC's condensed QP / SOCP,
+  the MHE's dense QP, the TS-LQR's numpy law, the plant's error message), then resumes it;
+* anything the Python loop would meet as an *exception* (a block raising) is not reproduced: the
+  engine gives up and ``simulate`` runs the whole run in Python (:class:`EngineFallback`).
+
+Switch it off with ``simulate(..., engine=False)`` or ``TSMPC_ENGINE=0``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from fractions import Fraction
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tsmpc.config import Config, InnerLaw, Method, MHEForm
+from tsmpc.control.cascade import EVENT_NAMES, Cascade
+from tsmpc.control.ts_mpc import MPCResult, MPCStatus
+from tsmpc.errors import NonFiniteError
+from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
+from tsmpc.sim.log import RunLog
+from tsmpc.sim.simulator import Scenario, _start_state, default_plant, tracked_steps
+
+__all__ = ["EngineFallback", "applicability", "enabled", "run"]
+
+#: Event names in the order of :attr:`Cascade.events` (the kernel's counter array).
+_EVENTS = (*EVENT_NAMES, "stale_rejected", "step_errors", "repeated_rejected")
+_MHE_STATUS = {1: EstimatorStatus.OK, 2: EstimatorStatus.REJECTED, 3: EstimatorStatus.FAILED,
+               4: EstimatorStatus.WARMUP}
+_MHE_CODE = {v: k for k, v in _MHE_STATUS.items()}
+_MPC_CODE = {MPCStatus.OPTIMAL: 1, MPCStatus.SOFT: 2, MPCStatus.FALLBACK: 3}
+_MPC_TEXT = np.array(["", str(MPCStatus.OPTIMAL), str(MPCStatus.SOFT), str(MPCStatus.FALLBACK)])
+_MHE_TEXT = np.array(["", *(str(_MHE_STATUS[i]) for i in (1, 2, 3, 4))])
+#: Outer steps per kernel call when a progress callback is given.
+_PROGRESS_CHUNK = 50
+
+
+class EngineFallback(RuntimeError):
+    """The run met a case the engine does not reproduce (a block raised); run it in Python."""
+
+
+def enabled() -> bool:
+    """True when ``TSMPC_ENGINE`` is set to a true value (1, true, yes, on)."""
+    return os.environ.get("TSMPC_ENGINE", "").strip().lower() in ("1", "true", "yes", "on")
+
+
+# ------------------------------------------------------------------------------ applicability
+def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, oracle: bool = False,
+                  plant: Any = None) -> str | None:
+    """None when the engine runs ``simulate(cfg, method, scenario, oracle=…, plant=…)``; else
+    why not (one line)."""
+    from tsmpc import kernels
+
+    if not kernels.enabled():
+        return "the compiled kernels are off (TSMPC_NO_JIT)"
+    if plant is not None:
+        return "a plant object was given (the engine integrates tsmpc's own plant)"
+    m = Method.parse(method) if isinstance(method, str) else method
+    if not m.is_ts_mpc:
+        return f"method {m.value}: the engine runs the TS-MPC (FZN, REF, ITER)"
+    if oracle or cfg.lqr.oracle:
+        return "the oracle ablation (the inner loop on the true state)"
+    if cfg.lqr.true_state_feedback or cfg.lqr.law != InnerLaw.STATIC_GAIN:
+        return "the published run's inner law (lqr.law / lqr.true_state_feedback)"
+    if cfg.mhe.form != MHEForm.WINDOW:
+        return f"mhe.form = {cfg.mhe.form.value!r} (the engine runs the window form)"
+    if cfg.rates.inner_steps_per_outer is not None:
+        return "rates.inner_steps_per_outer (the published run's time base)"
+    if scenario.actuators is not None:
+        return "actuator dynamics in front of the plant"
+    if _friction_program(scenario.friction) is None:
+        return f"friction profile {type(scenario.friction).__name__} (no data form)"
+    why = _fault_problem(scenario.sensor_fault)
+    if why is not None:
+        return why
+    return None
+
+
+# ------------------------------------------------------------------------------ scenario as data
+def _friction_program(profile: Any) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                             NDArray[np.float64]] | None:
+    """(base program, patches, events) of a friction profile (see ``friction_mu``), None when the
+    profile has no data form (a user-defined class)."""
+    from tsmpc.conditions import EventFriction
+    from tsmpc.scenarios import ConstantFriction, PaperFriction, PatchFriction
+
+    events = np.zeros((0, 5))
+    base = profile
+    if type(profile) is EventFriction:
+        events = np.array([[1.0 if e.by_time else 0.0, e.start, e.ramp, e.end, e.mu]
+                           for e in profile.events], dtype=float).reshape(-1, 5)
+        base = profile.base
+    patches = np.zeros((0, 4))
+    if type(base) is ConstantFriction:
+        frb = np.array([0.0, float(base.value)])
+    elif type(base) is PaperFriction:
+        frb = np.array([1.0, base.dry, base.ripple, base.earth, base.ice, base.wet], dtype=float)
+    elif type(base) is PatchFriction:
+        frb = np.array([2.0, base.base, base.lap_length_m], dtype=float)
+        patches = np.array([[p.start_m, p.end_m, p.mu, p.ramp_m] for p in base.patches],
+                           dtype=float).reshape(-1, 4)
+    else:
+        return None
+    return frb, patches, events
+
+
+def _split_fault(fault: Any) -> tuple[Any, Any]:
+    """(sensor model, inner fault) of a scenario's sensor fault."""
+    from tsmpc.conditions import SensorModel
+
+    if type(fault) is SensorModel:
+        return fault, fault.inner
+    return None, fault
+
+
+def _fault_problem(fault: Any) -> str | None:
+    from tsmpc.conditions import SensorModel
+    from tsmpc.robustness import DropoutFault, NaNBurstFault
+
+    if fault is None:
+        return None
+    model, inner = _split_fault(fault)
+    if inner is not None and type(inner) not in (DropoutFault, NaNBurstFault):
+        return f"sensor fault {type(inner).__name__} (no data form)"
+    if model is not None and type(model) is SensorModel and model._t is not None \
+            and not model._t > 1e-12:
+        return "a sensor model in the middle of a run (its first call would not restart it)"
+    return None
+
+
+def _fault_data(fault: Any, M: int, fp: NDArray[np.float64], ip: NDArray[np.int64],
+                sf: NDArray[np.float64], si: NDArray[np.int64]) -> tuple[Any, ...]:
+    """Parameters and pre-drawn samples of the scenario's sensor fault: (u_drop (M,), gnss (M, 2),
+    fifo) with the fields of fp/ip/sf/si filled."""
+    from tsmpc.kernels import engine as ke
+    from tsmpc.robustness import DropoutFault
+
+    model, inner = _split_fault(fault)
+    u_drop, gnss, fifo = np.zeros(1), np.zeros((1, 2)), np.zeros((1, 5))
+    if inner is not None:
+        ip[ke.IP_F_INNER] = ke.FAULT_HOLD_BURST if type(inner) is DropoutFault else ke.FAULT_NAN_BURST
+        fp[ke.FP_I_PERIOD], fp[ke.FP_I_DUR] = inner.period_s, inner.duration_s
+        fp[ke.FP_I_START] = inner.start_s
+        held = getattr(inner, "_held", None)
+        if held is not None:  # a DropoutFault keeps its last sample from a previous run
+            sf[ke.SF_FHELD:ke.SF_FHELD + 5] = held
+            si[ke.SI_FHELDHAS] = 1
+    if model is not None:
+        f = model.faults
+        ip[ke.IP_F_MODEL] = 1
+        fp[ke.FP_F_THB], fp[ke.FP_F_THD] = f.theta_bias, f.theta_drift
+        fp[ke.FP_F_VB], fp[ke.FP_F_VD] = f.v_bias, f.v_drift
+        fp[ke.FP_F_WB], fp[ke.FP_F_WD] = f.omega_bias, f.omega_drift
+        fp[ke.FP_F_ESIG], fp[ke.FP_F_PDROP] = model.extra_sigma, f.dropout_probability
+        ip[ke.IP_F_DELAY], ip[ke.IP_F_HOLD] = model.delay_n, int(f.dropout_hold)
+        seed = model.seed
+        # the draws SensorModel makes, one call per sample, drawn at once (the same stream)
+        if model.extra_sigma > 0.0:
+            ip[ke.IP_F_GNSS] = 1
+            gnss = np.random.default_rng([seed, 21, 2]).standard_normal((M, 2))
+        if f.dropout_probability > 0.0:
+            ip[ke.IP_F_DROP] = 1
+            u_drop = np.random.default_rng([seed, 21, 1]).random(M)
+        fifo = np.zeros((model.delay_n + 1, 5))
+    return u_drop, gnss, fifo
+
+
+def _restore_fault(fault: Any, n_calls: int, t_last: float, fifo: NDArray[np.float64],
+                   sf: NDArray[np.float64], si: NDArray[np.int64]) -> None:
+    """Leave the scenario's fault objects as the Python loop would have left them (a comparison
+    runs its next method on the same objects)."""
+    from tsmpc.kernels import engine as ke
+
+    model, inner = _split_fault(fault)
+    if inner is not None and hasattr(inner, "_held"):
+        inner._held = sf[ke.SF_FHELD:ke.SF_FHELD + 5].copy() if si[ke.SI_FHELDHAS] else None
+    if model is not None and n_calls > 0:
+        model._reset()
+        if model.faults.dropout_probability > 0.0:
+            model._drop.random(n_calls)
+        if model.extra_sigma > 0.0:
+            model._gnss.standard_normal((n_calls, 2))
+        model._fifo = deque((fifo[i].copy() for i in range(int(si[ke.SI_FIFON]))),
+                            maxlen=model.delay_n + 1)
+        model._last = sf[ke.SF_FLAST:ke.SF_FLAST + 5].copy() if si[ke.SI_FLASTHAS] else None
+        model._t = t_last
+
+
+def _noise(cfg: Config, M: int) -> NDArray[np.float64]:
+    """The M samples :class:`~tsmpc.scenarios.SensorNoise` draws (blocks of 4096 × 5, scaled)."""
+    s = cfg.noise
+    sigma = s.scale * np.array([s.position, s.position, s.theta, s.v, s.omega])
+    rng = np.random.default_rng(cfg.seed)
+    blocks = [rng.standard_normal((4096, 5)) * sigma for _ in range(max(-(-M // 4096), 1))]
+    return np.concatenate(blocks)
+
+
+# ------------------------------------------------------------------------------ exactness probes
+_PROBES: dict[str, Any] = {}
+
+
+def _fma(a: float, b: float, c: float) -> float:
+    return float(Fraction(a) * Fraction(b) + Fraction(c))
+
+
+def _matvec_mode() -> int:
+    """How this numpy's BLAS computes a row of a 2×2 ``P @ φ`` (the course fusion's RLS):
+    0 plain, 1 ``fma(P00, φ0, P01 φ1)``, 2 ``fma(P01, φ1, P00 φ0)`` (FMA kernels)."""
+    if "matvec" not in _PROBES:
+        rng = np.random.default_rng(20250)
+        hits = np.zeros(3, dtype=int)
+        n = 0
+        for _ in range(64):
+            P, phi = rng.normal(size=(2, 2)), rng.normal(size=2)
+            r = P @ phi
+            for i in range(2):
+                a, b, c, d = float(P[i, 0]), float(phi[0]), float(P[i, 1]), float(phi[1])
+                cands = (a * b + c * d, _fma(a, b, c * d), _fma(c, d, a * b))
+                hits += np.array([x == float(r[i]) for x in cands])
+                n += 1
+        best = int(np.argmax(hits))
+        _PROBES["matvec"] = best if hits[best] == n else 0
+        _PROBES["matvec_exact"] = bool(hits[best] == n)
+    return int(_PROBES["matvec"])
+
+
+def _hypot_exact(ke: Any) -> bool:
+    """Does the kernel's hypot reproduce this interpreter's ``math.hypot``?"""
+    if "hypot" not in _PROBES:
+        rng = np.random.default_rng(20251)
+        v = rng.normal(size=(200, 2)) * np.array([[1.0], [1e3]]).repeat(100, axis=0)
+        _PROBES["hypot"] = all(ke.hypot_py(float(a), float(b)) == math.hypot(a, b) for a, b in v)
+    return bool(_PROBES["hypot"])
+
+
+def exact() -> bool | None:
+    """Whether the last engine run's glue reproduces this interpreter's and BLAS's rounding to the
+    bit (None before any run): ``math.hypot`` of CPython ≤ 3.11, numpy's 2×2 products."""
+    if "hypot" not in _PROBES:
+        return None
+    return bool(_PROBES["hypot"] and _PROBES.get("matvec_exact", True))
+
+
+# ------------------------------------------------------------------------------ the kernel
+_KERNEL: dict[str, Any] = {}
+
+
+def _load_kernel() -> Any:
+    """The engine's kernel module (compiled on first use, then loaded from numba's cache), or
+    None when the compiled kernels are unavailable."""
+    if "mod" in _KERNEL:
+        return _KERNEL["mod"]
+    from tsmpc import kernels
+
+    mod = None
+    if kernels.load("mpc") is not None:  # sets NUMBA_CACHE_DIR before numba is imported
+        try:
+            cache = kernels.numba_cache_dir()
+            folder = kernels._tree_folder(cache)
+            if not any(folder.glob("engine.run-*.nbi")):
+                print("tsmpc: compiling the run engine (first run only)…", file=sys.stderr,
+                      flush=True)
+            from tsmpc.kernels import engine as mod  # noqa: PLC0415
+
+            mod.warm()
+        except Exception as err:  # a broken cache or compiler: the Python loop runs
+            print(f"tsmpc: run engine unavailable ({type(err).__name__}: {err}); using the "
+                  "Python loop", file=sys.stderr)
+            mod = None
+    _KERNEL["mod"] = mod
+    return mod
+
+
+# ------------------------------------------------------------------------------ the run
+@dataclass
+class _Arrays:
+    """Everything the kernel reads and writes, in its argument order (see ``run``)."""
+
+    x: NDArray[np.float64]
+    fp: NDArray[np.float64]
+    ip: NDArray[np.int64]
+    sf: NDArray[np.float64]
+    si: NDArray[np.int64]
+    sc: NDArray[np.float64]
+    ev: NDArray[np.int64]
+    noise: NDArray[np.float64]
+    u_drop: NDArray[np.float64]
+    gnss: NDArray[np.float64]
+    fifo: NDArray[np.float64]
+    frb: NDArray[np.float64]
+    patches: NDArray[np.float64]
+    events: NDArray[np.float64]
+    ref_x: NDArray[np.float64]
+    ref_y: NDArray[np.float64]
+    ref_th: NDArray[np.float64]
+    ref_v: NDArray[np.float64]
+    ref_w: NDArray[np.float64]
+    th_tan: NDArray[np.float64]
+    mv: NDArray[np.float64]
+    mw: NDArray[np.float64]
+    gate: NDArray[np.float64]
+    cur: NDArray[np.float64]
+    ivs: NDArray[np.float64]
+    mass_v: NDArray[np.float64]
+    mY: NDArray[np.float64]
+    mW: NDArray[np.float64]
+    mU: NDArray[np.float64]
+    mXS: NDArray[np.float64]
+    mA: NDArray[np.float64]
+    mB: NDArray[np.float64]
+    mX: NDArray[np.float64]
+    mp: NDArray[np.float64]
+    ls: NDArray[np.float64]
+    Kv: NDArray[np.float64]
+    zlo: NDArray[np.float64]
+    zhi: NDArray[np.float64]
+    bits: NDArray[np.bool_]
+    prm: NDArray[np.float64]
+    mlo: NDArray[np.float64]
+    mhi: NDArray[np.float64]
+    mq: NDArray[np.float64]
+    mP: NDArray[np.float64]
+    mr: NDArray[np.float64]
+    mS: NDArray[np.float64]
+    mdu: NDArray[np.float64]
+    mumin: NDArray[np.float64]
+    mumax: NDArray[np.float64]
+    prevX: NDArray[np.float64]
+    prevU: NDArray[np.float64]
+    pX: NDArray[np.float64]
+    pU: NDArray[np.float64]
+    cst: NDArray[np.float64]
+    lo: NDArray[np.float64]
+    loi: NDArray[np.int64]
+    lxp: NDArray[np.float64]
+    li: NDArray[np.float64]
+    lstat: NDArray[np.int8]
+    lsat: NDArray[np.bool_]
+
+    def args(self) -> tuple[Any, ...]:
+        return tuple(getattr(self, f) for f in self.__dataclass_fields__)
+
+
+def _f64(a: Any) -> NDArray[np.float64]:
+    """A writable C-ordered float64 copy (numba compiles one signature for these)."""
+    return np.array(a, dtype=np.float64, order="C")
+
+
+def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: int,
+             x0: NDArray[np.float64], ke: Any) -> _Arrays:
+    """The kernel's arrays from a reset cascade, the plant and the scenario."""
+    ref, n_in, N = cascade.reference, cascade.n_inner, cfg.mpc.N
+    M = K * n_in
+    mpc, mhe, lqr, fu = cascade.mpc, cascade.mhe, cascade.lqr, cascade._fusion
+    fp, ip = np.zeros(ke.N_FP), np.zeros(ke.N_IP, dtype=np.int64)
+    sf, si = np.zeros(ke.N_SF), np.zeros(ke.N_SI, dtype=np.int64)
+    veh, fs = cfg.vehicle, cfg.fusion
+    fp[ke.FP_TD], fp[ke.FP_TC], fp[ke.FP_H] = cascade.Td, cascade.Tc, plant.model.h
+    fp[ke.FP_MU_NOM], fp[ke.FP_MG] = plant.vehicle.mu_nominal, plant._mg
+    fp[ke.FP_V_LO], fp[ke.FP_V_HI] = cascade._v_range
+    fp[ke.FP_W_LIM], fp[ke.FP_POSE_NOISE] = cascade._w_limit, cascade._pose_noise
+    fp[ke.FP_HEAD_NOISE], fp[ke.FP_GATE_SIGMA] = cascade._heading_noise, cascade._slip_gate.sigma
+    course = fu.course
+    fp[ke.FP_COURSE_SIGMA] = course.sigma
+    fp[ke.FP_CF0], fp[ke.FP_CR0] = veh.C_f, veh.C_r
+    fp[ke.FP_VM], fp[ke.FP_VI], fp[ke.FP_VA], fp[ke.FP_VB] = veh.mass, veh.inertia, veh.a, veh.b
+    fp[ke.FP_TAU] = fu.tau
+    fp[ke.FP_MHE_MASS] = mhe.vehicle.mass
+    fp[ke.FP_ITER_TOL] = mpc.settings.iter_tol
+    bound = scenario.divergence_bound_m or cfg.divergence_bound_m
+    ip[ke.IP_HASBOUND] = bound is not None
+    fp[ke.FP_BOUND] = math.inf if bound is None else float(bound)
+    (Kv, zlo, zhi, bits, prm, lam, afilt, lTd, Fmin, Fmax, dmin, dmax, sfb, tau) = lqr._kargs
+    fp[ke.FP_L_LAM], fp[ke.FP_L_AF], fp[ke.FP_L_TD] = lam, afilt, lTd
+    fp[ke.FP_L_FMIN], fp[ke.FP_L_FMAX], fp[ke.FP_L_DMIN], fp[ke.FP_L_DMAX] = Fmin, Fmax, dmin, dmax
+    fp[ke.FP_L_TAU] = tau
+    ip[ke.IP_NIN], ip[ke.IP_K], ip[ke.IP_N] = n_in, K, N
+    ip[ke.IP_NSUB] = round(cascade.Td / plant.model.h)
+    ip[ke.IP_MODE] = mpc._mode_id
+    ip[ke.IP_NITER] = mpc.settings.iter_max
+    ip[ke.IP_TERM] = mpc.settings.terminal_constraint
+    ip[ke.IP_NW], ip[ke.IP_REFLEN] = cfg.mhe.N, len(ref)
+    mc = cfg.mpc
+    ip[ke.IP_SLIP], ip[ke.IP_TANGENT] = mc.slip_aware, mc.tangent_heading
+    ip[ke.IP_PREDICT], ip[ke.IP_REPEAT] = fs.predict_pose, fs.reject_repeated_samples
+    ip[ke.IP_ANYCOURSE] = fu.any_course
+    ip[ke.IP_CSLIP], ip[ke.IP_CSPEED] = fs.course_slip, fs.course_speed
+    ip[ke.IP_STIFF], ip[ke.IP_MASSEST] = fs.stiffness_estimate, fs.mass_estimate
+    ip[ke.IP_SPEEDFB], ip[ke.IP_LQR_SFB] = fu.speed_feedback, sfb
+    ip[ke.IP_COMP] = cfg.lqr.friction_compensation
+    ip[ke.IP_UIO] = cfg.lqr.friction_estimate.value == "uio"
+    ip[ke.IP_MFORCE], ip[ke.IP_MSTEER] = scenario.measured_force, scenario.measured_steering
+    ip[ke.IP_FMA] = _matvec_mode()
+    # the cascade's state after reset(x0)
+    sf[ke.SF_POSE:ke.SF_POSE + 3] = cascade._pose
+    sf[ke.SF_HELD:ke.SF_HELD + 3] = cascade._pose_held
+    sf[ke.SF_POSET] = cascade._pose_t
+    sf[ke.SF_UPREV:ke.SF_UPREV + 2] = cascade._u_prev
+    sf[ke.SF_UAPP:ke.SF_UAPP + 2] = cascade._u_applied
+    sf[ke.SF_THETA:ke.SF_THETA + 2] = course._theta
+    sf[ke.SF_P:ke.SF_P + 4] = course._P.reshape(-1)
+    sf[ke.SF_CNUM:ke.SF_CNUM + 2] = course._cnum
+    sf[ke.SF_CDEN:ke.SF_CDEN + 2] = course._cden
+    sf[ke.SF_PRIOR:ke.SF_PRIOR + 2] = course._prior_num
+    sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
+    sf[ke.SF_MF] = mhe._F
+    sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival
+    mp = np.array([*mhe._kargs[0], *mhe._kargs[1], *mhe._kargs[2], mhe._kargs[3], *mhe._kargs[4],
+                   *mhe._kargs[5], *mhe._kargs[6], *mhe._kargs[7], *mhe._kargs[8:17]], dtype=float)
+    u_drop, gnss, fifo = _fault_data(scenario.sensor_fault, M, fp, ip, sf, si)
+    prog = _friction_program(scenario.friction)
+    assert prog is not None
+    frb, patches, events = prog
+    # the MPC's reference inputs at every step: Reference.window's v, ω (a closed lap wraps, an
+    # open reference holds its last sample)
+    mref = cascade._mpc_reference
+    L = len(mref)
+    idx = np.arange(K + N + 1)
+    idx = idx % L if mref.closed else np.minimum(idx, L - 1)
+    mv, mw = _f64(mref.v[idx]), _f64(mref.omega[idx])
+    return _Arrays(
+        x=_f64(x0), fp=fp, ip=ip, sf=sf, si=si, sc=np.zeros(ke.N_SC),
+        ev=np.zeros(ke.N_EVENTS, dtype=np.int64), noise=_noise(cfg, M), u_drop=_f64(u_drop),
+        gnss=_f64(gnss), fifo=fifo, frb=frb, patches=_f64(patches), events=_f64(events),
+        ref_x=_f64(ref.x), ref_y=_f64(ref.y), ref_th=_f64(ref.theta), ref_v=_f64(ref.v),
+        ref_w=_f64(ref.omega), th_tan=_f64(cascade._theta_tangent), mv=mv, mw=mw,
+        gate=np.zeros((ke.GATE_BASELINE + 1, 3)), cur=np.zeros(ke.N_IV),
+        ivs=np.zeros((ke.BASELINE, ke.N_IV)), mass_v=np.zeros(cfg.mhe.N + 1),
+        mY=mhe._Y, mW=mhe._W, mU=mhe._U, mXS=mhe._XS, mA=mhe._Ab, mB=mhe._Bb, mX=mhe._Xb, mp=mp,
+        ls=lqr._s, Kv=Kv, zlo=zlo, zhi=zhi, bits=bits, prm=prm,
+        mlo=mpc._lo, mhi=mpc._hi, mq=_f64(mpc._q), mP=mpc._Pc, mr=_f64(mpc._r), mS=mpc._Sc,
+        mdu=_f64(mpc._du), mumin=_f64(mpc._umin), mumax=_f64(mpc._umax),
+        prevX=np.zeros((N + 1, 3)), prevU=np.zeros((N, 2)), pX=np.zeros((N + 1, 3)),
+        pU=np.zeros((N, 2)), cst=plant.model._cst, lo=np.zeros((K, ke.N_LO)),
+        loi=np.zeros((K, 4), dtype=np.int64), lxp=np.zeros((K, N + 1, 3)),
+        li=np.zeros((M, ke.N_LI)), lstat=np.zeros(M, dtype=np.int8), lsat=np.zeros(M, dtype=bool))
+
+
+class _Run:
+    """One engine run: the kernel calls and the Python slow paths between them."""
+
+    def __init__(self, cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: int,
+                 x0: NDArray[np.float64], ke: Any) -> None:
+        self.cfg, self.cascade, self.scenario, self.plant, self.K, self.ke = (
+            cfg, cascade, scenario, plant, K, ke)
+        self.n_in, self.N = cascade.n_inner, cfg.mpc.N
+        self.a = _prepare(cfg, cascade, scenario, plant, K, x0, ke)
+        self.args = self.a.args()
+        self.sec_mpc: dict[int, float] = {}
+        self.sec_mhe: dict[int, float] = {}
+        self.sec_lqr: dict[int, float] = {}
+
+    # -- slow paths --------------------------------------------------------------------------
+    def _mpc(self) -> None:
+        """TSMPC.step in Python (its fast path declined): the condensed QP / SOCP path."""
+        a, ke, N, mpc = self.a, self.ke, self.N, self.cascade.mpc
+        if a.si[ke.SI_HASPREV]:
+            mpc._prev = MPCResult(u=a.prevU[0].copy(), x_pred=a.prevX.copy(), u_pred=a.prevU.copy(),
+                                  du=np.zeros((N, 2)), cost=math.nan, status=MPCStatus.OPTIMAL,
+                                  iterations=0, qp_iterations=0, solve_time_s=0.0, n_clipped=0)
+        else:
+            mpc._prev = None
+        window = self.cascade._mpc_reference.window(int(a.si[ke.SI_KW]), N + 1)
+        e = a.sc[ke.SC_EMEAS:ke.SC_EMEAS + 3].copy()
+        t0 = time.perf_counter()
+        try:
+            plan = mpc.step(e, a.sf[ke.SF_UPREV:ke.SF_UPREV + 2].copy(), window)
+        except Exception as err:  # the cascade would catch it: not reproduced here
+            raise EngineFallback(f"MPC raised {type(err).__name__}") from err
+        self.sec_mpc[int(a.si[ke.SI_M]) // self.n_in] = time.perf_counter() - t0
+        a.pX[:] = np.asarray(plan.x_pred)[: N + 1]
+        a.pU[:] = plan.u_pred
+        a.sc[ke.SC_PU:ke.SC_PU + 2] = plan.u
+        a.si[ke.SI_PSTAT] = _MPC_CODE[plan.status]
+        a.si[ke.SI_PIT], a.si[ke.SI_PQPIT] = plan.iterations, plan.qp_iterations
+        a.si[ke.SI_PCLIP] = plan.n_clipped
+
+    def _mhe(self) -> None:
+        """MHEUIO's dense QP (a state bound is active in the window)."""
+        a, ke, mhe = self.a, self.ke, self.cascade.mhe
+        n, ok, full = int(a.si[ke.SI_MHEN]), bool(a.si[ke.SI_MHEOK]), bool(a.si[ke.SI_MHEFULL])
+        mhe._x = a.sf[ke.SF_MX:ke.SF_MX + 3].copy()
+        mhe._F = float(a.sf[ke.SF_MF])
+        mhe._ny, mhe._n_failed = int(a.si[ke.SI_NY]), int(a.si[ke.SI_NFAIL])
+        mhe._n_rejected = int(a.si[ke.SI_NREJ])
+        y = a.sc[ke.SC_YM:ke.SC_YM + 2].copy()
+        u = a.sc[ke.SC_UMHE:ke.SC_UMHE + 2].copy()
+        if not np.all(np.isfinite(u)):
+            u = np.zeros(2)
+        t0 = time.perf_counter()
+        try:
+            try:
+                with np.errstate(all="ignore"):
+                    est = mhe._step_dense(y, u, ok, n, full, mhe._U[:n], mhe._XS[: n + 1],
+                                          (mhe._Ab[:n].copy(), mhe._Bb[:n].copy()), t0,
+                                          float(a.sc[ke.SC_FRAW]))
+            except (np.linalg.LinAlgError, ValueError, ArithmeticError) as err:  # as MHEUIO.step
+                est = mhe._failed(float("nan"), t0, f"{type(err).__name__}")
+        except Exception as err:
+            raise EngineFallback(f"MHE raised {type(err).__name__}") from err
+        self.sec_mhe[int(a.si[ke.SI_M])] = time.perf_counter() - t0
+        a.sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
+        a.sf[ke.SF_MF] = mhe._F
+        a.si[ke.SI_NFAIL] = mhe._n_failed
+        a.sc[ke.SC_EST:ke.SC_EST + 3] = est.x
+        a.sc[ke.SC_ESTF], a.sc[ke.SC_ESTFR] = est.F_fr, est.F_fr_raw
+        a.si[ke.SI_ESTSTAT] = _MHE_CODE[est.status]
+
+    def _lqr(self) -> None:
+        """TSLQR's numpy law (the compiled one found N̄ singular)."""
+        a, ke, lqr = self.a, self.ke, self.cascade.lqr
+        if a.si[ke.SI_HASAPPLIED]:  # the numpy law reads the stiffnesses from its vehicle
+            lqr.set_cornering_stiffness(float(a.prm[2]), float(a.prm[3]))
+        inner = Estimate(a.sc[ke.SC_EST:ke.SC_EST + 3].copy(), float(a.sc[ke.SC_INF]),
+                         float(a.sc[ke.SC_INFR]), _MHE_STATUS[int(a.si[ke.SI_ESTSTAT])], 0.0)
+        kern, lqr._kern = lqr._kern, None
+        t0 = time.perf_counter()
+        try:
+            out = lqr._step(inner, float(a.sc[ke.SC_VREF]), float(a.sc[ke.SC_WREF]))
+        except Exception as err:
+            raise EngineFallback(f"TS-LQR raised {type(err).__name__}") from err
+        finally:
+            lqr._kern = kern
+        self.sec_lqr[int(a.si[ke.SI_M])] = time.perf_counter() - t0
+        a.sc[ke.SC_OF], a.sc[ke.SC_OD] = out.F_xR, out.delta
+        a.si[ke.SI_SAT] = bool(out.saturated)
+
+    def _plant(self) -> str | None:
+        """The plant's non-finite step in Python: its error message, or (rounding of the float
+        closure) a finite state to continue from."""
+        a, ke = self.a, self.ke
+        self.plant.reset(a.x.copy())
+        try:
+            x_next = self.plant.step(np.array([a.sc[ke.SC_OF], a.sc[ke.SC_OD]]), self.cascade.Td,
+                                     float(a.sc[ke.SC_MU]))
+            if not np.all(np.isfinite(x_next)):
+                raise NonFiniteError(f"plant: non-finite state {x_next}")
+        except NonFiniteError as err:
+            k = int(a.si[ke.SI_M]) // self.n_in
+            return f"plant diverged at t = {k * self.cascade.Tc:.2f} s: {err}"
+        a.x[:] = x_next
+        return None
+
+    # -- the loop ----------------------------------------------------------------------------
+    def loop(self, progress: Callable[[int, int], None] | None) -> tuple[str, int, int, int]:
+        """Run to the end; (termination, outer steps done, inner rows logged, sensor samples
+        taken)."""
+        a, ke, K, n_in = self.a, self.ke, self.K, self.n_in
+        M = K * n_in
+        chunk = M if progress is None else _PROGRESS_CHUNK * n_in
+        reported = 0
+        while True:
+            m_end = min(M, (int(a.si[ke.SI_M]) // chunk + 1) * chunk)
+            code = ke.run(m_end, *self.args)
+            m = int(a.si[ke.SI_M])
+            if code == ke.DONE:
+                if progress is not None:
+                    for k in range(reported, m // n_in):
+                        progress(k + 1, K)
+                    reported = m // n_in
+                if m >= M:
+                    return "completed", K, M, M
+            elif code == ke.NEED_MPC:
+                self._mpc()
+            elif code == ke.NEED_MHE:
+                self._mhe()
+            elif code == ke.NEED_LQR:
+                self._lqr()
+            elif code == ke.NEED_PLANT:
+                why = self._plant()
+                if why is not None:
+                    return why, m // n_in + 1, m + 1, m + 1
+            elif code == ke.DIVERGED:
+                k = m // n_in
+                bound = a.fp[ke.FP_BOUND]
+                e_y = abs(float(a.sc[ke.SC_EY]))
+                return (f"diverged: |e_y| = {e_y:.2f} m > {bound:g} m at t = "
+                        f"{k * self.cascade.Tc:.1f} s", k + 1, m, m + 1)
+            else:  # pragma: no cover (a kernel/caller mismatch)
+                raise RuntimeError(f"run engine: unknown code {code}")
+
+
+def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_design: Any = None,
+        dynamic_design: Any = None, progress: Callable[[int, int], None] | None = None,
+        max_steps: int | None = None) -> RunLog | None:
+    """``simulate(cfg, method, scenario, …)`` by the compiled engine; None when the blocks'
+    kernels are not all active (the caller runs the Python loop). Check :func:`applicability`
+    first. Raises :class:`EngineFallback` when the run meets a block exception."""
+    ke = _load_kernel()
+    if ke is None:
+        return None
+    cascade = Cascade(cfg, method, scenario.reference, kinematic_design=kinematic_design,
+                      dynamic_design=dynamic_design)
+    mhe, lqr, mpc = cascade.mhe, cascade.lqr, cascade.mpc
+    if mpc._kern is None or mhe._kern is None or not mhe._kargs[-1] or lqr._kern is None:
+        return None
+    ref, N, Tc, Td, n_in = cascade.reference, cfg.mpc.N, cfg.rates.Tc, cfg.rates.Td, cascade.n_inner
+    K = tracked_steps(ref, N)
+    if K < 1:
+        return None  # simulate raises the ConfigError
+    K = K if max_steps is None else min(K, int(max_steps))
+    plant = default_plant(cfg, scenario)
+    n_sub = round(Td / plant.model.h)
+    if plant.model._kern is None or abs(n_sub * plant.model.h - Td) > 1e-9 * max(1.0, Td):
+        return None
+    x0 = _start_state(ref, scenario.initial_error)
+    plant.reset(x0)
+    cascade.reset(x0)
+    _hypot_exact(ke)
+    t_start = time.perf_counter()
+    r = _Run(cfg, cascade, scenario, plant, K, x0, ke)
+    t_compile = time.perf_counter()
+    ke.run(0, *r.args)  # compiles or loads the kernel for these arrays (runs nothing): not timed
+    t_compile = time.perf_counter() - t_compile
+    t_loop, tick0 = time.perf_counter(), ke.ticks()
+    termination, done, rows, n_calls = r.loop(progress)
+    wall, ticks = time.perf_counter() - t_loop, ke.ticks() - tick0
+    m_last = n_calls - 1
+    k_last, j_last = divmod(m_last, n_in)
+    _restore_fault(scenario.sensor_fault, n_calls, k_last * Tc if j_last == 0 else m_last * Td,
+                   r.a.fifo, r.a.sf, r.a.si)
+    return _log(r, cascade.method.value, scenario, done, rows, termination,
+                ticks / wall if wall > 0 and ticks > 0 else 0.0,
+                time.perf_counter() - t_start - t_compile)
+
+
+def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termination: str,
+         ticks_per_s: float, wall_s: float) -> RunLog:
+    """The :class:`RunLog` ``simulate`` would have returned."""
+    a, ke, cfg, K, n_in = r.a, r.ke, r.cfg, r.K, r.n_in
+    ref = r.cascade.reference
+    Tc, Td, N = cfg.rates.Tc, cfg.rates.Td, cfg.mpc.N
+    t0 = float(ref.t[0])
+    o, i = slice(0, done), slice(0, rows)
+    lo, li = a.lo[o], a.li[i]
+    scale = 1.0 / ticks_per_s if ticks_per_s > 0 else 0.0
+    mpc_t, mhe_t, lqr_t = lo[:, ke.LO_TMPC] * scale, li[:, ke.LI_TMHE] * scale, li[:, ke.LI_TLQR] * scale
+    for d, arr in ((r.sec_mpc, mpc_t), (r.sec_mhe, mhe_t), (r.sec_lqr, lqr_t)):
+        for idx, sec in d.items():
+            if idx < arr.size:
+                arr[idx] = sec
+    refs = np.stack([ref.x[:K], ref.y[:K], ref.theta[:K], ref.v[:K], ref.omega[:K]], axis=1)
+    f_true = np.ascontiguousarray(li[:, ke.LI_FTRUE])
+    events = {name: int(a.ev[n]) for n, name in enumerate(_EVENTS)}
+    x = a.x
+    return RunLog(
+        method=method, scenario=scenario.name, Tc=Tc, Td=Td,
+        t_outer=(np.arange(K) * Tc + t0)[o], ref=refs[o],
+        state_outer=np.ascontiguousarray(lo[:, ke.LO_X:ke.LO_X + 6]),
+        errors=np.ascontiguousarray(lo[:, ke.LO_ERR:ke.LO_ERR + 3]),
+        errors_measured=np.ascontiguousarray(lo[:, ke.LO_EMEAS:ke.LO_EMEAS + 3]),
+        u_c=np.ascontiguousarray(lo[:, ke.LO_UC:ke.LO_UC + 2]), x_pred=a.lxp[o][:, : N + 1],
+        mpc_time_s=np.ascontiguousarray(mpc_t), mpc_status=_MPC_TEXT[a.loi[o, ke.LOI_STATUS]].astype("<U16"),
+        mpc_iterations=a.loi[o, ke.LOI_IT].copy(), mpc_qp_iterations=a.loi[o, ke.LOI_QPIT].copy(),
+        mpc_clipped=a.loi[o, ke.LOI_CLIP].copy(),
+        t_inner=(np.arange(K * n_in) * Td + t0)[i],
+        state=np.ascontiguousarray(li[:, ke.LI_X:ke.LI_X + 6]),
+        estimate=np.ascontiguousarray(li[:, ke.LI_EST:ke.LI_EST + 3]),
+        measurement=np.ascontiguousarray(li[:, ke.LI_MEAS:ke.LI_MEAS + 2]),
+        F_fr_hat=np.ascontiguousarray(li[:, ke.LI_FHAT]), F_fr_raw=np.ascontiguousarray(li[:, ke.LI_FRAW]),
+        F_fr_true=f_true, mu_road=np.ascontiguousarray(li[:, ke.LI_MU]),
+        command=np.ascontiguousarray(li[:, ke.LI_CMD:ke.LI_CMD + 2]), saturated=a.lsat[i].copy(),
+        mhe_time_s=np.ascontiguousarray(mhe_t), lqr_time_s=np.ascontiguousarray(lqr_t),
+        mhe_status=_MHE_TEXT[a.lstat[i]].astype("<U16"),
+        wall_s=wall_s, termination=termination, events=events,
+        meta={"oracle": False, "seed": cfg.seed, **scenario.meta, "final_state": x.tolist()})
