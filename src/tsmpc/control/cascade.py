@@ -265,8 +265,7 @@ class Cascade:
         self._slip_gate.reset()
         self._fusion.reset(None if self._x0 is None else self._x0[:3])
         if getattr(self, "_stiffness_applied", None):  # back to the config's stiffnesses
-            _apply_stiffness_to(self.mhe, self.lqr, (self.cfg.vehicle.C_f, self.cfg.vehicle.C_r),
-                                (self.cfg.vehicle.C_f, self.cfg.vehicle.C_r), [])
+            _apply_stiffness_to((self.mhe, self.lqr), (self.cfg.vehicle.C_f, self.cfg.vehicle.C_r), [])
         self._stiffness_applied: list[float] = []
         self.mpc.reset()
         self._calls = 0
@@ -353,8 +352,7 @@ class Cascade:
     def _apply_stiffness(self, C: tuple[float, float] | None) -> None:
         """fusion.stiffness_estimate: the fitted axle stiffnesses reach the MHE and the TS-LQR."""
         if C is not None:
-            _apply_stiffness_to(self.mhe, self.lqr, C, (self.cfg.vehicle.C_f, self.cfg.vehicle.C_r),
-                                self._stiffness_applied)
+            _apply_stiffness_to((self.mhe, self.lqr), C, self._stiffness_applied)
 
     def _fresh(self, t: float, m: Measurement) -> bool:
         if m.stamp is None:
@@ -526,29 +524,14 @@ class Cascade:
                        t_mpc, t2 - t1, t3 - t2)
 
 
-def _apply_stiffness_to(mhe: Any, lqr: Any, C: tuple[float, float], model: tuple[float, float],
-                        applied: list[float]) -> None:
-    """Give the fitted (Ĉ_f, Ĉ_r) to the blocks, when they moved by over 1 %: the inner loop's N̄
-    gets both axles; the MHE gets the model's stiffnesses scaled by their common factor
-    √(Ĉ_f Ĉ_r / (C_f C_r)), not the fitted front/rear balance.
-
-    Why the balance stays out of the MHE: α̂ is inferred through the model from ω and δ, and it
-    is most sensitive to the understeer balance C_f/C_r — the least reliable direction of the
-    fit (the difference of two correlated axle fits; on a multi-body car it also takes up load
-    transfer and combined slip, which a single-track model does not have) — and α̂ sits inside
-    the inner loop. Measured (REF, paper reference unless stated; RMSE y, per-axle balance in the
-    MHE → common factor): CommonRoad's multi-body van (vehicle 3, built-in circuit) left the road
-    at 74 s → 0.009 m; plant stiffness 24825 / 21032 N/rad 0.0075 → 0.0066 m; C_r −30 %
-    0.0176 → 0.0144 m; C_r +30 % 0.0071 → 0.0107 m; C_f −30 % 0.0094 → 0.018 m."""
+def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> None:
+    """Give the fitted (C_f, C_r) to the blocks that take them, when they moved by over 1 %."""
     if applied and all(abs(c - a) <= 0.01 * abs(a) for c, a in zip(C, applied, strict=True)):
         return
-    lqr_setter = getattr(lqr, "set_cornering_stiffness", None)
-    if lqr_setter is not None:
-        lqr_setter(*C)
-    mhe_setter = getattr(mhe, "set_cornering_stiffness", None)
-    if mhe_setter is not None:
-        common = math.sqrt((C[0] / model[0]) * (C[1] / model[1]))
-        mhe_setter(model[0] * common, model[1] * common)
+    for b in blocks:
+        setter = getattr(b, "set_cornering_stiffness", None)
+        if setter is not None:
+            setter(*C)
     applied[:] = list(C)
 
 

@@ -36,12 +36,12 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     course, the axle forces from the measured lateral and yaw accelerations and the slips of the
     single-track model, F_yF = C_f (δ − α − a ω/v) and F_yR = C_r (b ω/v − α) are
     fitted per axle (least squares through the origin on the compliance 1/C, the model's C as
-    prior, forgetting over ``STIFF_MEMORY_S``), from chords where the reference turns only
-    (``CORNER_ACCEL``). The fitted C_f, C_r replace the model's in the inner loop's reference
-    gain N̄, and their common factor scales the model's in the MHE (the front/rear balance stays
-    the model's there: :func:`tsmpc.control.cascade._apply_stiffness_to` says why); the LMI gains
-    stay. With them the steering feed-forward and α̂'s scale are right (issue 21: the stiffness
-    error was worth 0.08 m of RMSE y).
+    prior, forgetting over ``STIFF_MEMORY_S``), from chords where the reference turns
+    (``CORNER_ACCEL``) and the car neither accelerates nor brakes (``STIFF_MAX_ACCEL``). The
+    fitted C_f, C_r replace the model's in the MHE and in the inner loop's reference gain N̄ (the
+    LMI gains stay): with them α̂ and the steering feed-forward are right (issue 21: the stiffness
+    error was worth 0.08 m of RMSE y; with the true C in both blocks the loss disappears, in the
+    LMI gains alone it does not).
 
   The fits compare like with like (means over the same chord), so the chord's lag in a transient
   does not bias them; only chords of measured (not predicted) poses count.
@@ -103,6 +103,14 @@ STIFF_RANGE = (0.5, 2.0)
 #: Smallest lateral acceleration of the *reference* v_d ω_d [m/s²] all along a chord for it to count
 #: in the stiffness fit (the reference, not the car: a car weaving on a straight is no corner).
 CORNER_ACCEL = 0.2
+#: Largest longitudinal acceleration of the car over a chord [g] for it to count in the stiffness
+#: fit. The fit is a pure-slip, constant-speed single-track fit; under traction or braking the
+#: tyres' lateral stiffness drops (combined slip) and load moves between the axles (ΔF_z / F_z ≈
+#: a h / (g L/2): ≈ 4 % per axle at 0.1 g for a CoG height of 0.5 m on a 2.5 m wheelbase), neither
+#: of which the fit's model has. CommonRoad's multi-body van (vehicle 3), accelerating hard through
+#: fast corners, drove the fit's front/rear balance 10 % off, and the MHE with that balance left
+#: the road at 74 s; with the gate it tracks to 0.03 m.
+STIFF_MAX_ACCEL = 0.1
 
 
 def _wrap(a: float) -> float:
@@ -149,6 +157,7 @@ class _Interval:
     s_F: float = 0.0  #: Σ F_xR (applied force)
     w_first: float = 0.0  #: ω of the opening sample
     ay_ref: float = 0.0  #: smallest |v_d ω_d| of the reference at the interval's ends
+    v_first: float = math.nan  #: measured speed at the interval's first sample [m/s]
 
 
 class CourseFusion:
@@ -167,6 +176,7 @@ class CourseFusion:
         self._iv: deque[_Interval] = deque(maxlen=BASELINE)
         self._cur: _Interval | None = None
         self._omega_now = 0.0
+        self._v_now = math.nan
         self._theta = np.zeros(2)  # [κ, β]
         self._P = np.diag(np.square(SLIP_PRIOR))
         self._sv = 0.0  # speed-offset fit: Σ w b, Σ w
@@ -229,6 +239,7 @@ class CourseFusion:
         w = 0.5 if cur.n == 0 else 1.0  # trapezoid: the opening sample counts half
         if cur.n == 0:
             cur.w_first = omega
+            cur.v_first = v
         cur.n += 1
         cur.sv_full += v
         cur.s_delta += delta
@@ -246,6 +257,7 @@ class CourseFusion:
         ``v`` and ``omega`` the measured speed and yaw rate now (the closing sample), ``ay_ref``
         the reference's lateral acceleration v_d ω_d now."""
         self._omega_now = omega
+        self._v_now = v
         ay = abs(ay_ref) if math.isfinite(ay_ref) else 0.0
         cur = self._cur
         good = pose is not None and bool(np.all(np.isfinite(pose))) and math.isfinite(v)
@@ -312,7 +324,10 @@ class CourseFusion:
         # forces ≈ 0), only the traces of a lightly damped yaw motion (the same Monza case drifted
         # there); the reference's turn, not the car's, so that weaving does not count as a corner
         cornering = min(i.ay_ref for i in self._iv) >= CORNER_ACCEL
-        if p is not None and math.isfinite(self._omega_now) and cornering:
+        # and at nearly constant speed (pure slip: STIFF_MAX_ACCEL); a NaN speed fails the test
+        a_x = (self._v_now - self._iv[0].v_first) / (BASELINE * self.Tc)
+        steady = p is not None and abs(a_x) <= STIFF_MAX_ACCEL * p.g
+        if p is not None and math.isfinite(self._omega_now) and cornering and steady:
             span = BASELINE * self.Tc
             # α̇ from the model's α̂ over consecutive chords (smooth; the course's own α would put
             # its noise through a 1/T_c difference into the force)
