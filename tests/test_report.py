@@ -201,14 +201,15 @@ def test_sweep_plots_colour_by_a_second_axis(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_animate_writes_an_mp4_with_the_pip_installable_ffmpeg(run_dir: Path, tmp_path: Path) -> None:
-    """The [test] and [video] extras bring imageio-ffmpeg: CI always writes and checks an MP4."""
-    import os
+    """The [test] and [video] extras bring imageio-ffmpeg: wherever it is installed (the README's
+    test command installs it) the MP4 is written and checked; a lookup that misses it fails."""
+    import importlib.util
 
     from tsmpc.report.animation import animate_run, ffmpeg_executable
 
     if ffmpeg_executable() is None:
-        if os.environ.get("CI"):
-            pytest.fail("no ffmpeg in CI: install the [test] extra (imageio-ffmpeg)")
+        if importlib.util.find_spec("imageio_ffmpeg") is not None:
+            pytest.fail("imageio-ffmpeg is installed but tsmpc found no ffmpeg")
         pytest.skip("no ffmpeg: pip install 'tsmpc[video]'")
     log = load_run(run_dir).logs["REF"]
     res = animate_run(log, tmp_path / "a.gif", duration_s=1.0, size_px=(321, 241))
