@@ -6,7 +6,7 @@ beforehand by the caller with the same generator calls, sensor faults as data), 
 log and the divergence test, ``Cascade.step`` (sample gates, dead reckoning, the course fusion and
 its fits, the slip-aware outer-loop errors, the TS-MPC every T_c/T_d calls, the MHE-UIO, the
 mass-error terms, the TS-LQR) and the plant's T_d/h RK4 steps — and logs into preallocated arrays.
-The blocks are the compiled kernels the Python wrappers call (:func:`~tsmpc.kernels.mpc.fast_step`,
+The blocks are the compiled kernels the Python wrappers call (:func:`~tsmpc.kernels.mpc.guarded_step`,
 :func:`~tsmpc.kernels.mhe.window_step`, :func:`~tsmpc.kernels.lqr.lqr_step`,
 :func:`~tsmpc.kernels.plant.rk4_block`); the glue between them is ported operation by operation
 (same order, same rounding), so the engine reproduces the Python loop to the last bit.
@@ -34,7 +34,7 @@ from numba.extending import intrinsic
 
 from tsmpc.kernels.lqr import lqr_step
 from tsmpc.kernels.mhe import window_step
-from tsmpc.kernels.mpc import fast_step
+from tsmpc.kernels.mpc import guarded_step
 from tsmpc.kernels.plant import rk4_block
 
 __all__ = ["friction_mu", "hypot_py", "run", "ticks", "warm"]
@@ -57,8 +57,8 @@ N_EVENTS = 14
  FP_ITER_TOL, FP_BOUND,
  FP_F_THB, FP_F_THD, FP_F_VB, FP_F_VD, FP_F_WB, FP_F_WD, FP_F_ESIG, FP_F_PDROP,
  FP_I_PERIOD, FP_I_DUR, FP_I_START,
- FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU) = range(41)
-N_FP = 41
+ FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU, FP_VG) = range(42)
+N_FP = 42
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_K, IP_N, IP_MODE, IP_NITER, IP_TERM, IP_NW, IP_REFLEN,
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
@@ -78,8 +78,9 @@ N_MP = 30
  SF_PLANTU, _PU1, SF_LASTA, SF_GUARD, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
  SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_PRIOR, _R1, SF_AHPREV,
  SF_LF, SF_LA, SF_SXY, SF_SXX, SF_ACCEL, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
- SF_ARR, _AR1, _AR2, SF_FHELD, _FH1, _FH2, _FH3, _FH4, SF_FLAST, _FL1, _FL2, _FL3, _FL4) = range(60)
-N_SF = 60
+ SF_ARR, _AR1, _AR2, SF_FHELD, _FH1, _FH2, _FH3, _FH4, SF_FLAST, _FL1, _FL2, _FL3, _FL4,
+ SF_VNOW) = range(61)
+N_SF = 61
 # ---------------------------------------------------------------------------- integer state
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_HASCUR, SI_NCHORDS,
  SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
@@ -94,8 +95,8 @@ N_SI = 35
 N_SC = 34
 # ---------------------------------------------------------------------------- course intervals
 (IV_SX, IV_SY, IV_STH, IV_OK, IV_N, IV_SV, IV_SVDTH, IV_SVALPHA, IV_SVAY, IV_SVFULL, IV_SDELTA,
- IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF) = range(16)
-N_IV = 16
+ IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST) = range(17)
+N_IV = 17
 # ---------------------------------------------------------------------------- inner log columns
 (LI_X, _LX1, _LX2, _LX3, _LX4, _LX5, LI_EST, _LE1, _LE2, LI_MEAS, _LM1, LI_FHAT, LI_FRAW,
  LI_FTRUE, LI_MU, LI_CMD, _LC1, LI_TMHE, LI_TLQR) = range(19)
@@ -116,6 +117,7 @@ SLIP_CORRECTION_MAX, SPEED_OFFSET_MAX = 0.05, 2.0
 MASS_MIN_SPEED, MASS_HIGHPASS_S, MASS_MEMORY_S, MASS_EXCITATION = 3.0, 2.0, 100.0, 50.0
 MASS_RANGE_LO, MASS_RANGE_HI = -0.4, 0.6
 STIFF_PRIOR, STIFF_MEMORY_S, STIFF_RANGE_LO, STIFF_RANGE_HI, CORNER_ACCEL = 2.5e5, 100.0, 0.5, 2.0, 0.2
+STIFF_MAX_ACCEL = 0.1
 # friction programs (the profiles of tsmpc.scenarios / tsmpc.conditions as data)
 FR_CONST, FR_PAPER, FR_PATCH = 0, 1, 2
 
@@ -124,10 +126,10 @@ _VELTKAMP = 134217729.0  # 2**27 + 1: splits a double into two halves with exact
 
 # ============================================================================ primitives
 @intrinsic
-def _ticks(typingctx):  # noqa: ARG001 (numba's intrinsic signature)
+def _ticks(typingctx):
     """The CPU's cycle counter (rdtsc on x86): the block timings, converted to seconds by the
     caller against the call's wall time."""
-    def codegen(context, builder, signature, args):  # noqa: ARG001
+    def codegen(context, builder, signature, args):
         fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.IntType(64), []),
                                             "llvm.readcyclecounter")
         return builder.call(fn, [])
@@ -135,9 +137,9 @@ def _ticks(typingctx):  # noqa: ARG001 (numba's intrinsic signature)
 
 
 @intrinsic
-def _fma(typingctx, a, b, c):  # noqa: ARG001
+def _fma(typingctx, a, b, c):
     """a·b + c with one rounding (what the BLAS of numpy's ``P @ φ`` does on FMA machines)."""
-    def codegen(context, builder, signature, args):  # noqa: ARG001
+    def codegen(context, builder, signature, args):
         d = ir.DoubleType()
         fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(d, [d, d, d]),
                                             "llvm.fma.f64")
@@ -412,6 +414,7 @@ def _course_sample(ok, theta, v, alpha_hat, a_y, omega, delta, force, cur, si):
     w = 0.5 if cur[IV_N] == 0.0 else 1.0
     if cur[IV_N] == 0.0:
         cur[IV_WFIRST] = omega
+        cur[IV_VFIRST] = v
     cur[IV_N] += 1.0
     cur[IV_SVFULL] += v
     cur[IV_SDELTA] += delta
@@ -500,7 +503,10 @@ def _chord(ex, ey, eth, ivs, sf, si, fp, ip):
     for i in range(1, BASELINE):
         ay_min = _pmin(ay_min, ivs[i, IV_AYREF])
     cornering = ay_min >= CORNER_ACCEL
-    if math.isfinite(sf[SF_OMNOW]) and cornering:
+    # and at nearly constant speed (a pure-slip fit); a NaN speed fails the test
+    a_x = (sf[SF_VNOW] - ivs[0, IV_VFIRST]) / (BASELINE * Tc)
+    steady = abs(a_x) <= STIFF_MAX_ACCEL * fp[FP_VG]
+    if math.isfinite(sf[SF_OMNOW]) and cornering and steady:
         span = BASELINE * Tc
         ah_prev = sf[SF_AHPREV]
         has_prev = si[SI_HASAH] != 0
@@ -537,6 +543,7 @@ def _chord(ex, ey, eth, ivs, sf, si, fp, ip):
 def _course_close(good, px, py, pth, v, omega, ay_ref, cur, ivs, sf, si, fp, ip):
     """``CourseFusion.close`` at an MPC step (``good``: a measured pose and speed)."""
     sf[SF_OMNOW] = omega
+    sf[SF_VNOW] = v
     ay = abs(ay_ref) if math.isfinite(ay_ref) else 0.0
     good = good and math.isfinite(px) and math.isfinite(py) and math.isfinite(pth) \
         and math.isfinite(v)
@@ -571,6 +578,7 @@ def _course_close(good, px, py, pth, v, omega, ay_ref, cur, ivs, sf, si, fp, ip)
         cur[IV_SX], cur[IV_SY], cur[IV_STH] = px, py, pth
         cur[IV_OK] = 1.0
         cur[IV_AYREF] = ay
+        cur[IV_VFIRST] = math.nan
         si[SI_HASCUR] = 1
     else:
         si[SI_HASCUR] = 0
@@ -579,7 +587,7 @@ def _course_close(good, px, py, pth, v, omega, ay_ref, cur, ivs, sf, si, fp, ip)
 @njit(cache=True, fastmath=False)
 def _apply_stiffness(sf, si, fp, mp, prm):
     """``Cascade._apply_stiffness`` with ``CourseFusion.stiffness``: the fitted (Ĉ_f, Ĉ_r) to the
-    TS-LQR's N̄ (both axles) and, scaled by their common factor, to the MHE's model."""
+    MHE's model and the TS-LQR's N̄, when they moved by over 1 %."""
     comp = sf[SF_CNUM] / sf[SF_CDEN]
     c0 = 1.0 / (comp if comp >= 1e-12 else 1e-12) if comp > 0.0 else math.inf
     comp = sf[SF_CNUM + 1] / sf[SF_CDEN + 1]
@@ -592,8 +600,7 @@ def _apply_stiffness(sf, si, fp, mp, prm):
         if abs(C0 - a0) <= 0.01 * abs(a0) and abs(C1 - a1) <= 0.01 * abs(a1):
             return
     prm[2], prm[3] = C0, C1
-    common = math.sqrt((C0 / m0) * (C1 / m1))
-    mp[MP_CF], mp[MP_CR] = m0 * common, m1 * common
+    mp[MP_CF], mp[MP_CR] = C0, C1
     sf[SF_APPLIED], sf[SF_APPLIED + 1] = C0, C1
     si[SI_HASAPPLIED] = 1
 
@@ -754,7 +761,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
         gate, cur, ivs, mass_v,
         mY, mW, mU, mXS, mA, mB, mX, mp,
         ls, Kv, zlo, zhi, bits, prm,
-        mlo, mhi, mq, mP, mr, mS, mdu, mumin, mumax, prevX, prevU, pX, pU,
+        mints, mprm, mPS, prevX, prevU, pX, pU,
         cst, lo, loi, lxp, li, lstat, lsat):
     """Run steps ``si[SI_M]`` … ``m_end − 1`` (see the module docstring). Returns DONE when
     ``m_end`` is reached, else the code of the block the caller must run (NEED_*) or DIVERGED.
@@ -762,13 +769,11 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     Td, Tc = fp[FP_TD], fp[FP_TC]
     n_in = ip[IP_NIN]
     N = ip[IP_N]
-    mode = ip[IP_MODE]
     y = sc[SC_Y:SC_Y + 5]
     e_meas = sc[SC_EMEAS:SC_EMEAS + 3]
     tmp3 = np.empty(3)
-    eth = np.zeros(N)
-    om = np.zeros(N)
-    up = np.empty(2)
+    noX = np.zeros((0, 3))  # "no previous plan" for guarded_step
+    noU = np.zeros((0, 2))
     while si[SI_M] < m_end:
         m = si[SI_M]
         k = m // n_in
@@ -863,36 +868,16 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                     _pose_errors(px, py, pth + a, ref_x[kc], ref_y[kc], th_d + 0.5 * 0.0, e_meas)
                 else:
                     _pose_errors(px, py, pth, ref_x[kc], ref_y[kc], ref_th[kc], e_meas)
-                # ---- TSMPC.step: the compiled fast path, else the caller's condensed QP path
+                # ---- TSMPC.step: its compiled step (checks, schedule, Riccati fast path); a
+                # declined step (a constraint active, a non-finite input) is the caller's
                 tick = _ticks()
                 si[SI_KW] = kw
-                for i in range(2):
-                    up[i] = _npclip(sf[SF_UPREV + i], mumin[i], mumax[i])
-                ok_in = kw + N <= mv.size
-                if ok_in:
-                    acc = e_meas[0] + e_meas[1] + e_meas[2] + up[0] + up[1]
-                    for i in range(N):
-                        acc += mv[kw + i] + mw[kw + i]
-                    ok_in = math.isfinite(acc)
                 code = 1
-                if ok_in:
-                    has_eth = False
-                    has_om = False
-                    if si[SI_HASPREV] != 0 and mode != 0:
-                        eth[0] = e_meas[2]
-                        for i in range(1, N):
-                            eth[i] = prevX[i + 1, 2]
-                        has_eth = True
-                        if mode == 2:
-                            for i in range(N - 1):
-                                om[i] = prevU[i + 1, 1]
-                            om[N - 1] = prevU[N - 1, 1]
-                            has_om = True
-                    n_iter = ip[IP_NITER] if mode == 2 else 1
-                    code, U, du, Xp, cost, n_clip = fast_step(
-                        mode, e_meas, up, mv[kw:kw + N], mw[kw:kw + N], om, has_om, eth, has_eth,
-                        mlo, mhi, Tc, mq, mP, mr, mS, mdu, mumin, mumax, ip[IP_TERM] != 0, n_iter,
-                        fp[FP_ITER_TOL])
+                if kw + N + 1 <= mv.size:
+                    has_prev = si[SI_HASPREV] != 0
+                    code, U, _du, Xp, _cost, n_clip, _up = guarded_step(
+                        mints, mprm, mPS, e_meas, sf[SF_UPREV:SF_UPREV + 2], mv[kw:kw + N + 1],
+                        mw[kw:kw + N + 1], prevX if has_prev else noX, prevU if has_prev else noU)
                     if code == 0:
                         for i in range(N):
                             pU[i, 0], pU[i, 1] = U[i, 0], U[i, 1]
@@ -938,8 +923,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             u0 = sf[SF_PLANTU] if ip[IP_MFORCE] != 0 else sf[SF_UAPP]
             u1 = sf[SF_PLANTU + 1] if ip[IP_MSTEER] != 0 else sf[SF_UAPP + 1]
             si[SI_TICK0] = _ticks()
-            if _mhe_begin(sc[SC_YM], sc[SC_YM + 1], u0, u1, fp[FP_MHE_MASS], mY, mW, mU, mXS, mA, mB, mX, mp, sf,
-                          si, sc, ip) != 0:
+            if _mhe_begin(sc[SC_YM], sc[SC_YM + 1], u0, u1, fp[FP_MHE_MASS], mY, mW, mU, mXS, mA,
+                          mB, mX, mp, sf, si, sc, ip) != 0:
                 si[SI_PHASE] = PH_POST_MHE
                 return NEED_MHE
             li[m, LI_TMHE] = float(_ticks() - si[SI_TICK0])

@@ -51,7 +51,7 @@ from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.simulator import Scenario, _start_state, default_plant, tracked_steps
 
-__all__ = ["EngineFallback", "applicability", "enabled", "run"]
+__all__ = ["LAST_RUN", "EngineFallback", "applicability", "enabled", "exact", "run"]
 
 #: Event names in the order of :attr:`Cascade.events` (the kernel's counter array).
 _EVENTS = (*EVENT_NAMES, "stale_rejected", "step_errors", "repeated_rejected")
@@ -70,8 +70,8 @@ class EngineFallback(RuntimeError):
 
 
 def enabled() -> bool:
-    """True when ``TSMPC_ENGINE`` is set to a true value (1, true, yes, on)."""
-    return os.environ.get("TSMPC_ENGINE", "").strip().lower() in ("1", "true", "yes", "on")
+    """False when ``TSMPC_ENGINE`` is set to a false value (0, false, no, off)."""
+    return os.environ.get("TSMPC_ENGINE", "").strip().lower() not in ("0", "false", "no", "off")
 
 
 # ------------------------------------------------------------------------------ applicability
@@ -103,6 +103,188 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
     why = _fault_problem(scenario.sensor_fault)
     if why is not None:
         return why
+    why = _changed_since_port()
+    if why is not None:
+        return why
+    return _replaced_code()
+
+
+# ------------------------------------------------------------------------------ what was ported
+#: The Python code the kernel reproduces, with the fingerprints of the versions it was ported from
+#: (:func:`fingerprint`: the AST without docstrings and comments). When one changes, the engine
+#: steps aside (the Python loop runs) until kernels/engine.py follows the change and this table is
+#: refreshed (``python -m tsmpc.sim.engine`` prints it; tests/test_engine.py checks it).
+_PORTED: dict[str, str] = {
+    "tsmpc.sim.simulator:simulate": "dcb22cf7376a66bc",
+    "tsmpc.sim.simulator:_start_state": "2e35ad3de46ce500",
+    "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
+    "tsmpc.sim.simulator:default_plant": "0088c937e0241d8b",
+    "tsmpc.sim.simulator:tracked_steps": "394064c7f7227dae",
+    "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
+    "tsmpc.control.cascade:Cascade.__init__": "af0b18a5a8ce3c1e",
+    "tsmpc.control.cascade:Cascade.reset": "e3d611e7bea0f47b",
+    "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
+    "tsmpc.control.cascade:Cascade._step": "5e7481be251ba899",
+    "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
+    "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
+    "tsmpc.control.cascade:Cascade._plausible_speeds": "e406a3e08cdb871e",
+    "tsmpc.control.cascade:Cascade._accept_pose": "62c8438007fc5ae0",
+    "tsmpc.control.cascade:Cascade._dead_reckon": "de9dfd9dd526f273",
+    "tsmpc.control.cascade:Cascade._apply_stiffness": "446378c4435583d2",
+    "tsmpc.control.cascade:_apply_stiffness_to": "c0a68f984c5aa686",
+    "tsmpc.estimation.fusion:_wrap": "3fd9daeaa886e92c",
+    "tsmpc.estimation.fusion:RepeatGuard": "27f9c316059eec4f",
+    "tsmpc.estimation.fusion:_Interval": "a5469bc5f990c457",
+    "tsmpc.estimation.fusion:CourseFusion": "e591c76a562980a9",
+    "tsmpc.estimation.fusion:MassEstimator": "d73e4cf873cfe3df",
+    "tsmpc.estimation.fusion:Fusion": "f8e25eefdcfffb99",
+    "tsmpc.control.slip_aware:SlipGate": "914a291e0a0ef199",
+    "tsmpc.control.slip_aware:outer_loop_errors": "3775c2395e80851d",
+    "tsmpc.control.slip_aware:velocity_frame_errors": "b81a30dfed8c53bb",
+    "tsmpc.models.kinematic:pose_to_errors": "21aace1283045776",
+    "tsmpc.models.kinematic:wrap_angle": "84759ed30a2082e3",
+    "tsmpc.estimation.mhe_uio:MHEUIO.reset": "91c37b33d40113cb",
+    "tsmpc.estimation.mhe_uio:MHEUIO.step": "8b50a38a7325cedc",
+    "tsmpc.estimation.mhe_uio:MHEUIO._push": "399bd3980e3d8a56",
+    "tsmpc.estimation.mhe_uio:MHEUIO._step_kernel": "91e82de070de9265",
+    "tsmpc.estimation.mhe_uio:MHEUIO._failed": "481c2d5e6c42c5f7",
+    "tsmpc.estimation.mhe_uio:MHEUIO.set_cornering_stiffness": "4c2e3c0b21b47861",
+    "tsmpc.control.ts_lqr:TSLQR.reset": "87b87f561a20499d",
+    "tsmpc.control.ts_lqr:TSLQR.step": "6e5fb694882a1850",
+    "tsmpc.control.ts_lqr:TSLQR._step": "eb25d284c98a2050",
+    "tsmpc.control.ts_lqr:TSLQR.set_cornering_stiffness": "be3fd84f79326402",
+    "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
+    "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
+    "tsmpc.vehicle.plant:VehiclePlant": "0b52c004a843c73b",
+    "tsmpc.scenarios:SensorNoise": "1ba1c9047847d421",
+    "tsmpc.scenarios:ConstantFriction": "5a88ca3acb13f3c8",
+    "tsmpc.scenarios:PaperFriction": "9996087ab3f255ca",
+    "tsmpc.scenarios:_ramp": "5ef54bc2be16b7ea",
+    "tsmpc.scenarios:PatchFriction": "36dea15235f73f7a",
+    "tsmpc.conditions:ResolvedEvent": "03e17e620babc9f7",
+    "tsmpc.conditions:EventFriction": "dded7e7a165222e6",
+    "tsmpc.conditions:SensorModel": "c74cbfe146a3669c",
+    "tsmpc.robustness:DropoutFault": "7308cac71f886cf1",
+    "tsmpc.robustness:NaNBurstFault": "b02fcedb0d1277fb",
+    "tsmpc.robustness:_in_burst": "e7abf687d4c8006c",
+}
+#: Constants of the ported modules that the kernel holds as its own (name in the kernel module).
+_CONSTANTS = (
+    ("tsmpc.control.cascade", "POSE_JUMP_M", "POSE_JUMP_M"),
+    ("tsmpc.control.cascade", "POSE_DRIFT_M_PER_S", "POSE_DRIFT_M_PER_S"),
+    ("tsmpc.control.cascade", "HEADING_JUMP_RAD", "HEADING_JUMP_RAD"),
+    ("tsmpc.control.cascade", "HEADING_DRIFT_RAD_PER_S", "HEADING_DRIFT_RAD_PER_S"),
+    ("tsmpc.control.slip_aware", "GATE_RAD", "GATE_RAD"),
+    ("tsmpc.control.slip_aware", "MIN_CHORD_M", "GATE_MIN_CHORD_M"),
+    ("tsmpc.control.slip_aware", "BASELINE", "GATE_BASELINE"),
+    *(("tsmpc.estimation.fusion", n, n) for n in (
+        "BASELINE", "MIN_CHORD_M", "SLIP_MEMORY_S", "SPEED_MEMORY_S", "SLIP_CORRECTION_MAX",
+        "SPEED_OFFSET_MAX", "MASS_MIN_SPEED", "MASS_HIGHPASS_S", "MASS_MEMORY_S", "MASS_EXCITATION",
+        "STIFF_PRIOR", "STIFF_MEMORY_S", "CORNER_ACCEL", "STIFF_MAX_ACCEL")),
+)
+
+
+def fingerprint(target: str) -> str:
+    """Fingerprint of ``"module:qualname"`` (a function, method or class): a hash of its syntax
+    tree without docstrings, so comments and documentation may change, code may not."""
+    import ast
+    import hashlib
+    import importlib
+    import inspect
+    import textwrap
+
+    mod_name, qual = target.split(":")
+    obj: Any = importlib.import_module(mod_name)
+    for part in qual.split("."):
+        obj = getattr(obj, part)
+    tree = ast.parse(textwrap.dedent(inspect.getsource(obj)))
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef) and body
+                and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)):
+            node.body = body[1:] or [ast.Pass()]
+    return hashlib.sha256(ast.dump(tree).encode()).hexdigest()[:16]
+
+
+def stale_ports() -> list[str]:
+    """The ported code that changed since the port (targets whose fingerprint differs, constants
+    whose value differs), empty when the engine reproduces the current code."""
+    import importlib
+
+    out = [t for t, fp in _PORTED.items() if fingerprint(t) != fp]
+    ke = _load_kernel()  # (numba may only be imported after tsmpc.kernels set its cache folder)
+    if ke is None:
+        return out
+    for mod_name, name, mine in _CONSTANTS:
+        if getattr(importlib.import_module(mod_name), name) != getattr(ke, mine):
+            out.append(f"{mod_name}.{name}")
+    return out
+
+
+def _changed_since_port() -> str | None:
+    if "stale" not in _PROBES:
+        _PROBES["stale"] = stale_ports()
+    stale = _PROBES["stale"]
+    if stale:
+        return (f"{', '.join(stale)} changed since the engine was ported (the Python loop runs; "
+                "tests/test_engine.py says what to do)")
+    return None
+
+
+#: Classes whose methods the engine reproduces (a method replaced on one of them — a test's
+#: recorder, a user's instrumentation — only acts in the Python loop).
+_PORTED_CLASSES = (
+    ("tsmpc.control.cascade", "Cascade"), ("tsmpc.control.ts_mpc", "TSMPC"),
+    ("tsmpc.estimation.mhe_uio", "MHEUIO"), ("tsmpc.control.ts_lqr", "TSLQR"),
+    ("tsmpc.vehicle.plant", "VehiclePlant"), ("tsmpc.vehicle.plant", "Plant"),
+    ("tsmpc.scenarios", "SensorNoise"), ("tsmpc.scenarios", "PaperFriction"),
+    ("tsmpc.scenarios", "PatchFriction"), ("tsmpc.scenarios", "ConstantFriction"),
+    ("tsmpc.estimation.fusion", "Fusion"), ("tsmpc.estimation.fusion", "CourseFusion"),
+    ("tsmpc.estimation.fusion", "MassEstimator"), ("tsmpc.estimation.fusion", "RepeatGuard"),
+    ("tsmpc.control.slip_aware", "SlipGate"), ("tsmpc.conditions", "SensorModel"),
+    ("tsmpc.conditions", "EventFriction"), ("tsmpc.conditions", "ResolvedEvent"),
+    ("tsmpc.robustness", "DropoutFault"), ("tsmpc.robustness", "NaNBurstFault"),
+)
+#: Module-level functions the loop calls by name (module, name, where it is defined).
+_PORTED_FUNCTIONS = (
+    ("tsmpc.sim.simulator", "default_plant", "tsmpc.sim.simulator"),
+    ("tsmpc.sim.simulator", "_start_state", "tsmpc.sim.simulator"),
+    ("tsmpc.sim.simulator", "_measurement", "tsmpc.sim.simulator"),
+    ("tsmpc.sim.simulator", "tracked_steps", "tsmpc.sim.simulator"),
+    ("tsmpc.sim.simulator", "pose_to_errors", "tsmpc.models.kinematic"),
+    ("tsmpc.control.cascade", "outer_loop_errors", "tsmpc.control.slip_aware"),
+    ("tsmpc.control.cascade", "pose_to_errors", "tsmpc.models.kinematic"),
+    ("tsmpc.control.cascade", "_apply_stiffness_to", "tsmpc.control.cascade"),
+    ("tsmpc.control.slip_aware", "velocity_frame_errors", "tsmpc.control.slip_aware"),
+    ("tsmpc.control.slip_aware", "pose_to_errors", "tsmpc.models.kinematic"),
+    ("tsmpc.robustness", "_in_burst", "tsmpc.robustness"),
+)
+
+
+def _replaced_code() -> str | None:
+    """Why not, when a method or function the engine reproduces was replaced at run time (its
+    ``__qualname__`` or ``__module__`` is not its definition's), or a block kernel the engine
+    calls is no longer the one its module exports; else None."""
+    import importlib
+
+    for mod_name, cls_name in _PORTED_CLASSES:
+        cls = getattr(importlib.import_module(mod_name), cls_name)
+        for name, attr in vars(cls).items():
+            fn = getattr(attr, "__func__", attr)  # static/class methods
+            if callable(fn) and hasattr(fn, "__qualname__") and not (
+                    fn.__qualname__ == f"{cls.__qualname__}.{name}" and fn.__module__ == mod_name):
+                return f"{cls_name}.{name} was replaced (the Python loop runs the replacement)"
+    for mod_name, name, home in _PORTED_FUNCTIONS:
+        fn = getattr(importlib.import_module(mod_name), name, None)
+        if getattr(fn, "__qualname__", None) != name or getattr(fn, "__module__", None) != home:
+            return f"{mod_name}.{name} was replaced (the Python loop runs the replacement)"
+    if "mod" in _KERNEL and _KERNEL["mod"] is not None:
+        ke = _KERNEL["mod"]
+        for block, fn in (("mpc", "guarded_step"), ("mhe", "window_step"), ("lqr", "lqr_step"),
+                          ("plant", "rk4_block")):
+            if getattr(importlib.import_module(f"tsmpc.kernels.{block}"), fn) is not getattr(ke, fn):
+                return f"tsmpc.kernels.{block}.{fn} was replaced"
     return None
 
 
@@ -273,6 +455,9 @@ def exact() -> bool | None:
 
 # ------------------------------------------------------------------------------ the kernel
 _KERNEL: dict[str, Any] = {}
+#: Facts of the last engine run in this process: ``slow_paths`` (steps whose MPC, MHE, TS-LQR or
+#: plant step the Python path decided), ``loop_s``, ``compile_s`` (diagnostics and tests).
+LAST_RUN: dict[str, Any] = {}
 
 
 def _load_kernel() -> Any:
@@ -290,7 +475,7 @@ def _load_kernel() -> Any:
             if not any(folder.glob("engine.run-*.nbi")):
                 print("tsmpc: compiling the run engine (first run only)…", file=sys.stderr,
                       flush=True)
-            from tsmpc.kernels import engine as mod  # noqa: PLC0415
+            from tsmpc.kernels import engine as mod
 
             mod.warm()
         except Exception as err:  # a broken cache or compiler: the Python loop runs
@@ -299,6 +484,30 @@ def _load_kernel() -> Any:
             mod = None
     _KERNEL["mod"] = mod
     return mod
+
+
+def _compiled(ke: Any, args: tuple[Any, ...]) -> bool:
+    """Compile (or load from numba's cache) ``run`` for these arrays by a call that runs no
+    step. A cache entry numba cannot load is deleted and compiled again, once; False (the Python
+    loop runs) when that fails too."""
+    from tsmpc import kernels
+
+    for attempt in range(2):
+        try:
+            ke.run(0, *args)
+            return True
+        except Exception as err:
+            folder = kernels._tree_folder(kernels.numba_cache_dir())
+            print(f"tsmpc: the run engine's cache in {folder} could not be loaded "
+                  f"({type(err).__name__}){'; compiling it again…' if attempt == 0 else ''}",
+                  file=sys.stderr, flush=True)
+            if attempt == 0:
+                try:
+                    for p in folder.glob("engine.*.nb[ic]"):
+                        p.unlink()
+                except OSError:
+                    return False
+    return False
 
 
 # ------------------------------------------------------------------------------ the run
@@ -346,15 +555,9 @@ class _Arrays:
     zhi: NDArray[np.float64]
     bits: NDArray[np.bool_]
     prm: NDArray[np.float64]
-    mlo: NDArray[np.float64]
-    mhi: NDArray[np.float64]
-    mq: NDArray[np.float64]
-    mP: NDArray[np.float64]
-    mr: NDArray[np.float64]
-    mS: NDArray[np.float64]
-    mdu: NDArray[np.float64]
-    mumin: NDArray[np.float64]
-    mumax: NDArray[np.float64]
+    mints: NDArray[np.int64]
+    mprm: NDArray[np.float64]
+    mPS: NDArray[np.float64]
     prevX: NDArray[np.float64]
     prevU: NDArray[np.float64]
     pX: NDArray[np.float64]
@@ -394,6 +597,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     fp[ke.FP_COURSE_SIGMA] = course.sigma
     fp[ke.FP_CF0], fp[ke.FP_CR0] = veh.C_f, veh.C_r
     fp[ke.FP_VM], fp[ke.FP_VI], fp[ke.FP_VA], fp[ke.FP_VB] = veh.mass, veh.inertia, veh.a, veh.b
+    fp[ke.FP_VG] = veh.g
     fp[ke.FP_TAU] = fu.tau
     fp[ke.FP_MHE_MASS] = mhe.vehicle.mass
     fp[ke.FP_ITER_TOL] = mpc.settings.iter_tol
@@ -432,6 +636,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     sf[ke.SF_CNUM:ke.SF_CNUM + 2] = course._cnum
     sf[ke.SF_CDEN:ke.SF_CDEN + 2] = course._cden
     sf[ke.SF_PRIOR:ke.SF_PRIOR + 2] = course._prior_num
+    sf[ke.SF_VNOW] = course._v_now
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
     sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival
@@ -458,8 +663,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
         ivs=np.zeros((ke.BASELINE, ke.N_IV)), mass_v=np.zeros(cfg.mhe.N + 1),
         mY=mhe._Y, mW=mhe._W, mU=mhe._U, mXS=mhe._XS, mA=mhe._Ab, mB=mhe._Bb, mX=mhe._Xb, mp=mp,
         ls=lqr._s, Kv=Kv, zlo=zlo, zhi=zhi, bits=bits, prm=prm,
-        mlo=mpc._lo, mhi=mpc._hi, mq=_f64(mpc._q), mP=mpc._Pc, mr=_f64(mpc._r), mS=mpc._Sc,
-        mdu=_f64(mpc._du), mumin=_f64(mpc._umin), mumax=_f64(mpc._umax),
+        mints=mpc._ints, mprm=mpc._prm, mPS=mpc._PS,
         prevX=np.zeros((N + 1, 3)), prevU=np.zeros((N, 2)), pX=np.zeros((N + 1, 3)),
         pU=np.zeros((N, 2)), cst=plant.model._cst, lo=np.zeros((K, ke.N_LO)),
         loi=np.zeros((K, 4), dtype=np.int64), lxp=np.zeros((K, N + 1, 3)),
@@ -479,6 +683,7 @@ class _Run:
         self.sec_mpc: dict[int, float] = {}
         self.sec_mhe: dict[int, float] = {}
         self.sec_lqr: dict[int, float] = {}
+        self.slow = {"mpc": 0, "mhe": 0, "lqr": 0, "plant": 0}  # steps the Python paths decided
 
     # -- slow paths --------------------------------------------------------------------------
     def _mpc(self) -> None:
@@ -591,12 +796,16 @@ class _Run:
                 if m >= M:
                     return "completed", K, M, M
             elif code == ke.NEED_MPC:
+                self.slow["mpc"] += 1
                 self._mpc()
             elif code == ke.NEED_MHE:
+                self.slow["mhe"] += 1
                 self._mhe()
             elif code == ke.NEED_LQR:
+                self.slow["lqr"] += 1
                 self._lqr()
             elif code == ke.NEED_PLANT:
+                self.slow["plant"] += 1
                 why = self._plant()
                 if why is not None:
                     return why, m // n_in + 1, m + 1, m + 1
@@ -640,11 +849,14 @@ def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_desi
     t_start = time.perf_counter()
     r = _Run(cfg, cascade, scenario, plant, K, x0, ke)
     t_compile = time.perf_counter()
-    ke.run(0, *r.args)  # compiles or loads the kernel for these arrays (runs nothing): not timed
+    if not _compiled(ke, r.args):
+        return None
     t_compile = time.perf_counter() - t_compile
     t_loop, tick0 = time.perf_counter(), ke.ticks()
     termination, done, rows, n_calls = r.loop(progress)
     wall, ticks = time.perf_counter() - t_loop, ke.ticks() - tick0
+    LAST_RUN.clear()
+    LAST_RUN.update(slow_paths=dict(r.slow), loop_s=wall, compile_s=t_compile)
     m_last = n_calls - 1
     k_last, j_last = divmod(m_last, n_in)
     _restore_fault(scenario.sensor_fault, n_calls, k_last * Tc if j_last == 0 else m_last * Td,
@@ -694,3 +906,8 @@ def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termina
         mhe_status=_MHE_TEXT[a.lstat[i]].astype("<U16"),
         wall_s=wall_s, termination=termination, events=events,
         meta={"oracle": False, "seed": cfg.seed, **scenario.meta, "final_state": x.tolist()})
+
+
+if __name__ == "__main__":  # the table of _PORTED for the current code (after a port)
+    for _target in _PORTED:
+        print(f'    "{_target}": "{fingerprint(_target)}",')
