@@ -115,6 +115,14 @@ def test_slow_paths_friction_events_and_mismatch(cfg: Config, paper_reference_pa
     _assert_same(*_both(c2, "FZN", s2, max_steps=600))
 
 
+def test_actuators(cfg: Config, paper_reference_path: Path) -> None:
+    """A steering servo (lag, rate limit) and a force lag in front of the plant, the applied
+    steering measured and given to the MHE: the actuators as data, equal."""
+    c, s = apply_robustness("actuator_lag", cfg, load_scenario(cfg, paper_reference_path))
+    assert s.measured_steering and s.actuators is not None
+    _assert_same(*_both(c, "REF", s, max_steps=500))
+
+
 def test_a_diverging_run_ends_alike(cfg: Config, paper_reference_path: Path) -> None:
     """A heavier car with weaker rear tyres and combined slip leaves the road: the same |e_y|,
     time and logs up to that step."""
@@ -170,7 +178,6 @@ def test_progress_is_reported_for_every_outer_step(cfg: Config) -> None:
 def test_what_the_engine_does_not_run_goes_to_python(cfg: Config, monkeypatch) -> None:
     sc = load_scenario(cfg)
     assert eng.applicability(cfg, "REF", sc) is None
-    lag = apply_robustness("actuator_lag", cfg, sc)
     reasons = {
         "NL": eng.applicability(cfg, "NL", sc),
         "pure pursuit": eng.applicability(cfg, "pure_pursuit", sc),
@@ -178,7 +185,6 @@ def test_what_the_engine_does_not_run_goes_to_python(cfg: Config, monkeypatch) -
         "oracle": eng.applicability(cfg, "REF", sc, oracle=True),
         "paper-as-run": eng.applicability(Config.preset("paper-as-run"), "REF", sc),
         "uio": eng.applicability(replace(cfg, mhe=replace(cfg.mhe, form="uio")), "REF", sc),
-        "actuators": eng.applicability(lag.config, "REF", lag.scenario),
         "friction": eng.applicability(cfg, "REF", dc_replace(sc, friction=_OwnFriction())),
         "fault": eng.applicability(cfg, "REF", dc_replace(sc, sensor_fault=lambda t, y: y)),
     }

@@ -57,14 +57,16 @@ N_EVENTS = 14
  FP_ITER_TOL, FP_BOUND,
  FP_F_THB, FP_F_THD, FP_F_VB, FP_F_VD, FP_F_WB, FP_F_WD, FP_F_ESIG, FP_F_PDROP,
  FP_I_PERIOD, FP_I_DUR, FP_I_START,
- FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU, FP_VG) = range(42)
-N_FP = 42
+ FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU, FP_VG,
+ FP_A_GF, FP_A_GD, FP_A_RMAX) = range(45)
+N_FP = 45
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_K, IP_N, IP_MODE, IP_NITER, IP_TERM, IP_NW, IP_REFLEN,
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
- IP_FMA, IP_F_MODEL, IP_F_DELAY, IP_F_HOLD, IP_F_INNER, IP_F_GNSS, IP_F_DROP) = range(32)
-N_IP = 32
+ IP_FMA, IP_F_MODEL, IP_F_DELAY, IP_F_HOLD, IP_F_INNER, IP_F_GNSS, IP_F_DROP,
+ IP_ACT, IP_ACT_N, IP_ACT_NRK) = range(35)
+N_IP = 35
 # inner sensor faults (robustness scenarios), IP_F_INNER
 FAULT_NONE, FAULT_HOLD_BURST, FAULT_NAN_BURST = 0, 1, 2
 # ---------------------------------------------------------------------------- MHE parameters
@@ -79,15 +81,15 @@ N_MP = 30
  SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_PRIOR, _R1, SF_AHPREV,
  SF_LF, SF_LA, SF_SXY, SF_SXX, SF_ACCEL, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2, SF_FHELD, _FH1, _FH2, _FH3, _FH4, SF_FLAST, _FL1, _FL2, _FL3, _FL4,
- SF_VNOW) = range(61)
-N_SF = 61
+ SF_VNOW, SF_ACT, _AC1) = range(63)
+N_SF = 63
 # ---------------------------------------------------------------------------- integer state
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_HASCUR, SI_NCHORDS,
  SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
  SI_FIFON, SI_FLASTHAS, SI_FHELDHAS,
  SI_FRESH, SI_SPOK, SI_POSEOK, SI_MPCSTEP, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
- SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0) = range(35)
-N_SI = 35
+ SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS) = range(36)
+N_SI = 36
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
@@ -753,6 +755,36 @@ def _est_out(sf, sc, si, status, F_raw):
     si[SI_ESTSTAT] = status
 
 
+@njit(cache=True, fastmath=False)
+def _actuated(x, Fc, dc, mu, fp, ip, sf, si, cst):
+    """``ActuatedPlant.step`` over T_d: per sub-step the force lag and the rate-limited steering
+    servo, then the plant's RK4 steps with their outputs; the mean input over the step is what a
+    platform measures (``applied_input``). The state is committed only when every sub-step is
+    finite (else the caller's Python step words the error from the step's start)."""
+    n = ip[IP_ACT_N]
+    if si[SI_ACTHAS] != 0:
+        F, d = sf[SF_ACT], sf[SF_ACT + 1]
+    else:  # the actuators start at the first command
+        F, d = Fc, dc
+    gf, gd, rmax = fp[FP_A_GF], fp[FP_A_GD], fp[FP_A_RMAX]
+    acc0 = 0.0
+    acc1 = 0.0
+    xn = x.copy()
+    ok = True
+    for _ in range(n):
+        F += gf * (Fc - F)
+        d += _pmin(_pmax(gd * (dc - d), -rmax), rmax)
+        xn, ok = rk4_block(xn, F, d, mu, ip[IP_ACT_NRK], fp[FP_H], cst)
+        if not ok:
+            return xn, False
+        acc0 += F
+        acc1 += d
+    sf[SF_ACT], sf[SF_ACT + 1] = F, d
+    si[SI_ACTHAS] = 1
+    sf[SF_PLANTU], sf[SF_PLANTU + 1] = acc0 / n, acc1 / n
+    return xn, ok
+
+
 # ============================================================================ the run
 @njit(cache=True, fastmath=False)
 def run(m_end, x, fp, ip, sf, si, sc, ev,
@@ -992,11 +1024,17 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             li[m, LI_CMD], li[m, LI_CMD + 1] = sc[SC_OF], sc[SC_OD]
             lstat[m] = st
             lsat[m] = si[SI_SAT] != 0
-            sf[SF_PLANTU], sf[SF_PLANTU + 1] = sc[SC_OF], sc[SC_OD]
-            xn, ok = rk4_block(x, sc[SC_OF], sc[SC_OD], mu, ip[IP_NSUB], fp[FP_H], cst)
-            if not ok:
-                si[SI_PHASE] = PH_POST_PLANT
-                return NEED_PLANT
+            if ip[IP_ACT] == 0:
+                xn, ok = rk4_block(x, sc[SC_OF], sc[SC_OD], mu, ip[IP_NSUB], fp[FP_H], cst)
+                if not ok:
+                    si[SI_PHASE] = PH_POST_PLANT
+                    return NEED_PLANT
+                sf[SF_PLANTU], sf[SF_PLANTU + 1] = sc[SC_OF], sc[SC_OD]
+            else:
+                xn, ok = _actuated(x, sc[SC_OF], sc[SC_OD], mu, fp, ip, sf, si, cst)
+                if not ok:
+                    si[SI_PHASE] = PH_POST_PLANT
+                    return NEED_PLANT
             for i in range(6):
                 x[i] = xn[i]
             phase = PH_POST_PLANT

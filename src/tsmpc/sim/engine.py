@@ -5,15 +5,15 @@
 calls) and the plant. For the runs it can express as data, :func:`run` does the same in one
 compiled call (:func:`tsmpc.kernels.engine.run`): the built-in plant, the TS-MPC (FZN, REF, ITER),
 the MHE-UIO in its window form and the TS-LQR with the static reference gain, the sample gates,
-dead reckoning and the fusion switches of ``cfg.fusion``, the scenario's friction profile and
-sensor faults. It returns the same :class:`~tsmpc.sim.log.RunLog`, equal to the Python loop's
+dead reckoning and the fusion switches of ``cfg.fusion``, the scenario's friction profile,
+sensor faults and actuators (steering servo, force lag). It returns the same :class:`~tsmpc.sim.log.RunLog`, equal to the Python loop's
 (the tests compare both; the blocks are the same compiled kernels, the glue is ported with the
 same operations in the same order).
 
 What this module does:
 
 * :func:`applicability` — the explicit test, with the reason when the engine does not apply
-  (foreign plants, actuators, NL-MPC and the baselines, the oracle, the ``paper-as-run`` quirks,
+  (foreign plants, NL-MPC and the baselines, the oracle, the ``paper-as-run`` quirks,
   the paper's UIO form of the MHE, friction profiles or sensor faults it has no data form for);
 * the data: the sensor noise drawn with the generator calls :class:`~tsmpc.scenarios.SensorNoise`
   makes (blocks of 4096 samples, in order), the sensor model's dropout and GNSS draws likewise,
@@ -96,8 +96,9 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
         return f"mhe.form = {cfg.mhe.form.value!r} (the engine runs the window form)"
     if cfg.rates.inner_steps_per_outer is not None:
         return "rates.inner_steps_per_outer (the published run's time base)"
-    if scenario.actuators is not None:
-        return "actuator dynamics in front of the plant"
+    why = _actuator_problem(scenario.actuators)
+    if why is not None:
+        return why
     if _friction_program(scenario.friction) is None:
         return f"friction profile {type(scenario.friction).__name__} (no data form)"
     why = _fault_problem(scenario.sensor_fault)
@@ -166,6 +167,9 @@ _PORTED: dict[str, str] = {
     "tsmpc.conditions:SensorModel": "c74cbfe146a3669c",
     "tsmpc.robustness:DropoutFault": "7308cac71f886cf1",
     "tsmpc.robustness:NaNBurstFault": "b02fcedb0d1277fb",
+    "tsmpc.vehicle.actuators:Actuators": "2a6874a58d3e14a2",
+    "tsmpc.vehicle.actuators:_gain": "8f043d71c729db22",
+    "tsmpc.vehicle.actuators:ActuatedPlant": "7e59609bd713f2c4",
     "tsmpc.robustness:_in_burst": "e7abf687d4c8006c",
 }
 #: Constants of the ported modules that the kernel holds as its own (name in the kernel module).
@@ -245,6 +249,7 @@ _PORTED_CLASSES = (
     ("tsmpc.control.slip_aware", "SlipGate"), ("tsmpc.conditions", "SensorModel"),
     ("tsmpc.conditions", "EventFriction"), ("tsmpc.conditions", "ResolvedEvent"),
     ("tsmpc.robustness", "DropoutFault"), ("tsmpc.robustness", "NaNBurstFault"),
+    ("tsmpc.vehicle.actuators", "ActuatedPlant"), ("tsmpc.vehicle.actuators", "Actuators"),
 )
 #: Module-level functions the loop calls by name (module, name, where it is defined).
 _PORTED_FUNCTIONS = (
@@ -259,6 +264,7 @@ _PORTED_FUNCTIONS = (
     ("tsmpc.control.slip_aware", "velocity_frame_errors", "tsmpc.control.slip_aware"),
     ("tsmpc.control.slip_aware", "pose_to_errors", "tsmpc.models.kinematic"),
     ("tsmpc.robustness", "_in_burst", "tsmpc.robustness"),
+    ("tsmpc.vehicle.actuators", "_gain", "tsmpc.vehicle.actuators"),
 )
 
 
@@ -314,6 +320,38 @@ def _friction_program(profile: Any) -> tuple[NDArray[np.float64], NDArray[np.flo
     else:
         return None
     return frb, patches, events
+
+
+def _actuator_problem(act: Any) -> str | None:
+    """Why the scenario's actuators have no data form (None: none, or servo and lag as data)."""
+    from tsmpc.vehicle.actuators import Actuators, ForceLag, SteeringServo
+
+    if act is None:
+        return None
+    if type(act) is not Actuators or not (
+            act.steering is None or type(act.steering) is SteeringServo) or not (
+            act.force is None or type(act.force) is ForceLag):
+        return f"actuators {type(act).__name__} (no data form)"
+    return None
+
+
+def _actuator_data(plant: Any, Td: float, fp: NDArray[np.float64], ip: NDArray[np.int64]) -> bool:
+    """The ActuatedPlant's gains per sub-step into fp/ip (False: its sub-step is no whole number
+    of RK4 steps — the Python loop raises the plant's error)."""
+    from tsmpc.kernels import engine as ke
+    from tsmpc.vehicle.actuators import _gain
+
+    n = plant.substeps
+    h = Td / n  # ActuatedPlant.step's sub-step, as it computes it
+    sv, fl = plant.steering, plant.force
+    ip[ke.IP_ACT], ip[ke.IP_ACT_N] = 1, n
+    fp[ke.FP_A_GD] = _gain(sv.time_constant_s, h) if sv else 1.0
+    fp[ke.FP_A_RMAX] = sv.rate_limit * h if sv else math.inf
+    fp[ke.FP_A_GF] = _gain(fl.time_constant_s, h) if fl else 1.0
+    h_rk = plant.plant.model.h
+    n_rk = round(h / h_rk)  # VehiclePlant.step's RK4 steps per sub-step
+    ip[ke.IP_ACT_NRK] = n_rk
+    return n_rk >= 1 and abs(n_rk * h_rk - h) <= 1e-9 * max(1.0, h)
 
 
 def _split_fault(fault: Any) -> tuple[Any, Any]:
@@ -581,7 +619,9 @@ def _f64(a: Any) -> NDArray[np.float64]:
 
 def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: int,
              x0: NDArray[np.float64], ke: Any) -> _Arrays:
-    """The kernel's arrays from a reset cascade, the plant and the scenario."""
+    """The kernel's arrays from a reset cascade, the plant (a VehiclePlant, or the ActuatedPlant
+    around one) and the scenario."""
+    plant = plant if scenario.actuators is None else plant.plant
     ref, n_in, N = cascade.reference, cascade.n_inner, cfg.mpc.N
     M = K * n_in
     mpc, mhe, lqr, fu = cascade.mpc, cascade.mhe, cascade.lqr, cascade._fusion
@@ -765,6 +805,9 @@ class _Run:
         closure) a finite state to continue from."""
         a, ke = self.a, self.ke
         self.plant.reset(a.x.copy())
+        actuated = self.scenario.actuators is not None
+        if actuated and a.si[ke.SI_ACTHAS]:  # the actuators where the step started
+            self.plant._a = a.sf[ke.SF_ACT:ke.SF_ACT + 2].copy()
         try:
             x_next = self.plant.step(np.array([a.sc[ke.SC_OF], a.sc[ke.SC_OD]]), self.cascade.Td,
                                      float(a.sc[ke.SC_MU]))
@@ -774,6 +817,10 @@ class _Run:
             k = int(a.si[ke.SI_M]) // self.n_in
             return f"plant diverged at t = {k * self.cascade.Tc:.2f} s: {err}"
         a.x[:] = x_next
+        if actuated:
+            a.sf[ke.SF_ACT:ke.SF_ACT + 2] = self.plant._a
+            a.si[ke.SI_ACTHAS] = 1
+        a.sf[ke.SF_PLANTU:ke.SF_PLANTU + 2] = self.plant.applied_input
         return None
 
     # -- the loop ----------------------------------------------------------------------------
@@ -839,8 +886,9 @@ def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_desi
         return None  # simulate raises the ConfigError
     K = K if max_steps is None else min(K, int(max_steps))
     plant = default_plant(cfg, scenario)
-    n_sub = round(Td / plant.model.h)
-    if plant.model._kern is None or abs(n_sub * plant.model.h - Td) > 1e-9 * max(1.0, Td):
+    vp = plant if scenario.actuators is None else plant.plant  # the VehiclePlant
+    n_sub = round(Td / vp.model.h)
+    if vp.model._kern is None or abs(n_sub * vp.model.h - Td) > 1e-9 * max(1.0, Td):
         return None
     x0 = _start_state(ref, scenario.initial_error)
     plant.reset(x0)
@@ -848,6 +896,8 @@ def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_desi
     _hypot_exact(ke)
     t_start = time.perf_counter()
     r = _Run(cfg, cascade, scenario, plant, K, x0, ke)
+    if scenario.actuators is not None and not _actuator_data(plant, Td, r.a.fp, r.a.ip):
+        return None
     t_compile = time.perf_counter()
     if not _compiled(ke, r.args):
         return None
