@@ -6,9 +6,10 @@ calls) and the plant. For the runs it can express as data, :func:`run` does the 
 compiled call (:func:`tsmpc.kernels.engine.run`): the built-in plant, the TS-MPC (FZN, REF, ITER),
 the MHE-UIO in its window form and the TS-LQR with the static reference gain, the sample gates,
 dead reckoning and the fusion switches of ``cfg.fusion``, the scenario's friction profile,
-sensor faults and actuators (steering servo, force lag). It returns the same :class:`~tsmpc.sim.log.RunLog`, equal to the Python loop's
-(the tests compare both; the blocks are the same compiled kernels, the glue is ported with the
-same operations in the same order).
+sensor faults and actuators (steering servo, force lag). It returns the same
+:class:`~tsmpc.sim.log.RunLog`, equal to the Python loop's to the last bit (the tests compare
+both; the blocks are the same compiled kernels, the glue is ported with the same operations in
+the same order).
 
 What this module does:
 
