@@ -93,8 +93,8 @@ N_SI = 36
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
- SC_XN, _XN1, _XN2, _XN3, _XN4, _XN5, SC_PU, _PU2) = range(34)
-N_SC = 34
+ SC_XN, _XN1, _XN2, _XN3, _XN4, _XN5, SC_PU, _PU2, SC_UK, _UK1) = range(36)
+N_SC = 36
 # ---------------------------------------------------------------------------- course intervals
 (IV_SX, IV_SY, IV_STH, IV_OK, IV_N, IV_SV, IV_SVDTH, IV_SVALPHA, IV_SVAY, IV_SVFULL, IV_SDELTA,
  IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST) = range(17)
@@ -659,12 +659,13 @@ def _mass_terms(v_hat, F_hat, v_ref, mv, sf, si, fp, ip):
 
 # ============================================================================ MHE wrapper
 @njit(cache=True, fastmath=False)
-def _mhe_begin(y0, y1, u0, u1, mass, mY, mW, mU, mXS, mA, mB, mX, mp, sf, si, sc, ip):
+def _mhe_begin(y0, y1, u0, u1, mass, mY, mW, mU, mXS, mA, mB, mX, mp, views, sf, si, sc, ip):
     """``MHEUIO.step`` up to the window solve's answer. Returns 0 with the estimate in
     ``sc``/``si[SI_ESTSTAT]``, or 1 when the dense QP must decide (the window is ready for
-    ``MHEUIO._step_dense``; ``sc[SC_FRAW]`` holds F̂_raw)."""
+    ``MHEUIO._step_dense``; ``sc[SC_FRAW]`` holds F̂_raw). ``views``: the slices of ``mp``,
+    ``sf`` and ``sc`` the kernel takes, made once per call of run()."""
     N = ip[IP_NW]
-    xmin, xmax = mp[MP_XMIN:MP_XMIN + 3], mp[MP_XMAX:MP_XMAX + 3]
+    wq, wr, wp, xmin, xmax, blo, bhi, x, arrival, u = views
     sc[SC_UMHE], sc[SC_UMHE + 1] = u0, u1  # what the cascade gave (the course fusion's δ, F)
     first = si[SI_NY] == 0
     ok = math.isfinite(y0) and math.isfinite(y1)
@@ -705,15 +706,17 @@ def _mhe_begin(y0, y1, u0, u1, mass, mY, mW, mU, mXS, mA, mB, mX, mp, sf, si, sc
         return 0
     full = n == N
     si[SI_MHEFULL] = 1 if full else 0
-    x = sf[SF_MX:SF_MX + 3]
-    u = np.empty(2)
     u[0], u[1] = u0, u1
-    code, F, pred_v = window_step(
-        mY[:n + 1], mW[:n + 1], mU[:n], mXS[:n + 1], n, x, sf[SF_MF], u, ok, full,
-        sf[SF_ARR:SF_ARR + 3], mp[MP_Q:MP_Q + 3], mp[MP_R:MP_R + 2], mp[MP_P:MP_P + 3], mp[MP_PF],
-        xmin, xmax, mp[MP_LO:MP_LO + 3], mp[MP_HI:MP_HI + 3], mp[MP_M], mp[MP_I], mp[MP_CF],
-        mp[MP_CR], mp[MP_A], mp[MP_B], mp[MP_MUG], mp[MP_KD], mp[MP_TD], True, mA[:n], mB[:n],
-        mX[:n + 1])
+    if full:  # the whole arrays (the usual case): no views to make
+        code, F, pred_v = window_step(
+            mY, mW, mU, mXS, n, x, sf[SF_MF], u, ok, full, arrival, wq, wr, wp, mp[MP_PF], xmin,
+            xmax, blo, bhi, mp[MP_M], mp[MP_I], mp[MP_CF], mp[MP_CR], mp[MP_A], mp[MP_B],
+            mp[MP_MUG], mp[MP_KD], mp[MP_TD], True, mA, mB, mX)
+    else:
+        code, F, pred_v = window_step(
+            mY[:n + 1], mW[:n + 1], mU[:n], mXS[:n + 1], n, x, sf[SF_MF], u, ok, full, arrival, wq,
+            wr, wp, mp[MP_PF], xmin, xmax, blo, bhi, mp[MP_M], mp[MP_I], mp[MP_CF], mp[MP_CR],
+            mp[MP_A], mp[MP_B], mp[MP_MUG], mp[MP_KD], mp[MP_TD], True, mA[:n], mB[:n], mX[:n + 1])
     F_raw = (pred_v - y0) * mass / mp[MP_TD] if ok else 0.0
     sc[SC_FRAW] = F_raw
     if code == 3 or not math.isfinite(F_raw):  # _failed
@@ -806,6 +809,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     tmp3 = np.empty(3)
     noX = np.zeros((0, 3))  # "no previous plan" for guarded_step
     noU = np.zeros((0, 2))
+    mhe_views = (mp[MP_Q:MP_Q + 3], mp[MP_R:MP_R + 2], mp[MP_P:MP_P + 3], mp[MP_XMIN:MP_XMIN + 3],
+                 mp[MP_XMAX:MP_XMAX + 3], mp[MP_LO:MP_LO + 3], mp[MP_HI:MP_HI + 3],
+                 sf[SF_MX:SF_MX + 3], sf[SF_ARR:SF_ARR + 3], sc[SC_UK:SC_UK + 2])
     while si[SI_M] < m_end:
         m = si[SI_M]
         k = m // n_in
@@ -956,7 +962,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             u1 = sf[SF_PLANTU + 1] if ip[IP_MSTEER] != 0 else sf[SF_UAPP + 1]
             si[SI_TICK0] = _ticks()
             if _mhe_begin(sc[SC_YM], sc[SC_YM + 1], u0, u1, fp[FP_MHE_MASS], mY, mW, mU, mXS, mA,
-                          mB, mX, mp, sf, si, sc, ip) != 0:
+                          mB, mX, mp, mhe_views, sf, si, sc, ip) != 0:
                 si[SI_PHASE] = PH_POST_MHE
                 return NEED_MHE
             li[m, LI_TMHE] = float(_ticks() - si[SI_TICK0])

@@ -529,12 +529,16 @@ def _compiled(ke: Any, args: tuple[Any, ...]) -> bool:
     """Compile (or load from numba's cache) ``run`` for these arrays by a call that runs no
     step. A cache entry numba cannot load is deleted and compiled again, once; False (the Python
     loop runs) when that fails too."""
+    from numba.core.errors import NumbaError
+
     from tsmpc import kernels
 
     for attempt in range(2):
         try:
             ke.run(0, *args)
             return True
+        except NumbaError:  # a typing or lowering error is a bug of the kernel: say so loudly
+            raise
         except Exception as err:
             folder = kernels._tree_folder(kernels.numba_cache_dir())
             print(f"tsmpc: the run engine's cache in {folder} could not be loaded "
@@ -545,7 +549,8 @@ def _compiled(ke: Any, args: tuple[Any, ...]) -> bool:
                     for p in folder.glob("engine.*.nb[ic]"):
                         p.unlink()
                 except OSError:
-                    return False
+                    break
+    _KERNEL["mod"] = None  # not again in this process: the Python loop runs
     return False
 
 
