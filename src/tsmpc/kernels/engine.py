@@ -6,10 +6,12 @@ beforehand by the caller with the same generator calls, sensor faults as data), 
 log and the divergence test, ``Cascade.step`` (sample gates, dead reckoning, the course fusion and
 its fits, the slip-aware outer-loop errors, the TS-MPC every T_c/T_d calls, the MHE-UIO, the
 mass-error terms, the TS-LQR) and the plant's T_d/h RK4 steps — and logs into preallocated arrays.
-The blocks are the compiled kernels the Python wrappers call (:func:`~tsmpc.kernels.mpc.guarded_step`,
-:func:`~tsmpc.kernels.mhe.window_step`, :func:`~tsmpc.kernels.lqr.lqr_step`,
-:func:`~tsmpc.kernels.plant.rk4_block`); the glue between them is ported operation by operation
-(same order, same rounding), so the engine reproduces the Python loop to the last bit.
+The blocks are the compiled kernels the Python wrappers call: the TS-MPC's step (paper eq. "MPC";
+:func:`~tsmpc.kernels.mpc.guarded_step`), the MHE-UIO's window (eqs. "MHE", "disturb_estimation";
+:func:`~tsmpc.kernels.mhe.window_step`), the TS-LQR (Sec. 3.2; :func:`~tsmpc.kernels.lqr.lqr_step`)
+and the plant's RK4 block (SPEC §3; :func:`~tsmpc.kernels.plant.rk4_block`). The glue between
+them is ported operation by operation (same order, same rounding, Python's ``min``/``max``/``%``
+and ``math.hypot``), so the engine reproduces the Python loop to the last bit.
 
 Where a block's compiled fast path does not decide a step (the MPC's condensed QP / SOCP path, the
 MHE's dense QP with an active state bound, a singular reference gain of the TS-LQR, a non-finite
@@ -54,19 +56,19 @@ N_EVENTS = 14
 # ---------------------------------------------------------------------------- float parameters
 (FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_V_LO, FP_V_HI, FP_W_LIM, FP_POSE_NOISE, FP_HEAD_NOISE,
  FP_GATE_SIGMA, FP_COURSE_SIGMA, FP_CF0, FP_CR0, FP_VM, FP_VI, FP_VA, FP_VB, FP_TAU, FP_MHE_MASS,
- FP_ITER_TOL, FP_BOUND,
+ FP_BOUND,
  FP_F_THB, FP_F_THD, FP_F_VB, FP_F_VD, FP_F_WB, FP_F_WD, FP_F_ESIG, FP_F_PDROP,
  FP_I_PERIOD, FP_I_DUR, FP_I_START,
  FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU, FP_VG,
- FP_A_GF, FP_A_GD, FP_A_RMAX) = range(45)
-N_FP = 45
+ FP_A_GF, FP_A_GD, FP_A_RMAX) = range(44)
+N_FP = 44
 # ---------------------------------------------------------------------------- integer parameters
-(IP_NIN, IP_NSUB, IP_K, IP_N, IP_MODE, IP_NITER, IP_TERM, IP_NW, IP_REFLEN,
+(IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
  IP_FMA, IP_F_MODEL, IP_F_DELAY, IP_F_HOLD, IP_F_INNER, IP_F_GNSS, IP_F_DROP,
- IP_ACT, IP_ACT_N, IP_ACT_NRK) = range(35)
-N_IP = 35
+ IP_ACT, IP_ACT_N, IP_ACT_NRK) = range(31)
+N_IP = 31
 # inner sensor faults (robustness scenarios), IP_F_INNER
 FAULT_NONE, FAULT_HOLD_BURST, FAULT_NAN_BURST = 0, 1, 2
 # ---------------------------------------------------------------------------- MHE parameters
@@ -87,14 +89,14 @@ N_SF = 63
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_HASCUR, SI_NCHORDS,
  SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
  SI_FIFON, SI_FLASTHAS, SI_FHELDHAS,
- SI_FRESH, SI_SPOK, SI_POSEOK, SI_MPCSTEP, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
- SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS) = range(36)
-N_SI = 36
+ SI_FRESH, SI_SPOK, SI_POSEOK, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
+ SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS) = range(35)
+N_SI = 35
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
- SC_XN, _XN1, _XN2, _XN3, _XN4, _XN5, SC_PU, _PU2, SC_UK, _UK1) = range(36)
-N_SC = 36
+ SC_PU, _PU2, SC_UK, _UK1) = range(30)
+N_SC = 30
 # ---------------------------------------------------------------------------- course intervals
 (IV_SX, IV_SY, IV_STH, IV_OK, IV_N, IV_SV, IV_SVDTH, IV_SVALPHA, IV_SVAY, IV_SVFULL, IV_SDELTA,
  IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST) = range(17)
@@ -111,7 +113,7 @@ N_LO = 15
 LOI_STATUS, LOI_IT, LOI_QPIT, LOI_CLIP = range(4)
 
 # Constants of the blocks ported here (their modules: tsmpc.control.cascade, .slip_aware,
-# tsmpc.estimation.fusion); sim.engine checks at import that they still agree.
+# tsmpc.estimation.fusion); tsmpc.sim.engine checks that they still agree before every run.
 POSE_JUMP_M, POSE_DRIFT_M_PER_S, HEADING_JUMP_RAD, HEADING_DRIFT_RAD_PER_S = 1.0, 2.0, 0.3, 0.5
 GATE_RAD, GATE_MIN_CHORD_M, GATE_BASELINE = 0.01, 0.3, 5
 BASELINE, MIN_CHORD_M, SLIP_MEMORY_S, SPEED_MEMORY_S = 5, 2.0, 30.0, 10.0
@@ -120,6 +122,7 @@ MASS_MIN_SPEED, MASS_HIGHPASS_S, MASS_MEMORY_S, MASS_EXCITATION = 3.0, 2.0, 100.
 MASS_RANGE_LO, MASS_RANGE_HI = -0.4, 0.6
 STIFF_PRIOR, STIFF_MEMORY_S, STIFF_RANGE_LO, STIFF_RANGE_HI, CORNER_ACCEL = 2.5e5, 100.0, 0.5, 2.0, 0.2
 STIFF_MAX_ACCEL = 0.1
+MASS_RANGE, STIFF_RANGE = (MASS_RANGE_LO, MASS_RANGE_HI), (STIFF_RANGE_LO, STIFF_RANGE_HI)  # (checks)
 # friction programs (the profiles of tsmpc.scenarios / tsmpc.conditions as data)
 FR_CONST, FR_PAPER, FR_PATCH = 0, 1, 2
 
@@ -866,7 +869,6 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             si[SI_SPOK] = 1 if speeds_ok else 0
             si[SI_POSEOK] = 1 if pose_ok else 0
             mpc_step = si[SI_CALLS] % n_in == 0
-            si[SI_MPCSTEP] = 1 if mpc_step else 0
             phase = PH_MHE
             if mpc_step:
                 if not pose_ok:
@@ -1051,14 +1053,14 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     return DONE
 
 
+@njit(cache=True, fastmath=False)
+def ticks():
+    """The cycle counter, for the caller's calibration of the block timings."""
+    return _ticks()
+
+
 def warm() -> None:
     """Compile (or load from the cache) the helpers the caller probes outside ``run`` (``run``
     itself compiles for the caller's arrays on its first, empty call)."""
     hypot_py(3.0, 4.0)
     ticks()
-
-
-@njit(cache=True, fastmath=False)
-def ticks():
-    """The cycle counter, for the caller's calibration of the block timings."""
-    return _ticks()

@@ -185,7 +185,8 @@ _CONSTANTS = (
     *(("tsmpc.estimation.fusion", n, n) for n in (
         "BASELINE", "MIN_CHORD_M", "SLIP_MEMORY_S", "SPEED_MEMORY_S", "SLIP_CORRECTION_MAX",
         "SPEED_OFFSET_MAX", "MASS_MIN_SPEED", "MASS_HIGHPASS_S", "MASS_MEMORY_S", "MASS_EXCITATION",
-        "STIFF_PRIOR", "STIFF_MEMORY_S", "CORNER_ACCEL", "STIFF_MAX_ACCEL")),
+        "STIFF_PRIOR", "STIFF_MEMORY_S", "CORNER_ACCEL", "STIFF_MAX_ACCEL", "MASS_RANGE",
+        "STIFF_RANGE")),
 )
 
 
@@ -646,7 +647,6 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     fp[ke.FP_VG] = veh.g
     fp[ke.FP_TAU] = fu.tau
     fp[ke.FP_MHE_MASS] = mhe.vehicle.mass
-    fp[ke.FP_ITER_TOL] = mpc.settings.iter_tol
     bound = scenario.divergence_bound_m or cfg.divergence_bound_m
     ip[ke.IP_HASBOUND] = bound is not None
     fp[ke.FP_BOUND] = math.inf if bound is None else float(bound)
@@ -654,11 +654,8 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     fp[ke.FP_L_LAM], fp[ke.FP_L_AF], fp[ke.FP_L_TD] = lam, afilt, lTd
     fp[ke.FP_L_FMIN], fp[ke.FP_L_FMAX], fp[ke.FP_L_DMIN], fp[ke.FP_L_DMAX] = Fmin, Fmax, dmin, dmax
     fp[ke.FP_L_TAU] = tau
-    ip[ke.IP_NIN], ip[ke.IP_K], ip[ke.IP_N] = n_in, K, N
+    ip[ke.IP_NIN], ip[ke.IP_N] = n_in, N
     ip[ke.IP_NSUB] = round(cascade.Td / plant.model.h)
-    ip[ke.IP_MODE] = mpc._mode_id
-    ip[ke.IP_NITER] = mpc.settings.iter_max
-    ip[ke.IP_TERM] = mpc.settings.terminal_constraint
     ip[ke.IP_NW], ip[ke.IP_REFLEN] = cfg.mhe.N, len(ref)
     mc = cfg.mpc
     ip[ke.IP_SLIP], ip[ke.IP_TANGENT] = mc.slip_aware, mc.tangent_heading
