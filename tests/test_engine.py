@@ -19,6 +19,7 @@ from tsmpc.robustness import apply_robustness
 from tsmpc.scenarios import ConstantFriction
 from tsmpc.sim import engine as eng
 from tsmpc.sim.compare import load_scenario
+from tsmpc.planning.reference import Reference
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.simulator import Scenario, default_plant, simulate
 
@@ -121,6 +122,20 @@ def test_actuators(cfg: Config, paper_reference_path: Path) -> None:
     c, s = apply_robustness("actuator_lag", cfg, load_scenario(cfg, paper_reference_path))
     assert s.measured_steering and s.actuators is not None
     _assert_same(*_both(c, "REF", s, max_steps=500))
+
+
+def test_a_closed_lap_wraps_alike(cfg: Config) -> None:
+    """Two laps of a closed circle: the MPC's look-ahead wraps into the next lap at every lap's
+    end (Reference.window), in the engine as in the Python loop."""
+    n, v, dt = 300, 10.0, cfg.rates.Tc
+    R = n * v * dt / (2.0 * np.pi)
+    phi = np.arange(n) * v * dt / R
+    lap = Reference(np.arange(n) * dt, R * np.sin(phi), R * (1.0 - np.cos(phi)), phi,
+                    np.full(n, v), np.full(n, v / R), np.full(n, 1.0 / R), closed=True)
+    sc = Scenario("circle", lap.repeat(2), ConstantFriction(0.8))
+    le, lp = _both(cfg, "REF", sc)
+    assert le.n_outer == 2 * n
+    _assert_same(le, lp)
 
 
 def test_a_diverging_run_ends_alike(cfg: Config, paper_reference_path: Path) -> None:
