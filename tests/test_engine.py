@@ -15,11 +15,11 @@ import pytest
 
 from tsmpc.conditions import EventFriction, ResolvedEvent, apply_conditions
 from tsmpc.config import Config, replace
+from tsmpc.planning.reference import Reference
 from tsmpc.robustness import apply_robustness
 from tsmpc.scenarios import ConstantFriction
 from tsmpc.sim import engine as eng
 from tsmpc.sim.compare import load_scenario
-from tsmpc.planning.reference import Reference
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.simulator import Scenario, default_plant, simulate
 
