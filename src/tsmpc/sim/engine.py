@@ -39,6 +39,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -512,6 +513,7 @@ def _load_kernel() -> Any:
         try:
             cache = kernels.numba_cache_dir()
             folder = kernels._tree_folder(cache)
+            _forget_stale_machine_code(folder)
             if not any(folder.glob("engine.run-*.nbi")):
                 print("tsmpc: compiling the run engine (first run only)…", file=sys.stderr,
                       flush=True)
@@ -524,6 +526,33 @@ def _load_kernel() -> Any:
             mod = None
     _KERNEL["mod"] = mod
     return mod
+
+
+def _forget_stale_machine_code(folder: Any) -> None:
+    """numba keys a cached function by its own file only: the engine's machine code, which
+    contains the block kernels it calls (kernels/mpc.py, mhe.py, lqr.py, plant.py), would outlive
+    an edit of one of them. So the engine's cache entries carry the hash of those sources (a
+    file beside them) and are deleted when it differs: the next call compiles afresh."""
+    import hashlib
+
+    import tsmpc.kernels as pkg
+
+    here = Path(pkg.__file__).parent
+    digest = hashlib.sha256(b"".join((here / f"{m}.py").read_bytes()
+                                     for m in ("mpc", "mhe", "lqr", "plant"))).hexdigest()
+    stamp = folder / "engine.blocks-sha256"
+    try:
+        if stamp.read_text().strip() == digest:
+            return
+    except OSError:
+        pass
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for p in folder.glob("engine.*.nb[ic]"):
+            p.unlink()
+        stamp.write_text(digest)
+    except OSError:  # an unwritable cache: numba refuses it too (tsmpc.kernels.cache_problem)
+        pass
 
 
 def _compiled(ke: Any, args: tuple[Any, ...]) -> bool:
