@@ -865,7 +865,10 @@ class _Run:
         reported = 0
         while True:
             m_end = min(M, (int(a.si[ke.SI_M]) // chunk + 1) * chunk)
-            code = ke.run(m_end, *self.args)
+            try:
+                code = ke.run(m_end, *self.args)
+            except Exception as err:  # e.g. a float division by zero the cascade would catch
+                raise EngineFallback(f"the kernel raised {type(err).__name__}: {err}") from err
             m = int(a.si[ke.SI_M])
             if code == ke.DONE:
                 if progress is not None:
@@ -938,7 +941,7 @@ def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_desi
     termination, done, rows, n_calls = r.loop(progress)
     wall, ticks = time.perf_counter() - t_loop, ke.ticks() - tick0
     LAST_RUN.clear()
-    LAST_RUN.update(slow_paths=dict(r.slow), loop_s=wall, compile_s=t_compile)
+    LAST_RUN.update(slow_paths=dict(r.slow), loop_s=wall, compile_s=t_compile, exact=exact())
     m_last = n_calls - 1
     k_last, j_last = divmod(m_last, n_in)
     _restore_fault(scenario.sensor_fault, n_calls, k_last * Tc if j_last == 0 else m_last * Td,
