@@ -44,7 +44,7 @@ def test_cold_cache_is_detected(tmp_path) -> None:
 
 def test_warmup_command_and_the_switch(monkeypatch) -> None:
     res = CliRunner().invoke(app, ["warmup"])
-    assert res.exit_code == 0 and "kernels ready" in res.output
+    assert res.exit_code == 0 and "kernels and run engine ready" in res.output
     monkeypatch.setenv("TSMPC_NO_JIT", "1")
     assert not kernels.enabled() and kernels.load("mhe") is None
     res = CliRunner().invoke(app, ["warmup"])

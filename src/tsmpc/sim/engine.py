@@ -53,7 +53,7 @@ from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.simulator import Scenario, _start_state, default_plant, tracked_steps
 
-__all__ = ["LAST_RUN", "EngineFallback", "applicability", "enabled", "exact", "run"]
+__all__ = ["LAST_RUN", "EngineFallback", "applicability", "enabled", "exact", "run", "warmup"]
 
 #: Event names in the order of :attr:`Cascade.events` (the kernel's counter array).
 _EVENTS = (*EVENT_NAMES, "stale_rejected", "step_errors", "repeated_rejected")
@@ -510,20 +510,35 @@ def _load_kernel() -> Any:
 
     mod = None
     if kernels.load("mpc") is not None:  # sets NUMBA_CACHE_DIR before numba is imported
-        try:
-            cache = kernels.numba_cache_dir()
-            folder = kernels._tree_folder(cache)
-            _forget_stale_machine_code(folder)
-            if not any(folder.glob("engine.run-*.nbi")):
-                print("tsmpc: compiling the run engine (first run only)…", file=sys.stderr,
-                      flush=True)
-            from tsmpc.kernels import engine as mod
+        folder = kernels._tree_folder(kernels.numba_cache_dir())
+        for attempt in range(2):  # a cache entry numba cannot load: deleted, compiled again, once
+            try:
+                _forget_stale_machine_code(folder)
+                if not any(folder.glob("engine.run-*.nbi")):
+                    print("tsmpc: compiling the run engine (first run only)…", file=sys.stderr,
+                          flush=True)
+                from tsmpc.kernels import engine as mod
 
-            mod.warm()
-        except Exception as err:  # a broken cache or compiler: the Python loop runs
-            print(f"tsmpc: run engine unavailable ({type(err).__name__}: {err}); using the "
-                  "Python loop", file=sys.stderr)
-            mod = None
+                mod.warm()
+                break
+            except Exception as err:  # a broken cache or compiler: the Python loop runs
+                mod = None
+                sys.modules.pop("tsmpc.kernels.engine", None)
+                removed = 0
+                if attempt == 0:
+                    try:
+                        for q in folder.glob("engine.*.nb[ic]"):
+                            q.unlink()
+                            removed += 1
+                    except OSError:
+                        removed = 0
+                if removed:
+                    print(f"tsmpc: the run engine's cache in {folder} could not be loaded "
+                          f"({type(err).__name__}); compiling it again…", file=sys.stderr, flush=True)
+                    continue
+                print(f"tsmpc: run engine unavailable ({type(err).__name__}: {err}); using the "
+                      "Python loop", file=sys.stderr)
+                break
     _KERNEL["mod"] = mod
     return mod
 
@@ -996,3 +1011,18 @@ def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termina
 if __name__ == "__main__":  # the table of _PORTED for the current code (after a port)
     for _target in _PORTED:
         print(f'    "{_target}": "{fingerprint(_target)}",')
+
+
+def warmup() -> bool:
+    """Compile (or load from numba's cache) the engine's machine code now, by one MPC step of the
+    default cascade on the built-in circuit (``tsmpc warmup``; the designs of the default config
+    are solved if the cache has none). True when the engine is available."""
+    from tsmpc.planning.circuit import builtin_circuit
+    from tsmpc.sim.simulator import simulate
+
+    if not enabled() or _load_kernel() is None:
+        return False
+    cfg = Config()
+    simulate(cfg, Method.REF, Scenario("warmup", builtin_circuit(dt=cfg.rates.Tc)), max_steps=1,
+             engine=True)
+    return True
