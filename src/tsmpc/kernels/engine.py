@@ -38,6 +38,7 @@ from tsmpc.kernels.lqr import lqr_step
 from tsmpc.kernels.mhe import window_step
 from tsmpc.kernels.mpc import guarded_step
 from tsmpc.kernels.plant import rk4_block
+from tsmpc.scenarios import _ramp as _scenario_ramp
 
 __all__ = ["friction_mu", "hypot_py", "run", "ticks", "warm"]
 
@@ -254,15 +255,8 @@ def _in_burst(t, start, period, duration):
 
 
 # ============================================================================ scenario as data
-@njit(cache=True, fastmath=False)
-def _ramp(t, a, b, c, d, base, level):
-    if t < b:
-        w = (t - a) / (b - a)
-    elif t <= c:
-        w = 1.0
-    else:
-        w = (d - t) / (d - c)
-    return (1.0 - w) * base + w * level
+#: ``tsmpc.scenarios._ramp`` itself, compiled (one source for both loops)
+_ramp = njit(cache=True, fastmath=False)(_scenario_ramp)
 
 
 @njit(cache=True, fastmath=False)
