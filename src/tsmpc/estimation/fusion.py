@@ -37,7 +37,8 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     single-track model, F_yF = C_f (δ − α − a ω/v) and F_yR = C_r (b ω/v − α) are
     fitted per axle (least squares through the origin on the compliance 1/C, the model's C as
     prior, forgetting over ``STIFF_MEMORY_S``), from chords where the reference turns
-    (``CORNER_ACCEL``) and the car neither accelerates nor brakes (``STIFF_MAX_ACCEL``). The
+    (``CORNER_ACCEL``) and the car neither accelerates nor brakes (``STIFF_MAX_ACCEL``), per axle
+    only where the chord's own F / slip is a plausible stiffness (``STIFF_RANGE``). The
     fitted C_f, C_r replace the model's in the MHE and in the inner loop's reference gain N̄ (the
     LMI gains stay): with them α̂ and the steering feed-forward are right (issue 21: the stiffness
     error was worth 0.08 m of RMSE y; with the true C in both blocks the loss disappears, in the
@@ -186,6 +187,7 @@ class CourseFusion:
         p = self.vehicle
         c0 = np.array((p.C_f, p.C_r) if p is not None else (1.0, 1.0))
         self._prior_num = STIFF_PRIOR / c0
+        self._c0 = c0  # the model's (C_f, C_r): the plausible range of a chord's own stiffness
         self._cnum = self._prior_num.copy()
         self._cden = np.full(2, STIFF_PRIOR)
         self._alpha_hat_prev: float | None = None
@@ -340,6 +342,14 @@ class CourseFusion:
             delta = sum(i.s_delta for i in self._iv) / n
             slips = np.array([delta - a_course - p.a * w_v, p.b * w_v - a_course])
             forces = np.array([(p.b * S + T) / L, (p.a * S - T) / L])
+            # per axle, only a chord whose own stiffness F / slip is a plausible one (the sign and
+            # STIFF_RANGE × the model's): anything else is no quasi-steady pure-slip chord (a
+            # transient, a lag between forces and slips, a saturated tyre) and would drag the fit to
+            # its bounds (on Spa at 22 m/s one corner took it to 2× and doubled the largest e_y)
+            lo, hi = STIFF_RANGE
+            fa, sa = np.abs(forces), np.abs(slips)
+            ok = (forces * slips > 0.0) & (sa * hi * self._c0 >= fa) & (sa * lo * self._c0 <= fa)
+            forces, slips = np.where(ok, forces, 0.0), np.where(ok, slips, 0.0)
             g2 = 1.0 - self.Tc / STIFF_MEMORY_S
             # forgetting towards the prior (a fit without excitation returns to the model)
             self._cnum = g2 * self._cnum + (1.0 - g2) * self._prior_num + forces * slips

@@ -531,6 +531,13 @@ def _chord(ex, ey, eth, ivs, sf, si, fp, ip):
         sl1 = b * w_v - a_course
         f0 = (b * S + T) / L
         f1 = (a * S - T) / L
+        # per axle, only a chord whose own F / slip is a plausible stiffness (CourseFusion._chord)
+        m0, m1 = fp[FP_CF0], fp[FP_CR0]
+        fa0, sa0, fa1, sa1 = abs(f0), abs(sl0), abs(f1), abs(sl1)
+        if not (f0 * sl0 > 0.0 and sa0 * STIFF_RANGE_HI * m0 >= fa0 and sa0 * STIFF_RANGE_LO * m0 <= fa0):
+            f0, sl0 = 0.0, 0.0
+        if not (f1 * sl1 > 0.0 and sa1 * STIFF_RANGE_HI * m1 >= fa1 and sa1 * STIFF_RANGE_LO * m1 <= fa1):
+            f1, sl1 = 0.0, 0.0
         g2 = 1.0 - Tc / STIFF_MEMORY_S
         sf[SF_CNUM] = g2 * sf[SF_CNUM] + (1.0 - g2) * sf[SF_PRIOR] + f0 * sl0
         sf[SF_CNUM + 1] = g2 * sf[SF_CNUM + 1] + (1.0 - g2) * sf[SF_PRIOR + 1] + f1 * sl1

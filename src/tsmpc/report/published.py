@@ -1065,16 +1065,25 @@ def _render_blocks(mpc: dict[str, Any], inner: dict[str, Any], plant: dict[str, 
 def _render_run(casc: dict[str, Any]) -> str:
     ref = casc["results"]["REF"]
     nump = casc.get("results_numpy", {}).get("REF")
+    eng = casc.get("results_engine", {}).get("REF")
     ms = ref["ms"]
     part = ", ".join(f"{label} {_d(ms[k]['median'], 4)} / {_d(ms[k]['p99'], 4)}"
                      for k, label in (("mpc", "MPC"), ("mhe", "MHE"), ("lqr", "TS-LQR"),
                                       ("plant_block", "plant block")))
     nl = casc["results"].get("NL")
-    return (f"Whole paper run ({_d(ref['simulated_s'], 1)} s simulated, `cascade_run.py`): REF's loop "
-            f"takes {_d(ref['loop_s'], 2)} s wall / {_d(ref['simulate_cpu_s'], 2)} s CPU "
-            f"({_d(ref['realtime_factor'], 0)}× real time"
+    engine = ""
+    if eng and eng.get("applies"):
+        same = eng.get("vs_python", {})
+        engine = (f"REF's loop in the compiled run engine takes {_d(eng['loop_s'], 3)} s wall "
+                  f"({_d(eng['realtime_factor'], 0)}× real time; median of {len(eng['loop_s_runs'])} "
+                  f"runs), its log equal to the Python loop's (largest state difference "
+                  f"{same.get('max_abs_state_diff', float('nan')):.1g}, events "
+                  f"{'equal' if same.get('events_equal') else 'DIFFERENT'}); ")
+    return (f"Whole paper run ({_d(ref['simulated_s'], 1)} s simulated, `cascade_run.py`): {engine}"
+            f"the Python loop over the compiled blocks takes {_d(ref['loop_s'], 2)} s wall / "
+            f"{_d(ref['simulate_cpu_s'], 2)} s CPU ({_d(ref['realtime_factor'], 0)}× real time"
             + (f"; {_d(nump['loop_s'], 1)} s with the numpy blocks" if nump else "")
-            + f"); inside the cascade (medians / p99, ms) {part}"
+            + f"); inside that loop (medians / p99, ms) {part}"
             + (f"; NL's loop {_d(nl['loop_s'], 1)} s" if nl else "") + ".")
 
 

@@ -138,7 +138,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.estimation.fusion:_wrap": "3fd9daeaa886e92c",
     "tsmpc.estimation.fusion:RepeatGuard": "27f9c316059eec4f",
     "tsmpc.estimation.fusion:_Interval": "a5469bc5f990c457",
-    "tsmpc.estimation.fusion:CourseFusion": "e591c76a562980a9",
+    "tsmpc.estimation.fusion:CourseFusion": "1b880942a7259b8f",
     "tsmpc.estimation.fusion:MassEstimator": "d73e4cf873cfe3df",
     "tsmpc.estimation.fusion:Fusion": "f8e25eefdcfffb99",
     "tsmpc.control.slip_aware:SlipGate": "914a291e0a0ef199",
@@ -1008,11 +1008,6 @@ def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termina
         meta={"oracle": False, "seed": cfg.seed, **scenario.meta, "final_state": x.tolist()})
 
 
-if __name__ == "__main__":  # the table of _PORTED for the current code (after a port)
-    for _target in _PORTED:
-        print(f'    "{_target}": "{fingerprint(_target)}",')
-
-
 def warmup() -> bool:
     """Compile (or load from numba's cache) the engine's machine code now, by one MPC step of the
     default cascade on the built-in circuit (``tsmpc warmup``; the designs of the default config
@@ -1026,3 +1021,8 @@ def warmup() -> bool:
     simulate(cfg, Method.REF, Scenario("warmup", builtin_circuit(dt=cfg.rates.Tc)), max_steps=1,
              engine=True)
     return True
+
+
+if __name__ == "__main__":  # the table of _PORTED for the current code (after a port)
+    for _target in _PORTED:
+        print(f'    "{_target}": "{fingerprint(_target)}",')
