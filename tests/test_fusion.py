@@ -241,3 +241,28 @@ def test_the_paper_presets_have_every_fusion_switch_off(cfg: Config) -> None:
     for preset in ("paper", "paper-as-run"):
         f = Config.preset(preset).fusion
         assert not any(getattr(f, n) for n in names), preset
+
+
+def test_the_stiffness_fit_takes_no_implausible_chord(cfg: Config) -> None:
+    """A chord whose own F / slip lies outside 0.5–2× the model's stiffness is no quasi-steady
+    pure-slip chord (a transient, a saturated tyre): a car whose corners all imply 5× the model's
+    stiffness leaves the fit at the model (without the gate it ran to the 2× bound)."""
+    model = cfg.vehicle
+    alien = replace(model, cornering_stiffness_front=5.0 * model.C_f, cornering_stiffness_rear=5.0 * model.C_r)
+    f = CourseFusion(0.1, 0.0, model)
+    _drive(f, SEGMENTS * 2, kappa=0.0, beta=0.0, v_offset=0.0, true_vehicle=alien)
+    assert f.stiffness == pytest.approx((model.C_f, model.C_r), rel=1e-9)
+
+
+def test_the_stiffness_fit_takes_no_chord_under_acceleration(cfg: Config) -> None:
+    """Accelerating at 0.15 g through a corner (combined slip, load transfer: not the fit's model)
+    the fit keeps the model's stiffnesses; the same corner at constant speed moves it."""
+    model = cfg.vehicle
+    true = replace(model, cornering_stiffness_front=0.7 * model.C_f)
+    ramp = [(8.0 + 0.15 * k, 0.2, 0.1) for k in range(60)]  # +1.5 m/s², 6 s
+    f = CourseFusion(0.1, 0.0, model)
+    _drive(f, ramp, kappa=0.0, beta=0.0, v_offset=0.0, true_vehicle=true)
+    assert f.stiffness == pytest.approx((model.C_f, model.C_r), rel=1e-9)
+    g = CourseFusion(0.1, 0.0, model)
+    _drive(g, [(10.0, 0.2, 6.0)], kappa=0.0, beta=0.0, v_offset=0.0, true_vehicle=true)
+    assert g.stiffness[0] < 0.95 * model.C_f
