@@ -248,7 +248,8 @@ def test_the_stiffness_fit_takes_no_implausible_chord(cfg: Config) -> None:
     pure-slip chord (a transient, a saturated tyre): a car whose corners all imply 5× the model's
     stiffness leaves the fit at the model (without the gate it ran to the 2× bound)."""
     model = cfg.vehicle
-    alien = replace(model, cornering_stiffness_front=5.0 * model.C_f, cornering_stiffness_rear=5.0 * model.C_r)
+    alien = replace(model, cornering_stiffness_front=5.0 * model.C_f,
+                    cornering_stiffness_rear=5.0 * model.C_r)
     f = CourseFusion(0.1, 0.0, model)
     _drive(f, SEGMENTS * 2, kappa=0.0, beta=0.0, v_offset=0.0, true_vehicle=alien)
     assert f.stiffness == pytest.approx((model.C_f, model.C_r), rel=1e-9)
