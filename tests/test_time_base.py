@@ -143,5 +143,10 @@ def test_the_same_path_at_20_50_100_ms_tracks_alike(source: str, paper_reference
         assert m["termination"] == "completed"
         rmse[dt] = m["rmse"]["y"]
     for dt in (0.05, 0.02):
-        assert abs(rmse[dt] / rmse[0.1] - 1) <= 0.15, rmse
+        # A time-base error makes the finer-sampled run *worse* (the lag of θ_d was a steady offset
+        # in every corner: 2.5× at 50 ms). Better is allowed by more: the paper file converted to
+        # 50/20 ms interpolates v and ω between its samples, a slightly smoother path than the
+        # 100 ms file's steps (Δω std 0.0032 vs 0.0035 rad/s), tracked 12–17 % tighter (measured
+        # over seeds 0–4: 50 ms −17.2, −13.7, −13.6, −14.6, −15.2 %; 20 ms −11.6 … −15.5 %).
+        assert -0.25 <= rmse[dt] / rmse[0.1] - 1 <= 0.15, rmse
     assert rmse[0.1] < (0.006 if source == "paper" else 0.004), rmse  # measured 0.0048 / 0.0027

@@ -84,7 +84,10 @@ def sweep_cmd(
         out = claim_default_out("sweep")
         created = True
     else:
-        created = not out.exists()
+        try:
+            created = not out.exists()
+        except OSError:  # e.g. a name too long: check_out_dir names the problem
+            created = False
     if resume:
         check_out_dir(out, overwrite=True)  # records on disk are kept and skipped
     else:

@@ -9,7 +9,7 @@ mass-error terms, the TS-LQR) and the plant's T_d/h RK4 steps — and logs into 
 The blocks are the compiled kernels the Python wrappers call: the TS-MPC's step (paper eq. "MPC";
 :func:`~tsmpc.kernels.mpc.guarded_step`), the MHE-UIO's window (eqs. "MHE", "disturb_estimation";
 :func:`~tsmpc.kernels.mhe.window_step`), the TS-LQR (Sec. 3.2; :func:`~tsmpc.kernels.lqr.lqr_step`)
-and the plant's RK4 block (SPEC §3; :func:`~tsmpc.kernels.plant.rk4_block`). The glue between
+and the plant's RK4 block (the single-track plant; :func:`~tsmpc.kernels.plant.rk4_block`). The glue between
 them is ported operation by operation (same order, same rounding, Python's ``min``/``max``/``%``
 and ``math.hypot``), so the engine reproduces the Python loop to the last bit.
 

@@ -551,15 +551,17 @@ def _forget_stale_machine_code(folder: Any) -> None:
     import hashlib
 
     import tsmpc.kernels as pkg
+    from tsmpc.errors import TsmpcError
+    from tsmpc.textfile import read_bytes, read_text
 
     here = Path(pkg.__file__).parent
-    digest = hashlib.sha256(b"".join((here / f"{m}.py").read_bytes()
+    digest = hashlib.sha256(b"".join(read_bytes(here / f"{m}.py", "kernel source")
                                      for m in ("mpc", "mhe", "lqr", "plant"))).hexdigest()
     stamp = folder / "engine.blocks-sha256"
     try:
-        if stamp.read_text().strip() == digest:
+        if read_text(stamp, "engine cache stamp", limit=1024).strip() == digest:
             return
-    except OSError:
+    except (TsmpcError, OSError):
         pass
     try:
         folder.mkdir(parents=True, exist_ok=True)
