@@ -78,10 +78,13 @@ __all__ = [
     "SweepResult",
     "SweepSpec",
     "aggregate",
+    "batch_key",
+    "batches",
     "connect",
     "dry_run",
     "expand",
     "load_sweep",
+    "run_batch",
     "run_sweep",
     "run_task",
 ]
@@ -249,6 +252,10 @@ class SweepSpec(_Strict):
         "worker deaths are retried by Dask's distributed.scheduler.allowed-failures), 0 to 10"))
     max_lateral_m: _Real = Field(5.0, gt=0.0, le=1e3,
                                  description="|e_y| beyond which a run has diverged")
+    batch: StrictInt = Field(64, ge=1, le=1024, description=(
+        "runs per Dask task, stepped together by the batched kernel (tsmpc.sim.batch); a sweep "
+        "of few runs gets smaller tasks so that every worker has two or more. 1: every run its "
+        "own task, simulated exactly as 'tsmpc run' does (bit for bit)"))
     cases: dict[str, dict[str, Any]] = Field(
         default_factory=dict, description="named cases of the 'case' axis: each a [scenario] table "
         "(tsmpc.config.ScenarioSettings); 'nominal' (no change) is built in")
@@ -510,6 +517,56 @@ def run_task(task: RunTask) -> dict[str, Any]:
     return _record(task, status, reason, metrics, time.perf_counter() - t0)
 
 
+def run_batch(tasks: list[RunTask]) -> list[dict[str, Any]]:
+    """Simulate several runs in one process and return their records (as :func:`run_task`
+    would, in order). The runs that share a controller (config but the seed, method, duration)
+    are stepped together by the batched kernel (:func:`tsmpc.sim.batch.simulate_batch`): their
+    plant steps and MHE windows vectorised across runs. A batched run's states differ from the
+    same run simulated on its own by rounding only (the plant's vectorised sin/cos/atan, ≤ 2 ulp;
+    ~1e-12 m over a paper run), and never depend on which runs share its batch. Never raises."""
+
+    from tsmpc.sim.batch import simulate_batch
+
+    t0 = time.perf_counter()
+    out: list[dict[str, Any] | None] = [None] * len(tasks)
+    prepared: dict[int, _Prepared] = {}
+    groups: dict[tuple[Any, ...], list[int]] = {}
+    batched: list[int] = []
+    for i, task in enumerate(tasks):
+        try:
+            prep = _prepare(task)
+        except Exception as err:  # a failing run is data, not a crash
+            out[i] = _record(task, "error", f"{type(err).__name__}: {err}", {}, 0.0)
+            continue
+        prepared[i] = prep
+        controller = prep.cfg.model_dump(mode="json")
+        controller.pop("seed", None)
+        key = (prep.method, prep.max_steps, json.dumps(controller, sort_keys=True))
+        groups.setdefault(key, []).append(i)
+    for idxs in groups.values():
+        first = prepared[idxs[0]]
+        try:
+            logs = simulate_batch(first.cfg, first.method, [prepared[i].scenario for i in idxs],
+                                  seeds=[prepared[i].cfg.seed for i in idxs],
+                                  kinematic_design=first.designs[0],
+                                  dynamic_design=first.designs[1], max_steps=first.max_steps)
+        except Exception:  # the batch as a whole failed: each run on its own, as run_task does
+            for i in idxs:
+                out[i] = run_task(tasks[i])
+            continue
+        for i, log in zip(idxs, logs, strict=True):
+            try:
+                metrics, status, reason = _verdict(prepared[i], log)
+            except Exception as err:
+                metrics, status, reason = {}, "error", f"{type(err).__name__}: {err}"
+            out[i] = _record(tasks[i], status, reason, metrics, float("nan"))
+            batched.append(i)
+    share = (time.perf_counter() - t0) / max(1, len(tasks))  # a batched run's share of the batch
+    for i in batched:
+        out[i]["elapsed_s"] = share  # type: ignore[index]
+    return [rec for rec in out if rec is not None]
+
+
 def dry_run(task: RunTask) -> dict[str, Any]:
     """A stand-in for :func:`run_task` that does not simulate: it sleeps a little and returns
     deterministic fake metrics. For checking a cluster's plumbing (``tsmpc sweep --dry-run``)."""
@@ -528,6 +585,28 @@ def _record(
 
 
 def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
+    from tsmpc.sim.simulator import simulate
+
+    prep = _prepare(task)
+    log = simulate(prep.cfg, prep.method, prep.scenario, kinematic_design=prep.designs[0],
+                   dynamic_design=prep.designs[1], max_steps=prep.max_steps)
+    return _verdict(prep, log)
+
+
+@dataclass
+class _Prepared:
+    """One run as :func:`_simulate` sets it up: the controller's config (its seed the run's),
+    the scenario, the designs, the step budget, the track it must stay on."""
+
+    cfg: Config
+    method: str
+    scenario: Any
+    designs: tuple[Any, Any]
+    max_steps: int | None
+    track: Any
+
+
+def _prepare(task: RunTask) -> _Prepared:
     from dataclasses import replace as dc_replace
 
     from tsmpc.blas import limit_blas_threads
@@ -537,12 +616,11 @@ def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
     from tsmpc.config import replace
     from tsmpc.planning.circuit import builtin_circuit
     from tsmpc.planning.reference import Reference
-    from tsmpc.planning.tracks import is_tumftm, load_tumftm, off_track, plan_track
+    from tsmpc.planning.tracks import is_tumftm, load_tumftm, plan_track
     from tsmpc.robustness import apply_robustness
     from tsmpc.scenarios import ConstantFriction, paper_friction_profile
     from tsmpc.sim.compare import load_scenario
-    from tsmpc.sim.metrics import compute_metrics
-    from tsmpc.sim.simulator import Scenario, simulate
+    from tsmpc.sim.simulator import Scenario
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
     p = task.params
@@ -587,7 +665,15 @@ def _simulate(task: RunTask) -> tuple[dict[str, Any], str, str]:
     if kd is None or not _same_designs(task.designs_config, cfg):
         kd, dd = load_or_design_kinematic(cfg), load_or_design_dynamic(cfg)  # this run's controller
     max_steps = None if task.duration_s is None else max(1, round(task.duration_s / Tc))
-    log = simulate(cfg, p.method, sc, kinematic_design=kd, dynamic_design=dd, max_steps=max_steps)
+    return _Prepared(cfg, p.method, sc, (kd, dd), max_steps, track)
+
+
+def _verdict(prep: _Prepared, log: Any) -> tuple[dict[str, Any], str, str]:
+    """(metrics, status, reason) of a finished run."""
+    from tsmpc.planning.tracks import off_track
+    from tsmpc.sim.metrics import compute_metrics
+
+    track = prep.track
     metrics = compute_metrics(log)
     status, reason = "completed", ""
     if log.termination != "completed":
@@ -721,6 +807,10 @@ def run_sweep(
                 from tsmpc import kernels
 
                 kernels.warmup()
+                if spec.batch > 1:
+                    from tsmpc.sim import batch
+
+                    batch.warmup()
             pending = [RunTask(t.id, t.params, t.config, t.duration_s, t.max_lateral_m, t.root,
                                designs, cfg.model_dump(mode="json")) for t in pending]
     except BaseException:
@@ -735,27 +825,36 @@ def run_sweep(
          "runs": [{"id": t.id, **t.params.model_dump()} for t in tasks]}, indent=1))
     if client is not None:
         try:
-            futures = {client.submit(run_fn, t, key=f"tsmpc-run-{t.id}", retries=spec.retries,
-                                     pure=False): t for t in pending}
+            if run_fn is run_task and spec.batch > 1:
+                n_workers = max(1, len(client.scheduler_info().get("workers", {})) or workers)
+                chunks = batches(pending, spec.batch, n_workers)
+                futures = {client.submit(run_batch, c, key=batch_key(c), retries=spec.retries,
+                                         pure=False): c for c in chunks}
+            else:
+                futures = {client.submit(run_fn, t, key=f"tsmpc-run-{t.id}", retries=spec.retries,
+                                         pure=False): [t] for t in pending}
             for fut in as_completed(futures):
-                task = futures.pop(fut)
+                chunk = futures.pop(fut)
                 try:
-                    rec = fut.result()
+                    got = fut.result()
+                    recs = got if isinstance(got, list) else [got]
                 except Exception as err:  # e.g. KilledWorker after repeated worker deaths
-                    failed += 1
-                    rec = _record(task, "failed", f"{type(err).__name__}: {err}", {}, float("nan"))
+                    failed += len(chunk)
+                    recs = [_record(t, "failed", f"{type(err).__name__}: {err}", {}, float("nan"))
+                            for t in chunk]
                 # Forget the result on the cluster at once: a finished task whose result still
                 # sits in a worker's memory would be recomputed if that worker died.
                 fut.release()
                 del fut
-                if task.id in written:
-                    duplicates += 1
-                    continue
-                atomic_write_text(runs_dir / f"{task.id}.json", json.dumps(rec, indent=1))
-                written.add(task.id)
-                done += 1
-                if progress is not None:
-                    progress(done, len(tasks), rec)
+                for task, rec in zip(chunk, recs, strict=True):
+                    if task.id in written:
+                        duplicates += 1
+                        continue
+                    atomic_write_text(runs_dir / f"{task.id}.json", json.dumps(rec, indent=1))
+                    written.add(task.id)
+                    done += 1
+                    if progress is not None:
+                        progress(done, len(tasks), rec)
         finally:
             client.close()
             if cluster is not None:
@@ -767,6 +866,26 @@ def run_sweep(
             from tsmpc.report.sweep_plots import save_sweep_plots as plotter
         files += plotter(table, out, AXES)
     return SweepResult(out, len(tasks), len(written), skipped, failed, duplicates, table, files)
+
+
+def batches(tasks: list[RunTask], size: int, n_workers: int) -> list[list[RunTask]]:
+    """The Dask tasks of a batched sweep: runs of one controller (config, duration) together, in
+    chunks of at most ``size`` runs, and small enough that each worker gets two or more chunks
+    (a sweep of 24 runs on 3 workers: chunks of 4)."""
+    per = max(1, min(size, math.ceil(len(tasks) / (2 * max(1, n_workers)))))
+    groups: dict[tuple[Any, ...], list[RunTask]] = {}
+    for t in tasks:
+        controller = dict(t.config)
+        controller.pop("seed", None)
+        groups.setdefault((t.params.method, t.duration_s, json.dumps(controller, sort_keys=True)),
+                          []).append(t)
+    return [g[i:i + per] for g in groups.values() for i in range(0, len(g), per)]
+
+
+def batch_key(chunk: list[RunTask]) -> str:
+    """The Dask key of a batch: its runs' ids hashed (``tsmpc-batch-<hash>-<n runs>``)."""
+    digest = hashlib.sha256("".join(t.id for t in chunk).encode()).hexdigest()[:20]
+    return f"tsmpc-batch-{digest}-{len(chunk)}"
 
 
 def _same_designs(a: dict[str, Any] | None, cfg: Config) -> bool:

@@ -45,6 +45,10 @@ def sweep_cmd(
     max_runs: int = typer.Option(
         10_000, "--max-runs", min=1, max=100_000,
         help="Refuse a sweep with more runs than this (grid points × random draws)."),
+    batch: int | None = typer.Option(
+        None, "--batch", min=1, max=1024,
+        help="Runs per Dask task, stepped together by the batched kernel [default: the sweep "
+        "file's 'batch', 64]; 1: each run its own task, bit for bit as 'tsmpc run'."),
 ) -> None:
     """Run every point of a sweep as a Dask task; write one record per run, the aggregate table
     (CSV, Parquet) and summary plots."""
@@ -65,11 +69,14 @@ def sweep_cmd(
         "connect_timeout": (scheduler is None, "it bounds the wait for --scheduler (a local "
                             "cluster is started, not connected to)"),
         "retry_failed": (not resume, "failed records are retried only when resuming (--resume)"),
+        "batch": (dry_run, "--dry-run tasks sleep instead of simulating, one run each"),
     })
     try:
         spec = load_sweep(sweep_file, max_runs=max_runs)  # every problem before any task starts
     except TsmpcError as err:
         fail(err)
+    if batch is not None:
+        spec = spec.model_copy(update={"batch": batch})
     if out is None and resume:
         fail(ConfigError("--resume needs --out: the folder of the sweep to finish"))
     designs = None
@@ -113,6 +120,10 @@ def sweep_cmd(
 
                 with deferred_interrupts():  # numba/LLVM call back into Python: never raise there
                     kernels.warmup()
+                    if spec.batch > 1:  # the batched-run kernel too (tsmpc.sim.batch)
+                        from tsmpc.sim import batch
+
+                        batch.warmup()
             try:
                 res = run_sweep(spec, out, scheduler=scheduler, workers=workers, resume=resume,
                                 run_fn=dry_fn if dry_run else run_task, progress=on_record,

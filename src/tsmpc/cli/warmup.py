@@ -27,6 +27,10 @@ def warmup_cmd() -> None:
 
                 t0 = time.perf_counter()
                 engine_ok = engine.warmup()
+                if engine_ok:  # and the batched-run kernel of sweeps (tsmpc.sim.batch)
+                    from tsmpc.sim import batch
+
+                    batch.warmup()
                 seconds += time.perf_counter() - t0
     except KeyboardInterrupt as sig:
         typer.secho(f"interrupted ({sig})", err=True, fg=typer.colors.RED)

@@ -1,0 +1,334 @@
+"""Batched runs (issue 25 item 2): many runs that differ in their seed and plant parameters,
+stepped together by one compiled call (:func:`tsmpc.kernels.batch.advance`).
+
+Each run ("lane") is set up exactly as the run engine sets up one run (:mod:`tsmpc.sim.engine`:
+a reset :class:`~tsmpc.control.cascade.Cascade`, the plant, the noise drawn beforehand, the
+kernel's arrays); the lanes' arrays are stacked along a first axis and the kernel advances all of
+them step by step, the MHE window solves and the plant's RK4 blocks of all lanes vectorised. Where
+a lane needs a block's Python path (the engine's slow paths) the kernel returns, that lane's
+arrays go back to its own objects, the engine's handler runs (``_Run._mpc`` etc.) and the kernel
+resumes. Each run's :class:`~tsmpc.sim.log.RunLog` is assembled by the engine's own code.
+
+Results: the MHE window solves are the engine's to the bit. The plant's right-hand side uses
+polynomial transcendentals (≤ 2 ulp, see :mod:`tsmpc.kernels.batch`) instead of libm, so states
+differ from the engine's by amplified rounding (tests/test_batch.py bounds it);
+``exact_plant=True`` integrates each lane with the engine's scalar plant kernel instead, and then
+the logs equal the engine's bit for bit.
+
+Runs the batch does not cover — where :func:`tsmpc.sim.engine.applicability` says the engine does
+not apply, where the engine's own set-up declines, or a lane whose block raised
+(:class:`~tsmpc.sim.engine.EngineFallback`) — are run by :func:`~tsmpc.sim.simulator.simulate`
+one by one, so the answer is always complete.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tsmpc.config import Config, Method, replace
+from tsmpc.sim.log import RunLog
+from tsmpc.sim.simulator import Scenario
+
+__all__ = ["LAST_BATCH", "simulate_batch", "warmup"]
+
+#: Facts of the last batch in this process (diagnostics, tests, the benchmark): lanes batched,
+#: lanes run one by one and why, Python slow paths taken, kernel calls, loop seconds.
+LAST_BATCH: dict[str, Any] = {}
+
+#: The engine's arrays that the kernel only reads (never synchronised back from Python) and its
+#: logs (copied back once, at the end).
+_READ_ONLY = {"noise", "u_drop", "gnss", "frb", "patches", "events", "ref_x", "ref_y", "ref_th",
+              "ref_v", "ref_w", "th_tan", "mv", "mw", "Kv", "zlo", "zhi", "bits"}
+_LOGS = {"lo", "loi", "lxp", "li", "lstat", "lsat"}
+_KERNEL: dict[str, Any] = {}
+
+
+def _load_kernel() -> Any:
+    """tsmpc.kernels.batch (compiled or loaded from numba's cache), None when the compiled kernels
+    are unavailable."""
+    if "mod" in _KERNEL:
+        return _KERNEL["mod"]
+    from tsmpc import kernels
+    from tsmpc.sim import engine as eng
+
+    mod = None
+    if eng._load_kernel() is not None:  # the engine and the blocks (and NUMBA_CACHE_DIR) first
+        folder = kernels._tree_folder(kernels.numba_cache_dir())
+        _forget_stale_machine_code(folder)
+        if not any(folder.glob("batch.advance-*.nbi")):
+            print("tsmpc: compiling the batched-run kernel (first run only, about a minute)…",
+                  file=sys.stderr, flush=True)
+        try:
+            from tsmpc.kernels import batch as mod
+        except Exception as err:  # a broken compiler: every run goes to simulate()
+            print(f"tsmpc: batched runs unavailable ({type(err).__name__}: {err})", file=sys.stderr)
+            mod = None
+    _KERNEL["mod"] = mod
+    return mod
+
+
+def _forget_stale_machine_code(folder: Path) -> None:
+    """numba keys a cached function by its own file only, and the batch kernel's machine code
+    contains the engine's step and the block kernels (kernels/engine.py, mpc.py, mhe.py, lqr.py,
+    plant.py): its cache entries are deleted whenever one of those sources changes."""
+    import tsmpc.kernels as pkg
+    from tsmpc.errors import TsmpcError
+    from tsmpc.textfile import read_bytes, read_text
+
+    here = Path(pkg.__file__).parent
+    digest = hashlib.sha256(b"".join(read_bytes(here / f"{m}.py", "kernel source") for m in
+                                     ("engine", "mpc", "mhe", "lqr", "plant", "batch"))).hexdigest()
+    stamp = folder / "batch.sources-sha256"
+    try:
+        if read_text(stamp, "batch cache stamp", limit=1024).strip() == digest:
+            return
+    except (TsmpcError, OSError):
+        pass
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for p in folder.glob("batch.*.nb[ic]"):
+            p.unlink()
+        stamp.write_text(digest)
+    except OSError:  # an unwritable cache: numba refuses it too (tsmpc.kernels.cache_problem)
+        pass
+
+
+class _Lane:
+    """One run of the batch: the engine's set-up of it (``_Run``) and what the loop learns."""
+
+    def __init__(self, index: int, cfg: Config, scenario: Scenario, run: Any, K: int) -> None:
+        self.index, self.cfg, self.scenario, self.run, self.K = index, cfg, scenario, run, K
+        self.ended: str | None = None  # termination decided in Python (a plant error)
+        self.fallback: str | None = None  # a block raised: simulate() runs it
+
+
+def _set_up(index: int, cfg: Config, method: Method, scenario: Scenario, designs: tuple[Any, Any],
+            max_steps: int | None, ke: Any) -> _Lane | str:
+    """The engine's preparation of one run (as :func:`tsmpc.sim.engine.run` does it, without
+    running it), or why the engine would decline it."""
+    from tsmpc.control.cascade import Cascade
+    from tsmpc.sim import engine as eng
+    from tsmpc.sim.simulator import _start_state, default_plant, tracked_steps
+
+    cascade = Cascade(cfg, method, scenario.reference, kinematic_design=designs[0],
+                      dynamic_design=designs[1])
+    mhe, lqr, mpc = cascade.mhe, cascade.lqr, cascade.mpc
+    if mpc._kern is None or mhe._kern is None or not mhe._kargs[-1] or lqr._kern is None:
+        return "a block's compiled kernel is off"
+    ref, N, Td = cascade.reference, cfg.mpc.N, cfg.rates.Td
+    K = tracked_steps(ref, N)
+    if K < 1:
+        return "the reference is shorter than the horizon"
+    K = K if max_steps is None else min(K, int(max_steps))
+    plant = default_plant(cfg, scenario)
+    vp = plant if scenario.actuators is None else plant.plant
+    n_sub = round(Td / vp.model.h)
+    if vp.model._kern is None or abs(n_sub * vp.model.h - Td) > 1e-9 * max(1.0, Td):
+        return "T_d is no whole number of plant steps"
+    if cfg.mhe.N > 126:
+        return "an MHE window beyond the batch workspace (126 intervals)"
+    x0 = _start_state(ref, scenario.initial_error)
+    plant.reset(x0)
+    cascade.reset(x0)
+    eng._hypot_exact(ke)
+    run = eng._Run(cfg, cascade, scenario, plant, K, x0, ke)
+    if scenario.actuators is not None and not eng._actuator_data(plant, Td, run.a.fp, run.a.ip):
+        return "actuator sub-steps that are no whole number of plant steps"
+    return _Lane(index, cfg, scenario, run, K)
+
+
+def _signature(lane: _Lane) -> tuple[Any, ...]:
+    """Lanes with equal signatures stack into one batch (same array shapes and types)."""
+    a = lane.run.a
+    return tuple((f, getattr(a, f).shape, getattr(a, f).dtype.str) for f in a.__dataclass_fields__)
+
+
+def simulate_batch(cfg: Config, method: Method | str, scenarios: Scenario | Sequence[Scenario],
+                   seeds: Sequence[int] | None = None, *, kinematic_design: Any = None,
+                   dynamic_design: Any = None, max_steps: int | None = None,
+                   exact_plant: bool = False) -> list[RunLog]:
+    """``simulate(replace(cfg, seed=seeds[i]), method, scenarios[i], …)`` for every i, the runs
+    the engine applies to stepped together (see the module docstring). ``scenarios``: one
+    scenario for all runs or one per run (e.g. differing in ``plant_vehicle``, the plant's
+    parameters); ``seeds``: one noise seed per run (None: ``cfg.seed`` for every run). The
+    controller (``cfg`` but its seed) and so the designs are shared. ``exact_plant``: integrate
+    the plant with the engine's scalar kernel (bit-identical logs, slower). Returns the logs in
+    the runs' order."""
+    from tsmpc.blas import limit_blas_threads
+    from tsmpc.sim import engine as eng
+    from tsmpc.sim.simulator import simulate
+
+    limit_blas_threads()
+    m = Method.parse(method) if isinstance(method, str) else method
+    if isinstance(scenarios, Scenario):
+        n = len(seeds) if seeds is not None else 1
+        scs = [scenarios] * n
+    else:
+        scs = list(scenarios)
+        n = len(scs)
+    if seeds is not None and len(seeds) != n:
+        raise ValueError(f"simulate_batch: {len(seeds)} seeds for {n} scenarios")
+    cfgs = [cfg if seeds is None else replace(cfg, seed=int(s)) for s in (seeds or [None] * n)]
+    if kinematic_design is None or dynamic_design is None:
+        from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
+
+        kinematic_design = kinematic_design or load_or_design_kinematic(cfg)
+        dynamic_design = dynamic_design or load_or_design_dynamic(cfg)
+    designs = (kinematic_design, dynamic_design)
+    logs: list[RunLog | None] = [None] * n
+    single: dict[int, str] = {}
+    groups: dict[tuple[Any, ...], list[_Lane]] = {}
+    kb = _load_kernel() if eng.enabled() else None
+    ke = eng._load_kernel() if kb is not None else None
+    for i in range(n):
+        why = "the batch kernel is unavailable" if kb is None else eng.applicability(cfgs[i], m, scs[i])
+        lane = why if why is not None else _set_up(i, cfgs[i], m, scs[i], designs, max_steps, ke)
+        if isinstance(lane, str):
+            single[i] = lane
+        else:
+            groups.setdefault(_signature(lane), []).append(lane)
+    LAST_BATCH.clear()
+    LAST_BATCH.update(batched=0, single=dict(single), slow_paths={"mpc": 0, "mhe": 0, "lqr": 0,
+                                                                  "plant": 0},
+                      calls=0, loop_s=0.0, mhe_lanes=0, plant_lanes=0)
+    for lanes in groups.values():
+        for lane, log in zip(lanes, _run_group(kb, ke, m, lanes, exact_plant), strict=True):
+            if log is None:
+                single[lane.index] = f"fell back: {lane.fallback}"
+            logs[lane.index] = log
+        LAST_BATCH["batched"] += sum(1 for lane in lanes if lane.fallback is None)
+    LAST_BATCH["single"] = dict(single)
+    for i in single:
+        logs[i] = simulate(cfgs[i], m, scs[i], kinematic_design=designs[0],
+                           dynamic_design=designs[1], max_steps=max_steps)
+    return [log for log in logs if log is not None]
+
+
+def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant: bool
+               ) -> list[RunLog | None]:
+    """Step one group of lanes (equal signatures) to the end; their logs (None: fell back)."""
+    from tsmpc.sim import engine as eng
+
+    fields = list(lanes[0].run.a.__dataclass_fields__)
+    B = len(lanes)
+    st = {}
+    for f in fields:
+        first = getattr(lanes[0].run.a, f)
+        if f in _LOGS:  # zero-filled by the engine; calloc'ed here, pages touched only when written
+            st[f] = np.zeros((B, *first.shape), dtype=first.dtype)
+        else:
+            st[f] = np.empty((B, *first.shape), dtype=first.dtype)
+            for b, ln in enumerate(lanes):
+                st[f][b] = getattr(ln.run.a, f)
+    n_in = lanes[0].run.n_in
+    M = lanes[0].K * n_in
+    nw = lanes[0].cfg.mhe.N
+    state = np.zeros(B, dtype=np.int64)
+    need = np.zeros(B, dtype=np.int64)
+    tally = np.zeros(4, dtype=np.int64)
+    pw = np.zeros(kb.PW_ROWS * kb.LANES)
+    mws = kb.mhe_workspace(nw)
+    akey = np.full((B, nw), np.nan)
+    asin, acos = np.zeros((B, nw)), np.zeros((B, nw))
+    scratch = np.zeros(kb.LANES, dtype=np.int64)
+    args = [st[f] for f in fields]
+    sync = [f for f in fields if f not in _READ_ONLY and f not in _LOGS]
+    slow = LAST_BATCH["slow_paths"]
+    t0, tick0 = time.perf_counter(), ke.ticks()
+    while True:
+        LAST_BATCH["calls"] += 1
+        waiting = kb.advance(M, exact_plant, state, need, tally, pw, mws, akey, asin, acos, scratch,
+                             *args)
+        if waiting == 0:
+            break
+        for b in np.flatnonzero(state == kb.NEEDS_PYTHON):
+            lane, code = lanes[b], int(need[b])
+            r = lane.run
+            for f in sync:  # the lane's arrays back to its objects (they share them)
+                getattr(r.a, f)[...] = st[f][b]
+            try:
+                if code == ke.NEED_MPC:
+                    slow["mpc"] += 1
+                    r._mpc()
+                elif code == ke.NEED_MHE:
+                    slow["mhe"] += 1
+                    r._mhe()
+                elif code == ke.NEED_LQR:
+                    slow["lqr"] += 1
+                    r._lqr()
+                elif code == ke.NEED_PLANT:
+                    slow["plant"] += 1
+                    lane.ended = r._plant()
+                else:  # pragma: no cover (a kernel/caller mismatch)
+                    raise RuntimeError(f"batched runs: unknown code {code}")
+            except eng.EngineFallback as err:
+                lane.fallback = str(err)
+            for f in sync:
+                st[f][b] = getattr(r.a, f)
+            state[b] = kb.FINISHED if lane.ended is not None or lane.fallback else kb.READY
+    wall, ticks = time.perf_counter() - t0, ke.ticks() - tick0
+    LAST_BATCH["loop_s"] += wall
+    LAST_BATCH["mhe_lanes"] += int(tally[0])
+    LAST_BATCH["plant_lanes"] += int(tally[1])
+    ticks_per_s = ticks / wall if wall > 0 and ticks > 0 else 0.0
+    if ticks_per_s > 0:
+        LAST_BATCH["mhe_s"] = LAST_BATCH.get("mhe_s", 0.0) + float(tally[2]) / ticks_per_s
+        LAST_BATCH["plant_s"] = LAST_BATCH.get("plant_s", 0.0) + float(tally[3]) / ticks_per_s
+    out: list[RunLog | None] = []
+    for b, lane in enumerate(lanes):
+        if lane.fallback is not None:
+            out.append(None)
+            continue
+        r = lane.run
+        for f in sync:
+            getattr(r.a, f)[...] = st[f][b]
+        for f in _LOGS:  # the batch's log rows become the lane's logs (views, no copy)
+            setattr(r.a, f, st[f][b])
+        termination, done, rows, n_calls = _termination(lane, int(need[b]), ke)
+        m_last = n_calls - 1
+        k_last, j_last = divmod(m_last, n_in)
+        Tc, Td = r.cascade.Tc, r.cascade.Td
+        eng._restore_fault(lane.scenario.sensor_fault, n_calls,
+                           k_last * Tc if j_last == 0 else m_last * Td, r.a.fifo, r.a.sf, r.a.si)
+        out.append(eng._log(r, method.value, lane.scenario, done, rows, termination, ticks_per_s,
+                            wall / B))
+    return out
+
+
+def _termination(lane: _Lane, code: int, ke: Any) -> tuple[str, int, int, int]:
+    """(termination, outer steps done, inner rows logged, sensor samples taken) of a finished
+    lane, worded as the engine's loop words them."""
+    a, n_in, K = lane.run.a, lane.run.n_in, lane.K
+    m = int(a.si[ke.SI_M])
+    if lane.ended is not None:  # the plant's error (NEED_PLANT decided in Python)
+        return lane.ended, m // n_in + 1, m + 1, m + 1
+    if code == ke.DIVERGED:
+        k = m // n_in
+        bound = a.fp[ke.FP_BOUND]
+        e_y = abs(float(a.sc[ke.SC_EY]))
+        return (f"diverged: |e_y| = {e_y:.2f} m > {bound:g} m at t = "
+                f"{k * lane.run.cascade.Tc:.1f} s", k + 1, m, m + 1)
+    M = K * n_in
+    return "completed", K, M, M
+
+
+def warmup() -> bool:
+    """Compile (or load from numba's cache) the batch kernel's machine code now, by one step of
+    one default run on the built-in circuit (``tsmpc warmup``, and a local sweep before its
+    workers start). True when batched runs are available."""
+    from tsmpc.planning.circuit import builtin_circuit
+    from tsmpc.sim import engine as eng
+
+    if not eng.enabled() or _load_kernel() is None:
+        return False
+    cfg = Config()
+    simulate_batch(cfg, Method.REF, Scenario("warmup", builtin_circuit(dt=cfg.rates.Tc)),
+                   max_steps=1)
+    return LAST_BATCH.get("batched", 0) == 1
