@@ -6,9 +6,10 @@ small simulated sweep on them, and one worker is SIGKILLed mid-sweep — after s
 recorded, while others are pending and one is running on it. Then:
 
 * the sweep exits 0 and every run has exactly one record, never rewritten (nothing lost);
-* nothing was recomputed: the scheduler's own transition log shows every run's task completing
-  exactly once, and the runs recorded before the kill started exactly once (the killed worker
-  produced some of them: had their results still been held on it, Dask would have re-run them);
+* nothing was recomputed: the scheduler's own transition log shows every task (a batch of runs,
+  tsmpc.sim.batch) completing exactly once, and the batches recorded before the kill started
+  exactly once (the killed worker produced some of them: had their results still been held on
+  it, Dask would have re-run them);
 * the records equal those of the same sweep run locally (no ``--scheduler``), timings aside.
 
 Every process is started by the fixture and torn down by it (TERM, then KILL), pass or fail;
@@ -248,19 +249,23 @@ def test_a_worker_killed_mid_sweep_on_a_separate_cluster_loses_and_recomputes_no
         assert (st.st_ino, st.st_mtime_ns) == (ino, mtime), f"record {rid} was rewritten"
     assert f"{N_RUNS} runs ({N_RUNS} run now, 0 resumed)" in log, log[-3000:]
 
-    # Nothing recomputed, from the scheduler's own record of what ran.
-    started = dict.fromkeys(ids, 0)
-    completed = dict.fromkeys(ids, 0)
+    # Nothing recomputed, from the scheduler's own record of what ran. The sweep sends batches
+    # of runs (tsmpc.sim.batch): each record names the Dask task (batch) that produced it.
+    batch_of = {rid: rec["batch"] for rid, rec in got.items()}
+    keys = set(batch_of.values())
+    assert 1 < len(keys) < N_RUNS, keys  # batches of several runs, several batches
+    started = dict.fromkeys(keys, 0)
+    completed = dict.fromkeys(keys, 0)
     for key, start, finish, _ in dask_cluster.transitions():
-        rid = key.removeprefix("tsmpc-run-")
-        if rid in ids and finish == "processing":
-            started[rid] += 1
-        if rid in ids and (start, finish) == ("processing", "memory"):
-            completed[rid] += 1
+        if key in keys and finish == "processing":
+            started[key] += 1
+        if key in keys and (start, finish) == ("processing", "memory"):
+            completed[key] += 1
     assert all(n == 1 for n in completed.values()), {k: n for k, n in completed.items() if n != 1}
-    assert all(started[rid] == 1 for rid in at_kill), {k: started[k] for k in at_kill}
-    # The kill did interrupt work: the runs the dead worker held were started again elsewhere.
-    rerun = sum(started.values()) - N_RUNS
+    assert all(started[batch_of[rid]] == 1 for rid in at_kill), \
+        {k: started[batch_of[k]] for k in at_kill}
+    # The kill did interrupt work: the batch the dead worker held was started again elsewhere.
+    rerun = sum(started.values()) - len(keys)
     assert rerun >= 1, "no task was running on the killed worker"
 
     # Identical results: the same statuses and metrics as the local sweep (timings aside).
@@ -268,5 +273,5 @@ def test_a_worker_killed_mid_sweep_on_a_separate_cluster_loses_and_recomputes_no
     assert not differ, [(got[r]["metrics"].get("rmse"), expected[r]["metrics"].get("rmse"))
                         for r in differ[:3]]
     print(f"\n{N_RUNS} runs recorded once each; worker {victim} killed after {len(at_kill)} "
-          f"records; {rerun} interrupted run(s) re-run elsewhere; 0 recomputed; "
+          f"records; {rerun} interrupted batch(es) of {len(keys)} re-run elsewhere; 0 recomputed; "
           f"{N_RUNS} identical to the local sweep")

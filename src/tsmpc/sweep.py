@@ -564,7 +564,11 @@ def run_batch(tasks: list[RunTask]) -> list[dict[str, Any]]:
     share = (time.perf_counter() - t0) / max(1, len(tasks))  # a batched run's share of the batch
     for i in batched:
         out[i]["elapsed_s"] = share  # type: ignore[index]
-    return [rec for rec in out if rec is not None]
+    key = batch_key(tasks)
+    recs = [rec for rec in out if rec is not None]
+    for rec in recs:
+        rec["batch"] = key  # the Dask task that ran it
+    return recs
 
 
 def dry_run(task: RunTask) -> dict[str, Any]:

@@ -187,6 +187,7 @@ def simulate_batch(cfg: Config, method: Method | str, scenarios: Scenario | Sequ
     groups: dict[tuple[Any, ...], list[_Lane]] = {}
     kb = _load_kernel() if eng.enabled() else None
     ke = eng._load_kernel() if kb is not None else None
+    t_setup = time.perf_counter()
     for i in range(n):
         why = "the batch kernel is unavailable" if kb is None else eng.applicability(cfgs[i], m, scs[i])
         lane = why if why is not None else _set_up(i, cfgs[i], m, scs[i], designs, max_steps, ke)
@@ -194,8 +195,9 @@ def simulate_batch(cfg: Config, method: Method | str, scenarios: Scenario | Sequ
             single[i] = lane
         else:
             groups.setdefault(_signature(lane), []).append(lane)
+    t_setup = time.perf_counter() - t_setup
     LAST_BATCH.clear()
-    LAST_BATCH.update(batched=0, single=dict(single), slow_paths={"mpc": 0, "mhe": 0, "lqr": 0,
+    LAST_BATCH.update(setup_s=t_setup, logs_s=0.0, batched=0, single=dict(single), slow_paths={"mpc": 0, "mhe": 0, "lqr": 0,
                                                                   "plant": 0},
                       calls=0, loop_s=0.0, mhe_lanes=0, plant_lanes=0)
     for lanes in groups.values():
@@ -281,6 +283,7 @@ def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant
     if ticks_per_s > 0:
         LAST_BATCH["mhe_s"] = LAST_BATCH.get("mhe_s", 0.0) + float(tally[2]) / ticks_per_s
         LAST_BATCH["plant_s"] = LAST_BATCH.get("plant_s", 0.0) + float(tally[3]) / ticks_per_s
+    t_logs = time.perf_counter()
     out: list[RunLog | None] = []
     for b, lane in enumerate(lanes):
         if lane.fallback is not None:
@@ -299,6 +302,7 @@ def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant
                            k_last * Tc if j_last == 0 else m_last * Td, r.a.fifo, r.a.sf, r.a.si)
         out.append(eng._log(r, method.value, lane.scenario, done, rows, termination, ticks_per_s,
                             wall / B))
+    LAST_BATCH["logs_s"] += time.perf_counter() - t_logs
     return out
 
 
