@@ -197,8 +197,8 @@ def simulate_batch(cfg: Config, method: Method | str, scenarios: Scenario | Sequ
             groups.setdefault(_signature(lane), []).append(lane)
     t_setup = time.perf_counter() - t_setup
     LAST_BATCH.clear()
-    LAST_BATCH.update(setup_s=t_setup, logs_s=0.0, batched=0, single=dict(single), slow_paths={"mpc": 0, "mhe": 0, "lqr": 0,
-                                                                  "plant": 0},
+    LAST_BATCH.update(setup_s=t_setup, logs_s=0.0, batched=0, single=dict(single),
+                      slow_paths={"mpc": 0, "mhe": 0, "lqr": 0, "plant": 0},
                       calls=0, loop_s=0.0, mhe_lanes=0, plant_lanes=0)
     for lanes in groups.values():
         for lane, log in zip(lanes, _run_group(kb, ke, m, lanes, exact_plant), strict=True):
