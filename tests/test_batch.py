@@ -251,3 +251,27 @@ def test_a_run_that_cannot_be_set_up_is_an_error_record(tmp_path: Path,
             assert r["status"] == "completed", r["reason"]
         else:
             assert r["status"] == "error" and "gone.csv" in r["reason"], r["reason"]
+
+
+@pytest.mark.parametrize("value", ["0", "2000", '"64"', "true", "6.5"])
+def test_a_bad_batch_size_is_refused_naming_the_field(tmp_path: Path, value: str) -> None:
+    from tsmpc.errors import ConfigError
+    from tsmpc.sweep import load_sweep
+
+    f = tmp_path / "s.toml"
+    f.write_text(f'name = "b"\nbatch = {value}\n[grid]\nseed = [1]\n')
+    with pytest.raises(ConfigError, match="batch"):
+        load_sweep(f)
+
+
+def test_cli_batch_is_validated_before_anything_runs(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from tsmpc.cli import app
+
+    f = tmp_path / "s.toml"
+    f.write_text('name = "b"\n[grid]\nseed = [1]\n')
+    for args, why in ((["--batch", "0"], "--batch"), (["--batch", "4", "--dry-run"], "no effect")):
+        res = CliRunner().invoke(app, ["sweep", str(f), "--out", str(tmp_path / "o"), *args])
+        assert res.exit_code == 2 and why in res.output, res.output
+        assert not (tmp_path / "o").exists()

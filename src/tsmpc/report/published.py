@@ -1018,6 +1018,24 @@ def benchmarks(ctx: Context) -> Produced:
              "--out", str(ctx.scratch / "bench_compare"))
     p.add("benchmarks", "command", f"{_d(cmd['wall'], 1)} s wall ({_d(cmd['cpu'], 1)} s CPU) at load average "
           f"{_d(load_average(), 1)}", timing=True)
+    bt = _bench(ctx, "batch_runs", "--python", "0")
+    b = bt["batch"]
+    p.add("benchmarks", "batch", f"{_d(b['runs_per_s_per_core'], 1)} paper runs per second per core "
+          f"batched against {_d(bt['engine']['runs_per_s_per_core'], 1)} one at a time, "
+          f"{_d(bt['ratio_batch_over_engine'], 2)}×; largest state difference of a batched run "
+          f"{bt['batch_vs_engine_max_state_diff']:.0e} m; load average {_d(bt['load_average'][0], 1)}",
+          timing=True)
+    p.add("benchmarks", "batch-split", f"Per paper run at B = {bt['B']} the batch's loop takes "
+          f"{_d(1e3 * b['loop_s_per_run'], 0)} ms, of which the vectorised plant "
+          f"{_d(1e3 * b['plant_s_per_run'], 0)} ms and the window solves "
+          f"{_d(1e3 * b['mhe_s_per_run'], 0)} ms "
+          f"(the rest: the lanes' own steps — MPC, TS-LQR, the MHE's window bookkeeping, sensors, "
+          f"logs); the engine's loop for the run alone: {_d(1e3 * bt['engine']['loop_s_median'], 0)} ms "
+          f"(load average {_d(bt['load_average'][0], 1)}).", timing=True)
+    sr = _bench(ctx, "sweep_runs", "--baseline")
+    p.add("benchmarks", "sweep-runs", f"{_d(sr['batched']['wall_s'], 0)} s wall for "
+          f"{sr['batched']['runs']} runs batched, {_d(sr['one_run_per_task']['wall_s'], 0)} s with "
+          f"`--batch 1`; load average {_d(sr['load_average'][0], 1)}", timing=True)
     sw = _bench(ctx, "sweep_scaling")
     p.add("benchmarks", "sweep-scaling", f"measured a {_d(sw['speedup_2_over_1'], 2)}× speed-up from 1 to "
           f"2 workers ({sw['runs']} runs, load average {_d(load_average(), 1)})", timing=True)
