@@ -21,6 +21,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from tsmpc.blas import limit_blas_threads
+
 PAPER = Path(__file__).resolve().parents[2] / "shared" / "data" / "paper" / "planner_references_100ms.csv"
 MASSES = [0.95, 1.0, 1.05, 1.1]
 
@@ -59,6 +61,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--baseline", action="store_true", help="also time --batch 1 (one run per task)")
     args = ap.parse_args()
+    limit_blas_threads()  # as every benchmark (the sweep's processes limit themselves too)
     if not PAPER.exists():
         raise SystemExit(f"needs the paper reference at {PAPER}")
     subprocess.run([_tsmpc(), "warmup"], check=True, capture_output=True)  # untimed: compile once

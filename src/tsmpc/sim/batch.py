@@ -74,6 +74,46 @@ def _load_kernel() -> Any:
     return mod
 
 
+class _KernelUnavailable(Exception):
+    """The batch kernel's first call failed: numba could not load or compile it."""
+
+
+def _rebuilt(err: BaseException | None) -> Any:
+    """After the kernel's first call failed (e.g. a corrupt or truncated cache entry): its cache
+    entries deleted and the module imported afresh, once per process, with one line saying so.
+    None when that was tried already or nothing could be deleted."""
+    from tsmpc import kernels
+
+    if _KERNEL.get("rebuilt"):
+        _give_up(err)
+        return None
+    _KERNEL["rebuilt"] = True
+    folder = kernels._tree_folder(kernels.numba_cache_dir())
+    try:
+        removed = [p.unlink() for p in folder.glob("batch.*.nb[ic]")]
+    except OSError:
+        removed = []
+    if not removed:
+        _give_up(err)
+        return None
+    print(f"tsmpc: the batched-run kernel's cache in {folder} could not be loaded "
+          f"({type(err).__name__}); compiling it again…", file=sys.stderr, flush=True)
+    sys.modules.pop("tsmpc.kernels.batch", None)
+    try:
+        from tsmpc.kernels import batch as mod
+    except Exception as again:
+        _give_up(again)
+        return None
+    _KERNEL["mod"] = mod
+    return mod
+
+
+def _give_up(err: BaseException | None) -> None:
+    print(f"tsmpc: batched runs unavailable ({type(err).__name__}: {err}); running them one by "
+          "one", file=sys.stderr, flush=True)
+    _KERNEL["mod"] = None
+
+
 def _forget_stale_machine_code(folder: Path) -> None:
     """numba keys a cached function by its own file only, and the batch kernel's machine code
     contains the engine's step and the block kernels (kernels/engine.py, mpc.py, mhe.py, lqr.py,
@@ -201,7 +241,21 @@ def simulate_batch(cfg: Config, method: Method | str, scenarios: Scenario | Sequ
                       slow_paths={"mpc": 0, "mhe": 0, "lqr": 0, "plant": 0},
                       calls=0, loop_s=0.0, mhe_lanes=0, plant_lanes=0)
     for lanes in groups.values():
-        for lane, log in zip(lanes, _run_group(kb, ke, m, lanes, exact_plant), strict=True):
+        try:
+            group_logs = _run_group(kb, ke, m, lanes, exact_plant)
+        except _KernelUnavailable as err:
+            kb = _rebuilt(err.__cause__)
+            try:
+                group_logs = _run_group(kb, ke, m, lanes, exact_plant) if kb is not None else None
+            except _KernelUnavailable as again:
+                _give_up(again.__cause__)
+                group_logs = None
+            if group_logs is None:  # these runs (and any later batch) by simulate()
+                kb = None
+                for lane in lanes:
+                    single[lane.index] = "the batch kernel is unavailable"
+                continue
+        for lane, log in zip(lanes, group_logs, strict=True):
             if log is None:
                 single[lane.index] = f"fell back: {lane.fallback}"
             logs[lane.index] = log
@@ -244,10 +298,17 @@ def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant
     sync = [f for f in fields if f not in _READ_ONLY and f not in _LOGS]
     slow = LAST_BATCH["slow_paths"]
     t0, tick0 = time.perf_counter(), ke.ticks()
+    first = True
     while True:
         LAST_BATCH["calls"] += 1
-        waiting = kb.advance(M, exact_plant, state, need, tally, pw, mws, akey, asin, acos, scratch,
-                             *args)
+        try:
+            waiting = kb.advance(M, exact_plant, state, need, tally, pw, mws, akey, asin, acos,
+                                 scratch, *args)
+        except Exception as err:
+            if first:  # numba could not load or compile the kernel: nothing has run yet
+                raise _KernelUnavailable(err) from err
+            raise
+        first = False
         if waiting == 0:
             break
         for b in np.flatnonzero(state == kb.NEEDS_PYTHON):
