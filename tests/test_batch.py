@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tsmpc import kernels
 from tsmpc.config import Config, replace
 from tsmpc.kernels import batch as batch_k
 from tsmpc.robustness import apply_robustness
@@ -22,7 +23,7 @@ from tsmpc.sim.log import RunLog
 from tsmpc.sim.simulator import Scenario, simulate
 from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
-pytestmark = pytest.mark.skipif(batch._load_kernel() is None, reason="compiled kernels are off")
+pytestmark = pytest.mark.skipif(not kernels.enabled(), reason="compiled kernels are off")
 
 STEPS = 300  # 30 s of the paper reference: the start-up, the first corners, friction changes
 
