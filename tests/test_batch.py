@@ -214,12 +214,18 @@ def test_sweep_batches_equal_one_run_tasks(tmp_path: Path, paper_reference_path:
                  f'track = ["{paper_reference_path}"]\n')
     tasks = expand(load_sweep(f))
     assert len(tasks) == 16
-    chunks = batches(tasks, 64, 2)
-    assert [len(c) for c in chunks] == [4, 4, 4, 4]  # 16 runs, 2 workers: 4 chunks of 4
+    chunks, singles = batches(tasks, 64, 2)
+    assert [len(c) for c in chunks] == [8, 8] and singles == []  # a chunk per method, ≥ 8 runs
     assert all(len({t.params.method for t in c}) == 1 for c in chunks)
     assert sorted(t.id for c in chunks for t in c) == sorted(t.id for t in tasks)
-    assert len({batch_key(c) for c in chunks}) == 4
-    assert [len(c) for c in batches(tasks, 3, 1)] == [3, 3, 2, 3, 3, 2]
+    assert len({batch_key(c) for c in chunks}) == 2
+    assert [len(c) for c in batches(tasks, 3, 1)[0]] == [3, 3, 2, 3, 3, 2]
+    assert batches(tasks, 1, 2) == ([], tasks)  # --batch 1: one run per task
+    # Whether a run is batched depends on the whole sweep, not on what is pending (--resume):
+    # five pending REF runs of a controller with 8 runs in the sweep are batched, alone they are not.
+    ref = [t for t in tasks if t.params.method == "REF"][:5]
+    assert batches(ref, 64, 2) == ([], ref)
+    assert batches(ref, 64, 2, among=tasks) == ([ref], [])
     got = run_batch(tasks)
     assert [r["id"] for r in got] == [t.id for t in tasks]
     for rec, task in zip(got, tasks, strict=True):

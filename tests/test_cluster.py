@@ -35,11 +35,13 @@ import pytest
 
 from tsmpc.sweep import expand, load_sweep, read_record
 
-# 24 runs of 15 simulated seconds: ~0.2–0.6 s each once a worker has loaded its kernels, so the
-# sweep lasts seconds and a kill after the first records lands while most runs are pending.
+# 24 runs of 15 simulated seconds in batches of 4 (tsmpc.sim.batch): ~0.2–0.6 s a run once a
+# worker has loaded its kernels, so the sweep lasts seconds and a kill after the first records
+# lands while most batches are pending.
 SWEEP = """
 name = "cluster"
 duration_s = 15.0
+batch = 4
 [grid]
 method = ["ref", "fzn", "iter"]
 scenario = ["nominal", "noise_x10"]

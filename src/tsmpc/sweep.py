@@ -23,10 +23,12 @@ A sweep file (TOML) names a base configuration, the axes and how long each run l
     choices = { friction = ["paper", "dry"] }
 
 Runs go to Dask in batches (``client.submit(run_batch, chunk, retries=...)``; ``batch`` runs of
-one controller per task, fewer when the sweep is small, so every worker gets two or more): a
-worker steps a batch's runs together with the batched kernel (:mod:`tsmpc.sim.batch`, ~2× the
-throughput of the runs one by one). ``batch = 1`` makes every run its own task, simulated by
-:func:`run_task` exactly as ``tsmpc run`` does (batched runs differ from that by rounding only).
+one controller per task, fewer when the sweep is small, so every worker gets two or more; see
+:func:`batches`): a worker steps a batch's runs together with the batched kernel
+(:mod:`tsmpc.sim.batch`, ~2× the throughput of the runs one by one). A controller with fewer
+than :data:`MIN_LANES` runs in the sweep, and every run with ``batch = 1``, is its own task,
+simulated by :func:`run_task` exactly as ``tsmpc run`` does (batched runs differ from that by
+rounding only).
 A run that ends early (diverged, left the track, raised) is *data*: its record says why. The
 client writes every finished run's record atomically to ``DIR/runs/<id>.json`` as soon as its
 task arrives; ids hash the run's resolved parameters, so ``resume`` skips what is on disk and a
@@ -78,6 +80,7 @@ __all__ = [
     "AXES",
     "FRICTIONS",
     "MAX_RUNS",
+    "MIN_LANES",
     "RunParams",
     "RunTask",
     "SweepResult",
@@ -259,8 +262,9 @@ class SweepSpec(_Strict):
                                  description="|e_y| beyond which a run has diverged")
     batch: StrictInt = Field(64, ge=1, le=1024, description=(
         "runs per Dask task, stepped together by the batched kernel (tsmpc.sim.batch); a sweep "
-        "of few runs gets smaller tasks so that every worker has two or more. 1: every run its "
-        "own task, simulated exactly as 'tsmpc run' does (bit for bit)"))
+        "of few runs gets smaller tasks so that every worker has two or more, and a controller "
+        "with fewer than 8 runs in the sweep runs one run per task. 1: every run its own task, "
+        "simulated exactly as 'tsmpc run' does (bit for bit)"))
     cases: dict[str, dict[str, Any]] = Field(
         default_factory=dict, description="named cases of the 'case' axis: each a [scenario] table "
         "(tsmpc.config.ScenarioSettings); 'nominal' (no change) is built in")
@@ -834,14 +838,15 @@ def run_sweep(
          "runs": [{"id": t.id, **t.params.model_dump()} for t in tasks]}, indent=1))
     if client is not None:
         try:
-            if run_fn is run_task and spec.batch > 1:
+            chunks: list[list[RunTask]] = []
+            singles = pending
+            if run_fn is run_task:
                 n_workers = max(1, len(client.scheduler_info().get("workers", {})) or workers)
-                chunks = batches(pending, spec.batch, n_workers)
-                futures = {client.submit(run_batch, c, key=batch_key(c), retries=spec.retries,
-                                         pure=False): c for c in chunks}
-            else:
-                futures = {client.submit(run_fn, t, key=f"tsmpc-run-{t.id}", retries=spec.retries,
-                                         pure=False): [t] for t in pending}
+                chunks, singles = batches(pending, spec.batch, n_workers, among=tasks)
+            futures = {client.submit(run_batch, c, key=batch_key(c), retries=spec.retries,
+                                     pure=False): c for c in chunks}
+            futures.update({client.submit(run_fn, t, key=f"tsmpc-run-{t.id}", retries=spec.retries,
+                                          pure=False): [t] for t in singles})
             for fut in as_completed(futures):
                 chunk = futures.pop(fut)
                 try:
@@ -877,18 +882,49 @@ def run_sweep(
     return SweepResult(out, len(tasks), len(written), skipped, failed, duplicates, table, files)
 
 
-def batches(tasks: list[RunTask], size: int, n_workers: int) -> list[list[RunTask]]:
-    """The Dask tasks of a batched sweep: runs of one controller (config, duration) together, in
-    chunks of at most ``size`` runs, and small enough that each worker gets two or more chunks
-    (a sweep of 24 runs on 3 workers: chunks of 4)."""
-    per = max(1, min(size, math.ceil(len(tasks) / (2 * max(1, n_workers)))))
+#: Runs of one controller a sweep must hold for them to be batched: below it, the batch kernel's
+#: vector groups (32 lanes) would run mostly empty and one run per task is faster.
+MIN_LANES = 8
+
+
+def _controller(t: RunTask) -> tuple[Any, ...]:
+    """What the runs of one batch share: method, duration and the config but the seed."""
+    controller = dict(t.config)
+    controller.pop("seed", None)
+    return (t.params.method, t.duration_s, json.dumps(controller, sort_keys=True))
+
+
+def batches(tasks: list[RunTask], size: int, n_workers: int, *,
+            among: list[RunTask] | None = None) -> tuple[list[list[RunTask]], list[RunTask]]:
+    """(batches, single runs): the Dask tasks of a sweep. Runs of one controller go together in
+    chunks of at most ``size`` runs, of near-equal size, small enough that each worker gets two or
+    more (but ≥ :data:`MIN_LANES` runs); a controller with fewer than ``min(MIN_LANES, size)``
+    runs in the whole sweep (``among``, default ``tasks``) runs one run per task, as does every
+    run when ``size`` is 1. Whether a run is batched depends on the sweep alone — never on what
+    is pending (``--resume``) or on the number of workers — so its record does too."""
+    counts: dict[tuple[Any, ...], int] = {}
+    for t in among if among is not None else tasks:
+        counts[_controller(t)] = counts.get(_controller(t), 0) + 1
+    floor = min(MIN_LANES, size)
+    per = min(size, max(MIN_LANES, math.ceil(len(tasks) / (2 * max(1, n_workers)))))
     groups: dict[tuple[Any, ...], list[RunTask]] = {}
+    singles: list[RunTask] = []
     for t in tasks:
-        controller = dict(t.config)
-        controller.pop("seed", None)
-        groups.setdefault((t.params.method, t.duration_s, json.dumps(controller, sort_keys=True)),
-                          []).append(t)
-    return [g[i:i + per] for g in groups.values() for i in range(0, len(g), per)]
+        key = _controller(t)
+        if size > 1 and counts.get(key, 0) >= floor:
+            groups.setdefault(key, []).append(t)
+        else:
+            singles.append(t)
+    chunks: list[list[RunTask]] = []
+    for g in groups.values():
+        k = math.ceil(len(g) / per)
+        q, r = divmod(len(g), k)
+        i = 0
+        for j in range(k):
+            n = q + (1 if j < r else 0)
+            chunks.append(g[i:i + n])
+            i += n
+    return chunks, singles
 
 
 def batch_key(chunk: list[RunTask]) -> str:
