@@ -904,7 +904,8 @@ def batches(tasks: list[RunTask], size: int, n_workers: int, *,
     is pending (``--resume``) or on the number of workers — so its record does too."""
     counts: dict[tuple[Any, ...], int] = {}
     for t in among if among is not None else tasks:
-        counts[_controller(t)] = counts.get(_controller(t), 0) + 1
+        key = _controller(t)
+        counts[key] = counts.get(key, 0) + 1
     floor = min(MIN_LANES, size)
     per = min(size, max(MIN_LANES, math.ceil(len(tasks) / (2 * max(1, n_workers)))))
     groups: dict[tuple[Any, ...], list[RunTask]] = {}

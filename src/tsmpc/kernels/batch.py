@@ -34,7 +34,6 @@ import types as pytypes
 from typing import Any
 
 import numpy as np
-from llvmlite import ir
 from numba import njit
 from numba.core import cgutils
 from numba.core import types as nbtypes
@@ -55,15 +54,8 @@ _NJ = {"cache": False, "fastmath": False, "error_model": "numpy"}
 _INL = {**_NJ, "inline": "always"}
 
 
-@intrinsic
-def _fma(typingctx, a, b, c):
-    """a·b + c rounded once (llvm.fma: one vfmadd instruction, vectorisable)."""
-    def codegen(context, builder, signature, args):
-        d = ir.DoubleType()
-        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(d, [d, d, d]),
-                                            "llvm.fma.f64")
-        return builder.call(fn, args)
-    return nbtypes.float64(nbtypes.float64, nbtypes.float64, nbtypes.float64), codegen
+#: a·b + c rounded once (llvm.fma: one vfmadd instruction, vectorisable)
+_fma = ke._fma
 
 
 # ============================================================================ transcendentals

@@ -23,11 +23,9 @@ one by one, so the answer is always complete.
 
 from __future__ import annotations
 
-import hashlib
 import sys
 import time
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -61,7 +59,9 @@ def _load_kernel() -> Any:
     mod = None
     if eng._load_kernel() is not None:  # the engine and the blocks (and NUMBA_CACHE_DIR) first
         folder = kernels._tree_folder(kernels.numba_cache_dir())
-        _forget_stale_machine_code(folder)
+        # its machine code holds the engine's step and the block kernels: stale when one changes
+        eng._forget_stale_machine_code(folder, "batch", ("engine", "mpc", "mhe", "lqr", "plant",
+                                                         "batch"), "batch.sources-sha256")
         if not any(folder.glob("batch.advance-*.nbi")):
             print("tsmpc: compiling the batched-run kernel (first run only, about a minute)…",
                   file=sys.stderr, flush=True)
@@ -112,32 +112,6 @@ def _give_up(err: BaseException | None) -> None:
     print(f"tsmpc: batched runs unavailable ({type(err).__name__}: {err}); running them one by "
           "one", file=sys.stderr, flush=True)
     _KERNEL["mod"] = None
-
-
-def _forget_stale_machine_code(folder: Path) -> None:
-    """numba keys a cached function by its own file only, and the batch kernel's machine code
-    contains the engine's step and the block kernels (kernels/engine.py, mpc.py, mhe.py, lqr.py,
-    plant.py): its cache entries are deleted whenever one of those sources changes."""
-    import tsmpc.kernels as pkg
-    from tsmpc.errors import TsmpcError
-    from tsmpc.textfile import read_bytes, read_text
-
-    here = Path(pkg.__file__).parent
-    digest = hashlib.sha256(b"".join(read_bytes(here / f"{m}.py", "kernel source") for m in
-                                     ("engine", "mpc", "mhe", "lqr", "plant", "batch"))).hexdigest()
-    stamp = folder / "batch.sources-sha256"
-    try:
-        if read_text(stamp, "batch cache stamp", limit=1024).strip() == digest:
-            return
-    except (TsmpcError, OSError):
-        pass
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        for p in folder.glob("batch.*.nb[ic]"):
-            p.unlink()
-        stamp.write_text(digest)
-    except OSError:  # an unwritable cache: numba refuses it too (tsmpc.kernels.cache_problem)
-        pass
 
 
 class _Lane:

@@ -543,11 +543,14 @@ def _load_kernel() -> Any:
     return mod
 
 
-def _forget_stale_machine_code(folder: Any) -> None:
+def _forget_stale_machine_code(folder: Any, prefix: str = "engine",
+                               sources: tuple[str, ...] = ("mpc", "mhe", "lqr", "plant"),
+                               stamp_name: str = "engine.blocks-sha256") -> None:
     """numba keys a cached function by its own file only: the engine's machine code, which
     contains the block kernels it calls (kernels/mpc.py, mhe.py, lqr.py, plant.py), would outlive
-    an edit of one of them. So the engine's cache entries carry the hash of those sources (a
-    file beside them) and are deleted when it differs: the next call compiles afresh."""
+    an edit of one of them. So the cache entries ``<prefix>.*`` carry the hash of those
+    ``sources`` (a file beside them, ``stamp_name``) and are deleted when it differs: the next
+    call compiles afresh. The batch kernel (tsmpc.sim.batch) uses the same with its sources."""
     import hashlib
 
     import tsmpc.kernels as pkg
@@ -556,16 +559,16 @@ def _forget_stale_machine_code(folder: Any) -> None:
 
     here = Path(pkg.__file__).parent
     digest = hashlib.sha256(b"".join(read_bytes(here / f"{m}.py", "kernel source")
-                                     for m in ("mpc", "mhe", "lqr", "plant"))).hexdigest()
-    stamp = folder / "engine.blocks-sha256"
+                                     for m in sources)).hexdigest()
+    stamp = folder / stamp_name
     try:
-        if read_text(stamp, "engine cache stamp", limit=1024).strip() == digest:
+        if read_text(stamp, f"{prefix} cache stamp", limit=1024).strip() == digest:
             return
     except (TsmpcError, OSError):
         pass
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        for p in folder.glob("engine.*.nb[ic]"):
+        for p in folder.glob(f"{prefix}.*.nb[ic]"):
             p.unlink()
         stamp.write_text(digest)
     except OSError:  # an unwritable cache: numba refuses it too (tsmpc.kernels.cache_problem)
