@@ -350,9 +350,13 @@ class Cascade:
         return tt
 
     def _apply_stiffness(self, C: tuple[float, float] | None) -> None:
-        """fusion.stiffness_estimate: the fitted axle stiffnesses reach the MHE and the TS-LQR."""
+        """fusion.stiffness_estimate: the fitted axle stiffnesses reach the MHE and the TS-LQR;
+        when they replace earlier ones, the slip fit's gain κ restarts (fusion.py: it explained
+        what the previous model left unexplained)."""
         if C is not None:
-            _apply_stiffness_to((self.mhe, self.lqr), C, self._stiffness_applied)
+            before = bool(self._stiffness_applied)
+            if _apply_stiffness_to((self.mhe, self.lqr), C, self._stiffness_applied) and before:
+                self._fusion.course.model_changed()
 
     def _fresh(self, t: float, m: Measurement) -> bool:
         if m.stamp is None:
@@ -524,15 +528,17 @@ class Cascade:
                        t_mpc, t2 - t1, t3 - t2)
 
 
-def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> None:
-    """Give the fitted (C_f, C_r) to the blocks that take them, when they moved by over 1 %."""
+def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> bool:
+    """Give the fitted (C_f, C_r) to the blocks that take them, when they moved by over 1 %
+    (True: they were given)."""
     if applied and all(abs(c - a) <= 0.01 * abs(a) for c, a in zip(C, applied, strict=True)):
-        return
+        return False
     for b in blocks:
         setter = getattr(b, "set_cornering_stiffness", None)
         if setter is not None:
             setter(*C)
     applied[:] = list(C)
+    return True
 
 
 def _oracle_estimate(state: ArrayLike) -> Estimate:

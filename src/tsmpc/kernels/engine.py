@@ -119,6 +119,7 @@ POSE_JUMP_M, POSE_DRIFT_M_PER_S, HEADING_JUMP_RAD, HEADING_DRIFT_RAD_PER_S = 1.0
 GATE_RAD, GATE_MIN_CHORD_M, GATE_BASELINE = 0.01, 0.3, 5
 BASELINE, MIN_CHORD_M, SLIP_MEMORY_S, SPEED_MEMORY_S = 5, 2.0, 30.0, 10.0
 SLIP_CORRECTION_MAX, SPEED_OFFSET_MAX = 0.05, 2.0
+SLIP_PRIOR = (0.005, 0.02)
 MASS_MIN_SPEED, MASS_HIGHPASS_S, MASS_MEMORY_S, MASS_EXCITATION = 3.0, 2.0, 100.0, 50.0
 MASS_RANGE_LO, MASS_RANGE_HI = -0.4, 0.6
 STIFF_PRIOR, STIFF_MEMORY_S, STIFF_RANGE_LO, STIFF_RANGE_HI, CORNER_ACCEL = 2.5e5, 100.0, 0.5, 2.0, 0.2
@@ -593,7 +594,8 @@ def _course_close(good, px, py, pth, v, omega, ay_ref, cur, ivs, sf, si, fp, ip)
 @njit(cache=True, fastmath=False)
 def _apply_stiffness(sf, si, fp, mp, prm):
     """``Cascade._apply_stiffness`` with ``CourseFusion.stiffness``: the fitted (Ĉ_f, Ĉ_r) to the
-    MHE's model and the TS-LQR's N̄, when they moved by over 1 %."""
+    MHE's model and the TS-LQR's N̄, when they moved by over 1 %; when they replace earlier
+    ones, the slip fit's κ restarts from its prior (``CourseFusion.model_changed``)."""
     comp = sf[SF_CNUM] / sf[SF_CDEN]
     c0 = 1.0 / (comp if comp >= 1e-12 else 1e-12) if comp > 0.0 else math.inf
     comp = sf[SF_CNUM + 1] / sf[SF_CDEN + 1]
@@ -608,6 +610,9 @@ def _apply_stiffness(sf, si, fp, mp, prm):
     prm[2], prm[3] = C0, C1
     mp[MP_CF], mp[MP_CR] = C0, C1
     sf[SF_APPLIED], sf[SF_APPLIED + 1] = C0, C1
+    if si[SI_HASAPPLIED] != 0:  # a model change: κ restarts (its row and column of P too)
+        sf[SF_THETA] = 0.0
+        sf[SF_P], sf[SF_P + 1], sf[SF_P + 2] = SLIP_PRIOR[0] * SLIP_PRIOR[0], 0.0, 0.0
     si[SI_HASAPPLIED] = 1
 
 
