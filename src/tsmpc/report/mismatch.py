@@ -13,6 +13,7 @@ Computation only (the figure function takes an output path; matplotlib is import
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -67,10 +68,12 @@ class Verdict:
     worst_ratio: float  #: largest default / oracle over RATIO_COLUMNS
     worst_column: str
     sat_ratio: float  #: default / oracle saturated steps (1 when both are 0)
-    physics: bool  #: the oracle-tuned row leaves 2× nominal (or diverges): the bounds do not apply
+    physics: bool  #: the oracle-tuned row leaves 2× nominal (or diverges where no controller completes)
     bounds_ok: bool | None  #: None when physics
     diverged: bool  #: the default run diverged
     passed: bool
+    diverged_at: str = ""  #: when the default run diverged ("8.2 s"), from its record's reason
+    completes: tuple[str, ...] = ()  #: the controllers that complete the case (when the oracle does not)
 
 
 def _ratio(a: float, b: float) -> float:
@@ -98,12 +101,18 @@ def acceptance(table: Any, track: str, cases: list[str], default: str = "default
         worst = max(ratios, key=lambda k: ratios[k])
         sat = _ratio(float(d["events_inner_saturated"]), float(o["events_inner_saturated"]))
         o_done = str(o["status"]) == "completed"
-        physics = not o_done or any(float(o[k]) > PHYSICS_FACTOR * float(nom[k]) for k in RATIO_COLUMNS)
+        # an oracle that leaves the road is physics only if no controller of the sweep stays on it
+        done = tuple(str(r["controller"]) for _, r in sub[sub["case"] == case].iterrows()
+                     if str(r["status"]) == "completed")
+        physics = (not o_done and not done) or (
+            o_done and any(float(o[k]) > PHYSICS_FACTOR * float(nom[k]) for k in RATIO_COLUMNS))
         diverged = str(d["status"]) != "completed"
+        when = re.search(r"at t = ([0-9.]+) s", str(d.get("reason", ""))) if diverged else None
         bounds_ok = None if physics else all(float(d[k]) <= b for k, b in BOUNDS.items())
         # a run that leaves the road never meets the criteria, even beside an oracle that does too
         passed = not diverged and ratios[worst] <= RATIO and sat <= SAT_RATIO and bounds_ok is not False
-        out.append(Verdict(case, ratios[worst], worst, sat, physics, bounds_ok, diverged, passed))
+        out.append(Verdict(case, ratios[worst], worst, sat, physics, bounds_ok, diverged, passed,
+                           f"{when.group(1)} s" if when else "", () if o_done else done))
     return out
 
 
@@ -114,9 +123,12 @@ def verdict_table(verdicts: list[Verdict]) -> str:
              "bounds (y ≤ 0.04, max abs e_y ≤ 0.25, v ≤ 0.15) | met |", "|---|---|---|---|---|---|---|"]
     for v in verdicts:
         bounds = "n/a (physics)" if v.bounds_ok is None else ("yes" if v.bounds_ok else "**no**")
-        met = "yes" if v.passed else ("**no** (diverged)" if v.diverged else "**no**")
+        at = f" at t = {v.diverged_at}" if v.diverged_at else ""
+        met = "yes" if v.passed else (f"**no** (diverged{at})" if v.diverged else "**no**")
+        phys = "yes" if v.physics else ("no: " + ", ".join(v.completes) + " completes"
+                                        if v.completes else "no")
         lines.append(f"| {v.case} | {v.worst_ratio:.2f} | {names[v.worst_column]} | {v.sat_ratio:.2f} | "
-                     f"{'yes' if v.physics else 'no'} | {bounds} | {met} |")
+                     f"{phys} | {bounds} | {met} |")
     return "\n".join(lines)
 
 
