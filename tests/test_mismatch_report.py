@@ -38,5 +38,6 @@ def test_ratio_rule_physics_label_and_divergence_time() -> None:
     assert v["ice"].diverged_at == "8.2 s"
     assert v["wall"].physics and not v["wall"].passed
     text = verdict_table(list(v.values()))
-    assert "| ice | 1.00 | x [m] | 1.00 | no: paper completes | **no** | **no** (diverged at t = 8.2 s) |" in text
+    assert ("| ice | 1.00 | x [m] | 1.00 | no: paper completes | **no** | **no** (diverged at t = 8.2 s) |"
+            in text)
     assert "| wall | 1.00 | x [m] | 1.00 | yes | n/a (physics) | **no** (diverged at t = 8.2 s) |" in text
