@@ -349,11 +349,7 @@ def _termination(lane: _Lane, code: int, ke: Any) -> tuple[str, int, int, int]:
     if lane.ended is not None:  # the plant's error (NEED_PLANT decided in Python)
         return lane.ended, m // n_in + 1, m + 1, m + 1
     if code == ke.DIVERGED:
-        k = m // n_in
-        bound = a.fp[ke.FP_BOUND]
-        e_y = abs(float(a.sc[ke.SC_EY]))
-        return (f"diverged: |e_y| = {e_y:.2f} m > {bound:g} m at t = "
-                f"{k * lane.run.cascade.Tc:.1f} s", k + 1, m, m + 1)
+        return lane.run.diverged(m)
     M = K * n_in
     return "completed", K, M, M
 

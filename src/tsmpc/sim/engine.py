@@ -876,6 +876,14 @@ class _Run:
         return None
 
     # -- the loop ----------------------------------------------------------------------------
+    def diverged(self, m: int) -> tuple[str, int, int, int]:
+        """(termination, outer steps done, inner rows logged, sensor samples taken) of a run the
+        kernel stopped at inner step ``m`` for |e_y| beyond its bound (the Python loop's words)."""
+        a, ke, k = self.a, self.ke, m // self.n_in
+        e_y, bound = abs(float(a.sc[ke.SC_EY])), a.fp[ke.FP_BOUND]
+        return (f"diverged: |e_y| = {e_y:.2f} m > {bound:g} m at t = {k * self.cascade.Tc:.1f} s",
+                k + 1, m, m + 1)
+
     def loop(self, progress: Callable[[int, int], None] | None) -> tuple[str, int, int, int]:
         """Run to the end; (termination, outer steps done, inner rows logged, sensor samples
         taken)."""
@@ -912,11 +920,7 @@ class _Run:
                 if why is not None:
                     return why, m // n_in + 1, m + 1, m + 1
             elif code == ke.DIVERGED:
-                k = m // n_in
-                bound = a.fp[ke.FP_BOUND]
-                e_y = abs(float(a.sc[ke.SC_EY]))
-                return (f"diverged: |e_y| = {e_y:.2f} m > {bound:g} m at t = "
-                        f"{k * self.cascade.Tc:.1f} s", k + 1, m, m + 1)
+                return self.diverged(m)
             else:  # pragma: no cover (a kernel/caller mismatch)
                 raise RuntimeError(f"run engine: unknown code {code}")
 
