@@ -228,3 +228,31 @@ def test_cli_sweep_dry_run_and_bad_file(tmp_path: Path) -> None:
     assert again.exit_code == 0 and "0 run now, 8 resumed" in again.output
     bad = CliRunner().invoke(app, ["sweep", str(_write(tmp_path, "[grid]\nmethod = []\n", "b.toml"))])
     assert bad.exit_code == 2 and "axis 'method' is empty" in bad.output
+
+
+def test_cli_sweep_refuses_a_full_out_folder_before_any_design_work(tmp_path: Path, monkeypatch) -> None:
+    """A non-empty --out (without --resume) is refused with one line before the LMI designs are
+    loaded or solved; a design failure leaves no folder the command created."""
+    from typer.testing import CliRunner
+
+    import tsmpc.cli.sweep as cli_sweep
+    from tsmpc.cli import app
+    from tsmpc.errors import SolverError
+
+    calls = []
+
+    def designs(cfg):
+        calls.append(cfg)
+        raise SolverError("dynamic LMI infeasible (injected)")
+
+    monkeypatch.setattr(cli_sweep, "design_status", designs)
+    sweep = _write(tmp_path, GRID8)
+    full = tmp_path / "full"
+    full.mkdir()
+    (full / "notes.txt").write_text("mine")
+    res = CliRunner().invoke(app, ["sweep", str(sweep), "--out", str(full)])
+    assert res.exit_code == 2 and "folder is not empty" in res.output and not calls
+    fresh = tmp_path / "fresh"
+    res = CliRunner().invoke(app, ["sweep", str(sweep), "--out", str(fresh)])
+    assert res.exit_code == 2 and "infeasible (injected)" in res.output and len(calls) == 1
+    assert not fresh.exists()

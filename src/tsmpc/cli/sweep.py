@@ -79,12 +79,6 @@ def sweep_cmd(
         spec = spec.model_copy(update={"batch": batch})
     if out is None and resume:
         fail(ConfigError("--resume needs --out: the folder of the sweep to finish"))
-    designs = None
-    if not dry_run:  # one pair of designs serves every run: solved before anything is written
-        try:
-            designs = design_status(base_config(spec))
-        except TsmpcError as err:
-            fail(err)
     if out is None:
         from tsmpc.cli._outdir import claim_default_out
 
@@ -99,6 +93,14 @@ def sweep_cmd(
         check_out_dir(out, overwrite=True)  # records on disk are kept and skipped
     else:
         check_out_dir(out, overwrite=False, hint="pass --resume to finish the sweep in it")
+    designs = None
+    if not dry_run:  # one pair of designs serves every run: solved before any run starts
+        try:
+            designs = design_status(base_config(spec))
+        except TsmpcError as err:
+            if created and out.is_dir() and not any(out.iterdir()):  # leave no trace
+                out.rmdir()
+            fail(err)
     n = len(expand(spec))
     where = scheduler or f"a local cluster of {workers} worker processes"
     con.print(Text.assemble("sweep ", (spec.name, "bold"), f": {n} runs on {where} → {out}"))
