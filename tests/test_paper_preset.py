@@ -42,7 +42,9 @@ def test_paper_preset_is_the_published_cascade() -> None:
     fusion = set(type(default.fusion).model_fields)
     assert not any(getattr(paper.fusion, f) for f in fusion)
     assert all(getattr(default.fusion, f) for f in fusion)
-    beyond = {"lqr": {"speed_feedback", "friction_estimate"}, "mpc": set(outer), "fusion": fusion}
+    assert paper.lqr.low_speed_resistance is False and default.lqr.low_speed_resistance is True
+    beyond = {"lqr": {"speed_feedback", "friction_estimate", "low_speed_resistance"}, "mpc": set(outer),
+              "fusion": fusion}
     assert paper.model_dump(exclude=beyond) == default.model_dump(exclude=beyond)
     assert Config.preset("default") == default
 

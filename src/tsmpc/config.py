@@ -573,6 +573,10 @@ class LQRSettings(_Frozen):
         0.3, ge=0.01, le=100.0,
         description="time constant τ [s] of the speed-error feedback M (v_ref − v̂)/τ, 0.01 to 100"
     )
+    low_speed_resistance: StrictBool = Field(
+        True, description="below the dynamic box's speed floor, add the model's road resistance the "
+        "clipped premise leaves out, mu_o M g (1 - v/v_min), to the force and remove it from the "
+        "force the MHE sees (beyond the paper: a launch from rest)")
     # Quirks of the published run, not recommendations: the ``paper-as-run`` preset.
     true_state_feedback: StrictBool = Field(
         False, description="the inner law runs on the true plant state [v, α, ω] while the MHE is "
@@ -1005,7 +1009,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     # reference gain, friction compensation with the paper's UIO formula (P-disturb_estimation),
     # no speed-error feedback, the body-frame kinematic error model against the reference heading
     # as given (no slip-aware loop, no tangent heading). The weights are the paper's already.
-    "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio"},
+    "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio", "low_speed_resistance": False},
               "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False},
               "fusion": _FUSION_OFF},
     # The paper as it was run (the published run): the ``paper`` preset plus every quirk of the published
@@ -1018,7 +1022,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         # published solver's point is unknown; the centre is what an interior-point method
         # converges to without objective, in any units)
         "dynamic_lmi": {"formulation": "feasibility-euler", "feasible_point": "analytic-center"},
-        "lqr": {"speed_feedback": False, "friction_estimate": "uio",
+        "lqr": {"speed_feedback": False, "friction_estimate": "uio", "low_speed_resistance": False,
                 "friction_compensation": False,  # the force command was the clipped LQR output
                 "true_state_feedback": True,  # the inner law on the true states; MHE unused
                 "law": "as-run", "steering_bias_rad": 0.5236, "scheduling_speed_shift": 2.0,

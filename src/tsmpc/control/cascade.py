@@ -276,6 +276,7 @@ class Cascade:
         self._pose_fresh = False
         self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
         self._u_applied = np.zeros(2)
+        self._low_applied = 0.0  # lqr.low_speed_resistance's part of the applied force
         self._last: Command | None = None
         self._plan: MPCResult | None = None
         self._events = dict.fromkeys(EVENT_NAMES, 0)
@@ -491,9 +492,12 @@ class Cascade:
         if m.force is not None or m.steering is not None:
             u_mhe = np.array([self._u_applied[0] if m.force is None else float(m.force),
                               self._u_applied[1] if m.steering is None else float(m.steering)])
+        # lqr.low_speed_resistance: the MHE's model has the clipped resistance, so it sees the force
+        # net of the part the law added for it (ts_lqr.py)
+        u_model = u_mhe if self._low_applied == 0.0 else u_mhe - np.array([self._low_applied, 0.0])
         t1 = time.perf_counter()
         try:
-            est = self.mhe.step(y, u_mhe)
+            est = self.mhe.step(y, u_model)
         except Exception as err:  # e.g. a LinAlgError: keep the last estimate, flagged FAILED
             self._caught(err)
             last = self.last_estimate
@@ -505,7 +509,7 @@ class Cascade:
         if fu.any_course:
             # only samples the gates accepted: a rejected heading or speed is garbage
             fu.course.sample(pose_ok and speeds_ok, th, v, float(est.x[1]), float(est.x[0] * est.x[2]), om,
-                             float(u_mhe[1]), float(u_mhe[0]))
+                             float(u_model[1]), float(u_model[0]))
         if m.state is None:
             inner = est
             if fs.mass_estimate:  # the mass error's inertia is not friction (fusion.py)
@@ -521,6 +525,7 @@ class Cascade:
         out = self.lqr.step(inner, v_ref, w_ref)
         t3 = time.perf_counter()
         self._u_applied = np.array([out.F_xR, out.delta])
+        self._low_applied = float(getattr(out, "F_low_speed", 0.0))
         ev["mhe_rejected"] += est.status == EstimatorStatus.REJECTED
         ev["mhe_failed"] += est.status == EstimatorStatus.FAILED
         ev["inner_saturated"] += bool(out.saturated)

@@ -27,6 +27,14 @@ compensated F̂_fr: the MHE's window fit (default) or the paper's one-step UIO f
 Anti-windup: the filter states are clamped to the saturation limits and ζ stops integrating
 while an input saturates.
 
+``low_speed_resistance`` (beyond the paper): the model's road resistance, written ``(μ_o g / v) v``
+in the linear-parameter-varying form, is evaluated at the speed clipped into the box, so below the
+box's floor v_min (2 m/s) it shrinks to ``μ_o M g v / v_min``: the law under-drives a launch by up to
+μ_o M g and the MHE reads the missing resistance as friction (F̂ twice the true one at 1 m/s). The
+switch adds the missing part ``μ_o M g (1 − v̂ / v_min)`` (:meth:`TSLQR.low_speed_residual`) to the
+force, outside the filter like the compensation, and the cascade removes it from the force the MHE
+sees, so the model's resistance is μ_o M g at every speed.
+
 The law as the published run ran it (the published run; ``lqr.law = "as-run"``, a quirk of that run) is
 :mod:`tsmpc.control.paper_as_run`.
 """
@@ -55,6 +63,9 @@ class InnerCommand:
     delta: float
     saturated: bool
     F_comp: float  #: the friction compensation included in F_xR [N]
+    #: the model's road resistance below the box's speed floor included in F_xR [N]
+    #: (``low_speed_resistance``; the MHE must see F_xR minus this, see :meth:`TSLQR.low_speed_residual`)
+    F_low_speed: float = 0.0
 
 
 def equilibrium(v: float, omega: float, p: VehicleParams, iters: int = 4) -> tuple[float, float, float]:
@@ -242,22 +253,33 @@ class TSLQR:
         the outer-loop references; returns the plant input for the next T_d."""
         return self._step(estimate, v_ref, omega_ref)
 
+    def low_speed_residual(self, v: float) -> float:
+        """The model's road resistance the clipped premise leaves out at speed ``v`` [N]:
+        μ_o M g (1 − v / v_min) below the box's speed floor v_min, 0 above it and with
+        ``low_speed_resistance`` off."""
+        v_min = self._zlo[1]
+        if not self.settings.low_speed_resistance or not v < v_min:
+            return 0.0
+        p = self.vehicle
+        return p.mu_nominal * p.g * p.mass * (1.0 - max(v, 0.0) / v_min)
+
     def _step(self, estimate: Any, v_ref: float, omega_ref: float) -> InnerCommand:
         v, al, om = (float(c) for c in estimate.x)
         if not (math.isfinite(v) and math.isfinite(al) and math.isfinite(om)):
             # Never command from a corrupted estimate: hold the last input.
             return InnerCommand(float(self._applied[0]), float(self._applied[1]), True, 0.0)
         st = self.settings
+        low = self.low_speed_residual(v)
         if self._kern is not None:
             comp = 0.0
             if st.friction_compensation:
                 F_hat = float(estimate.F_fr if st.friction_estimate == FrictionEstimate.WINDOW
                               else estimate.F_fr_raw)
                 comp = F_hat if math.isfinite(F_hat) else 0.0
-            o0, o1, sat, ok = self._kern.lqr_step(self._s, v, al, om, comp, float(v_ref),
+            o0, o1, sat, ok = self._kern.lqr_step(self._s, v, al, om, comp + low, float(v_ref),
                                                   float(omega_ref), *self._kargs)
             if ok:
-                return InnerCommand(o0, o1, sat, comp)
+                return InnerCommand(o0, o1, sat, comp, low)
             # singular reference gain: the numpy step below decides (and may raise)
         Fmin, dmin = float(self._lo[0]), float(self._lo[1])
         Fmax, dmax = float(self._hi[0]), float(self._hi[1])
@@ -284,7 +306,7 @@ class TSLQR:
             F_hat = float(estimate.F_fr if st.friction_estimate == FrictionEstimate.WINDOW
                           else estimate.F_fr_raw)
             comp = F_hat if math.isfinite(F_hat) else 0.0
-        out0 = f0 + F_add + comp
+        out0 = f0 + F_add + comp + low
         o0, o1 = min(max(out0, Fmin), Fmax), min(max(f1, dmin), dmax)
         saturated = o0 != out0 or o1 != f1
         a = self._a
@@ -293,7 +315,7 @@ class TSLQR:
         if not saturated:
             self._zeta += self.Td * (omega_ref - om)
         self._applied = np.array([o0, o1])
-        return InnerCommand(o0, o1, saturated, comp)
+        return InnerCommand(o0, o1, saturated, comp, low)
 
     def _steady_input(self, delta: float, v: float, K: NDArray[np.float64], r: NDArray[np.float64]
                       ) -> NDArray[np.float64]:

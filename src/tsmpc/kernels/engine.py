@@ -68,8 +68,8 @@ N_FP = 44
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
  IP_FMA, IP_F_MODEL, IP_F_DELAY, IP_F_HOLD, IP_F_INNER, IP_F_GNSS, IP_F_DROP,
- IP_ACT, IP_ACT_N, IP_ACT_NRK) = range(31)
-N_IP = 31
+ IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES) = range(32)
+N_IP = 32
 # inner sensor faults (robustness scenarios), IP_F_INNER
 FAULT_NONE, FAULT_HOLD_BURST, FAULT_NAN_BURST = 0, 1, 2
 # ---------------------------------------------------------------------------- MHE parameters
@@ -84,8 +84,8 @@ N_MP = 30
  SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_PRIOR, _R1, SF_AHPREV,
  SF_LF, SF_LA, SF_SXY, SF_SXX, SF_ACCEL, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2, SF_FHELD, _FH1, _FH2, _FH3, _FH4, SF_FLAST, _FL1, _FL2, _FL3, _FL4,
- SF_VNOW, SF_ACT, _AC1) = range(63)
-N_SF = 63
+ SF_VNOW, SF_ACT, _AC1, SF_LOW) = range(64)
+N_SF = 64
 # ---------------------------------------------------------------------------- integer state
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_HASCUR, SI_NCHORDS,
  SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
@@ -968,6 +968,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 sc[SC_YM], sc[SC_YM + 1] = math.nan, math.nan
             u0 = sf[SF_PLANTU] if ip[IP_MFORCE] != 0 else sf[SF_UAPP]
             u1 = sf[SF_PLANTU + 1] if ip[IP_MSTEER] != 0 else sf[SF_UAPP + 1]
+            if sf[SF_LOW] != 0.0:  # lqr.low_speed_resistance: the MHE sees the force net of it
+                u0 = u0 - sf[SF_LOW]
             si[SI_TICK0] = _ticks()
             if _mhe_begin(sc[SC_YM], sc[SC_YM + 1], u0, u1, fp[FP_MHE_MASS], mY, mW, mU, mXS, mA,
                           mB, mX, mp, mhe_views, sf, si, sc, ip) != 0:
@@ -998,13 +1000,18 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             if not (math.isfinite(ev0) and math.isfinite(ev1) and math.isfinite(ev2)):
                 sc[SC_OF], sc[SC_OD] = ls[4], ls[5]
                 si[SI_SAT] = 1
+                sf[SF_LOW] = 0.0
             else:
                 comp = 0.0
                 if ip[IP_COMP] != 0:
                     Fh = Fr_in if ip[IP_UIO] != 0 else F_in
                     comp = Fh if math.isfinite(Fh) else 0.0
+                low = 0.0  # TSLQR.low_speed_residual
+                if ip[IP_LOWRES] != 0 and ev0 < zlo[1]:
+                    low = prm[6] * prm[0] * (1.0 - _pmax(ev0, 0.0) / zlo[1])
+                sf[SF_LOW] = low
                 o0, o1, sat, ok = lqr_step(
-                    ls, ev0, ev1, ev2, comp, sc[SC_VREF], sc[SC_WREF], Kv, zlo, zhi, bits, prm,
+                    ls, ev0, ev1, ev2, comp + low, sc[SC_VREF], sc[SC_WREF], Kv, zlo, zhi, bits, prm,
                     fp[FP_L_LAM], fp[FP_L_AF], fp[FP_L_TD], fp[FP_L_FMIN], fp[FP_L_FMAX],
                     fp[FP_L_DMIN], fp[FP_L_DMAX], ip[IP_LQR_SFB] != 0, fp[FP_L_TAU])
                 if not ok:

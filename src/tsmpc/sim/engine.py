@@ -125,9 +125,9 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
     "tsmpc.control.cascade:Cascade.__init__": "af0b18a5a8ce3c1e",
-    "tsmpc.control.cascade:Cascade.reset": "e3d611e7bea0f47b",
+    "tsmpc.control.cascade:Cascade.reset": "d4b527a6c6ad599f",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "5e7481be251ba899",
+    "tsmpc.control.cascade:Cascade._step": "17af0bba8bf0179f",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
     "tsmpc.control.cascade:Cascade._plausible_speeds": "e406a3e08cdb871e",
@@ -154,7 +154,8 @@ _PORTED: dict[str, str] = {
     "tsmpc.estimation.mhe_uio:MHEUIO.set_cornering_stiffness": "4c2e3c0b21b47861",
     "tsmpc.control.ts_lqr:TSLQR.reset": "87b87f561a20499d",
     "tsmpc.control.ts_lqr:TSLQR.step": "6e5fb694882a1850",
-    "tsmpc.control.ts_lqr:TSLQR._step": "eb25d284c98a2050",
+    "tsmpc.control.ts_lqr:TSLQR._step": "8d51097438eb8dd0",
+    "tsmpc.control.ts_lqr:TSLQR.low_speed_residual": "82f47f9cb03354b2",
     "tsmpc.control.ts_lqr:TSLQR.set_cornering_stiffness": "be3fd84f79326402",
     "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
@@ -715,6 +716,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     ip[ke.IP_SPEEDFB], ip[ke.IP_LQR_SFB] = fu.speed_feedback, sfb
     ip[ke.IP_COMP] = cfg.lqr.friction_compensation
     ip[ke.IP_UIO] = cfg.lqr.friction_estimate.value == "uio"
+    ip[ke.IP_LOWRES] = lqr.settings.low_speed_resistance
     ip[ke.IP_MFORCE], ip[ke.IP_MSTEER] = scenario.measured_force, scenario.measured_steering
     ip[ke.IP_FMA] = _matvec_mode()
     # the cascade's state after reset(x0)
@@ -723,6 +725,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     sf[ke.SF_POSET] = cascade._pose_t
     sf[ke.SF_UPREV:ke.SF_UPREV + 2] = cascade._u_prev
     sf[ke.SF_UAPP:ke.SF_UAPP + 2] = cascade._u_applied
+    sf[ke.SF_LOW] = cascade._low_applied
     sf[ke.SF_THETA:ke.SF_THETA + 2] = course._theta
     sf[ke.SF_P:ke.SF_P + 4] = course._P.reshape(-1)
     sf[ke.SF_CNUM:ke.SF_CNUM + 2] = course._cnum
@@ -850,6 +853,7 @@ class _Run:
             lqr._kern = kern
         self.sec_lqr[int(a.si[ke.SI_M])] = time.perf_counter() - t0
         a.sc[ke.SC_OF], a.sc[ke.SC_OD] = out.F_xR, out.delta
+        a.sf[ke.SF_LOW] = out.F_low_speed
         a.si[ke.SI_SAT] = bool(out.saturated)
 
     def _plant(self) -> str | None:

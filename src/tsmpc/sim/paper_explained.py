@@ -160,10 +160,13 @@ def ablation_rows() -> list[ExplainedRow]:
     paper = Config.preset("paper")
     fb = replace(paper, lqr=replace(paper.lqr, speed_feedback=True))
     win = replace(fb, lqr=replace(fb.lqr, friction_estimate="window"))
+    low = replace(win, lqr=replace(win.lqr, low_speed_resistance=True))
     return [
         ExplainedRow("+ speed-error feedback", fb, "lqr.speed_feedback false → true", "ablation"),
         ExplainedRow("+ MHE-window friction estimate", win, "lqr.friction_estimate uio → window",
                      "ablation"),
+        ExplainedRow("+ model resistance below the box's speed floor", low,
+                     "lqr.low_speed_resistance false → true", "ablation"),
         ExplainedRow("+ slip-aware outer loop, tangent heading, step-average reference",
                      replace(Config(), fusion=paper.fusion),
                      "mpc.slip_aware, mpc.tangent_heading, mpc.step_average_reference false → true",
