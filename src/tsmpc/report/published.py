@@ -357,7 +357,7 @@ def ablation_rows() -> list[tuple[str, Any, bool]]:
         ("**paper preset**", paper, False),
         ("+ speed-error feedback", fb, False),
         ("+ MHE-window friction estimate", win, False),
-        ("+ model resistance below the box's speed floor",
+        ("+ low-speed model resistance",
          replace(win, lqr=replace(win.lqr, low_speed_resistance=True)), False),
         ("+ outer-loop mechanisms", replace(Config(), fusion=paper.fusion), False),
         ("+ fusion and adaptation (**= default**)", Config(), False),
@@ -436,7 +436,7 @@ def ablation(ctx: Context) -> Produced:
         f"RMSE v {_d(fb['rmse']['v'], 3)} → {_d(win['rmse']['v'], 3)} m/s; σ(ΔF_xR) {_d(fb['dF_std'], 0)} → "
         f"{_d(win['dF_std'], 0)} N; RMS error of the friction estimate {_d(err_rms(log_fb, True), 0)} N "
         f"(one-step formula) → {_d(err_rms(log_win, False), 0)} N (window).",
-        f"* **+ model resistance below the box's speed floor**: the launch's largest friction-"
+        f"* **+ low-speed model resistance**: the launch's largest friction-"
         f"estimate error (first 2 s) {_d(_launch_error(log_win), 0)} → {_d(_launch_error(log_low), 0)} N, "
         f"inner saturations {log_win.events['inner_saturated']} → {log_low.events['inner_saturated']}, "
         f"RMSE v {_d(win['rmse']['v'], 3)} → {_d(low['rmse']['v'], 3)} m/s.",

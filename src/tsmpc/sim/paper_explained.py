@@ -165,7 +165,7 @@ def ablation_rows() -> list[ExplainedRow]:
         ExplainedRow("+ speed-error feedback", fb, "lqr.speed_feedback false → true", "ablation"),
         ExplainedRow("+ MHE-window friction estimate", win, "lqr.friction_estimate uio → window",
                      "ablation"),
-        ExplainedRow("+ model resistance below the box's speed floor", low,
+        ExplainedRow("+ low-speed model resistance", low,
                      "lqr.low_speed_resistance false → true", "ablation"),
         ExplainedRow("+ slip-aware outer loop, tangent heading, step-average reference",
                      replace(Config(), fusion=paper.fusion),
