@@ -525,7 +525,7 @@ class Cascade:
         out = self.lqr.step(inner, v_ref, w_ref)
         t3 = time.perf_counter()
         self._u_applied = np.array([out.F_xR, out.delta])
-        self._low_applied = float(getattr(out, "F_low_speed", 0.0))
+        self._low_applied = out.F_low_speed
         ev["mhe_rejected"] += est.status == EstimatorStatus.REJECTED
         ev["mhe_failed"] += est.status == EstimatorStatus.FAILED
         ev["inner_saturated"] += bool(out.saturated)

@@ -127,7 +127,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade.__init__": "af0b18a5a8ce3c1e",
     "tsmpc.control.cascade:Cascade.reset": "d4b527a6c6ad599f",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "17af0bba8bf0179f",
+    "tsmpc.control.cascade:Cascade._step": "b3720bc537ce0d14",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
     "tsmpc.control.cascade:Cascade._plausible_speeds": "e406a3e08cdb871e",
