@@ -577,6 +577,15 @@ class LQRSettings(_Frozen):
         True, description="below the dynamic box's speed floor, add the model's road resistance the "
         "clipped premise leaves out, mu_o M g (1 - v/v_min), to the force and remove it from the "
         "force the MHE sees (beyond the paper: a launch from rest)")
+    friction_step: StrictBool = Field(
+        True, description="let the compensated friction follow a step of the road within the MHE window: "
+        "a CUSUM test on the one-step UIO estimate's innovation against the window fit declares a "
+        "step, and the one-step estimate is compensated until the window holds only later samples "
+        "(beyond the paper: a sudden loss of grip; tsmpc.estimation.friction_step)")
+    friction_step_threshold: FiniteFloat = Field(
+        5.0, ge=2.0, le=50.0,
+        description="friction_step's CUSUM decision threshold, in standard deviations of the "
+        "innovation, 2 to 50 (higher: fewer false alarms, later detection)")
     # Quirks of the published run, not recommendations: the ``paper-as-run`` preset.
     true_state_feedback: StrictBool = Field(
         False, description="the inner law runs on the true plant state [v, α, ω] while the MHE is "
@@ -1009,7 +1018,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     # reference gain, friction compensation with the paper's UIO formula (P-disturb_estimation),
     # no speed-error feedback, the body-frame kinematic error model against the reference heading
     # as given (no slip-aware loop, no tangent heading). The weights are the paper's already.
-    "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio", "low_speed_resistance": False},
+    "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio", "low_speed_resistance": False,
+                      "friction_step": False},
               "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False},
               "fusion": _FUSION_OFF},
     # The paper as it was run (the published run): the ``paper`` preset plus every quirk of the published
@@ -1023,7 +1033,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         # converges to without objective, in any units)
         "dynamic_lmi": {"formulation": "feasibility-euler", "feasible_point": "analytic-center"},
         "lqr": {"speed_feedback": False, "friction_estimate": "uio", "low_speed_resistance": False,
-                "friction_compensation": False,  # the force command was the clipped LQR output
+                "friction_step": False, "friction_compensation": False,  # the force command was the clipped LQR output
                 "true_state_feedback": True,  # the inner law on the true states; MHE unused
                 "law": "as-run", "steering_bias_rad": 0.5236, "scheduling_speed_shift": 2.0,
                 "extrapolate_memberships": True, "initial_filter_state": (4355.15, 0.52466)},

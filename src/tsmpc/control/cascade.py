@@ -47,6 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
+from tsmpc.estimation.friction_step import FrictionStep
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.planning.reference import Reference
@@ -248,6 +249,9 @@ class Cascade:
         from tsmpc.estimation.fusion import Fusion
 
         self._fusion = Fusion(cfg)  # beyond the paper: cfg.fusion's switches (issue 21)
+        # beyond the paper: the compensated friction may step within the MHE window
+        self._friction_step = (FrictionStep(cfg.mhe.N, cfg.lqr.friction_step_threshold)
+                               if cfg.lqr.friction_step else None)
         self.reset(x0)
 
     # -------------------------------------------------------------------------- state
@@ -264,6 +268,8 @@ class Cascade:
         self.lqr.reset()
         self._slip_gate.reset()
         self._fusion.reset(None if self._x0 is None else self._x0[:3])
+        if self._friction_step is not None:
+            self._friction_step.reset()
         if getattr(self, "_stiffness_applied", None):  # back to the config's stiffnesses
             _apply_stiffness_to((self.mhe, self.lqr), (self.cfg.vehicle.C_f, self.cfg.vehicle.C_r), [])
         self._stiffness_applied: list[float] = []
@@ -283,6 +289,7 @@ class Cascade:
         self._events["stale_rejected"] = 0
         self._events["step_errors"] = 0
         self._events["repeated_rejected"] = 0  # fusion.reject_repeated_samples (issue 21)
+        self._events["friction_steps"] = 0  # lqr.friction_step: steps of the friction detected
         self.last_error: str | None = None
 
     @property
@@ -510,15 +517,22 @@ class Cascade:
             # only samples the gates accepted: a rejected heading or speed is garbage
             fu.course.sample(pose_ok and speeds_ok, th, v, float(est.x[1]), float(est.x[0] * est.x[2]), om,
                              float(u_model[1]), float(u_model[0]))
+        F_c = est.F_fr  # the compensated window estimate (friction_step.py)
+        if self._friction_step is not None:
+            n0 = self._friction_step.n_steps
+            F_c = self._friction_step.step(float(est.F_fr), float(est.F_fr_raw),
+                                           est.status == EstimatorStatus.OK)
+            ev["friction_steps"] += self._friction_step.n_steps - n0
         if m.state is None:
-            inner = est
+            inner = est if F_c == est.F_fr else Estimate(est.x, F_c, est.F_fr_raw, est.status,
+                                                         est.solve_time_s)
             if fs.mass_estimate:  # the mass error's inertia is not friction (fusion.py)
                 dF = fu.inertia_terms(float(est.x[0]), float(est.F_fr), v_ref)
                 if dF != 0.0:
-                    inner = Estimate(est.x, est.F_fr + dF, est.F_fr_raw + dF, est.status,
+                    inner = Estimate(est.x, F_c + dF, est.F_fr_raw + dF, est.status,
                                      est.solve_time_s)
         elif self.cfg.lqr.true_state_feedback:  # the published run: true state, F̂ as configured
-            inner = Estimate(np.asarray(m.state, dtype=float).reshape(3).copy(), est.F_fr,
+            inner = Estimate(np.asarray(m.state, dtype=float).reshape(3).copy(), F_c,
                              est.F_fr_raw, est.status, est.solve_time_s)
         else:
             inner = _oracle_estimate(m.state)

@@ -51,8 +51,9 @@ ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP = 1, 2, 3, 4
 MPC_OPTIMAL, MPC_SOFT, MPC_FALLBACK = 1, 2, 3
 # event counters, in the order of Cascade.events
 (EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_MHE_REJ, EV_MHE_FAIL, EV_SAT, EV_POSE_REJ, EV_TIME_REJ,
- EV_STAMP_REJ, EV_SPEED_REJ, EV_JUMP_REJ, EV_STALE_REJ, EV_STEP_ERR, EV_REPEATED) = range(14)
-N_EVENTS = 14
+ EV_STAMP_REJ, EV_SPEED_REJ, EV_JUMP_REJ, EV_STALE_REJ, EV_STEP_ERR, EV_REPEATED,
+ EV_FSTEP) = range(15)
+N_EVENTS = 15
 
 # ---------------------------------------------------------------------------- float parameters
 (FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_V_LO, FP_V_HI, FP_W_LIM, FP_POSE_NOISE, FP_HEAD_NOISE,
@@ -61,15 +62,15 @@ N_EVENTS = 14
  FP_F_THB, FP_F_THD, FP_F_VB, FP_F_VD, FP_F_WB, FP_F_WD, FP_F_ESIG, FP_F_PDROP,
  FP_I_PERIOD, FP_I_DUR, FP_I_START,
  FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU, FP_VG,
- FP_A_GF, FP_A_GD, FP_A_RMAX) = range(44)
-N_FP = 44
+ FP_A_GF, FP_A_GD, FP_A_RMAX, FP_FS_H) = range(45)
+N_FP = 45
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
  IP_FMA, IP_F_MODEL, IP_F_DELAY, IP_F_HOLD, IP_F_INNER, IP_F_GNSS, IP_F_DROP,
- IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES) = range(32)
-N_IP = 32
+ IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP) = range(33)
+N_IP = 33
 # inner sensor faults (robustness scenarios), IP_F_INNER
 FAULT_NONE, FAULT_HOLD_BURST, FAULT_NAN_BURST = 0, 1, 2
 # ---------------------------------------------------------------------------- MHE parameters
@@ -84,15 +85,15 @@ N_MP = 30
  SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_PRIOR, _R1, SF_AHPREV,
  SF_LF, SF_LA, SF_SXY, SF_SXX, SF_ACCEL, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2, SF_FHELD, _FH1, _FH2, _FH3, _FH4, SF_FLAST, _FL1, _FL2, _FL3, _FL4,
- SF_VNOW, SF_ACT, _AC1, SF_LOW) = range(64)
-N_SF = 64
+ SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM) = range(67)
+N_SF = 67
 # ---------------------------------------------------------------------------- integer state
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_HASCUR, SI_NCHORDS,
  SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
  SI_FIFON, SI_FLASTHAS, SI_FHELDHAS,
  SI_FRESH, SI_SPOK, SI_POSEOK, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
- SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS) = range(35)
-N_SI = 35
+ SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, SI_FSN, SI_FSSINCE) = range(37)
+N_SI = 37
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
@@ -124,6 +125,7 @@ MASS_MIN_SPEED, MASS_HIGHPASS_S, MASS_MEMORY_S, MASS_EXCITATION = 3.0, 2.0, 100.
 MASS_RANGE_LO, MASS_RANGE_HI = -0.4, 0.6
 STIFF_PRIOR, STIFF_MEMORY_S, STIFF_RANGE_LO, STIFF_RANGE_HI, CORNER_ACCEL = 2.5e5, 100.0, 0.5, 2.0, 0.2
 STIFF_MAX_ACCEL = 0.1
+FS_MIN_SAMPLES, FS_VARIANCE_MEMORY, FS_DRIFT, FS_OUTLIER = 50, 500, 1.0, 3.0  # friction_step.py
 MASS_RANGE, STIFF_RANGE = (MASS_RANGE_LO, MASS_RANGE_HI), (STIFF_RANGE_LO, STIFF_RANGE_HI)  # (checks)
 # friction programs (the profiles of tsmpc.scenarios / tsmpc.conditions as data)
 FR_CONST, FR_PAPER, FR_PATCH = 0, 1, 2
@@ -668,6 +670,35 @@ def _mass_terms(v_hat, F_hat, v_ref, mv, sf, si, fp, ip):
 
 # ============================================================================ MHE wrapper
 @njit(cache=True, fastmath=False)
+def _friction_step(Fw, Fr, ok, sf, si, fp, ip, ev):
+    """``FrictionStep.step``: the friction force to compensate (lqr.friction_step)."""
+    ok = ok and math.isfinite(Fr) and math.isfinite(Fw)
+    if si[SI_FSSINCE] > 0:  # a step in progress
+        si[SI_FSSINCE] += 1
+        if si[SI_FSSINCE] > ip[IP_NW]:
+            si[SI_FSSINCE] = 0
+            sf[SF_FSGP] = 0.0
+            sf[SF_FSGM] = 0.0
+        return Fr if ok and si[SI_FSSINCE] > 0 else Fw
+    if not ok:
+        return Fw
+    d = Fr - Fw
+    if si[SI_FSN] >= FS_MIN_SAMPLES:
+        z = d / math.sqrt(sf[SF_FSVAR]) if sf[SF_FSVAR] > 0.0 else 0.0
+        sf[SF_FSGP] = _pmax(0.0, sf[SF_FSGP] + z - FS_DRIFT)
+        sf[SF_FSGM] = _pmax(0.0, sf[SF_FSGM] - z - FS_DRIFT)
+        if sf[SF_FSGP] > fp[FP_FS_H] or sf[SF_FSGM] > fp[FP_FS_H]:
+            si[SI_FSSINCE] = 1
+            ev[EV_FSTEP] += 1
+            return Fr
+        if abs(z) > FS_OUTLIER:
+            return Fw
+    si[SI_FSN] += 1
+    sf[SF_FSVAR] += (d * d - sf[SF_FSVAR]) / min(si[SI_FSN], FS_VARIANCE_MEMORY)
+    return Fw
+
+
+@njit(cache=True, fastmath=False)
 def _mhe_begin(y0, y1, u0, u1, mass, mY, mW, mU, mXS, mA, mB, mX, mp, views, sf, si, sc, ip):
     """``MHEUIO.step`` up to the window solve's answer. Returns 0 with the estimate in
     ``sc``/``si[SI_ESTSTAT]``, or 1 when the dense QP must decide (the window is ready for
@@ -991,11 +1022,14 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 _course_sample(si[SI_POSEOK] != 0 and si[SI_SPOK] != 0, y[2], y[3], ev1, ev0 * ev2,
                                y[4], sc[SC_UMHE + 1], sc[SC_UMHE], cur, si)
             F_in, Fr_in = sc[SC_ESTF], sc[SC_ESTFR]
+            F_c = F_in  # the compensated window estimate (lqr.friction_step)
+            if ip[IP_FSTEP] != 0:
+                F_c = _friction_step(F_in, Fr_in, si[SI_ESTSTAT] == ST_OK, sf, si, fp, ip, ev)
             if ip[IP_MASSEST] != 0:
                 dF = _mass_terms(ev0, F_in, sc[SC_VREF], mass_v, sf, si, fp, ip)
                 if dF != 0.0:
-                    F_in, Fr_in = F_in + dF, Fr_in + dF
-            sc[SC_INF], sc[SC_INFR] = F_in, Fr_in
+                    F_c, Fr_in = F_c + dF, Fr_in + dF
+            sc[SC_INF], sc[SC_INFR] = F_c, Fr_in
             # TSLQR.step (compiled law; a singular N̄ goes to the caller's numpy step)
             if not (math.isfinite(ev0) and math.isfinite(ev1) and math.isfinite(ev2)):
                 sc[SC_OF], sc[SC_OD] = ls[4], ls[5]
@@ -1004,7 +1038,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             else:
                 comp = 0.0
                 if ip[IP_COMP] != 0:
-                    Fh = Fr_in if ip[IP_UIO] != 0 else F_in
+                    Fh = Fr_in if ip[IP_UIO] != 0 else F_c
                     comp = Fh if math.isfinite(Fh) else 0.0
                 low = 0.0  # TSLQR.low_speed_residual
                 if ip[IP_LOWRES] != 0 and ev0 < zlo[1]:

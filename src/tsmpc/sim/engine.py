@@ -56,7 +56,7 @@ from tsmpc.sim.simulator import Scenario, _start_state, default_plant, tracked_s
 __all__ = ["LAST_RUN", "EngineFallback", "applicability", "enabled", "exact", "run", "warmup"]
 
 #: Event names in the order of :attr:`Cascade.events` (the kernel's counter array).
-_EVENTS = (*EVENT_NAMES, "stale_rejected", "step_errors", "repeated_rejected")
+_EVENTS = (*EVENT_NAMES, "stale_rejected", "step_errors", "repeated_rejected", "friction_steps")
 _MHE_STATUS = {1: EstimatorStatus.OK, 2: EstimatorStatus.REJECTED, 3: EstimatorStatus.FAILED,
                4: EstimatorStatus.WARMUP}
 _MHE_CODE = {v: k for k, v in _MHE_STATUS.items()}
@@ -124,10 +124,10 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:default_plant": "0088c937e0241d8b",
     "tsmpc.sim.simulator:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
-    "tsmpc.control.cascade:Cascade.__init__": "af0b18a5a8ce3c1e",
-    "tsmpc.control.cascade:Cascade.reset": "d4b527a6c6ad599f",
+    "tsmpc.control.cascade:Cascade.__init__": "6c1c796e8d6dbfaf",
+    "tsmpc.control.cascade:Cascade.reset": "4766309803084b40",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "b3720bc537ce0d14",
+    "tsmpc.control.cascade:Cascade._step": "90816eef490a320e",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
     "tsmpc.control.cascade:Cascade._plausible_speeds": "e406a3e08cdb871e",
@@ -156,6 +156,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.ts_lqr:TSLQR.step": "6e5fb694882a1850",
     "tsmpc.control.ts_lqr:TSLQR._step": "8d51097438eb8dd0",
     "tsmpc.control.ts_lqr:TSLQR.low_speed_residual": "82f47f9cb03354b2",
+    "tsmpc.estimation.friction_step:FrictionStep": "6c4d9a9cafdac2c2",
     "tsmpc.control.ts_lqr:TSLQR.set_cornering_stiffness": "be3fd84f79326402",
     "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
@@ -189,6 +190,10 @@ _CONSTANTS = (
         "SPEED_OFFSET_MAX", "MASS_MIN_SPEED", "MASS_HIGHPASS_S", "MASS_MEMORY_S", "MASS_EXCITATION",
         "STIFF_PRIOR", "STIFF_MEMORY_S", "CORNER_ACCEL", "STIFF_MAX_ACCEL", "MASS_RANGE",
         "STIFF_RANGE")),
+    ("tsmpc.estimation.friction_step", "MIN_SAMPLES", "FS_MIN_SAMPLES"),
+    ("tsmpc.estimation.friction_step", "VARIANCE_MEMORY", "FS_VARIANCE_MEMORY"),
+    ("tsmpc.estimation.friction_step", "DRIFT", "FS_DRIFT"),
+    ("tsmpc.estimation.friction_step", "OUTLIER", "FS_OUTLIER"),
 )
 
 
@@ -254,6 +259,7 @@ _PORTED_CLASSES = (
     ("tsmpc.conditions", "EventFriction"), ("tsmpc.conditions", "ResolvedEvent"),
     ("tsmpc.robustness", "DropoutFault"), ("tsmpc.robustness", "NaNBurstFault"),
     ("tsmpc.vehicle.actuators", "ActuatedPlant"), ("tsmpc.vehicle.actuators", "Actuators"),
+    ("tsmpc.estimation.friction_step", "FrictionStep"),
 )
 #: Module-level functions the loop calls by name (module, name, where it is defined).
 _PORTED_FUNCTIONS = (
@@ -717,6 +723,12 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     ip[ke.IP_COMP] = cfg.lqr.friction_compensation
     ip[ke.IP_UIO] = cfg.lqr.friction_estimate.value == "uio"
     ip[ke.IP_LOWRES] = lqr.settings.low_speed_resistance
+    fstep = cascade._friction_step
+    ip[ke.IP_FSTEP] = fstep is not None
+    if fstep is not None:  # its state after reset
+        fp[ke.FP_FS_H] = fstep.threshold
+        sf[ke.SF_FSVAR], sf[ke.SF_FSGP], sf[ke.SF_FSGM] = fstep._var, fstep._gp, fstep._gm
+        si[ke.SI_FSN], si[ke.SI_FSSINCE] = fstep._nvar, fstep._since
     ip[ke.IP_MFORCE], ip[ke.IP_MSTEER] = scenario.measured_force, scenario.measured_steering
     ip[ke.IP_FMA] = _matvec_mode()
     # the cascade's state after reset(x0)
