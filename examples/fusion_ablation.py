@@ -1,5 +1,6 @@
 """Ablation of the fusion and adaptation switches (issue 21; cfg.fusion) on the paper's reference:
-each switch off in turn, all off, and the paper preset, under the conditions that motivated them —
+each switch off in turn (and the inner loop's lqr.friction_step), all fusion off, and the paper
+preset, under the conditions that motivated them —
 plus the issue's single-number acceptance checks (docs/mismatch.md shows this script's output).
 
     python examples/fusion_ablation.py [REFERENCE]
@@ -7,7 +8,7 @@ plus the issue's single-number acceptance checks (docs/mismatch.md shows this sc
 :func:`fusion_blocks` is the docs generator's section ``fusion-ablation``.
 
 REFERENCE defaults to ../shared/data/paper/planner_references_100ms.csv (the paper's file, not
-bundled). 54 whole runs of 127 s (REF, seed 0): 2–4 minutes on two shared cores.
+bundled). 63 whole runs of 127 s (REF, seed 0): 2–4 minutes on two shared cores.
 """
 
 from __future__ import annotations
@@ -63,6 +64,8 @@ def fusion_blocks(ref: Path, steps: int | None = None) -> dict[str, str]:
         variants = [("default (all on)", base)]
         variants += [(f"without {s}", replace(base, fusion=replace(base.fusion, **{s: False})))
                      for s in SWITCHES]
+        # the inner loop's switch of the same issue (friction_step.py)
+        variants += [("without lqr.friction_step", replace(base, lqr=replace(base.lqr, friction_step=False)))]
         variants += [("all fusion off", replace(base, fusion=Config.preset("paper").fusion)),
                      ("paper preset", Config.preset("paper").model_copy(update={"scenario": base.scenario}))]
         for name, cfg in variants:

@@ -43,7 +43,9 @@ def test_paper_preset_is_the_published_cascade() -> None:
     assert not any(getattr(paper.fusion, f) for f in fusion)
     assert all(getattr(default.fusion, f) for f in fusion)
     assert paper.lqr.low_speed_resistance is False and default.lqr.low_speed_resistance is True
-    beyond = {"lqr": {"speed_feedback", "friction_estimate", "low_speed_resistance"}, "mpc": set(outer),
+    assert paper.lqr.friction_step is False and default.lqr.friction_step is True
+    beyond = {"lqr": {"speed_feedback", "friction_estimate", "low_speed_resistance", "friction_step"},
+              "mpc": set(outer),
               "fusion": fusion}
     assert paper.model_dump(exclude=beyond) == default.model_dump(exclude=beyond)
     assert Config.preset("default") == default

@@ -1033,7 +1033,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         # converges to without objective, in any units)
         "dynamic_lmi": {"formulation": "feasibility-euler", "feasible_point": "analytic-center"},
         "lqr": {"speed_feedback": False, "friction_estimate": "uio", "low_speed_resistance": False,
-                "friction_step": False, "friction_compensation": False,  # the force command was the clipped LQR output
+                "friction_step": False,
+                "friction_compensation": False,  # the force command was the clipped LQR output
                 "true_state_feedback": True,  # the inner law on the true states; MHE unused
                 "law": "as-run", "steering_bias_rad": 0.5236, "scheduling_speed_shift": 2.0,
                 "extrapolate_memberships": True, "initial_filter_state": (4355.15, 0.52466)},

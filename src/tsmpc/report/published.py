@@ -353,12 +353,13 @@ def ablation_rows() -> list[tuple[str, Any, bool]]:
     paper = Config.preset("paper")
     fb = replace(paper, lqr=replace(paper.lqr, speed_feedback=True))
     win = replace(fb, lqr=replace(fb.lqr, friction_estimate="window"))
+    low = replace(win, lqr=replace(win.lqr, low_speed_resistance=True))
     return [
         ("**paper preset**", paper, False),
         ("+ speed-error feedback", fb, False),
         ("+ MHE-window friction estimate", win, False),
-        ("+ low-speed model resistance",
-         replace(win, lqr=replace(win.lqr, low_speed_resistance=True)), False),
+        ("+ low-speed model resistance", low, False),
+        ("+ friction step detection", replace(low, lqr=replace(low.lqr, friction_step=True)), False),
         ("+ outer-loop mechanisms", replace(Config(), fusion=paper.fusion), False),
         ("+ fusion and adaptation (**= default**)", Config(), False),
         ("oracle (`--oracle`)", Config(), True),
@@ -412,8 +413,9 @@ def ablation(ctx: Context) -> Produced:
     # two narrow tables rather than one wide one: each fits a page at 1400 px
     p.add("ablation", "table", _table(["row", "x", "y", "θ", "v", "ω", "max \\|e_y\\| [m]"], rows))
     p.add("ablation", "effort", _table(["row", "soft / fallback MPC steps", "σ(ΔF_xR) [N]"], effort))
-    paper, fb, win, low, mech, dflt, oracle, _off = ms
-    (_, _, log_paper), (_, _, log_fb), (_, _, log_win), (_, _, log_low), _, _, _, (_, _, log_off) = runs
+    paper, fb, win, low, fstep, mech, dflt, oracle, _off = ms
+    ((_, _, log_paper), (_, _, log_fb), (_, _, log_win), (_, _, log_low), (_, _, log_step), _, _, _,
+     (_, _, log_off)) = runs
 
     def ratios(m: dict[str, Any]) -> str:
         return ", ".join(f"{_d(m['rmse'][k] / t5[k], 2)}× ({_SYM[k]})" for k in RMSE_KEYS)
@@ -440,9 +442,14 @@ def ablation(ctx: Context) -> Produced:
         f"estimate error (first 2 s) {_d(_launch_error(log_win), 0)} → {_d(_launch_error(log_low), 0)} N, "
         f"inner saturations {log_win.events['inner_saturated']} → {log_low.events['inner_saturated']}, "
         f"RMSE v {_d(win['rmse']['v'], 3)} → {_d(low['rmse']['v'], 3)} m/s.",
-        f"* **+ outer-loop mechanisms**: RMSE y {_d(low['rmse']['y'], 3)} → "
-        f"{_d(mech['rmse']['y'], 3)} m, max \\|e_y\\| {_d(low['max_abs_lateral_m'], 2)} → "
-        f"{_d(mech['max_abs_lateral_m'], 2)} m, RMSE θ {_d(low['rmse']['theta'], 4)} → "
+        f"* **+ friction step detection**: {log_step.events['friction_steps']} steps of the friction "
+        f"force declared on the paper run (the scenario's own friction changes); RMSE v "
+        f"{_d(low['rmse']['v'], 3)} → {_d(fstep['rmse']['v'], 3)} m/s, x {_d(low['rmse']['x'], 4)} → "
+        f"{_d(fstep['rmse']['x'], 4)} m; σ(ΔF_xR) {_d(low['dF_std'], 0)} → {_d(fstep['dF_std'], 0)} N "
+        "(the one-step estimate's noise while a step is compensated).",
+        f"* **+ outer-loop mechanisms**: RMSE y {_d(fstep['rmse']['y'], 3)} → "
+        f"{_d(mech['rmse']['y'], 3)} m, max \\|e_y\\| {_d(fstep['max_abs_lateral_m'], 2)} → "
+        f"{_d(mech['max_abs_lateral_m'], 2)} m, RMSE θ {_d(fstep['rmse']['theta'], 4)} → "
         f"{_d(mech['rmse']['theta'], 4)} rad.",
         f"* **+ fusion and adaptation (= default)**: on the nominal vehicle RMSE x "
         f"{_d(mech['rmse']['x'], 4)} → {_d(dflt['rmse']['x'], 4)} m, y {_d(mech['rmse']['y'], 4)} → "

@@ -167,6 +167,8 @@ def ablation_rows() -> list[ExplainedRow]:
                      "ablation"),
         ExplainedRow("+ low-speed model resistance", low,
                      "lqr.low_speed_resistance false → true", "ablation"),
+        ExplainedRow("+ friction step detection", replace(low, lqr=replace(low.lqr, friction_step=True)),
+                     "lqr.friction_step false → true", "ablation"),
         ExplainedRow("+ slip-aware outer loop, tangent heading, step-average reference",
                      replace(Config(), fusion=paper.fusion),
                      "mpc.slip_aware, mpc.tangent_heading, mpc.step_average_reference false → true",
