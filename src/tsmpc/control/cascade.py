@@ -295,7 +295,9 @@ class Cascade:
     @property
     def events(self) -> dict[str, int]:
         """Event counters since the last reset (see :data:`EVENT_NAMES`; plus ``stale_rejected``,
-        samples rejected for their age, and ``step_errors``, unexpected errors caught)."""
+        samples rejected for their age, ``step_errors``, unexpected errors caught,
+        ``repeated_rejected``, stalled samples, and ``friction_steps``, steps of the friction force
+        declared by ``lqr.friction_step``)."""
         return dict(self._events)
 
     @property

@@ -15,13 +15,14 @@ two-sided CUSUM test on z = d / σ: g⁺ = max(0, g⁺ + z − k), g⁻ = max(0,
 When g⁺ or g⁻ exceeds ``threshold`` h (5 by default) the friction force has stepped: from then on
 the one-step estimate itself is compensated (the paper's UIO formula, which follows a step within a
 sample) until the window holds only samples after the step and its own fit takes over. A shift of
-2.5 σ — the first samples after μ 0.9 → 0.3 mid-corner, where the sliding rear tyre caps the
-acceleration the estimate sees — is declared on the fourth sample. Under Gaussian noise the test's
+2.5 σ is declared on the fourth sample; after μ 0.9 → 0.3 mid-corner the first samples are only
+about that far off, because the sliding rear tyre caps the acceleration the estimate sees. Under
+Gaussian noise the test's
 in-control run length is ≈ 5.7·10⁴ samples (Siegmund's approximation; ≈ 9 min at 100 Hz); a false
 alarm costs one window (0.3 s) of the one-step estimate's noise on the force.
 
-Measured in docs/mismatch.md (mu_step, and the paper scenario's own friction pulse at 70 s in the
-nominal rows).
+Measured in docs/mismatch.md (mu_step) and in the README's ablation (the paper scenario's ice
+patch, μ = 0.1 for 0.1 s at 70 s, is such a step and its end another).
 """
 
 from __future__ import annotations
