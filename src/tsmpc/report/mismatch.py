@@ -163,9 +163,11 @@ def figure(table: Any, tracks: list[str], cases: list[str], controllers: list[st
             ax.set_ylabel(label)
             ax.set_title(f"{_ref_name(track)}: {label} (hatched: diverged)", fontsize=9)
             ax.grid(axis="y", alpha=0.3, which="both")
-            if i == 0 and j == 0:
-                ax.legend(fontsize=8)
-    fig.tight_layout()
+    # one legend above the panels: inside a panel it covered bars
+    handles, labels = axs[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", ncol=max(len(controllers), 1), fontsize=9,
+               frameon=False)
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 1.0 - 0.3 / fig.get_figheight()))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
