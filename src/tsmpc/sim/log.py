@@ -46,7 +46,10 @@ class RunLog:
     state: NDArray[np.float64]  #: (M, 6) true plant state at the start of each inner step
     estimate: NDArray[np.float64]  #: (M, 3) v̂, α̂, ω̂
     measurement: NDArray[np.float64]  #: (M, 2) measured v, ω
-    F_fr_hat: NDArray[np.float64]  #: (M,) friction estimate used by the controller [N]
+    #: (M,) the MHE's friction estimate (its window fit) [N]; the force compensated differs from it
+    #: by the mass estimate's inertia terms (fusion.mass_estimate) and, after a declared step of
+    #: the friction, by the one-step estimate (lqr.friction_step)
+    F_fr_hat: NDArray[np.float64]
     F_fr_raw: NDArray[np.float64]  #: (M,) raw UIO formula [N]
     F_fr_true: NDArray[np.float64]  #: (M,) true (μ(road) − μ_o) M g [N]
     mu_road: NDArray[np.float64]  #: (M,)
