@@ -520,11 +520,10 @@ class Cascade:
             fu.course.sample(pose_ok and speeds_ok, th, v, float(est.x[1]), float(est.x[0] * est.x[2]), om,
                              float(u_model[1]), float(u_model[0]))
         F_c = est.F_fr  # the compensated window estimate (friction_step.py)
-        if self._friction_step is not None:
-            n0 = self._friction_step.n_steps
+        if self._friction_step is not None:  # (reset together with the events)
             F_c = self._friction_step.step(float(est.F_fr), float(est.F_fr_raw),
                                            est.status == EstimatorStatus.OK)
-            ev["friction_steps"] += self._friction_step.n_steps - n0
+            ev["friction_steps"] = self._friction_step.n_steps
         if m.state is None:
             inner = est if F_c == est.F_fr else Estimate(est.x, F_c, est.F_fr_raw, est.status,
                                                          est.solve_time_s)

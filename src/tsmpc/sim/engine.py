@@ -127,7 +127,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade.__init__": "6c1c796e8d6dbfaf",
     "tsmpc.control.cascade:Cascade.reset": "4766309803084b40",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "90816eef490a320e",
+    "tsmpc.control.cascade:Cascade._step": "13ae8ed035175e67",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
     "tsmpc.control.cascade:Cascade._plausible_speeds": "e406a3e08cdb871e",
