@@ -39,8 +39,9 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
   - the axle cornering stiffnesses (``stiffness_estimate``): with the chord's slip ᾱ from the
     course, the axle forces from the measured lateral and yaw accelerations and the slips of the
     single-track model, F_yF = C_f (δ − α − a ω/v) and F_yR = C_r (b ω/v − α) are
-    fitted per axle (least squares through the origin on the compliance 1/C, the model's C as
-    prior, forgetting over ``STIFF_MEMORY_S``), from chords where the reference turns
+    fitted per axle (least squares through the origin on the compliance 1/C, Bayesian: the
+    model's C as prior with a relative σ of ``STIFF_PRIOR_REL``, each chord weighted by its slip
+    noise, forgetting over ``STIFF_MEMORY_S``), from chords where the reference turns
     (``CORNER_ACCEL``) and the car neither accelerates nor brakes (``STIFF_MAX_ACCEL``), per axle
     only where the chord's own F / slip is a plausible stiffness (``STIFF_RANGE``). The
     fitted C_f, C_r replace the model's in the MHE and in the inner loop's reference gain N̄ (the
@@ -98,9 +99,20 @@ MASS_MEMORY_S = 100.0
 MASS_EXCITATION = 50.0
 #: Bounds of the mass correction, as fractions of the model mass.
 MASS_RANGE = (-0.4, 0.6)
-#: Prior weight of the compliance fits [N²]: the model's 1/C counts as this much Σ F² (one chord
-#: at 500 N of axle force: a weak prior that data outweigh within a corner).
-STIFF_PRIOR = 2.5e5
+#: Prior standard deviation of the axle cornering stiffnesses, as a fraction of the model's: a
+#: car's tyres differ from the model's by tens of per cent (tyre make, pressure, load, wear,
+#: temperature). The compliance fits are Bayesian: the model's 1/C with this relative σ against
+#: chords weighted by their own slip noise, so how fast data outweigh the model follows the
+#: measurement's noise instead of a fixed weight.
+STIFF_PRIOR_REL = 0.3
+#: Smallest slip error [rad] of one chord in the compliance fits: the quasi-steady single-track
+#: fit's own error, which no better sensor removes (residual rms of the chords' slip against F / C
+#: with a plant equal to the model, paper reference: 0.44 mrad rear, 0.54 mrad front).
+STIFF_SLIP_FLOOR = 5e-4
+#: Chords per independent slip measurement in the compliance fits: consecutive chords' errors are
+#: correlated (same model error through a corner); 1 + 2 Σ ρ_k of that residual over 15 chords is
+#: 4.0 (rear) to 5.0 (front), so each chord counts as 1/5 of one.
+STIFF_CORRELATION = 5.0
 #: Memory of the stiffness fits [s].
 STIFF_MEMORY_S = 100.0
 #: Bounds of the fitted stiffnesses, as multiples of the model's.
@@ -187,13 +199,15 @@ class CourseFusion:
         self._sv = 0.0  # speed-offset fit: Σ w b, Σ w
         self._sw = 0.0
         self.n_chords = 0
-        # compliance fits α = F / C per axle: Σ F α, Σ F² (prior: the model's 1/C over STIFF_PRIOR)
+        # compliance fits α = F / C per axle: Σ w F α, Σ w F² with the prior 1/C_model of
+        # standard deviation STIFF_PRIOR_REL / C_model, i.e. information (C_model / REL)²
         p = self.vehicle
         c0 = np.array((p.C_f, p.C_r) if p is not None else (1.0, 1.0))
-        self._prior_num = STIFF_PRIOR / c0
+        self._prior_den = np.square(c0 / STIFF_PRIOR_REL)
+        self._prior_num = self._prior_den / c0
         self._c0 = c0  # the model's (C_f, C_r): the plausible range of a chord's own stiffness
         self._cnum = self._prior_num.copy()
-        self._cden = np.full(2, STIFF_PRIOR)
+        self._cden = self._prior_den.copy()
         self._alpha_hat_prev: float | None = None
 
     @property
@@ -364,10 +378,14 @@ class CourseFusion:
             fa, sa = np.abs(forces), np.abs(slips)
             ok = (forces * slips > 0.0) & (sa * hi * self._c0 >= fa) & (sa * lo * self._c0 <= fa)
             forces, slips = np.where(ok, forces, 0.0), np.where(ok, slips, 0.0)
+            # the chord's weight: its slip noise (the course's, or the fit's own floor), shared
+            # with the neighbouring chords (STIFF_CORRELATION)
+            s_slip = max(sig, STIFF_SLIP_FLOOR)
+            w_c = 1.0 / (STIFF_CORRELATION * s_slip * s_slip)
             g2 = 1.0 - self.Tc / STIFF_MEMORY_S
             # forgetting towards the prior (a fit without excitation returns to the model)
-            self._cnum = g2 * self._cnum + (1.0 - g2) * self._prior_num + forces * slips
-            self._cden = g2 * self._cden + (1.0 - g2) * STIFF_PRIOR + forces * forces
+            self._cnum = g2 * self._cnum + (1.0 - g2) * self._prior_num + w_c * (forces * slips)
+            self._cden = g2 * self._cden + (1.0 - g2) * self._prior_den + w_c * (forces * forces)
 
 
 class MassEstimator:

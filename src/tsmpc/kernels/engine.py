@@ -85,8 +85,8 @@ N_MP = 30
  SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_PRIOR, _R1, SF_AHPREV,
  SF_LF, SF_LA, SF_SXY, SF_SXX, SF_ACCEL, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2, SF_FHELD, _FH1, _FH2, _FH3, _FH4, SF_FLAST, _FL1, _FL2, _FL3, _FL4,
- SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM) = range(67)
-N_SF = 67
+ SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM, SF_PRIORD, _RD1) = range(69)
+N_SF = 69
 # ---------------------------------------------------------------------------- integer state
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_HASCUR, SI_NCHORDS,
  SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
@@ -123,7 +123,8 @@ SLIP_CORRECTION_MAX, SPEED_OFFSET_MAX = 0.05, 2.0
 SLIP_PRIOR = (0.005, 0.02)
 MASS_MIN_SPEED, MASS_HIGHPASS_S, MASS_MEMORY_S, MASS_EXCITATION = 3.0, 2.0, 100.0, 50.0
 MASS_RANGE_LO, MASS_RANGE_HI = -0.4, 0.6
-STIFF_PRIOR, STIFF_MEMORY_S, STIFF_RANGE_LO, STIFF_RANGE_HI, CORNER_ACCEL = 2.5e5, 100.0, 0.5, 2.0, 0.2
+STIFF_PRIOR_REL, STIFF_SLIP_FLOOR, STIFF_CORRELATION = 0.3, 5e-4, 5.0
+STIFF_MEMORY_S, STIFF_RANGE_LO, STIFF_RANGE_HI, CORNER_ACCEL = 100.0, 0.5, 2.0, 0.2
 STIFF_MAX_ACCEL = 0.1
 FS_MIN_SAMPLES, FS_VARIANCE_MEMORY, FS_DRIFT, FS_OUTLIER = 50, 500, 1.0, 3.0  # friction_step.py
 MASS_RANGE, STIFF_RANGE = (MASS_RANGE_LO, MASS_RANGE_HI), (STIFF_RANGE_LO, STIFF_RANGE_HI)  # (checks)
@@ -541,11 +542,13 @@ def _chord(ex, ey, eth, ivs, sf, si, fp, ip):
             f0, sl0 = 0.0, 0.0
         if not (f1 * sl1 > 0.0 and sa1 * STIFF_RANGE_HI * m1 >= fa1 and sa1 * STIFF_RANGE_LO * m1 <= fa1):
             f1, sl1 = 0.0, 0.0
+        s_slip = _pmax(sig, STIFF_SLIP_FLOOR)  # the chord's weight (CourseFusion._chord)
+        w_c = 1.0 / (STIFF_CORRELATION * s_slip * s_slip)
         g2 = 1.0 - Tc / STIFF_MEMORY_S
-        sf[SF_CNUM] = g2 * sf[SF_CNUM] + (1.0 - g2) * sf[SF_PRIOR] + f0 * sl0
-        sf[SF_CNUM + 1] = g2 * sf[SF_CNUM + 1] + (1.0 - g2) * sf[SF_PRIOR + 1] + f1 * sl1
-        sf[SF_CDEN] = g2 * sf[SF_CDEN] + (1.0 - g2) * STIFF_PRIOR + f0 * f0
-        sf[SF_CDEN + 1] = g2 * sf[SF_CDEN + 1] + (1.0 - g2) * STIFF_PRIOR + f1 * f1
+        sf[SF_CNUM] = g2 * sf[SF_CNUM] + (1.0 - g2) * sf[SF_PRIOR] + w_c * (f0 * sl0)
+        sf[SF_CNUM + 1] = g2 * sf[SF_CNUM + 1] + (1.0 - g2) * sf[SF_PRIOR + 1] + w_c * (f1 * sl1)
+        sf[SF_CDEN] = g2 * sf[SF_CDEN] + (1.0 - g2) * sf[SF_PRIORD] + w_c * (f0 * f0)
+        sf[SF_CDEN + 1] = g2 * sf[SF_CDEN + 1] + (1.0 - g2) * sf[SF_PRIORD + 1] + w_c * (f1 * f1)
 
 
 @njit(cache=True, fastmath=False)
