@@ -28,10 +28,13 @@ def test_repeated_samples_are_recognised_and_nan_is_not_a_repeat() -> None:
 
 
 def _drive(fusion: CourseFusion, segments, *, kappa: float, beta: float, v_offset: float,
-           true_vehicle=None, model_vehicle=None, Tc: float = 0.1, Td: float = 0.01) -> None:
+           true_vehicle=None, model_vehicle=None, Tc: float = 0.1, Td: float = 0.01,
+           pos_noise: float = 0.0) -> None:
     """Drive arcs of constant (v, ω) [segment = (v, ω, seconds)] with the true slip α and the
-    model's α̂ = α − (κ v ω + β); the speed sensor reads v + v_offset. With vehicles given, α and δ
-    are the linear single-track's steady state of the true vehicle (SPEC §5)."""
+    model's α̂ = α − (κ v ω + β); the speed sensor reads v + v_offset, the positions carry
+    Gaussian noise of σ ``pos_noise`` (seed 0). With vehicles given, α and δ are the linear
+    single-track's steady state of the true vehicle (SPEC §5)."""
+    rng = np.random.default_rng(0)
     X = Y = th = 0.0
     n_in = round(Tc / Td)
     first = True
@@ -43,7 +46,8 @@ def _drive(fusion: CourseFusion, segments, *, kappa: float, beta: float, v_offse
         alpha_hat = alpha - (kappa * v * w + beta)
         for k in range(round(secs / Td)):
             if k % n_in == 0:  # the reference turns as the car does (its v_d ω_d)
-                fusion.close(np.array([X, Y, th]), v + v_offset, w, v * w)
+                fusion.close(np.array([X, Y, th]) + np.r_[pos_noise * rng.standard_normal(2), 0.0],
+                             v + v_offset, w, v * w)
                 first = False
             fusion.sample(True, th, v + v_offset, alpha_hat, v * w, w, delta, 0.0)
             # exact motion over T_d: heading θ + α of the velocity turns at ω (α constant)
@@ -110,6 +114,27 @@ def test_the_stiffness_fit_weighs_a_gentle_corner_by_the_positions_noise(cfg: Co
     noisy = CourseFusion(0.1, 0.05, model)
     _drive(noisy, corner, kappa=0.0, beta=0.0, v_offset=0.0, true_vehicle=true)
     assert noisy.stiffness[1] > 0.95 * model.C_r
+
+
+def test_positions_noisier_than_configured_are_measured_on_straights(cfg: Config) -> None:
+    """On straights the slip fit's innovation is the chords' noise: positions with 1 cm of noise
+    where the config says 1 mm raise the noise scale (each chord then counts for less in the slip
+    and stiffness fits), exact positions leave it at 1."""
+    model = cfg.vehicle
+    true = replace(model, cornering_stiffness_rear=0.7 * model.C_r)
+    course = [(10.0, 0.0, 30.0), (10.0, 0.06, 3.0)]
+    exact = CourseFusion(0.1, 0.001, model)
+    _drive(exact, course, kappa=0.0, beta=0.0, v_offset=0.0, true_vehicle=true)
+    assert exact.noise_scale == 1.0
+    noisy = CourseFusion(0.1, 0.001, model)
+    _drive(noisy, course, kappa=0.0, beta=0.0, v_offset=0.0, true_vehicle=true, pos_noise=0.01)
+    # the chord's lateral noise √2 σ / chord = 2.8 mrad over the configured (conservative)
+    # 2 √2 σ / chord + 0.2 mrad = 0.77 mrad on 5 m chords: 3.7
+    assert 2.5 < noisy.noise_scale < 5.0
+    # the exact chords take the fit to the true rear grip; the noisy ones, weighed as noisy, take
+    # it part of the way (trusted as precise, they took it to 0.73× the model, past the truth)
+    assert exact.stiffness[1] == pytest.approx(true.C_r, rel=0.05)
+    assert 0.75 * model.C_r < noisy.stiffness[1] < 0.9 * model.C_r
 
 
 def test_the_stiffness_fit_ignores_a_car_weaving_on_a_straight(cfg: Config) -> None:

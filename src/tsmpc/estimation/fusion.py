@@ -50,7 +50,11 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     LMI gains alone it does not).
 
   The fits compare like with like (means over the same chord), so the chord's lag in a transient
-  does not bias them; only chords of measured (not predicted) poses count.
+  does not bias them; only chords of measured (not predicted) poses count. Each chord is weighted
+  by its slip noise: the configured position σ over the chord's length, scaled up by the noise
+  level the slip fit measures where the reference runs straight (there the slip and the model's
+  error in it are ≈ 0, so its innovation is noise: ``noise_scale``) — positions noisier than the
+  config says then count for less instead of driving the fits.
 * :class:`MassEstimator` (``mass_estimate``) — the MHE's window-constant friction force F̂ takes up
   whatever force the model does not explain; with a mass error that includes ΔM ā, the inertia of
   the extra mass (ā = the window's mean acceleration). Compensating it feeds the acceleration back
@@ -113,6 +117,10 @@ STIFF_SLIP_FLOOR = 5e-4
 #: correlated (same model error through a corner); 1 + 2 Σ ρ_k of that residual over 15 chords is
 #: 4.0 (rear) to 5.0 (front), so each chord counts as 1/5 of one.
 STIFF_CORRELATION = 5.0
+#: Memory [s of chords on straights] of the positions' measured noise level.
+NOISE_MEMORY_S = 30.0
+#: Prior of the measured noise level, in chords at the configured σ.
+NOISE_PRIOR_CHORDS = 10.0
 #: Memory of the stiffness fits [s].
 STIFF_MEMORY_S = 100.0
 #: Bounds of the fitted stiffnesses, as multiples of the model's.
@@ -199,6 +207,9 @@ class CourseFusion:
         self._sv = 0.0  # speed-offset fit: Σ w b, Σ w
         self._sw = 0.0
         self.n_chords = 0
+        # measured noise level: Σ (innovation / σ_chord)² and Σ 1 of the slip fit on straights
+        self._n2 = NOISE_PRIOR_CHORDS
+        self._n1 = NOISE_PRIOR_CHORDS
         # compliance fits α = F / C per axle: Σ w F α, Σ w F² with the prior 1/C_model of
         # standard deviation STIFF_PRIOR_REL / C_model, i.e. information (C_model / REL)²
         p = self.vehicle
@@ -221,6 +232,12 @@ class CourseFusion:
             a_y = 0.0
         c = float(self._theta[0] * a_y + self._theta[1])
         return min(max(c, -SLIP_CORRECTION_MAX), SLIP_CORRECTION_MAX)
+
+    @property
+    def noise_scale(self) -> float:
+        """The chords' slip noise as measured on straights, over the configured σ's (≥ 1: the
+        configured σ is a floor)."""
+        return math.sqrt(max(1.0, self._n2 / self._n1))
 
     @property
     def speed_offset(self) -> float:
@@ -326,12 +343,23 @@ class CourseFusion:
         self.n_chords += 1
         # slip: z = ᾱ_course − ᾱ̂ = κ ā_y + β, weighted by the chord's noise (positions at both ends)
         z = a_course - alpha_hat
-        sig = 2.0 * math.sqrt(2.0) * self.sigma / chord + 2e-4
-        lam = 1.0 - self.Tc / SLIP_MEMORY_S
+        sig0 = 2.0 * math.sqrt(2.0) * self.sigma / chord + 2e-4
+        # where the reference runs straight the slip and the model's error in it are ≈ 0, so the
+        # fit's innovation there is the chord's noise: its level scales the configured σ up
+        # (positions noisier than the config says)
+        cornering = min(i.ay_ref for i in self._iv) >= CORNER_ACCEL
         phi = np.array([a_y, 1.0])
+        innov = z - phi @ self._theta
+        if not cornering:
+            g_n = 1.0 - self.Tc / NOISE_MEMORY_S
+            r = innov / sig0
+            self._n2 = g_n * self._n2 + r * r
+            self._n1 = g_n * self._n1 + 1.0
+        sig = sig0 * self.noise_scale
+        lam = 1.0 - self.Tc / SLIP_MEMORY_S
         P = self._P / lam
         k = P @ phi / (sig * sig + phi @ P @ phi)
-        self._theta = self._theta + k * (z - phi @ self._theta)
+        self._theta = self._theta + k * innov
         self._P = P - np.outer(k, phi @ P)
         # speed over ground: the arc of the chord (turn Δχ ≈ Δθ) over its time span
         turn = abs(_wrap(float(end[2]) - first[2]))
@@ -353,7 +381,7 @@ class CourseFusion:
         # and only where the reference turns: a straight carries no information on C (slips and
         # forces ≈ 0), only the traces of a lightly damped yaw motion (the same Monza case drifted
         # there); the reference's turn, not the car's, so that weaving does not count as a corner
-        cornering = min(i.ay_ref for i in self._iv) >= CORNER_ACCEL
+        # (cornering, above)
         # and at nearly constant speed (pure slip: STIFF_MAX_ACCEL); a NaN speed fails the test
         a_x = (self._v_now - self._iv[0].v_first) / (BASELINE * self.Tc)
         steady = p is not None and abs(a_x) <= STIFF_MAX_ACCEL * p.g

@@ -85,8 +85,9 @@ N_MP = 30
  SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_PRIOR, _R1, SF_AHPREV,
  SF_LF, SF_LA, SF_SXY, SF_SXX, SF_ACCEL, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2, SF_FHELD, _FH1, _FH2, _FH3, _FH4, SF_FLAST, _FL1, _FL2, _FL3, _FL4,
- SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM, SF_PRIORD, _RD1) = range(69)
-N_SF = 69
+ SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM, SF_PRIORD, _RD1, SF_N2,
+ SF_N1) = range(71)
+N_SF = 71
 # ---------------------------------------------------------------------------- integer state
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_HASCUR, SI_NCHORDS,
  SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
@@ -124,6 +125,7 @@ SLIP_PRIOR = (0.005, 0.02)
 MASS_MIN_SPEED, MASS_HIGHPASS_S, MASS_MEMORY_S, MASS_EXCITATION = 3.0, 2.0, 100.0, 50.0
 MASS_RANGE_LO, MASS_RANGE_HI = -0.4, 0.6
 STIFF_PRIOR_REL, STIFF_SLIP_FLOOR, STIFF_CORRELATION = 0.3, 5e-4, 5.0
+NOISE_MEMORY_S, NOISE_PRIOR_CHORDS = 30.0, 10.0
 STIFF_MEMORY_S, STIFF_RANGE_LO, STIFF_RANGE_HI, CORNER_ACCEL = 100.0, 0.5, 2.0, 0.2
 STIFF_MAX_ACCEL = 0.1
 FS_MIN_SAMPLES, FS_VARIANCE_MEMORY, FS_DRIFT, FS_OUTLIER = 50, 500, 1.0, 3.0  # friction_step.py
@@ -468,9 +470,22 @@ def _chord(ex, ey, eth, ivs, sf, si, fp, ip):
     sigma = fp[FP_COURSE_SIGMA]
     # slip: recursive least squares of z = κ a_y + β with forgetting (numpy's 2-vector algebra)
     z = a_course - alpha_hat
-    sig = 2.0 * math.sqrt(2.0) * sigma / chord + 2e-4
-    lam = 1.0 - Tc / SLIP_MEMORY_S
+    sig0 = 2.0 * math.sqrt(2.0) * sigma / chord + 2e-4
+    # the chords' noise level measured on straights scales the configured σ up (CourseFusion)
+    ay_min = ivs[0, IV_AYREF]
+    for i in range(1, BASELINE):
+        ay_min = _pmin(ay_min, ivs[i, IV_AYREF])
+    cornering = ay_min >= CORNER_ACCEL
     phi0, phi1 = a_y, 1.0
+    th0, th1 = sf[SF_THETA], sf[SF_THETA + 1]
+    innov = z - (phi0 * th0 + phi1 * th1)
+    if not cornering:
+        g_n = 1.0 - Tc / NOISE_MEMORY_S
+        r = innov / sig0
+        sf[SF_N2] = g_n * sf[SF_N2] + r * r
+        sf[SF_N1] = g_n * sf[SF_N1] + 1.0
+    sig = sig0 * math.sqrt(_pmax(1.0, sf[SF_N2] / sf[SF_N1]))
+    lam = 1.0 - Tc / SLIP_MEMORY_S
     P00, P01 = sf[SF_P] / lam, sf[SF_P + 1] / lam
     P10, P11 = sf[SF_P + 2] / lam, sf[SF_P + 3] / lam
     fm = ip[IP_FMA]
@@ -480,8 +495,6 @@ def _chord(ex, ey, eth, ivs, sf, si, fp, ip):
     pP1 = phi0 * P01 + phi1 * P11
     den = sig * sig + (pP0 * phi0 + pP1 * phi1)
     k0, k1 = Pp0 / den, Pp1 / den
-    th0, th1 = sf[SF_THETA], sf[SF_THETA + 1]
-    innov = z - (phi0 * th0 + phi1 * th1)
     sf[SF_THETA] = th0 + k0 * innov
     sf[SF_THETA + 1] = th1 + k1 * innov
     sf[SF_P] = P00 - k0 * pP0
@@ -502,10 +515,7 @@ def _chord(ex, ey, eth, ivs, sf, si, fp, ip):
     for i in range(BASELINE):
         s_vw += ivs[i, IV_SVW]
     vw = s_vw / n
-    ay_min = ivs[0, IV_AYREF]
-    for i in range(1, BASELINE):
-        ay_min = _pmin(ay_min, ivs[i, IV_AYREF])
-    cornering = ay_min >= CORNER_ACCEL
+    # (cornering, above)
     # and at nearly constant speed (a pure-slip fit); a NaN speed fails the test
     a_x = (sf[SF_VNOW] - ivs[0, IV_VFIRST]) / (BASELINE * Tc)
     steady = abs(a_x) <= STIFF_MAX_ACCEL * fp[FP_VG]

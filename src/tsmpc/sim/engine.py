@@ -138,7 +138,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.estimation.fusion:_wrap": "3fd9daeaa886e92c",
     "tsmpc.estimation.fusion:RepeatGuard": "27f9c316059eec4f",
     "tsmpc.estimation.fusion:_Interval": "a5469bc5f990c457",
-    "tsmpc.estimation.fusion:CourseFusion": "fb32267da8102a34",
+    "tsmpc.estimation.fusion:CourseFusion": "c3c66ce9b3ae99d0",
     "tsmpc.estimation.fusion:MassEstimator": "d73e4cf873cfe3df",
     "tsmpc.estimation.fusion:Fusion": "f8e25eefdcfffb99",
     "tsmpc.control.slip_aware:SlipGate": "914a291e0a0ef199",
@@ -189,7 +189,7 @@ _CONSTANTS = (
         "BASELINE", "MIN_CHORD_M", "SLIP_MEMORY_S", "SPEED_MEMORY_S", "SLIP_CORRECTION_MAX", "SLIP_PRIOR",
         "SPEED_OFFSET_MAX", "MASS_MIN_SPEED", "MASS_HIGHPASS_S", "MASS_MEMORY_S", "MASS_EXCITATION",
         "STIFF_PRIOR_REL", "STIFF_SLIP_FLOOR", "STIFF_CORRELATION", "STIFF_MEMORY_S", "CORNER_ACCEL",
-        "STIFF_MAX_ACCEL", "MASS_RANGE", "STIFF_RANGE")),
+        "STIFF_MAX_ACCEL", "MASS_RANGE", "STIFF_RANGE", "NOISE_MEMORY_S", "NOISE_PRIOR_CHORDS")),
     ("tsmpc.estimation.friction_step", "MIN_SAMPLES", "FS_MIN_SAMPLES"),
     ("tsmpc.estimation.friction_step", "VARIANCE_MEMORY", "FS_VARIANCE_MEMORY"),
     ("tsmpc.estimation.friction_step", "DRIFT", "FS_DRIFT"),
@@ -744,6 +744,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     sf[ke.SF_CDEN:ke.SF_CDEN + 2] = course._cden
     sf[ke.SF_PRIOR:ke.SF_PRIOR + 2] = course._prior_num
     sf[ke.SF_PRIORD:ke.SF_PRIORD + 2] = course._prior_den
+    sf[ke.SF_N2], sf[ke.SF_N1] = course._n2, course._n1
     sf[ke.SF_VNOW] = course._v_now
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
