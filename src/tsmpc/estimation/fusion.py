@@ -344,9 +344,10 @@ class CourseFusion:
         # slip: z = ᾱ_course − ᾱ̂ = κ ā_y + β, weighted by the chord's noise (positions at both ends)
         z = a_course - alpha_hat
         sig0 = 2.0 * math.sqrt(2.0) * self.sigma / chord + 2e-4
-        # where the reference runs straight the slip and the model's error in it are ≈ 0, so the
-        # fit's innovation there is the chord's noise: its level scales the configured σ up
-        # (positions noisier than the config says)
+        # where the reference turns (its turn, not the car's, so that weaving is no corner): the
+        # stiffness fit below takes only such chords; where it runs straight the slip and the
+        # model's error in it are ≈ 0, so the fit's innovation there is the chord's noise, and its
+        # level scales the configured σ up (positions noisier than the config says)
         cornering = min(i.ay_ref for i in self._iv) >= CORNER_ACCEL
         phi = np.array([a_y, 1.0])
         innov = z - phi @ self._theta
@@ -378,10 +379,9 @@ class CourseFusion:
         # bias the fit (as a regressor it would pull C towards 0 on every straight).
         p = self.vehicle
         vw = sum(i.s_vw for i in self._iv) / n
-        # and only where the reference turns: a straight carries no information on C (slips and
-        # forces ≈ 0), only the traces of a lightly damped yaw motion (the same Monza case drifted
-        # there); the reference's turn, not the car's, so that weaving does not count as a corner
-        # (cornering, above)
+        # and only where the reference turns (``cornering``): a straight carries no information on
+        # C (slips and forces ≈ 0), only the traces of a lightly damped yaw motion (the same Monza
+        # case drifted there)
         # and at nearly constant speed (pure slip: STIFF_MAX_ACCEL); a NaN speed fails the test
         a_x = (self._v_now - self._iv[0].v_first) / (BASELINE * self.Tc)
         steady = p is not None and abs(a_x) <= STIFF_MAX_ACCEL * p.g

@@ -515,7 +515,7 @@ def _chord(ex, ey, eth, ivs, sf, si, fp, ip):
     for i in range(BASELINE):
         s_vw += ivs[i, IV_SVW]
     vw = s_vw / n
-    # (cornering, above)
+    # (only where the reference turns: ``cornering`` above)
     # and at nearly constant speed (a pure-slip fit); a NaN speed fails the test
     a_x = (sf[SF_VNOW] - ivs[0, IV_VFIRST]) / (BASELINE * Tc)
     steady = abs(a_x) <= STIFF_MAX_ACCEL * fp[FP_VG]
