@@ -41,7 +41,7 @@ def _main(
 
 def _register() -> None:
     # Each module adds its commands to ``app``; heavy imports stay inside the command bodies.
-    from tsmpc.cli import animate, compare, demo, design, plan, sweep, warmup  # noqa: F401
+    from tsmpc.cli import animate, compare, data, demo, design, plan, sweep, warmup  # noqa: F401
 
 
 _register()
@@ -72,6 +72,15 @@ def main() -> None:
         code = exc.code
     except KeyboardInterrupt:
         code = 130
+    except ImportError as exc:  # an optional dependency a command needs: the extra to install
+        from tsmpc.extras import from_import_error
+
+        hint = from_import_error(exc)
+        if hint is None or os.environ.get("TSMPC_DEBUG"):
+            raise
+        with contextlib.suppress(Exception):
+            sys.stderr.write(f"error: {hint}\n")
+        code = 2
     except Exception as exc:  # the last net: one line, never a traceback (TSMPC_DEBUG=1 shows it)
         if os.environ.get("TSMPC_DEBUG"):
             raise
