@@ -53,6 +53,7 @@ __all__ = [
     "check_out_file",
     "check_path_text",
     "console",
+    "data_path",
     "deferred_interrupts",
     "design_status",
     "fail",
@@ -234,6 +235,24 @@ def finite(name: str, value: float | None, *, lo: float | None = None, hi: float
                    f"{'inf' if hi is None else f'{hi:g}'}]")
         fail(ConfigError(f"{name} = {value!r}: must be a finite number {rng}"))
     return value
+
+
+def data_path(path: Path | None, option: str) -> Path | None:
+    """An input that may name a dataset (issue 37): an existing path is used as given; otherwise a
+    dataset or track name (``paper``, ``monza``: :mod:`tsmpc.datasets`) is resolved to its file.
+    A dataset not downloaded exits 2 naming ``tsmpc data fetch …``."""
+    from tsmpc import datasets
+
+    if path is None or os.path.lexists(path) or not datasets.is_dataset_name(path):
+        return path
+    try:
+        found = datasets.resolve(str(path))
+    except datasets.DataNotFoundError as err:
+        fail(ConfigError(f"{option} {path}: {err}"))
+    if found.is_dir():
+        fail(ConfigError(f"{option} {path}: names every race track; give one of "
+                         f"{', '.join(n for n in datasets.names() if n not in datasets.DATASETS)}"))
+    return found
 
 
 # -- output locations ----------------------------------------------------------------------

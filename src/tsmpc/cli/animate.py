@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from tsmpc.cli import app
-from tsmpc.cli._common import check_out_file, console, fail, refuse_ineffective
+from tsmpc.cli._common import check_out_file, console, data_path, fail, refuse_ineffective
 
 
 @app.command("animate")
@@ -16,7 +16,8 @@ def animate_cmd(
     method: str | None = typer.Option(None, "--method", help="Method (default: REF, else the first)."),
     out: Path | None = typer.Option(None, "--out", help="GIF path, or an MP4 path (needs ffmpeg: pip "
                                     "install 'tsmpc[video]'); default: RUN_DIR/animation_M.gif."),
-    track: Path | None = typer.Option(None, "--track", help="TUMFTM track file whose borders are drawn."),
+    track: Path | None = typer.Option(None, "--track", help="TUMFTM track file (or a track name: "
+                                      "monza, …) whose borders are drawn."),
     road_width: float | None = typer.Option(
         None, "--road-width", min=0.1, help="Draw borders at ± width/2 around the reference [m] (no --track)."
     ),
@@ -37,6 +38,7 @@ def animate_cmd(
     from tsmpc.sim.run_dir import load_run
 
     refuse_ineffective({"road_width": (track is not None, "--track draws the track's own borders")})
+    track = data_path(track, "--track")  # `--track monza`: a downloaded track
     try:
         run = load_run(run_dir)
         name = (method.upper() if method else ("REF" if "REF" in run.logs else next(iter(run.logs))))

@@ -15,6 +15,7 @@ from tsmpc.cli._common import (
     check_laps,
     check_out_dir,
     check_scenario_options,
+    data_path,
     deferred_interrupts,
     design_status,
     fail,
@@ -98,6 +99,7 @@ def _execute(
     if not methods:
         fail(ConfigError("--methods is empty"))
     check_laps(laps)
+    reference = data_path(reference, "--reference")  # `--reference paper`: a downloaded dataset
     try:
         exp = experiment.prepare(
             cfg, methods, reference=reference,
@@ -247,8 +249,8 @@ _DT_HELP = ("Column period [s] of a paper-format file (default: measured from th
             "data contradict is refused).")
 _LAPS_HELP = "Laps of a closed track (a planned track CSV); the look-ahead wraps around the lap."
 _REF_HELP = ("Reference: a paper-format file (6 rows; the paper-run window 5..1316 is used unless "
-             "--window says otherwise) or a planned CSV (t,x,y,theta,v,omega,kappa). "
-             "Default: the built-in paper-like circuit.")
+             "--window says otherwise), a planned CSV (t,x,y,theta,v,omega,kappa) or 'paper' (the "
+             "paper's reference: tsmpc data fetch paper). Default: the built-in paper-like circuit.")
 
 
 # Options shared by ``compare`` and ``run`` (one definition, two commands).

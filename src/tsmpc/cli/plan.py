@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import typer
 
 from tsmpc.cli import app
-from tsmpc.cli._common import check_laps, check_out_file, fail, finite, refuse_ineffective
+from tsmpc.cli._common import check_laps, check_out_file, data_path, fail, finite, refuse_ineffective
 from tsmpc.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -36,8 +36,9 @@ def _read_waypoints(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64
 
 @app.command("plan")
 def plan(
-    source: Path = typer.Argument(..., help="TUMFTM track CSV (recognised by its header) or an x,y "
-                                  "waypoints CSV (optional column v: speed cap to the next point)."),
+    source: Path = typer.Argument(..., help="TUMFTM track CSV (recognised by its header), a track name "
+                                  "(monza, spa, …: tsmpc data fetch tracks) or an x,y waypoints CSV "
+                                  "(optional column v: speed cap to the next point)."),
     out: Path = typer.Option(..., "--out", "-o", help="Reference file to write."),
     v_max: float = typer.Option(14.7, help="Maximum speed [m/s]."),
     a_lat: float = typer.Option(3.0, help="Lateral acceleration limit [m/s^2]."),
@@ -66,6 +67,7 @@ def plan(
     finite("--dt", dt, lo=0.0, lo_open=True, hi=10.0)
     finite("--tail", tail, lo=0.0, hi=3600.0)
     check_laps(laps)
+    source = data_path(source, "SOURCE") or source  # `tsmpc plan monza`: a downloaded track
     is_track = is_tumftm(source)
     is_closed = (True if closed is None else closed) if is_track else bool(closed)
     if v_start is not None and is_closed:  # an option that would be ignored is refused
@@ -124,7 +126,8 @@ def _warn_envelope(ref: object) -> None:
 
 @app.command("show-reference")
 def show_reference(
-    file: Path = typer.Argument(..., help="Reference (planned CSV or paper format) or TUMFTM track."),
+    file: Path = typer.Argument(..., help="Reference (planned CSV or paper format), TUMFTM track, or "
+                                "a dataset name (paper, monza, …: tsmpc data fetch)."),
     out: Path | None = typer.Option(None, "--out", "-o", help="PNG to write, or an existing folder "
                                     "(writes FOLDER/FILE-stem.png) [default: FILE.png]."),
     window: str | None = typer.Option(None, help="Paper-format columns 'FIRST,LAST' (1-based) "
@@ -147,6 +150,8 @@ def show_reference(
     png_path = out or file.with_suffix(".png")
     if out is not None and (out.is_dir() or str(out).endswith(("/", "\\"))):
         png_path = out / f"{file.stem}.png"
+    title = file.stem
+    file = data_path(file, "FILE") or file  # a dataset name: its PNG goes to the working folder
     refuse_ineffective({"window": (is_tumftm(file), "a track is planned whole: --window picks "
                                    "columns of a paper-format file or rows of a planned CSV")})
     check_out_file(png_path)
@@ -157,7 +162,7 @@ def show_reference(
             ref = plan_track(track, PlannerSettings())
         else:
             ref = load_reference(file, window=win)
-        png = save_reference_figure(ref, png_path, track=track, title=file.stem)
+        png = save_reference_figure(ref, png_path, track=track, title=title)
     except (TsmpcError, ValueError) as err:
         fail(err)
     except OSError as err:
