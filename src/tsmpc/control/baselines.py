@@ -16,41 +16,26 @@ Every baseline speaks the outer MPC's protocol: ``dt``, ``reset()`` and
 ``step(errors, u_prev, window) -> MPCResult`` with ``u = [v_ref, ω_ref]``; non-finite inputs
 give the shared fallback (:func:`tsmpc.control.ts_mpc.shifted_plan`), nothing raises.
 A law (no optimisation) reports status OPTIMAL (the law was evaluated), cost NaN, and no
-prediction: ``x_pred[0]`` is the current errors and rows 1…N are NaN; ``u_pred`` holds u.
+prediction: ``x_pred[0]`` is the current errors and rows 1…N are NaN; ``u_pred`` holds u
+(:func:`tsmpc.control.law.law_result`).
+
+This module is the registry: it imports the laws, the laws never import it.
 """
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import Config, Method
-from tsmpc.control.ts_mpc import MPCResult, MPCStatus
+from tsmpc.control.law import law_result  # (re-exported: its home is below the laws)
 
 __all__ = ["BASELINES", "build_baseline", "law_result"]
 
 #: The baseline methods (each a :class:`~tsmpc.config.Method`).
 BASELINES = (Method.PURE_PURSUIT, Method.STANLEY, Method.LQR, Method.LTV)
-
-
-def law_result(
-    x0: NDArray[np.float64], u: NDArray[np.float64], u_prev: NDArray[np.float64], N: int, t0: float,
-    n_clipped: int = 0,
-) -> MPCResult:
-    """The :class:`MPCResult` of a guidance law evaluated at errors ``x0``: first move ``u``, held
-    over the horizon, no prediction (rows 1…N of ``x_pred`` NaN); ``t0`` is the step's start
-    (perf_counter)."""
-    x_pred = np.full((N + 1, 3), np.nan)
-    x_pred[0] = x0
-    u_pred = np.tile(u, (N, 1))
-    du = np.zeros((N, 2))
-    du[0] = u - u_prev
-    return MPCResult(u=np.array(u, dtype=float), x_pred=x_pred, u_pred=u_pred, du=du,
-                     cost=float("nan"), status=MPCStatus.OPTIMAL, iterations=0, qp_iterations=0,
-                     solve_time_s=time.perf_counter() - t0, n_clipped=n_clipped)
 
 
 def build_baseline(

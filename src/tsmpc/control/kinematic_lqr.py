@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import MPCSettings
-from tsmpc.control.baselines import law_result
+from tsmpc.control.law import law_result
 from tsmpc.control.ts_mpc import MPCResult, shifted_plan
 from tsmpc.errors import ConfigError
 from tsmpc.models.kinematic import KinematicTS

@@ -27,7 +27,6 @@ from typing import Any
 import numpy as np
 
 from tsmpc.config import MPCSettings, PurePursuitSettings
-from tsmpc.control.baselines import law_result
 from tsmpc.control.geometric import (
     lookahead_point,
     nearest_point,
@@ -36,6 +35,7 @@ from tsmpc.control.geometric import (
     vehicle_pose,
     yaw_rate_command,
 )
+from tsmpc.control.law import law_result
 from tsmpc.control.ts_mpc import MPCResult, shifted_plan
 
 __all__ = ["PurePursuit"]

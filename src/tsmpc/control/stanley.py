@@ -35,7 +35,6 @@ from typing import Any
 import numpy as np
 
 from tsmpc.config import MPCSettings, StanleySettings, VehicleParams
-from tsmpc.control.baselines import law_result
 from tsmpc.control.geometric import (
     curvature_of_steering,
     nearest_point,
@@ -44,6 +43,7 @@ from tsmpc.control.geometric import (
     vehicle_pose,
     yaw_rate_command,
 )
+from tsmpc.control.law import law_result
 from tsmpc.control.ts_mpc import MPCResult, shifted_plan
 
 __all__ = ["Stanley"]
