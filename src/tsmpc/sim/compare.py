@@ -47,7 +47,7 @@ def versions() -> dict[str, str]:
 
 def load_scenario(
     cfg: Config,
-    reference: Path | None = None,
+    reference: Path | str | None = None,
     window: tuple[int, int] | None = None,
     *,
     use_paper_window: bool = True,
@@ -59,7 +59,9 @@ def load_scenario(
     the paper's time-based friction profile applies in every case. ``laps`` > 1 repeats a closed
     lap (a planned track). A paper-format file's column period is measured (``dt`` given: checked
     against the data); the default window is the paper run's time span at that period, and the
-    paper's Table 5 rows go beside ours only for the paper's own run (``paper_reference``)."""
+    paper's Table 5 rows go beside ours only for the paper's own run (``paper_reference``).
+    ``reference`` may name a dataset (``"paper"``: :func:`tsmpc.datasets.resolve`; not downloaded:
+    :class:`~tsmpc.datasets.DataNotFoundError` naming ``tsmpc data fetch``)."""
     from tsmpc.planning.paper_format import (
         is_paper_run,
         load_reference,
@@ -73,8 +75,11 @@ def load_scenario(
         ref = builtin_circuit(dt=cfg.rates.Tc)
         return Scenario("builtin-circuit", ref, paper_friction_profile(),
                         meta={"reference": "builtin-circuit", "paper_reference": False})
+    from tsmpc import datasets
     from tsmpc.planning.reference import read_csv_meta
 
+    if not Path(reference).exists() and datasets.is_dataset_name(reference):
+        reference = datasets.resolve(str(reference))
     paper = _is_paper_format(Path(reference))
     if paper:  # measure the column period on the whole file, then take the window in it
         full = load_reference(reference, window=None, dt=dt)

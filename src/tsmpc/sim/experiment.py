@@ -83,7 +83,7 @@ def prepare(
     cfg: Config,
     methods: Sequence[Method | str],
     *,
-    reference: Path | None = None,
+    reference: Path | str | None = None,
     window: tuple[int, int] | None = None,
     laps: int = 1,
     dt: float | None = None,
@@ -97,7 +97,8 @@ def prepare(
 ) -> Experiment:
     """Validate every input and assemble the experiment; nothing is solved or written.
 
-    Args mirror ``tsmpc compare`` / ``tsmpc run``: ``reference`` None is the built-in circuit;
+    Args mirror ``tsmpc compare`` / ``tsmpc run``: ``reference`` None is the built-in circuit,
+    a path, or a dataset name (``"paper"``: :func:`tsmpc.datasets.resolve`);
     ``window`` 1-based (FIRST, LAST) columns/rows; ``duration`` [s] tracks only the first part;
     ``robustness`` a named scenario of :mod:`tsmpc.robustness`; ``strict_box`` refuses a
     reference beyond the designs' boxes instead of widening them.
