@@ -25,6 +25,12 @@ from tsmpc.io import atomic_write_text
 from tsmpc.synthesis.certificates import Certificate, check
 from tsmpc.synthesis.dynamic import DynamicDesign, certify_dynamic, design_dynamic
 from tsmpc.synthesis.kinematic import KinematicDesign, certify_kinematic, design_kinematic
+from tsmpc.synthesis.paper_as_run import (
+    FeasibilityDesign,
+    certify_vertices,
+    design_feasibility,
+    vertex_models,
+)
 
 __all__ = [
     "cache_dir",
@@ -33,6 +39,7 @@ __all__ = [
     "dynamic_key",
     "kinematic_key",
     "load_or_design_dynamic",
+    "load_or_design_feasibility",
     "load_or_design_kinematic",
 ]
 
@@ -167,7 +174,38 @@ def load_or_design_dynamic(
     """The dynamic design of ``cfg``, from the cache when its inputs are unchanged (the published
     run's feasibility design, :mod:`tsmpc.synthesis.paper_as_run`, when ``cfg`` selects it)."""
     if cfg.dynamic_lmi.formulation == DynamicLMIFormulation.FEASIBILITY_EULER:
-        from tsmpc.synthesis.paper_as_run import load_or_design_feasibility
-
         return load_or_design_feasibility(cfg, directory, use_cache=use_cache)  # type: ignore[return-value]
     return _load_or_design(cfg, "dynamic", directory, use_cache)
+
+
+def load_or_design_feasibility(
+    cfg: Config, directory: Path | None = None, *, use_cache: bool = True
+) -> FeasibilityDesign:
+    """The feasibility design of ``cfg`` from the design cache (keyed like every dynamic design,
+    :func:`dynamic_key`), solved and stored when missing (the published run's design,
+    :mod:`tsmpc.synthesis.paper_as_run`). The vertex certificates are recomputed on load; a stale
+    or tampered entry is re-solved."""
+    from tsmpc.textfile import read_text
+
+    key = dynamic_key(cfg)
+    path = (directory or cache_dir()) / f"dynamic-{key[:32]}.json"
+    lmi = cfg.dynamic_lmi
+    if use_cache and path.exists():
+        try:
+            # a regular file of bounded size only (a folder, a FIFO: re-solved, never blocks)
+            d = design_from_dict(json.loads(read_text(path, "design cache entry",
+                                                      limit=64 * 1024 * 1024)), FeasibilityDesign)
+            if d.inputs_hash == key:
+                A, B = vertex_models(cfg.dynamic_box, cfg.vehicle, d.Td, d.bandwidth)
+                check(certify_vertices(A, B, lmi, d.K, d.P), "cached feasibility design")
+                return d
+        except (TsmpcError, KeyError, ValueError, TypeError, AttributeError, RecursionError, OSError,
+                np.linalg.LinAlgError):
+            pass  # unreadable or stale entry: re-solve and overwrite it
+    d = design_feasibility(cfg.dynamic_box, cfg.vehicle, lmi, cfg.rates.Td, inputs_hash=key)
+    if use_cache:
+        try:
+            atomic_write_text(path, json.dumps(design_to_dict(d)))
+        except OSError:
+            pass  # a read-only home must not stop a run
+    return d

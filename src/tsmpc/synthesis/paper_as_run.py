@@ -38,16 +38,14 @@ on any machine.
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tsmpc.config import Config, DynamicBox, DynamicLMISettings, FeasiblePoint, VehicleParams
-from tsmpc.errors import SolverError, TsmpcError
+from tsmpc.config import DynamicBox, DynamicLMISettings, FeasiblePoint, VehicleParams
+from tsmpc.errors import SolverError
 from tsmpc.models.dynamic import Discretization, augment_apkarian, continuous_matrices, discretize
 from tsmpc.models.polytope import SchedulingBox
 from tsmpc.synthesis.analytic_center import AffineLMI, analytic_center
@@ -60,7 +58,6 @@ __all__ = [
     "certify_vertices",
     "design_feasibility",
     "grid_report",
-    "load_or_design_feasibility",
     "solve_unscaled",
     "vertex_lmis",
     "vertex_models",
@@ -367,37 +364,3 @@ def grid_report(
     G = Li @ np.swapaxes(Acl, -1, -2) @ P @ Acl @ Li.T
     dec = float(np.max(np.linalg.eigvalsh(0.5 * (G + np.swapaxes(G, -1, -2)))))
     return rho, dec
-
-
-def load_or_design_feasibility(
-    cfg: Config, directory: Path | None = None, *, use_cache: bool = True
-) -> FeasibilityDesign:
-    """The feasibility design of ``cfg`` from the design cache (keyed like every dynamic design,
-    :func:`tsmpc.synthesis.cache.dynamic_key`), solved and stored when missing. The vertex
-    certificates are recomputed on load; a stale or tampered entry is re-solved."""
-    from tsmpc.io import atomic_write_text
-    from tsmpc.synthesis.cache import cache_dir, design_from_dict, design_to_dict, dynamic_key
-    from tsmpc.textfile import read_text
-
-    key = dynamic_key(cfg)
-    path = (directory or cache_dir()) / f"dynamic-{key[:32]}.json"
-    lmi = cfg.dynamic_lmi
-    if use_cache and path.exists():
-        try:
-            # a regular file of bounded size only (a folder, a FIFO: re-solved, never blocks)
-            d = design_from_dict(json.loads(read_text(path, "design cache entry",
-                                                      limit=64 * 1024 * 1024)), FeasibilityDesign)
-            if d.inputs_hash == key:
-                A, B = vertex_models(cfg.dynamic_box, cfg.vehicle, d.Td, d.bandwidth)
-                check(certify_vertices(A, B, lmi, d.K, d.P), "cached feasibility design")
-                return d
-        except (TsmpcError, KeyError, ValueError, TypeError, AttributeError, RecursionError, OSError,
-                np.linalg.LinAlgError):
-            pass  # unreadable or stale entry: re-solve and overwrite it
-    d = design_feasibility(cfg.dynamic_box, cfg.vehicle, lmi, cfg.rates.Td, inputs_hash=key)
-    if use_cache:
-        try:
-            atomic_write_text(path, json.dumps(design_to_dict(d)))
-        except OSError:
-            pass  # a read-only home must not stop a run
-    return d
