@@ -1,7 +1,10 @@
-"""Reference windows with closed-form geometry for the geometric baselines' tests (not a test module)."""
+"""Reference windows with closed-form geometry for the geometric baselines' tests, and where the
+tests find the paper's reference and the race tracks (not a test module)."""
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -28,3 +31,39 @@ def straight_window(v: float, Tc: float, n: int) -> SimpleNamespace:
     x = np.arange(n) * v * Tc
     z = np.zeros(n)
     return SimpleNamespace(x=x, y=z.copy(), theta=z.copy(), v=np.full(n, v), omega=z.copy(), kappa=z.copy())
+
+
+# -- the data the tests read (issue 37) ------------------------------------------------------
+#: Set to 1 (CI, which has ../shared): a test whose data is missing FAILS instead of skipping.
+REQUIRE_DATA_ENV = "TSMPC_REQUIRE_DATA"
+#: The checkout's ../shared/data, searched after tsmpc's own folders (a non-editable install of
+#: tsmpc does not know the checkout; the tests do).
+CHECKOUT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+def data_roots() -> list[tuple[str, Path]]:
+    """tsmpc's resolver order ($TSMPC_DATA_DIR, the cache, ../shared of a checkout), then the
+    tests' own checkout's ../shared/data."""
+    from tsmpc import datasets
+
+    roots = datasets.data_roots()
+    if all(root != CHECKOUT_DATA for _label, root in roots):
+        roots.append(("the tests' ../shared", CHECKOUT_DATA))
+    return roots
+
+
+def need_data(name: str) -> Path:
+    """The path of dataset ``name`` (``paper``, ``tracks``, ``monza``…); when it is missing the
+    test skips with the command that downloads it, or fails under ``TSMPC_REQUIRE_DATA=1``."""
+    import pytest
+
+    from tsmpc import datasets
+
+    path = datasets.find(name, data_roots())
+    if path is not None:
+        return path
+    where = "; ".join(f"{label} {root}" for label, root in data_roots())
+    msg = f"dataset {name!r} not found (searched {where}): run `{datasets.fetch_command(name)}`"
+    if os.environ.get(REQUIRE_DATA_ENV, "") not in ("", "0"):
+        pytest.fail(f"{msg} ({REQUIRE_DATA_ENV} is set: missing data fails)")
+    pytest.skip(msg)

@@ -233,12 +233,13 @@ def _complete(root: Path, files: Iterable[RemoteFile]) -> bool:
     return all((root / f.path).is_file() for f in files)
 
 
-def find(name: str) -> Path | None:
+def find(name: str, roots: Iterable[tuple[str, Path]] | None = None) -> Path | None:
     """The path of dataset or track ``name`` in the first data folder that has it whole (a file
-    for ``paper`` or a track, the folder for ``tracks``), else None. ``KeyError``: unknown name."""
+    for ``paper`` or a track, the folder for ``tracks``), else None. ``roots``: (label, folder)
+    pairs searched instead of :func:`data_roots`. ``KeyError``: unknown name."""
     ds, rel = _lookup(name)
     wanted = [f for f in ds.data_files if f.path == rel] if rel else list(ds.data_files)
-    for _label, root in data_roots():
+    for _label, root in (data_roots() if roots is None else roots):
         if _complete(root, wanted):
             return root / (rel or ds.folder)
     return None
