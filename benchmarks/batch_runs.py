@@ -24,15 +24,16 @@ import argparse
 import json
 import os
 import time
-from pathlib import Path
 
 import numpy as np
 
+from tsmpc import datasets
 from tsmpc.blas import limit_blas_threads
 from tsmpc.config import Config, replace
 from tsmpc.sim.simulator import simulate
 
-PAPER = Path(__file__).resolve().parents[2] / "shared" / "data" / "paper" / "planner_references_100ms.csv"
+#: The paper's reference where tsmpc finds it ($TSMPC_DATA_DIR, `tsmpc data fetch paper`, ../shared), or None.
+PAPER = datasets.find("paper")
 
 
 def _runs(cfg: Config, scenario, method: str, seeds: range, designs: tuple, engine: bool) -> dict:
@@ -88,7 +89,7 @@ def main() -> None:
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
     cfg = Config()
-    scenario = load_scenario(cfg, PAPER if PAPER.exists() else None)
+    scenario = load_scenario(cfg, PAPER)
     designs = (load_or_design_kinematic(cfg), load_or_design_dynamic(cfg))
     method = args.method.upper()
     simulate(cfg, method, scenario, kinematic_design=designs[0], dynamic_design=designs[1],

@@ -1,5 +1,5 @@
 """Whole-run cost of the cascade: the simulation loop of a method on the paper reference
-(../shared/data/paper/planner_references_100ms.csv, columns 5…1316; else the built-in circuit),
+(`tsmpc data fetch paper`, or ../shared/data in a checkout; columns 5…1316; else the built-in circuit),
 with the per-block medians/p99 *inside* the loop (MPC, MHE-UIO, TS-LQR and the plant block of
 T_d/h RK4 steps), the loop time and the real-time factor — the Python loop with the compiled
 kernels, the same with the numpy blocks (``--no-numpy`` skips it) and the compiled run engine
@@ -17,15 +17,16 @@ import argparse
 import json
 import os
 import time
-from pathlib import Path
 
 import numpy as np
 
+from tsmpc import datasets
 from tsmpc.blas import limit_blas_threads
 from tsmpc.config import Config
 from tsmpc.sim.simulator import default_plant, simulate
 
-PAPER = Path(__file__).resolve().parents[2] / "shared" / "data" / "paper" / "planner_references_100ms.csv"
+#: The paper's reference where tsmpc finds it ($TSMPC_DATA_DIR, `tsmpc data fetch paper`, ../shared), or None.
+PAPER = datasets.find("paper")
 
 
 class TimedPlant:
@@ -119,7 +120,7 @@ def main() -> None:
     from tsmpc.sim.compare import load_scenario
 
     cfg = Config()
-    scenario = load_scenario(cfg, PAPER if PAPER.exists() else None)
+    scenario = load_scenario(cfg, PAPER)
     t0 = time.perf_counter()
     kernels.warmup()
     load_s = time.perf_counter() - t0

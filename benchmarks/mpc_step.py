@@ -1,7 +1,7 @@
 """Per-step wall time of the outer MPCs in a receding-horizon loop on the kinematic error model.
 
 Scheduling + build + solve (everything a vehicle waits for), along the paper's reference
-(../shared/data/paper/planner_references_100ms.csv, columns 5…1316) when present, else the
+(`tsmpc data fetch paper`, or ../shared/data in a checkout; columns 5…1316) when present, else the
 built-in circuit; start from a 2 m / 0.1 rad error. Prints median/p95/p99/max [ms], QP
 iterations and the NL/method ratio measured in the same run, for the compiled fast path
 (``results``) and the numpy condensed path (``results_numpy``, the kernels' oracle).
@@ -14,10 +14,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
-from pathlib import Path
 
 import numpy as np
 
+from tsmpc import datasets
 from tsmpc.blas import limit_blas_threads
 from tsmpc.config import Config, SchedulingMode
 from tsmpc.control.nl_mpc import NLMPC
@@ -25,11 +25,12 @@ from tsmpc.control.ts_mpc import TSMPC
 from tsmpc.models.kinematic import KinematicTS, nonlinear_step
 from tsmpc.synthesis.cache import load_or_design_kinematic
 
-PAPER = Path(__file__).resolve().parents[2] / "shared" / "data" / "paper" / "planner_references_100ms.csv"
+#: The paper's reference where tsmpc finds it ($TSMPC_DATA_DIR, `tsmpc data fetch paper`, ../shared), or None.
+PAPER = datasets.find("paper")
 
 
 def _reference():
-    if PAPER.exists():
+    if PAPER is not None:
         from tsmpc.planning.paper_format import load_paper_reference
 
         return load_paper_reference(PAPER), "paper reference"

@@ -21,9 +21,11 @@ import tempfile
 import time
 from pathlib import Path
 
+from tsmpc import datasets
 from tsmpc.blas import limit_blas_threads
 
-PAPER = Path(__file__).resolve().parents[2] / "shared" / "data" / "paper" / "planner_references_100ms.csv"
+#: The paper's reference where tsmpc finds it ($TSMPC_DATA_DIR, `tsmpc data fetch paper`, ../shared), or None.
+PAPER = datasets.find("paper")
 MASSES = [0.95, 1.0, 1.05, 1.1]
 
 
@@ -62,8 +64,8 @@ def main() -> None:
     ap.add_argument("--baseline", action="store_true", help="also time --batch 1 (one run per task)")
     args = ap.parse_args()
     limit_blas_threads()  # as every benchmark (the sweep's processes limit themselves too)
-    if not PAPER.exists():
-        raise SystemExit(f"needs the paper reference at {PAPER}")
+    if PAPER is None:
+        raise SystemExit("needs the paper reference: run `tsmpc data fetch paper`")
     subprocess.run([_tsmpc(), "warmup"], check=True, capture_output=True)  # untimed: compile once
     out: dict = {"workers": args.workers, "load_average": os.getloadavg()}
     with tempfile.TemporaryDirectory() as tmp:
