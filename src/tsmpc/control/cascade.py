@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
+from tsmpc.control.gates import GateParams, dead_reckon, plausible_speeds, pose_consistent
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep
@@ -68,13 +69,6 @@ EVENT_NAMES = (
     "speed_rejected",  # samples with an impossible speed or yaw rate (negative, absurd)
     "pose_jump_rejected",  # poses further than the car can have moved since the last good one
 )
-#: Drift allowed between the dead-reckoned and a measured pose: metres plus metres per second
-#: without an accepted pose (dead reckoning on the estimate drifts slowly; a pose jump does not).
-POSE_JUMP_M = 1.0
-POSE_DRIFT_M_PER_S = 2.0
-#: Heading counterpart [rad, rad/s].
-HEADING_JUMP_RAD = 0.3
-HEADING_DRIFT_RAD_PER_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -246,6 +240,8 @@ class Cascade:
         self._w_limit = max(4.0, 2.0 * w_bound) + 5.0 * nz.omega * nz.scale
         self._pose_noise = 5.0 * nz.position * nz.scale
         self._heading_noise = 5.0 * nz.theta * nz.scale
+        self._gates = GateParams(self._v_range[0], self._v_range[1], self._w_limit, self._pose_noise,
+                                 self._heading_noise, self.Td)
         from tsmpc.estimation.fusion import Fusion
 
         self._fusion = Fusion(cfg)  # beyond the paper: cfg.fusion's switches (issue 21)
@@ -385,10 +381,7 @@ class Cascade:
 
     def _plausible_speeds(self, v: float, om: float) -> bool:
         """False (counted) for a finite speed or yaw rate no vehicle of this config can have."""
-        if not (math.isfinite(v) and math.isfinite(om)):
-            return True  # NaN: the MHE rejects it (mhe_rejected)
-        lo, hi = self._v_range
-        if lo <= v <= hi and abs(om) <= self._w_limit:
+        if plausible_speeds(self._gates, v, om):
             return True
         self._events["speed_rejected"] += 1
         return False
@@ -396,29 +389,19 @@ class Cascade:
     def _accept_pose(self, t: float, X: float, Y: float, th: float) -> bool:
         """Is a finite, fresh pose consistent with where the car can be (the dead-reckoned pose)?"""
         p = self._pose
-        if p is None:
+        if p is None or pose_consistent(self._gates, X, Y, th, float(p[0]), float(p[1]), float(p[2]),
+                                        t - self._pose_t):
             return True
-        dt = max(t - self._pose_t, 0.0)
-        far = math.hypot(X - p[0], Y - p[1]) > POSE_JUMP_M + POSE_DRIFT_M_PER_S * dt + self._pose_noise
-        dth = (th - p[2] + math.pi) % (2.0 * math.pi) - math.pi
-        turned = abs(dth) > HEADING_JUMP_RAD + HEADING_DRIFT_RAD_PER_S * dt + self._heading_noise
-        if far or turned:
-            self._events["pose_jump_rejected"] += 1
-            return False
-        return True
+        self._events["pose_jump_rejected"] += 1
+        return False
 
     def _dead_reckon(self, est: Estimate) -> None:
         """Advance the pose by one T_d on the estimate (until the next accepted measurement)."""
         p = self._pose
         if p is None:
             return
-        v, a, w = (float(c) for c in est.x[:3])
-        if not (math.isfinite(v) and math.isfinite(a) and math.isfinite(w)):
-            return
-        v = min(max(v, 0.0), self._v_range[1])
-        heading = p[2] + a
-        self._pose = np.array([p[0] + v * math.cos(heading) * self.Td,
-                               p[1] + v * math.sin(heading) * self.Td, p[2] + w * self.Td])
+        self._pose = np.array(dead_reckon(self._gates, float(p[0]), float(p[1]), float(p[2]),
+                                          float(est.x[0]), float(est.x[1]), float(est.x[2])))
 
     def _step(self, t: float, m: Measurement) -> Command:
         X, Y, th = (float(c) for c in m.pose)

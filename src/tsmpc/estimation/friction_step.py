@@ -28,8 +28,11 @@ patch, μ = 0.1 for 0.1 s at 70 s, is such a step and its end another).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
-__all__ = ["FrictionStep"]
+from tsmpc.kernels.jit import jitable
+
+__all__ = ["FrictionStep", "FrictionStepParams", "FrictionStepState", "friction_step_update"]
 
 #: Samples of innovation needed before the detector may fire (its variance is unknown before).
 MIN_SAMPLES = 50
@@ -41,8 +44,74 @@ DRIFT = 1.0
 OUTLIER = 3.0
 
 
+class FrictionStepParams(NamedTuple):
+    """Parameters of the detector.
+
+    Attributes:
+        window: the MHE's horizon N [samples]: after a detected step the one-step estimate is
+            compensated for this many samples, then the window fit again.
+        threshold: CUSUM decision threshold h [innovation standard deviations].
+    """
+
+    window: int
+    threshold: float
+
+
+class FrictionStepState(NamedTuple):
+    """State of the detector (all zero at the start).
+
+    Attributes:
+        var: innovation variance σ² [N²].
+        n_var: samples in it.
+        g_plus: CUSUM statistic of an upward step.
+        g_minus: CUSUM statistic of a downward step.
+        since: samples since a declared step (0: no step in progress).
+    """
+
+    var: float = 0.0
+    n_var: int = 0
+    g_plus: float = 0.0
+    g_minus: float = 0.0
+    since: int = 0
+
+
+@jitable
+def friction_step_update(p: FrictionStepParams, s: FrictionStepState, F_window: float, F_raw: float,
+                         ok: bool) -> tuple[float, FrictionStepState, bool]:
+    """One sample: (the friction force to compensate [N], the new state, a step was declared).
+
+    ``F_window``: the MHE's window fit; ``F_raw``: its one-step UIO estimate (paper eq.
+    "disturb_estimation"); ``ok``: the sample was accepted (a rejected or warm-up sample neither
+    detects nor is compensated)."""
+    var, n_var, gp, gm, since = s.var, s.n_var, s.g_plus, s.g_minus, s.since
+    ok = ok and math.isfinite(F_raw) and math.isfinite(F_window)
+    if since > 0:  # a step in progress: the window still holds samples before it
+        since += 1
+        if since > p.window:  # the window holds only samples after the step: its fit again
+            since = 0
+            gp = 0.0
+            gm = 0.0
+        F = F_raw if ok and since > 0 else F_window
+        return F, FrictionStepState(var, n_var, gp, gm, since), False
+    if not ok:
+        return F_window, s, False
+    d = F_raw - F_window
+    if n_var >= MIN_SAMPLES:
+        z = d / math.sqrt(var) if var > 0.0 else 0.0
+        gp = max(0.0, gp + z - DRIFT)
+        gm = max(0.0, gm - z - DRIFT)
+        if gp > p.threshold or gm > p.threshold:
+            return F_raw, FrictionStepState(var, n_var, gp, gm, 1), True
+        if abs(z) > OUTLIER:  # an outlier does not inflate the variance
+            return F_window, FrictionStepState(var, n_var, gp, gm, since), False
+    n_var += 1
+    var += (d * d - var) / min(n_var, VARIANCE_MEMORY)
+    return F_window, FrictionStepState(var, n_var, gp, gm, since), False
+
+
 class FrictionStep:
-    """Change detector on the one-step friction estimate, applied to the MHE window fit.
+    """Change detector on the one-step friction estimate, applied to the MHE window fit (the
+    online wrapper of :func:`friction_step_update`).
 
     Args:
         window: the MHE's horizon N [samples]: after a detected step, the one-step estimate is
@@ -54,46 +123,21 @@ class FrictionStep:
         if window < 1 or not threshold > 0.0:
             raise ValueError("FrictionStep needs window >= 1 and threshold > 0")
         self.window, self.threshold = int(window), float(threshold)
+        self.params = FrictionStepParams(self.window, self.threshold)
         self.reset()
 
     def reset(self) -> None:
         """Forget the innovation statistics and any step in progress."""
-        self._var = 0.0  # innovation variance [N²]
-        self._nvar = 0  # samples in it
-        self._gp = self._gm = 0.0  # CUSUM statistics (up, down)
-        self._since = 0  # samples since a detected step (0: no step in progress)
+        self.state = FrictionStepState()
         self.n_steps = 0  #: steps detected since the last reset
 
     @property
     def active(self) -> bool:
         """True while the compensated estimate is the one-step estimate after a detected step."""
-        return self._since > 0
+        return self.state.since > 0
 
     def step(self, F_window: float, F_raw: float, ok: bool) -> float:
-        """The friction force to compensate this sample [N].
-
-        ``F_window``: the MHE's window fit; ``F_raw``: its one-step UIO estimate; ``ok``: the
-        sample was accepted (a rejected or warm-up sample neither detects nor is compensated)."""
-        ok = ok and math.isfinite(F_raw) and math.isfinite(F_window)
-        if self._since > 0:  # a step in progress: the window still holds samples before it
-            self._since += 1
-            if self._since > self.window:
-                self._since = 0
-                self._gp = self._gm = 0.0
-            return F_raw if ok and self._since > 0 else F_window
-        if not ok:
-            return F_window
-        d = F_raw - F_window
-        if self._nvar >= MIN_SAMPLES:
-            z = d / math.sqrt(self._var) if self._var > 0.0 else 0.0
-            self._gp = max(0.0, self._gp + z - DRIFT)
-            self._gm = max(0.0, self._gm - z - DRIFT)
-            if self._gp > self.threshold or self._gm > self.threshold:
-                self._since = 1
-                self.n_steps += 1
-                return F_raw
-            if abs(z) > OUTLIER:  # an outlier does not inflate the variance
-                return F_window
-        self._nvar += 1
-        self._var += (d * d - self._var) / min(self._nvar, VARIANCE_MEMORY)
-        return F_window
+        """The friction force to compensate this sample [N] (see :func:`friction_step_update`)."""
+        F, self.state, declared = friction_step_update(self.params, self.state, F_window, F_raw, ok)
+        self.n_steps += declared
+        return F

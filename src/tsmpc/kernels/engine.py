@@ -34,6 +34,12 @@ from numba import njit
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
+from tsmpc.control.gates import GateParams, dead_reckon, plausible_speeds, pose_consistent
+from tsmpc.estimation.friction_step import (
+    FrictionStepParams,
+    FrictionStepState,
+    friction_step_update,
+)
 from tsmpc.kernels.lqr import lqr_step
 from tsmpc.kernels.mhe import window_step
 from tsmpc.kernels.mpc import guarded_step
@@ -117,7 +123,6 @@ LOI_STATUS, LOI_IT, LOI_QPIT, LOI_CLIP = range(4)
 
 # Constants of the blocks ported here (their modules: tsmpc.control.cascade, .slip_aware,
 # tsmpc.estimation.fusion); tsmpc.sim.engine checks that they still agree before every run.
-POSE_JUMP_M, POSE_DRIFT_M_PER_S, HEADING_JUMP_RAD, HEADING_DRIFT_RAD_PER_S = 1.0, 2.0, 0.3, 0.5
 GATE_RAD, GATE_MIN_CHORD_M, GATE_BASELINE = 0.01, 0.3, 5
 BASELINE, MIN_CHORD_M, SLIP_MEMORY_S, SPEED_MEMORY_S = 5, 2.0, 30.0, 10.0
 SLIP_CORRECTION_MAX, SPEED_OFFSET_MAX = 0.05, 2.0
@@ -128,7 +133,6 @@ STIFF_PRIOR_REL, STIFF_SLIP_FLOOR, STIFF_CORRELATION = 0.3, 5e-4, 5.0
 NOISE_MEMORY_S, NOISE_PRIOR_CHORDS = 30.0, 10.0
 STIFF_MEMORY_S, STIFF_RANGE_LO, STIFF_RANGE_HI, CORNER_ACCEL = 100.0, 0.5, 2.0, 0.2
 STIFF_MAX_ACCEL = 0.1
-FS_MIN_SAMPLES, FS_VARIANCE_MEMORY, FS_DRIFT, FS_OUTLIER = 50, 500, 1.0, 3.0  # friction_step.py
 MASS_RANGE, STIFF_RANGE = (MASS_RANGE_LO, MASS_RANGE_HI), (STIFF_RANGE_LO, STIFF_RANGE_HI)  # (checks)
 # friction programs (the profiles of tsmpc.scenarios / tsmpc.conditions as data)
 FR_CONST, FR_PAPER, FR_PATCH = 0, 1, 2
@@ -684,31 +688,15 @@ def _mass_terms(v_hat, F_hat, v_ref, mv, sf, si, fp, ip):
 # ============================================================================ MHE wrapper
 @njit(cache=True, fastmath=False)
 def _friction_step(Fw, Fr, ok, sf, si, fp, ip, ev):
-    """``FrictionStep.step``: the friction force to compensate (lqr.friction_step)."""
-    ok = ok and math.isfinite(Fr) and math.isfinite(Fw)
-    if si[SI_FSSINCE] > 0:  # a step in progress
-        si[SI_FSSINCE] += 1
-        if si[SI_FSSINCE] > ip[IP_NW]:
-            si[SI_FSSINCE] = 0
-            sf[SF_FSGP] = 0.0
-            sf[SF_FSGM] = 0.0
-        return Fr if ok and si[SI_FSSINCE] > 0 else Fw
-    if not ok:
-        return Fw
-    d = Fr - Fw
-    if si[SI_FSN] >= FS_MIN_SAMPLES:
-        z = d / math.sqrt(sf[SF_FSVAR]) if sf[SF_FSVAR] > 0.0 else 0.0
-        sf[SF_FSGP] = _pmax(0.0, sf[SF_FSGP] + z - FS_DRIFT)
-        sf[SF_FSGM] = _pmax(0.0, sf[SF_FSGM] - z - FS_DRIFT)
-        if sf[SF_FSGP] > fp[FP_FS_H] or sf[SF_FSGM] > fp[FP_FS_H]:
-            si[SI_FSSINCE] = 1
-            ev[EV_FSTEP] += 1
-            return Fr
-        if abs(z) > FS_OUTLIER:
-            return Fw
-    si[SI_FSN] += 1
-    sf[SF_FSVAR] += (d * d - sf[SF_FSVAR]) / min(si[SI_FSN], FS_VARIANCE_MEMORY)
-    return Fw
+    """The friction-step block (:func:`tsmpc.estimation.friction_step.friction_step_update`, one
+    definition) on the engine's state slots."""
+    s = FrictionStepState(sf[SF_FSVAR], si[SI_FSN], sf[SF_FSGP], sf[SF_FSGM], si[SI_FSSINCE])
+    F, s, declared = friction_step_update(FrictionStepParams(ip[IP_NW], fp[FP_FS_H]), s, Fw, Fr, ok)
+    sf[SF_FSVAR], si[SI_FSN], sf[SF_FSGP], sf[SF_FSGM], si[SI_FSSINCE] = \
+        s.var, s.n_var, s.g_plus, s.g_minus, s.since
+    if declared:
+        ev[EV_FSTEP] += 1
+    return F
 
 
 @njit(cache=True, fastmath=False)
@@ -862,6 +850,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     tmp3 = np.empty(3)
     noX = np.zeros((0, 3))  # "no previous plan" for guarded_step
     noU = np.zeros((0, 2))
+    gates = GateParams(fp[FP_V_LO], fp[FP_V_HI], fp[FP_W_LIM], fp[FP_POSE_NOISE], fp[FP_HEAD_NOISE], Td)
     mhe_views = (mp[MP_Q:MP_Q + 3], mp[MP_R:MP_R + 2], mp[MP_P:MP_P + 3], mp[MP_XMIN:MP_XMIN + 3],
                  mp[MP_XMAX:MP_XMAX + 3], mp[MP_LO:MP_LO + 3], mp[MP_HI:MP_HI + 3],
                  sf[SF_MX:SF_MX + 3], sf[SF_ARR:SF_ARR + 3], sc[SC_UK:SC_UK + 2])
@@ -886,13 +875,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             # ---- Cascade._step: gates
             X, Y, th, v, omv = y[0], y[1], y[2], y[3], y[4]
             fresh = True
-            if not (math.isfinite(v) and math.isfinite(omv)):
-                speeds_ok = True
-            elif fp[FP_V_LO] <= v <= fp[FP_V_HI] and abs(omv) <= fp[FP_W_LIM]:
-                speeds_ok = True
-            else:
+            speeds_ok = plausible_speeds(gates, v, omv)
+            if not speeds_ok:
                 ev[EV_SPEED_REJ] += 1
-                speeds_ok = False
             if ip[IP_REPEAT] != 0 and not (X != X or Y != Y or th != th or v != v or omv != omv):
                 same = si[SI_GUARDHAS] != 0 and X == sf[SF_GUARD] and Y == sf[SF_GUARD + 1] \
                     and th == sf[SF_GUARD + 2] and v == sf[SF_GUARD + 3] and omv == sf[SF_GUARD + 4]
@@ -903,15 +888,10 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                     fresh = False
                     ev[EV_REPEATED] += 1
             pose_ok = fresh and math.isfinite(X) and math.isfinite(Y) and math.isfinite(th)
-            if pose_ok:  # Cascade._accept_pose against the dead-reckoned pose
-                dt = _pmax(t - sf[SF_POSET], 0.0)
-                far = hypot_py(X - sf[SF_POSE], Y - sf[SF_POSE + 1]) > \
-                    POSE_JUMP_M + POSE_DRIFT_M_PER_S * dt + fp[FP_POSE_NOISE]
-                dth = (th - sf[SF_POSE + 2] + math.pi) % (2.0 * math.pi) - math.pi
-                turned = abs(dth) > HEADING_JUMP_RAD + HEADING_DRIFT_RAD_PER_S * dt + fp[FP_HEAD_NOISE]
-                if far or turned:
-                    ev[EV_JUMP_REJ] += 1
-                    pose_ok = False
+            if pose_ok and not pose_consistent(gates, X, Y, th, sf[SF_POSE], sf[SF_POSE + 1],
+                                               sf[SF_POSE + 2], t - sf[SF_POSET]):
+                ev[EV_JUMP_REJ] += 1  # Cascade._accept_pose: a jump from the dead-reckoned pose
+                pose_ok = False
             if pose_ok:
                 sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2] = X, Y, th
                 sf[SF_POSET] = t
@@ -1025,12 +1005,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             tick = _ticks()
             # Cascade._dead_reckon
             ev0, ev1, ev2 = sc[SC_EST], sc[SC_EST + 1], sc[SC_EST + 2]
-            if math.isfinite(ev0) and math.isfinite(ev1) and math.isfinite(ev2):
-                vv = _pmin(_pmax(ev0, 0.0), fp[FP_V_HI])
-                heading = sf[SF_POSE + 2] + ev1
-                sf[SF_POSE] = sf[SF_POSE] + vv * math.cos(heading) * Td
-                sf[SF_POSE + 1] = sf[SF_POSE + 1] + vv * math.sin(heading) * Td
-                sf[SF_POSE + 2] = sf[SF_POSE + 2] + ev2 * Td
+            sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2] = dead_reckon(
+                gates, sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], ev0, ev1, ev2)
             if ip[IP_ANYCOURSE] != 0:
                 _course_sample(si[SI_POSEOK] != 0 and si[SI_SPOK] != 0, y[2], y[3], ev1, ev0 * ev2,
                                y[4], sc[SC_UMHE + 1], sc[SC_UMHE], cur, si)

@@ -50,8 +50,9 @@ from tsmpc.control.cascade import EVENT_NAMES, Cascade
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
+from tsmpc.scenarios import Scenario
 from tsmpc.sim.log import RunLog
-from tsmpc.sim.simulator import Scenario, _start_state, default_plant, tracked_steps
+from tsmpc.sim.start import _start_state, default_plant, tracked_steps
 
 __all__ = ["LAST_RUN", "EngineFallback", "applicability", "enabled", "exact", "run", "warmup"]
 
@@ -119,20 +120,17 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
 #: refreshed (``python -m tsmpc.sim.engine`` prints it; tests/test_engine.py checks it).
 _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:simulate": "dcb22cf7376a66bc",
-    "tsmpc.sim.simulator:_start_state": "2e35ad3de46ce500",
+    "tsmpc.sim.start:_start_state": "2e35ad3de46ce500",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
-    "tsmpc.sim.simulator:default_plant": "0088c937e0241d8b",
-    "tsmpc.sim.simulator:tracked_steps": "394064c7f7227dae",
+    "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
+    "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
-    "tsmpc.control.cascade:Cascade.__init__": "6c1c796e8d6dbfaf",
+    "tsmpc.control.cascade:Cascade.__init__": "f8ff02cddbec47fa",
     "tsmpc.control.cascade:Cascade.reset": "4766309803084b40",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
     "tsmpc.control.cascade:Cascade._step": "13ae8ed035175e67",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
-    "tsmpc.control.cascade:Cascade._plausible_speeds": "e406a3e08cdb871e",
-    "tsmpc.control.cascade:Cascade._accept_pose": "62c8438007fc5ae0",
-    "tsmpc.control.cascade:Cascade._dead_reckon": "de9dfd9dd526f273",
     "tsmpc.control.cascade:Cascade._apply_stiffness": "64539bcf90245f1d",
     "tsmpc.control.cascade:_apply_stiffness_to": "5a20c2976a06a2d3",
     "tsmpc.estimation.fusion:_wrap": "3fd9daeaa886e92c",
@@ -156,7 +154,6 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.ts_lqr:TSLQR.step": "6e5fb694882a1850",
     "tsmpc.control.ts_lqr:TSLQR._step": "8d51097438eb8dd0",
     "tsmpc.control.ts_lqr:TSLQR.low_speed_residual": "82f47f9cb03354b2",
-    "tsmpc.estimation.friction_step:FrictionStep": "6c4d9a9cafdac2c2",
     "tsmpc.control.ts_lqr:TSLQR.set_cornering_stiffness": "be3fd84f79326402",
     "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
@@ -166,22 +163,18 @@ _PORTED: dict[str, str] = {
     "tsmpc.scenarios:PaperFriction": "9996087ab3f255ca",
     "tsmpc.scenarios:_ramp": "5ef54bc2be16b7ea",
     "tsmpc.scenarios:PatchFriction": "36dea15235f73f7a",
-    "tsmpc.conditions:ResolvedEvent": "03e17e620babc9f7",
-    "tsmpc.conditions:EventFriction": "dded7e7a165222e6",
-    "tsmpc.conditions:SensorModel": "c74cbfe146a3669c",
-    "tsmpc.robustness:DropoutFault": "7308cac71f886cf1",
-    "tsmpc.robustness:NaNBurstFault": "b02fcedb0d1277fb",
+    "tsmpc.scenarios:ResolvedEvent": "03e17e620babc9f7",
+    "tsmpc.scenarios:EventFriction": "dded7e7a165222e6",
+    "tsmpc.scenarios:SensorModel": "c74cbfe146a3669c",
+    "tsmpc.scenarios:DropoutFault": "7308cac71f886cf1",
+    "tsmpc.scenarios:NaNBurstFault": "b02fcedb0d1277fb",
     "tsmpc.vehicle.actuators:Actuators": "2a6874a58d3e14a2",
     "tsmpc.vehicle.actuators:_gain": "8f043d71c729db22",
     "tsmpc.vehicle.actuators:ActuatedPlant": "7e59609bd713f2c4",
-    "tsmpc.robustness:_in_burst": "e7abf687d4c8006c",
+    "tsmpc.scenarios:_in_burst": "e7abf687d4c8006c",
 }
 #: Constants of the ported modules that the kernel holds as its own (name in the kernel module).
 _CONSTANTS = (
-    ("tsmpc.control.cascade", "POSE_JUMP_M", "POSE_JUMP_M"),
-    ("tsmpc.control.cascade", "POSE_DRIFT_M_PER_S", "POSE_DRIFT_M_PER_S"),
-    ("tsmpc.control.cascade", "HEADING_JUMP_RAD", "HEADING_JUMP_RAD"),
-    ("tsmpc.control.cascade", "HEADING_DRIFT_RAD_PER_S", "HEADING_DRIFT_RAD_PER_S"),
     ("tsmpc.control.slip_aware", "GATE_RAD", "GATE_RAD"),
     ("tsmpc.control.slip_aware", "MIN_CHORD_M", "GATE_MIN_CHORD_M"),
     ("tsmpc.control.slip_aware", "BASELINE", "GATE_BASELINE"),
@@ -190,10 +183,6 @@ _CONSTANTS = (
         "SPEED_OFFSET_MAX", "MASS_MIN_SPEED", "MASS_HIGHPASS_S", "MASS_MEMORY_S", "MASS_EXCITATION",
         "STIFF_PRIOR_REL", "STIFF_SLIP_FLOOR", "STIFF_CORRELATION", "STIFF_MEMORY_S", "CORNER_ACCEL",
         "STIFF_MAX_ACCEL", "MASS_RANGE", "STIFF_RANGE", "NOISE_MEMORY_S", "NOISE_PRIOR_CHORDS")),
-    ("tsmpc.estimation.friction_step", "MIN_SAMPLES", "FS_MIN_SAMPLES"),
-    ("tsmpc.estimation.friction_step", "VARIANCE_MEMORY", "FS_VARIANCE_MEMORY"),
-    ("tsmpc.estimation.friction_step", "DRIFT", "FS_DRIFT"),
-    ("tsmpc.estimation.friction_step", "OUTLIER", "FS_OUTLIER"),
 )
 
 
@@ -255,25 +244,25 @@ _PORTED_CLASSES = (
     ("tsmpc.scenarios", "PatchFriction"), ("tsmpc.scenarios", "ConstantFriction"),
     ("tsmpc.estimation.fusion", "Fusion"), ("tsmpc.estimation.fusion", "CourseFusion"),
     ("tsmpc.estimation.fusion", "MassEstimator"), ("tsmpc.estimation.fusion", "RepeatGuard"),
-    ("tsmpc.control.slip_aware", "SlipGate"), ("tsmpc.conditions", "SensorModel"),
-    ("tsmpc.conditions", "EventFriction"), ("tsmpc.conditions", "ResolvedEvent"),
-    ("tsmpc.robustness", "DropoutFault"), ("tsmpc.robustness", "NaNBurstFault"),
+    ("tsmpc.control.slip_aware", "SlipGate"), ("tsmpc.scenarios", "SensorModel"),
+    ("tsmpc.scenarios", "EventFriction"), ("tsmpc.scenarios", "ResolvedEvent"),
+    ("tsmpc.scenarios", "DropoutFault"), ("tsmpc.scenarios", "NaNBurstFault"),
     ("tsmpc.vehicle.actuators", "ActuatedPlant"), ("tsmpc.vehicle.actuators", "Actuators"),
     ("tsmpc.estimation.friction_step", "FrictionStep"),
 )
 #: Module-level functions the loop calls by name (module, name, where it is defined).
 _PORTED_FUNCTIONS = (
-    ("tsmpc.sim.simulator", "default_plant", "tsmpc.sim.simulator"),
-    ("tsmpc.sim.simulator", "_start_state", "tsmpc.sim.simulator"),
+    ("tsmpc.sim.simulator", "default_plant", "tsmpc.sim.start"),
+    ("tsmpc.sim.simulator", "_start_state", "tsmpc.sim.start"),
     ("tsmpc.sim.simulator", "_measurement", "tsmpc.sim.simulator"),
-    ("tsmpc.sim.simulator", "tracked_steps", "tsmpc.sim.simulator"),
+    ("tsmpc.sim.simulator", "tracked_steps", "tsmpc.sim.start"),
     ("tsmpc.sim.simulator", "pose_to_errors", "tsmpc.models.kinematic"),
     ("tsmpc.control.cascade", "outer_loop_errors", "tsmpc.control.slip_aware"),
     ("tsmpc.control.cascade", "pose_to_errors", "tsmpc.models.kinematic"),
     ("tsmpc.control.cascade", "_apply_stiffness_to", "tsmpc.control.cascade"),
     ("tsmpc.control.slip_aware", "velocity_frame_errors", "tsmpc.control.slip_aware"),
     ("tsmpc.control.slip_aware", "pose_to_errors", "tsmpc.models.kinematic"),
-    ("tsmpc.robustness", "_in_burst", "tsmpc.robustness"),
+    ("tsmpc.scenarios", "_in_burst", "tsmpc.scenarios"),
     ("tsmpc.vehicle.actuators", "_gain", "tsmpc.vehicle.actuators"),
 )
 
@@ -309,8 +298,7 @@ def _friction_program(profile: Any) -> tuple[NDArray[np.float64], NDArray[np.flo
                                              NDArray[np.float64]] | None:
     """(base program, patches, events) of a friction profile (see ``friction_mu``), None when the
     profile has no data form (a user-defined class)."""
-    from tsmpc.conditions import EventFriction
-    from tsmpc.scenarios import ConstantFriction, PaperFriction, PatchFriction
+    from tsmpc.scenarios import ConstantFriction, EventFriction, PaperFriction, PatchFriction
 
     events = np.zeros((0, 5))
     base = profile
@@ -366,7 +354,7 @@ def _actuator_data(plant: Any, Td: float, fp: NDArray[np.float64], ip: NDArray[n
 
 def _split_fault(fault: Any) -> tuple[Any, Any]:
     """(sensor model, inner fault) of a scenario's sensor fault."""
-    from tsmpc.conditions import SensorModel
+    from tsmpc.scenarios import SensorModel
 
     if type(fault) is SensorModel:
         return fault, fault.inner
@@ -374,8 +362,7 @@ def _split_fault(fault: Any) -> tuple[Any, Any]:
 
 
 def _fault_problem(fault: Any) -> str | None:
-    from tsmpc.conditions import SensorModel
-    from tsmpc.robustness import DropoutFault, NaNBurstFault
+    from tsmpc.scenarios import DropoutFault, NaNBurstFault, SensorModel
 
     if fault is None:
         return None
@@ -393,7 +380,7 @@ def _fault_data(fault: Any, M: int, fp: NDArray[np.float64], ip: NDArray[np.int6
     """Parameters and pre-drawn samples of the scenario's sensor fault: (u_drop (M,), gnss (M, 2),
     fifo) with the fields of fp/ip/sf/si filled."""
     from tsmpc.kernels import engine as ke
-    from tsmpc.robustness import DropoutFault
+    from tsmpc.scenarios import DropoutFault
 
     model, inner = _split_fault(fault)
     u_drop, gnss, fifo = np.zeros(1), np.zeros((1, 2)), np.zeros((1, 5))
@@ -554,19 +541,24 @@ def _forget_stale_machine_code(folder: Any, prefix: str = "engine",
                                sources: tuple[str, ...] = ("mpc", "mhe", "lqr", "plant"),
                                stamp_name: str = "engine.blocks-sha256") -> None:
     """numba keys a cached function by its own file only: the engine's machine code, which
-    contains the block kernels it calls (kernels/mpc.py, mhe.py, lqr.py, plant.py), would outlive
-    an edit of one of them. So the cache entries ``<prefix>.*`` carry the hash of those
+    contains the block kernels it calls (kernels/mpc.py, mhe.py, lqr.py, plant.py, and the
+    ``@jitable`` blocks of :data:`tsmpc.kernels.jit.BLOCK_MODULES`), would outlive an edit of one
+    of them. So the cache entries ``<prefix>.*`` carry the hash of those
     ``sources`` (a file beside them, ``stamp_name``) and are deleted when it differs: the next
     call compiles afresh. The batch kernel (tsmpc.sim.batch) uses the same with its sources."""
     import hashlib
 
     import tsmpc.kernels as pkg
     from tsmpc.errors import TsmpcError
+    from tsmpc.kernels.jit import BLOCK_MODULES
     from tsmpc.textfile import read_bytes, read_text
 
     here = Path(pkg.__file__).parent
-    digest = hashlib.sha256(b"".join(read_bytes(here / f"{m}.py", "kernel source")
-                                     for m in sources)).hexdigest()
+    top = here.parent.parent  # the folder holding the tsmpc package
+    # the blocks compiled into the kernel (tsmpc.kernels.jit) are part of its machine code too
+    files = [here / f"{m}.py" for m in sources] + [top / (m.replace(".", "/") + ".py")
+                                                   for m in BLOCK_MODULES]
+    digest = hashlib.sha256(b"".join(read_bytes(f, "kernel source") for f in files)).hexdigest()
     stamp = folder / stamp_name
     try:
         if read_text(stamp, f"{prefix} cache stamp", limit=1024).strip() == digest:
@@ -727,8 +719,9 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     ip[ke.IP_FSTEP] = fstep is not None
     if fstep is not None:  # its state after reset
         fp[ke.FP_FS_H] = fstep.threshold
-        sf[ke.SF_FSVAR], sf[ke.SF_FSGP], sf[ke.SF_FSGM] = fstep._var, fstep._gp, fstep._gm
-        si[ke.SI_FSN], si[ke.SI_FSSINCE] = fstep._nvar, fstep._since
+        st = fstep.state
+        sf[ke.SF_FSVAR], sf[ke.SF_FSGP], sf[ke.SF_FSGM] = st.var, st.g_plus, st.g_minus
+        si[ke.SI_FSN], si[ke.SI_FSSINCE] = st.n_var, st.since
     ip[ke.IP_MFORCE], ip[ke.IP_MSTEER] = scenario.measured_force, scenario.measured_steering
     ip[ke.IP_FMA] = _matvec_mode()
     # the cascade's state after reset(x0)
@@ -1039,14 +1032,19 @@ def warmup() -> bool:
     """Compile (or load from numba's cache) the engine's machine code now, by one MPC step of the
     default cascade on the built-in circuit (``tsmpc warmup``; the designs of the default config
     are solved if the cache has none). True when the engine is available."""
+    from tsmpc.blas import limit_blas_threads
     from tsmpc.planning.circuit import builtin_circuit
-    from tsmpc.sim.simulator import simulate
 
     if not enabled() or _load_kernel() is None:
         return False
+    limit_blas_threads()  # as simulate() before a run
     cfg = Config()
-    simulate(cfg, Method.REF, Scenario("warmup", builtin_circuit(dt=cfg.rates.Tc)), max_steps=1,
-             engine=True)
+    scenario = Scenario("warmup", builtin_circuit(dt=cfg.rates.Tc))
+    if applicability(cfg, Method.REF, scenario) is None:  # (run() by itself, not via simulate():
+        try:                                              # the simulator sits above the engine)
+            run(cfg, Method.REF, scenario, max_steps=1)
+        except EngineFallback:
+            pass  # a block raised in the first step: the machine code is compiled all the same
     return True
 
 

@@ -1,0 +1,89 @@
+"""One definition per block, run two ways (issue 34): as Python from :class:`Cascade
+<tsmpc.control.cascade.Cascade>`, compiled inside the run engine and the batch.
+
+A block's per-step logic is written once, as a pure function over named records (``NamedTuple``
+parameters and state, the new state returned), in the block's own module, and decorated with
+:func:`jitable`. Called from Python it *is* that Python function (no dispatcher: typing a record
+argument costs numba's dispatcher ≈ 6 µs, more than the block's own work); called from compiled
+code (``tsmpc.kernels.engine.run``, the batch's lanes) numba compiles it into the caller. So the
+engine and the Python loop run the same source, and a change to it reaches both: there is nothing
+to port and nothing to keep in step.
+
+Rules for a ``@jitable`` function: numba's nopython subset (floats, ints, bools, tuples,
+``NamedTuple`` records, ``math``), no allocation of Python objects, Python's ``min``/``max``
+(numba's have the same NaN semantics), :func:`exact_hypot` instead of ``math.hypot`` (libm's
+rounds differently from CPython's), and the module listed in :data:`BLOCK_MODULES` — numba keys a
+cached kernel by its own file only, so the engine's cache carries a hash of these sources and is
+rebuilt when one changes (:func:`tsmpc.sim.engine._forget_stale_machine_code`).
+
+With ``TSMPC_NO_JIT=1`` (or without numba) :func:`jitable` returns the function unchanged and
+numba is not imported.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+__all__ = ["BLOCK_MODULES", "exact_hypot", "jitable"]
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+#: The modules that define ``@jitable`` blocks (their sources are part of the engine's cache key;
+#: tests/test_architecture.py checks the list is complete).
+BLOCK_MODULES = (
+    "tsmpc.control.gates",
+    "tsmpc.estimation.friction_step",
+    "tsmpc.kernels.jit",
+)
+
+
+def _numba_ready() -> bool:
+    """True when numba may be imported for compiled blocks: the kernels are on, and numba's cache
+    folder is set before its first import (numba reads ``NUMBA_CACHE_DIR`` once)."""
+    import sys
+
+    from tsmpc.kernels import cache_problem, enabled, numba_cache_dir
+
+    if not enabled():
+        return False
+    if "numba" not in sys.modules:
+        if cache_problem() is not None:  # the kernels refuse it too (tsmpc.kernels.load)
+            return False
+        os.environ.setdefault("NUMBA_CACHE_DIR", str(numba_cache_dir()))
+    try:
+        import numba.extending  # noqa: F401
+    except Exception:  # no numba on this platform: the blocks run as Python
+        return False
+    return True
+
+
+def jitable(fn: F) -> F:
+    """Mark ``fn`` as a block's one definition: plain Python when called from Python, compiled
+    into compiled callers (numba's ``register_jitable``)."""
+    if not _numba_ready():
+        return fn
+    from numba.extending import register_jitable
+
+    return register_jitable(fn)  # type: ignore[no-any-return]
+
+
+def exact_hypot(a: float, b: float) -> float:
+    """``math.hypot(a, b)``; compiled, CPython's own algorithm to the last bit
+    (:func:`tsmpc.kernels.engine.hypot_py`), so a gate decides the same in both loops."""
+    return math.hypot(a, b)
+
+
+if _numba_ready():
+    from numba.extending import overload
+
+    @overload(exact_hypot, jit_options={"cache": True})
+    def _exact_hypot_compiled(a, b):  # type: ignore[no-untyped-def]  # numba matches the signatures
+        from tsmpc.kernels.engine import hypot_py
+
+        def impl(a, b):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+            return hypot_py(a, b)
+
+        return impl
