@@ -13,7 +13,7 @@ without Python::
     at_corner = 2                    # μ(road) drops to 0.3 at the apex of the second corner
     mu = 0.3
 
-:func:`apply_conditions` turns them into the run's :class:`~tsmpc.sim.simulator.Scenario` (and,
+:func:`apply_conditions` turns them into the run's :class:`~tsmpc.scenarios.Scenario` (and,
 for ``oracle_tuned``, the controllers' config). Everything is deterministic given the run's seed;
 the stateful parts (sensor faults) restart when a run starts again at t = 0.
 """
@@ -21,13 +21,10 @@ the stateful parts (sensor faults) restart when a run starts again at t = 0.
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
 from dataclasses import replace as dc_replace
 
 import numpy as np
-from numpy.typing import NDArray
 
 from tsmpc.config import (
     Config,
@@ -41,8 +38,7 @@ from tsmpc.config import (
 from tsmpc.errors import ConfigError
 from tsmpc.planning.reference import Reference
 from tsmpc.robustness import RobustnessCase
-from tsmpc.scenarios import ConstantFriction, FrictionProfile
-from tsmpc.sim.simulator import Scenario, SensorFault
+from tsmpc.scenarios import ConstantFriction, EventFriction, ResolvedEvent, Scenario, SensorModel
 
 __all__ = [
     "EventFriction",
@@ -105,29 +101,6 @@ def corner_apexes(ref: Reference) -> list[int]:
     return out
 
 
-@dataclass(frozen=True)
-class ResolvedEvent:
-    """A friction event on one axis: time [s] (``by_time``) or travelled distance [m]."""
-
-    by_time: bool
-    start: float
-    ramp: float
-    end: float  #: end of the surface (inf: to the end of the run)
-    mu: float
-
-    def weight(self, t: float, s: float) -> float:
-        """0 before, ramps to 1 over ``ramp``, 1 until ``end``, back to 0 over ``ramp`` after."""
-        x = t if self.by_time else s
-        if x < self.start:
-            return 0.0
-        r = self.ramp
-        if x < self.end:
-            return 1.0 if r <= 0.0 or x >= self.start + r else (x - self.start) / r
-        if r <= 0.0 or x >= self.end + r:
-            return 0.0
-        return 1.0 - (x - self.end) / r
-
-
 def resolve_events(events: Sequence[FrictionEvent], ref: Reference) -> tuple[ResolvedEvent, ...]:
     """The events on their axes; ``at_corner`` becomes the apex's time since the reference's start.
     Raises :class:`ConfigError` for a corner the reference does not have."""
@@ -150,76 +123,6 @@ def resolve_events(events: Sequence[FrictionEvent], ref: Reference) -> tuple[Res
         dur = math.inf if e.duration_s is None else e.duration_s
         out.append(ResolvedEvent(True, start, e.ramp_s or 0.0, start + dur, e.mu))
     return tuple(out)
-
-
-@dataclass(frozen=True)
-class EventFriction:
-    """μ(road) of a base profile with events applied in order: each blends
-    from the μ before it to its own with its weight (a step takes effect at its start)."""
-
-    base: FrictionProfile
-    events: tuple[ResolvedEvent, ...]
-
-    def mu(self, t: float, s: float = 0.0) -> float:
-        m = self.base.mu(t, s)
-        for e in self.events:
-            w = e.weight(t, s)
-            if w > 0.0:
-                m = (1.0 - w) * m + w * e.mu
-        return m
-
-
-class SensorModel:
-    """Sensor faults of ``[scenario.sensors]`` on the noisy sample [X, Y, θ, v, ω] (a
-    :class:`~tsmpc.sim.simulator.SensorFault`), after an optional ``inner`` fault. In order:
-    biases and drifts, extra GNSS noise, delay, dropouts. Seeded; restarts when time goes back
-    (the next method of a comparison starts its run at t = 0 with the same draws).
-
-    Args:
-        faults: the settings.
-        Td: sample period of the calls [s] (the delay is rounded to whole samples).
-        position_sigma: σ of the configured position noise [m] (the GNSS scale multiplies it).
-        seed: the run's seed.
-        inner: a fault applied first (e.g. a named robustness scenario's).
-    """
-
-    def __init__(self, faults: SensorFaults, Td: float, position_sigma: float, seed: int,
-                 inner: SensorFault | None = None) -> None:
-        self.faults = faults
-        self.Td = float(Td)
-        self.delay_n = round(faults.delay_s / self.Td)
-        s = faults.gnss_noise_scale
-        self.extra_sigma = position_sigma * math.sqrt(max(s * s - 1.0, 0.0))
-        self.seed = int(seed)
-        self.inner = inner
-        self._reset()
-
-    def _reset(self) -> None:
-        self._drop = np.random.default_rng([self.seed, 21, 1])
-        self._gnss = np.random.default_rng([self.seed, 21, 2])
-        self._fifo: deque[NDArray[np.float64]] = deque(maxlen=self.delay_n + 1)
-        self._last: NDArray[np.float64] | None = None
-        self._t: float | None = None
-
-    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
-        if self._t is not None and t < self._t - 1e-12:
-            self._reset()
-        self._t = t
-        if self.inner is not None:
-            y = self.inner(t, y)
-        f = self.faults
-        out = np.array(y, dtype=float)
-        out[2] += f.theta_bias + f.theta_drift * t
-        out[3] += f.v_bias + f.v_drift * t
-        out[4] += f.omega_bias + f.omega_drift * t
-        if self.extra_sigma > 0.0:
-            out[0:2] += self.extra_sigma * self._gnss.standard_normal(2)
-        self._fifo.append(out)
-        out = self._fifo[0].copy()  # delay_n samples ago (the oldest until the FIFO is full)
-        if f.dropout_probability > 0.0 and self._drop.random() < f.dropout_probability:
-            out = self._last.copy() if f.dropout_hold and self._last is not None else np.full(5, np.nan)
-        self._last = out
-        return out
 
 
 def _budget_mu(scenario: Scenario, cfg: Config, duration: float) -> float:

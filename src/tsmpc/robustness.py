@@ -10,19 +10,15 @@ created per run (a run owns its fault, so runs in parallel never share state).
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
 from dataclasses import replace as dc_replace
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
 
 from tsmpc.config import Config, replace
 from tsmpc.errors import ConfigError
 from tsmpc.planning.reference import Reference
-from tsmpc.scenarios import PatchFriction, SurfacePatch
-from tsmpc.sim.simulator import Scenario
+from tsmpc.scenarios import DropoutFault, NaNBurstFault, PatchFriction, Scenario, SurfacePatch
 from tsmpc.vehicle.actuators import Actuators, ForceLag, SteeringServo
 
 __all__ = [
@@ -51,42 +47,6 @@ ROBUSTNESS_SCENARIOS: dict[str, str] = {
     "offset_start": "start 2 m left of the path with a 0.2 rad (11.5°) heading error: the e_θ premise "
     "leaves its ±5° box and the outer-loop methods schedule the transient differently",
 }
-
-
-@dataclass
-class DropoutFault:
-    """Measurements frozen at their last value for ``duration_s`` every ``period_s`` (from
-    ``start_s``): a stalled sensor bus. Stateful: one instance per run."""
-
-    period_s: float = 5.0
-    duration_s: float = 0.2
-    start_s: float = 2.0
-    _held: NDArray[np.float64] | None = field(default=None, repr=False)
-
-    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
-        if _in_burst(t, self.start_s, self.period_s, self.duration_s) and self._held is not None:
-            return self._held.copy()
-        self._held = np.array(y, dtype=float)
-        return y
-
-
-@dataclass(frozen=True)
-class NaNBurstFault:
-    """All measurements NaN for ``duration_s`` every ``period_s`` (from ``start_s``)."""
-
-    period_s: float = 7.0
-    duration_s: float = 0.05
-    start_s: float = 3.0
-
-    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
-        if _in_burst(t, self.start_s, self.period_s, self.duration_s):
-            return np.full_like(y, np.nan)
-        return y
-
-
-def _in_burst(t: float, start: float, period: float, duration: float) -> bool:
-    # A tiny tolerance so that sample instants k·T_d on a burst edge are classified consistently.
-    return t >= start - 1e-9 and math.fmod(t - start + 1e-9, period) < duration
 
 
 class RobustnessCase(NamedTuple):

@@ -1,24 +1,40 @@
-"""Scenarios (the paper's scenario): road-friction profiles μ(road) by time or path distance, and the seeded
-sensor-noise model."""
+"""Scenarios (the paper's scenario): what a run tracks and the conditions it meets, as data — the
+:class:`Scenario` itself, road-friction profiles μ(road) by time or path distance (with the friction
+events of a config's ``[scenario]`` section), the seeded sensor-noise model and the sensor faults.
+
+The data types sit below the simulator and the modules that build scenarios
+(:mod:`tsmpc.robustness`, :mod:`tsmpc.conditions`, :mod:`tsmpc.sim.compare`): the simulator and
+its compiled engine read them, the builders fill them in.
+"""
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tsmpc.config import NoiseSettings
+from tsmpc.config import NoiseSettings, SensorFaults, TyreParams, VehicleParams
 from tsmpc.errors import ConfigError
+from tsmpc.planning.reference import Reference
+from tsmpc.vehicle.actuators import Actuators
 
 __all__ = [
     "ConstantFriction",
+    "DropoutFault",
+    "EventFriction",
     "FrictionProfile",
+    "NaNBurstFault",
     "PaperFriction",
     "PatchFriction",
+    "ResolvedEvent",
+    "Scenario",
+    "SensorFault",
+    "SensorModel",
     "SensorNoise",
     "SurfacePatch",
     "mu_array",
@@ -148,3 +164,175 @@ class SensorNoise:
         out = self._buf[self._i]
         self._i += 1
         return out
+
+
+@dataclass
+class DropoutFault:
+    """Measurements frozen at their last value for ``duration_s`` every ``period_s`` (from
+    ``start_s``): a stalled sensor bus. Stateful: one instance per run."""
+
+    period_s: float = 5.0
+    duration_s: float = 0.2
+    start_s: float = 2.0
+    _held: NDArray[np.float64] | None = field(default=None, repr=False)
+
+    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
+        if _in_burst(t, self.start_s, self.period_s, self.duration_s) and self._held is not None:
+            return self._held.copy()
+        self._held = np.array(y, dtype=float)
+        return y
+
+
+@dataclass(frozen=True)
+class NaNBurstFault:
+    """All measurements NaN for ``duration_s`` every ``period_s`` (from ``start_s``)."""
+
+    period_s: float = 7.0
+    duration_s: float = 0.05
+    start_s: float = 3.0
+
+    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
+        if _in_burst(t, self.start_s, self.period_s, self.duration_s):
+            return np.full_like(y, np.nan)
+        return y
+
+
+def _in_burst(t: float, start: float, period: float, duration: float) -> bool:
+    # A tiny tolerance so that sample instants k·T_d on a burst edge are classified consistently.
+    return t >= start - 1e-9 and math.fmod(t - start + 1e-9, period) < duration
+
+
+@dataclass(frozen=True)
+class ResolvedEvent:
+    """A friction event on one axis: time [s] (``by_time``) or travelled distance [m]."""
+
+    by_time: bool
+    start: float
+    ramp: float
+    end: float  #: end of the surface (inf: to the end of the run)
+    mu: float
+
+    def weight(self, t: float, s: float) -> float:
+        """0 before, ramps to 1 over ``ramp``, 1 until ``end``, back to 0 over ``ramp`` after."""
+        x = t if self.by_time else s
+        if x < self.start:
+            return 0.0
+        r = self.ramp
+        if x < self.end:
+            return 1.0 if r <= 0.0 or x >= self.start + r else (x - self.start) / r
+        if r <= 0.0 or x >= self.end + r:
+            return 0.0
+        return 1.0 - (x - self.end) / r
+
+
+@dataclass(frozen=True)
+class EventFriction:
+    """μ(road) of a base profile with events applied in order: each blends
+    from the μ before it to its own with its weight (a step takes effect at its start)."""
+
+    base: FrictionProfile
+    events: tuple[ResolvedEvent, ...]
+
+    def mu(self, t: float, s: float = 0.0) -> float:
+        m = self.base.mu(t, s)
+        for e in self.events:
+            w = e.weight(t, s)
+            if w > 0.0:
+                m = (1.0 - w) * m + w * e.mu
+        return m
+
+
+class SensorModel:
+    """Sensor faults of ``[scenario.sensors]`` on the noisy sample [X, Y, θ, v, ω] (a
+    :class:`SensorFault`), after an optional ``inner`` fault. In order:
+    biases and drifts, extra GNSS noise, delay, dropouts. Seeded; restarts when time goes back
+    (the next method of a comparison starts its run at t = 0 with the same draws).
+
+    Args:
+        faults: the settings.
+        Td: sample period of the calls [s] (the delay is rounded to whole samples).
+        position_sigma: σ of the configured position noise [m] (the GNSS scale multiplies it).
+        seed: the run's seed.
+        inner: a fault applied first (e.g. a named robustness scenario's).
+    """
+
+    def __init__(self, faults: SensorFaults, Td: float, position_sigma: float, seed: int,
+                 inner: SensorFault | None = None) -> None:
+        self.faults = faults
+        self.Td = float(Td)
+        self.delay_n = round(faults.delay_s / self.Td)
+        s = faults.gnss_noise_scale
+        self.extra_sigma = position_sigma * math.sqrt(max(s * s - 1.0, 0.0))
+        self.seed = int(seed)
+        self.inner = inner
+        self._reset()
+
+    def _reset(self) -> None:
+        self._drop = np.random.default_rng([self.seed, 21, 1])
+        self._gnss = np.random.default_rng([self.seed, 21, 2])
+        self._fifo: deque[NDArray[np.float64]] = deque(maxlen=self.delay_n + 1)
+        self._last: NDArray[np.float64] | None = None
+        self._t: float | None = None
+
+    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
+        if self._t is not None and t < self._t - 1e-12:
+            self._reset()
+        self._t = t
+        if self.inner is not None:
+            y = self.inner(t, y)
+        f = self.faults
+        out = np.array(y, dtype=float)
+        out[2] += f.theta_bias + f.theta_drift * t
+        out[3] += f.v_bias + f.v_drift * t
+        out[4] += f.omega_bias + f.omega_drift * t
+        if self.extra_sigma > 0.0:
+            out[0:2] += self.extra_sigma * self._gnss.standard_normal(2)
+        self._fifo.append(out)
+        out = self._fifo[0].copy()  # delay_n samples ago (the oldest until the FIFO is full)
+        if f.dropout_probability > 0.0 and self._drop.random() < f.dropout_probability:
+            out = self._last.copy() if f.dropout_hold and self._last is not None else np.full(5, np.nan)
+        self._last = out
+        return out
+
+
+class SensorFault(Protocol):
+    """Corrupts measurements: called every T_d with the time and the noisy measurement
+    ``[X, Y, θ, v, ω]``; returns what the sensors deliver (may hold values or return NaN)."""
+
+    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]: ...
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """What a run tracks and in which conditions.
+
+    Attributes:
+        name: label used in outputs.
+        reference: reference sampled at T_c, including the N-step look-ahead at its end.
+        friction: μ(road) as a function of time and travelled distance.
+        initial_error: (lateral offset [m], heading offset [rad]) of the start pose.
+        plant_vehicle: plant-only vehicle parameters (model mismatch); None = the config's.
+        plant_tyre: plant-only tyre parameters (model mismatch); None = the config's.
+        actuators: steering servo / force lag in front of the default plant; None = ideal.
+        measured_steering: the platform measures the steering angle the vehicle really
+            received (the plant's ``applied_input``) and gives it to the cascade (the MHE then
+            uses it instead of the command).
+        measured_force: the same for the drive force.
+        sensor_fault: measurement corruption (dropouts, NaN bursts); None = healthy sensors.
+        divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track's
+            half-width); None = ``cfg.divergence_bound_m``.
+        meta: free-form facts written to metrics.json (source file, window, ...).
+    """
+
+    name: str
+    reference: Reference
+    friction: FrictionProfile = field(default_factory=paper_friction_profile)
+    initial_error: tuple[float, float] = (0.0, 0.0)
+    plant_vehicle: VehicleParams | None = None
+    plant_tyre: TyreParams | None = None
+    actuators: Actuators | None = None
+    measured_steering: bool = False
+    measured_force: bool = False
+    sensor_fault: SensorFault | None = None
+    divergence_bound_m: float | None = None
+    meta: dict[str, Any] = field(default_factory=dict)

@@ -129,7 +129,7 @@ def _set_up(index: int, cfg: Config, method: Method, scenario: Scenario, designs
     running it), or why the engine would decline it."""
     from tsmpc.control.cascade import Cascade
     from tsmpc.sim import engine as eng
-    from tsmpc.sim.simulator import _start_state, default_plant, tracked_steps
+    from tsmpc.sim.start import _start_state, default_plant, tracked_steps
 
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=designs[0],
                       dynamic_design=designs[1])

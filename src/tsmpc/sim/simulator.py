@@ -14,70 +14,25 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tsmpc.config import Config, TyreParams, VehicleParams
+from tsmpc.config import Config
 from tsmpc.control.cascade import Cascade, Command, Measurement, Method, build_outer_controller
 from tsmpc.errors import ConfigError, NonFiniteError
 from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.planning.reference import Reference
-from tsmpc.scenarios import FrictionProfile, SensorNoise, paper_friction_profile
+from tsmpc.scenarios import Scenario, SensorFault, SensorNoise
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.plant import Plant
-from tsmpc.vehicle.actuators import Actuators
-from tsmpc.vehicle.plant import VehiclePlant
+from tsmpc.sim.start import _start_state, default_plant, tracked_steps
 
 __all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "default_plant", "simulate",
            "tracked_steps"]
 
 ProgressFn = Callable[[int, int], None]
-
-
-class SensorFault(Protocol):
-    """Corrupts measurements: called every T_d with the time and the noisy measurement
-    ``[X, Y, θ, v, ω]``; returns what the sensors deliver (may hold values or return NaN)."""
-
-    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]: ...
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """What a run tracks and in which conditions.
-
-    Attributes:
-        name: label used in outputs.
-        reference: reference sampled at T_c, including the N-step look-ahead at its end.
-        friction: μ(road) as a function of time and travelled distance.
-        initial_error: (lateral offset [m], heading offset [rad]) of the start pose.
-        plant_vehicle: plant-only vehicle parameters (model mismatch); None = the config's.
-        plant_tyre: plant-only tyre parameters (model mismatch); None = the config's.
-        actuators: steering servo / force lag in front of the default plant; None = ideal.
-        measured_steering: the platform measures the steering angle the vehicle really
-            received (the plant's ``applied_input``) and gives it to the cascade (the MHE then
-            uses it instead of the command).
-        measured_force: the same for the drive force.
-        sensor_fault: measurement corruption (dropouts, NaN bursts); None = healthy sensors.
-        divergence_bound_m: end the run as diverged when |e_y| exceeds it (e.g. a track's
-            half-width); None = ``cfg.divergence_bound_m``.
-        meta: free-form facts written to metrics.json (source file, window, ...).
-    """
-
-    name: str
-    reference: Reference
-    friction: FrictionProfile = field(default_factory=paper_friction_profile)
-    initial_error: tuple[float, float] = (0.0, 0.0)
-    plant_vehicle: VehicleParams | None = None
-    plant_tyre: TyreParams | None = None
-    actuators: Actuators | None = None
-    measured_steering: bool = False
-    measured_force: bool = False
-    sensor_fault: SensorFault | None = None
-    divergence_bound_m: float | None = None
-    meta: dict[str, Any] = field(default_factory=dict)
 
 
 class _Recorder:
@@ -143,29 +98,6 @@ class _Recorder:
             F_fr_true=self.f_true[i], mu_road=self.mu[i], command=self.cmd[i],
             saturated=self.sat[i], mhe_time_s=self.mhe_time[i], lqr_time_s=self.lqr_time[i],
             mhe_status=self.mhe_status[i], **facts)
-
-
-def tracked_steps(ref: Reference, N: int) -> int:
-    """Outer steps a run tracks: a closed lap to its end (its look-ahead wraps into the next lap,
-    see :meth:`Reference.window`); an open reference keeps its last N samples as look-ahead."""
-    return len(ref) if ref.closed else len(ref) - N
-
-
-def _start_state(ref: Reference, initial_error: tuple[float, float]) -> NDArray[np.float64]:
-    """Start pose on the reference, optionally offset laterally and in heading."""
-    th0 = float(ref.theta[0])
-    lat, dth = initial_error
-    return np.array([ref.x[0] - lat * np.sin(th0), ref.y[0] + lat * np.cos(th0), th0 + dth,
-                     max(float(ref.v[0]), 0.0), 0.0, float(ref.omega[0])])
-
-
-def default_plant(cfg: Config, scenario: Scenario) -> Plant:
-    """tsmpc's nonlinear plant with the scenario's plant parameters (the config's if None),
-    behind the scenario's actuators if any."""
-    plant = VehiclePlant(scenario.plant_vehicle or cfg.vehicle, scenario.plant_tyre or cfg.tyre,
-                         cfg.rates.h)
-    return plant if scenario.actuators is None else scenario.actuators.wrap(
-        plant, substeps=cfg.rates.plant_per_inner)
 
 
 def _measurement(y: NDArray[np.float64], x: NDArray[np.float64], plant: Plant, oracle: bool,
