@@ -1,7 +1,7 @@
 """The README's baseline table (issue 26): every outer-loop method — the TS-MPC's three scheduling
 modes, the NL-MPC and the four baselines users pick instead — in the same cascade on five cases.
 
-    python examples/baseline_table.py [--out results/baselines] [--shared ../shared] [--markdown FILE]
+    python examples/baseline_table.py [--out results/baselines] [--data DIR] [--markdown FILE]
 
 Cases: the paper reference (paper-run window), two public race tracks (TUMFTM, LGPL-3.0) planned
 at v_max = 22 m/s and a_lat = 5 m/s² (as ``tsmpc plan TRACK --v-max 22 --a-lat 5``; the scheduling
@@ -12,6 +12,8 @@ Every case is one :func:`tsmpc.sim.compare.compare` call (all methods, one seed)
 (metrics.json, comfort.md, …) are written under ``--out/<case>/`` and the table is built from
 those metrics only. :func:`baseline_table` returns the Markdown (the docs generator's entry point)
 and writes it to ``--out/baseline_table.md``. ``TSMPC_EXAMPLE_STEPS`` shortens every run (CI).
+The paper's reference and the tracks are found by :func:`tsmpc.datasets.resolve` (``tsmpc data
+fetch`` downloads them) unless ``--data`` names a folder laid out as ``paper/…`` and ``tracks/…``.
 """
 
 from __future__ import annotations
@@ -23,15 +25,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from tsmpc import datasets
 from tsmpc.config import Config, Method, PlannerSettings
 
 #: Rows: every method, in this order.
 METHODS = (Method.FZN, Method.REF, Method.ITER, Method.NL, Method.PURE_PURSUIT, Method.STANLEY,
            Method.LQR, Method.LTV)
-#: The two race tracks (files in ../shared/data/tracks) and their plan.
+#: The two race tracks (TUMFTM, `tsmpc data fetch tracks`) and their plan.
 TRACKS = ("Monza", "Silverstone")
 V_MAX, A_LAT = 22.0, 5.0
-PAPER_FILE = Path("data/paper/planner_references_100ms.csv")
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -45,7 +47,7 @@ class Case:
     robustness: str = "nominal"
 
 
-def plan_tracks(shared: Path, work: Path, cfg: Config) -> dict[str, Path]:
+def plan_tracks(tracks: Path, work: Path, cfg: Config) -> dict[str, Path]:
     """Plan each of :data:`TRACKS` at (V_MAX, A_LAT) into ``work/<track>.csv`` (as ``tsmpc plan``:
     a closed lap, the track's narrowest half-width as the divergence bound)."""
     from tsmpc.planning.planner import plan_path
@@ -54,7 +56,7 @@ def plan_tracks(shared: Path, work: Path, cfg: Config) -> dict[str, Path]:
     out = {}
     settings = PlannerSettings(v_max=V_MAX, a_lat_max=A_LAT)
     for name in TRACKS:
-        track = load_tumftm(shared / "data" / "tracks" / f"{name}.csv")
+        track = load_tumftm(tracks / f"{name}.csv")
         ref = plan_path(track.centre, settings, closed=True, dt=cfg.rates.Tc)
         half = float(min(track.w_left.min(), track.w_right.min()))
         path = work / f"{name}_{V_MAX:g}_{A_LAT:g}.csv"
@@ -63,9 +65,8 @@ def plan_tracks(shared: Path, work: Path, cfg: Config) -> dict[str, Path]:
     return out
 
 
-def cases(shared: Path, planned: dict[str, Path]) -> list[Case]:
+def cases(paper: Path, planned: dict[str, Path]) -> list[Case]:
     """The five table cases and the offset start (key ``offset_start``), in order."""
-    paper = shared / PAPER_FILE
     return [
         Case("paper", "paper reference", paper),
         *(Case(name.lower(), f"{name} (22 m/s, 5 m/s²)", path) for name, path in planned.items()),
@@ -160,15 +161,23 @@ def settling_markdown(metrics: dict[str, Any]) -> str:
             + "\n| settling time [s] | " + " | ".join(vals) + " |\n")
 
 
-def baseline_table(out: Path, *, shared: Path = ROOT.parent / "shared", methods: tuple[Method, ...] = METHODS,
+def baseline_table(out: Path, *, data: Path | None = None, methods: tuple[Method, ...] = METHODS,
                    max_steps: int | None = None, run: bool = True) -> str:
     """Run every case (``run``; else read the metrics.json files an earlier run left under
-    ``out``), write ``out/baseline_table.md`` and return the Markdown."""
+    ``out``), write ``out/baseline_table.md`` and return the Markdown. ``data``: a folder holding
+    ``paper/planner_references_100ms.csv`` and ``tracks/<Name>.csv`` (default: tsmpc's data
+    folders, :func:`tsmpc.datasets.resolve`)."""
     import json
 
     out.mkdir(parents=True, exist_ok=True)
     load0 = os.getloadavg()[0]
-    planned = (plan_tracks(shared, out, Config()) if run
+    if data is not None:
+        paper, tracks = data / datasets.PAPER_FILE, data / "tracks"
+    elif run:
+        paper, tracks = datasets.resolve("paper"), datasets.resolve("tracks")
+    else:  # the table from an earlier run's metrics.json files: no data is read
+        paper, tracks = Path(datasets.PAPER_FILE), Path("tracks")
+    planned = (plan_tracks(tracks, out, Config()) if run
                else {n: out / f"{n}_{V_MAX:g}_{A_LAT:g}.csv" for n in TRACKS})
     results = {}
     # Every method's outer step timed as a Python caller sees it: the TS-MPC methods would
@@ -176,7 +185,7 @@ def baseline_table(out: Path, *, shared: Path = ROOT.parent / "shared", methods:
     # call overhead every baseline pays. The tracking numbers are the same either way.
     engine, os.environ["TSMPC_ENGINE"] = os.environ.get("TSMPC_ENGINE"), "0"
     try:
-        for case in cases(shared, planned):
+        for case in cases(paper, planned):
             metrics = (run_case(case, out, methods, max_steps) if run
                        else json.loads((out / case.key / "metrics.json").read_text(encoding="utf-8")))
             results[case.key] = (case, metrics)
@@ -207,15 +216,16 @@ def baseline_table(out: Path, *, shared: Path = ROOT.parent / "shared", methods:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("results/baselines"))
-    ap.add_argument("--shared", type=Path, default=ROOT.parent / "shared",
-                    help="folder holding data/paper and data/tracks (not bundled)")
+    ap.add_argument("--data", type=Path, default=None,
+                    help="folder holding paper/ and tracks/ (default: tsmpc's data folders; the data "
+                    "is not bundled: tsmpc data fetch)")
     ap.add_argument("--markdown", type=Path, default=None,
                     help="also write the table here (docs/generated/baseline_table.md for the docs)")
     ap.add_argument("--no-run", action="store_true",
                     help="rebuild the table from the metrics.json files of an earlier run in --out")
     args = ap.parse_args()
     steps = int(os.environ.get("TSMPC_EXAMPLE_STEPS", "0")) or None
-    text = baseline_table(args.out, shared=args.shared, max_steps=steps, run=not args.no_run)
+    text = baseline_table(args.out, data=args.data, max_steps=steps, run=not args.no_run)
     if args.markdown is not None:
         from tsmpc.io import atomic_write_text
 

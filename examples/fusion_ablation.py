@@ -7,8 +7,8 @@ plus the issue's single-number acceptance checks (docs/mismatch.md shows this sc
 
 :func:`fusion_blocks` is the docs generator's section ``fusion-ablation``.
 
-REFERENCE defaults to ../shared/data/paper/planner_references_100ms.csv (the paper's file, not
-bundled). 63 whole runs of 127 s (REF, seed 0): 2–4 minutes on two shared cores.
+REFERENCE defaults to the paper's file (not bundled: ``tsmpc data fetch paper``; found by
+:func:`tsmpc.datasets.resolve`). 63 whole runs of 127 s (REF, seed 0): 2–4 minutes on two shared cores.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from tsmpc.config import Config, apply_overrides, replace
+from tsmpc.datasets import path_or_dataset
 from tsmpc.sim import experiment
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -99,12 +100,12 @@ def fusion_blocks(ref: Path, steps: int | None = None) -> dict[str, str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("reference", nargs="?",
-                    default=ROOT.parent / "shared" / "data" / "paper" / "planner_references_100ms.csv")
+    ap.add_argument("reference", nargs="?", default="paper",
+                    help="a file or a dataset name (default: paper, from `tsmpc data fetch paper`)")
     args = ap.parse_args()
     steps = int(os.environ.get("TSMPC_EXAMPLE_STEPS", "0")) or None  # shortened runs (tests)
     t0 = time.perf_counter()
-    blocks = fusion_blocks(Path(args.reference), steps)
+    blocks = fusion_blocks(path_or_dataset(args.reference), steps)
     for name, body in blocks.items():
         print(f"\n## {name}\n\n{body}")
     print(f"({time.perf_counter() - t0:.0f} s)")

@@ -6,8 +6,8 @@ there).
 
     python examples/paper_ablation.py [REFERENCE]
 
-Runs from any folder. REFERENCE defaults to the paper's file in ../shared/data next to the
-repository (not bundled). Every row is a full REF run of the paper window.
+Runs from any folder. REFERENCE defaults to the paper's file (not bundled: ``tsmpc data fetch
+paper``; found by :func:`tsmpc.datasets.resolve`). Every row is a full REF run of the paper window.
 """
 
 from __future__ import annotations
@@ -17,19 +17,20 @@ import os
 import sys
 from pathlib import Path
 
+from tsmpc.datasets import path_or_dataset
 from tsmpc.report.published import Context, ablation, speed_mode
 
 ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT.parent / "shared" / "data" / "paper" / "planner_references_100ms.csv"
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("reference", nargs="?", type=Path, default=PAPER)
+    ap.add_argument("reference", nargs="?", default="paper",
+                    help="a file or a dataset name (default: paper, from `tsmpc data fetch paper`)")
     ap.add_argument("--skip-runs", action="store_true", help="only the speed-mode table")
     args = ap.parse_args()
     steps = int(os.environ.get("TSMPC_EXAMPLE_STEPS", "0")) or None  # shortened runs (tests)
-    ctx = Context(ROOT, reference=args.reference.resolve(), max_steps=steps,
+    ctx = Context(ROOT, reference=path_or_dataset(args.reference).resolve(), max_steps=steps,
                   progress=lambda s: print(f"  running: {s}", file=sys.stderr, flush=True))
     out = speed_mode(ctx)
     if not args.skip_runs:

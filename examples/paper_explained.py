@@ -6,10 +6,10 @@ MHE-UIO forms (README.md and docs/paper.md show this script's output).
 
     python examples/paper_explained.py [REFERENCE] [--img-dir docs/img] [--update-docs]
 
-Runs from any folder. REFERENCE defaults to the paper's file in ../shared/data next to the
-repository (not bundled). ``--update-docs`` rewrites the marked blocks of README.md and
-docs/paper.md with the tables printed here (``python docs/generate.py --only paper-explained``
-does the same). ≈ 35 full runs at 1–10 ms inner steps: 15–25 minutes on two shared cores.
+Runs from any folder. REFERENCE defaults to the paper's file (not bundled: ``tsmpc data fetch
+paper``; found by :func:`tsmpc.datasets.resolve`). ``--update-docs`` rewrites the marked blocks
+of README.md and docs/paper.md with the tables printed here (``python docs/generate.py --only
+paper-explained`` does the same). ≈ 35 full runs at 1–10 ms inner steps: 15–25 minutes on two shared cores.
 """
 
 from __future__ import annotations
@@ -20,16 +20,17 @@ import sys
 import time
 from pathlib import Path
 
+from tsmpc.datasets import path_or_dataset
 from tsmpc.report.paper_explained import generate, update_block
 
 ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT.parent / "shared" / "data" / "paper" / "planner_references_100ms.csv"
 DOCS = (ROOT / "README.md", ROOT / "docs" / "paper.md")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("reference", nargs="?", type=Path, default=PAPER)
+    ap.add_argument("reference", nargs="?", default="paper",
+                    help="a file or a dataset name (default: paper, from `tsmpc data fetch paper`)")
     ap.add_argument("--img-dir", type=Path, default=None, help="write the figures here (docs/img)")
     ap.add_argument("--update-docs", action="store_true",
                     help="rewrite the marked blocks of README.md and docs/paper.md")
@@ -38,7 +39,7 @@ def main() -> None:
     if args.update_docs and steps is not None:
         sys.exit("refusing to write shortened runs (TSMPC_EXAMPLE_STEPS) into the docs")
     t0 = time.perf_counter()
-    rep = generate(Path(args.reference), args.img_dir, max_steps=steps,
+    rep = generate(path_or_dataset(args.reference), args.img_dir, max_steps=steps,
                    progress=lambda s: print(f"  running: {s}", file=sys.stderr, flush=True))
     for name, body in rep.blocks.items():
         print(f"\n## {name}\n\n{body}")

@@ -1,4 +1,4 @@
-"""Race speeds (issue 21, item 5): the five public tracks of ../shared/data/tracks planned at
+"""Race speeds (issue 21, item 5): the five public TUMFTM tracks (``tsmpc data fetch tracks``) planned at
 22 m/s, 5 m/s² and at 25 m/s, 6 m/s² (``tsmpc plan --v-max … --a-lat …``), one whole lap each with
 the default cascade (REF; the boxes widened and certified for the plan automatically), and three
 synthetic S-bends at 22 m/s: the largest lateral error (docs/mismatch.md shows this script's
@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from tsmpc.config import Config, PlannerSettings
+from tsmpc.datasets import path_or_dataset
 from tsmpc.planning.planner import plan_path
 from tsmpc.planning.tracks import load_tumftm
 from tsmpc.sim import experiment
@@ -94,11 +95,13 @@ def race_block(tracks: Path, steps: int | None = None) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("tracks", nargs="?", default=ROOT.parent / "shared" / "data" / "tracks", type=Path)
+    ap.add_argument("tracks", nargs="?", default="tracks",
+                    help="a folder of TUMFTM tracks or 'tracks' (default: `tsmpc data fetch tracks`)")
     args = ap.parse_args()
     steps = int(os.environ.get("TSMPC_EXAMPLE_STEPS", "0")) or None  # shortened runs (tests)
     t0 = time.perf_counter()
-    print(f"\n## race-speeds\n\n{race_block(args.tracks, steps)}\n({time.perf_counter() - t0:.0f} s)")
+    block = race_block(path_or_dataset(args.tracks), steps)
+    print(f"\n## race-speeds\n\n{block}\n({time.perf_counter() - t0:.0f} s)")
 
 
 if __name__ == "__main__":

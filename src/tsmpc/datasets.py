@@ -58,6 +58,7 @@ __all__ = [
     "find",
     "is_dataset_name",
     "names",
+    "path_or_dataset",
     "resolve",
 ]
 
@@ -257,6 +258,14 @@ def resolve(name: str) -> Path:
         raise DataNotFoundError(f"dataset {name!r} not found (searched {where}); download it with "
                                 f"`{fetch_command(name)}`")
     return path
+
+
+def path_or_dataset(text: str | os.PathLike[str]) -> Path:
+    """``text`` as a path when something exists there or it is no dataset name; else the dataset
+    it names, resolved (:class:`DataNotFoundError` when not downloaded)."""
+    if os.path.lexists(text) or not is_dataset_name(text):
+        return Path(text)
+    return resolve(os.fspath(text))
 
 
 # -- download --------------------------------------------------------------------------------

@@ -59,20 +59,30 @@ class Context:
     progress: Callable[[str], None] = lambda _s: None
     quick: bool = False  #: the CI subset: only the rows the drift test re-runs
     max_steps: int | None = None  #: shortened runs (examples under test); never for the docs
-    reference: Path | None = None  #: the paper's reference file (default: ../shared/data)
+    reference: Path | None = None  #: the paper's reference file (default: tsmpc.datasets.resolve)
     cache: dict[str, Any] = field(default_factory=dict)
     scratch: Path = field(default_factory=lambda: Path(tempfile.mkdtemp(prefix="tsmpc-docs-")))
 
     @property
-    def shared(self) -> Path:
-        return self.root.parent / "shared" / "data"
-
-    @property
     def paper_reference(self) -> Path:
-        return self.reference or self.shared / "paper" / "planner_references_100ms.csv"
+        """The paper's reference: ``reference``, else where :func:`tsmpc.datasets.resolve` finds it
+        ($TSMPC_DATA_DIR, the cache of ``tsmpc data fetch``, ../shared/data of a checkout)."""
+        from tsmpc import datasets
+
+        return self.reference or datasets.resolve("paper")
 
     def track(self, name: str) -> Path:
-        return self.shared / "tracks" / f"{name}.csv"
+        """A race track's file (``tsmpc data fetch tracks``)."""
+        from tsmpc import datasets
+
+        return datasets.resolve(name)
+
+    @property
+    def tracks(self) -> Path:
+        """The folder of the race tracks."""
+        from tsmpc import datasets
+
+        return datasets.resolve("tracks")
 
     def figure(self, name: str) -> Path:
         folder = self.img_dir if self.img_dir is not None else self.scratch / "img"
@@ -954,7 +964,7 @@ def baselines(ctx: Context) -> Produced:
     p = Produced()
     ctx.progress("examples/baseline_table.py (6 compares of 8 methods)")
     table = _example(ctx, "baseline_table").baseline_table
-    text = table(ctx.scratch / "baselines", shared=ctx.root.parent / "shared", max_steps=ctx.max_steps)
+    text = table(ctx.scratch / "baselines", max_steps=ctx.max_steps)
     p.add("baselines", "table", text.rstrip("\n"))
     return p
 
@@ -997,7 +1007,7 @@ def race_speeds(ctx: Context) -> Produced:
     """The public tracks at 22 and 25 m/s and three S-bends (docs/mismatch.md)."""
     p = Produced()
     ctx.progress("examples/race_tracks.py (13 runs)")
-    p.add("race-speeds", "table", _example(ctx, "race_tracks").race_block(ctx.shared / "tracks",
+    p.add("race-speeds", "table", _example(ctx, "race_tracks").race_block(ctx.tracks,
                                                                           ctx.max_steps))
     return p
 
