@@ -12,6 +12,7 @@ import dataclasses
 import functools
 import hashlib
 import http.server
+import os
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -109,8 +110,11 @@ def test_fetch_all_over_http(upstream: tuple[_Server, dict[str, bytes]], tmp_pat
     res = runner.invoke(app, ["data", "fetch", "all", "--mirror", server.url])
     assert res.exit_code == 0, res.output
     data = tmp_path / "cache" / "data"
+    mask = os.umask(0o022)
+    os.umask(mask)
     for rel, content in served.items():
         assert (data / rel).read_bytes() == content, rel
+        assert (data / rel).stat().st_mode & 0o777 == 0o666 & ~mask, rel  # as a plain write, not 0600
     assert len(server.requests) == len(served)
     # the licence is recorded next to each dataset; the paper's says it must not be redistributed
     paper_note = (data / "paper" / "README.txt").read_text(encoding="utf-8")

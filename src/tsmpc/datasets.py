@@ -318,7 +318,7 @@ def fetch(which: str = "all", *, mirror: str | None = None, root: Path | None = 
     import pooch
     import requests
 
-    from tsmpc.io import atomic_write_text
+    from tsmpc.io import _umask, atomic_write_text
 
     key = which.strip().lower()
     if key == "all":
@@ -352,6 +352,10 @@ def fetch(which: str = "all", *, mirror: str | None = None, root: Path | None = 
                 raise DataFetchError(f"{url}: download failed ({_reason(err)})") from None
             except OSError as err:
                 raise DataFetchError(f"{target}: cannot write ({err.strerror or err})") from None
+            try:  # pooch's temporary file was 0600: give it the mode a plain write would (umask)
+                os.chmod(target, 0o666 & ~_umask())
+            except OSError as err:
+                raise DataFetchError(f"{target}: cannot set its mode ({err.strerror or err})") from None
             if f in ds.data_files:
                 out.append(target)
         note = dest / ds.folder / "README.txt"
