@@ -167,7 +167,9 @@ def test_network_failures_exit_1(upstream: tuple[_Server, dict[str, bytes]], tmp
     res = runner.invoke(app, ["data", "fetch", "paper", "--mirror", "http://127.0.0.1:9"])
     assert res.exit_code == 1, res.output
     assert _leftovers(tmp_path / "cache" / "data") == []
-    for bad in (["data", "fetch", "nope"], ["data", "fetch", "paper", "--mirror", "no-such-folder"]):
+    (tmp_path / "a-file").write_text("", encoding="utf-8")
+    for bad in (["data", "fetch", "nope"], ["data", "fetch", "paper", "--mirror", "no-such-folder"],
+                ["data", "fetch", "paper", "--mirror", server.url, "--dir", str(tmp_path / "a-file")]):
         res = runner.invoke(app, bad)
         assert res.exit_code == 2 and res.output.count("error:") == 1, res.output
 

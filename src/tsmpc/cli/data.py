@@ -27,11 +27,15 @@ def fetch_cmd(
     """Download the paper's planner reference (authors' repository) and the TUMFTM race tracks,
     each checked against its pinned SHA-256, with a README.txt of origin and licence."""
     from tsmpc import datasets
-    from tsmpc.errors import TsmpcError
+    from tsmpc.errors import ConfigError, TsmpcError
+    from tsmpc.paths import folder_problem
 
     check_environment(kernels=False)
     if target is not None:
         check_path_text(target, "--dir")
+        problem = folder_problem(target)
+        if problem:
+            fail(ConfigError(f"--dir {target}: {problem}"))
     try:
         files = datasets.fetch(which, mirror=mirror, root=target,
                                progress=lambda text: typer.echo(f"fetching {text}", err=True))
