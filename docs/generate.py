@@ -7,7 +7,7 @@ numbers in the text, the figures in docs/img and the README's GIF — or check t
     python docs/generate.py --list                 # the sections and their blocks
 
 Every generated block sits between ``<!-- SECTION:NAME:begin -->`` and ``<!-- SECTION:NAME:end -->``
-(``tsmpc.report.docs``); SECTION is one of the sections below (``tsmpc.report.published``). The
+(``generator.blocks``); SECTION is one of the sections below (``generator.published``). The
 paper's reference and the race tracks are read from ../shared/data next to the repository.
 ``--check`` fails (exit 1) when a published number differs from the fresh run by more than 2 %
 beyond half a unit of its last printed digit; timings are regenerated but never checked.
@@ -21,9 +21,10 @@ import sys
 import time
 from pathlib import Path
 
+from generator.blocks import blocks_in, check_files, update_block
+from generator.published import PRODUCERS, TIMING_COLUMNS, TIMING_LINES, Context, precise
+
 from tsmpc.blas import limit_blas_threads
-from tsmpc.report.docs import blocks_in, check_files, update_block
-from tsmpc.report.published import PRODUCERS, TIMING_COLUMNS, TIMING_LINES, Context, precise
 
 ROOT = Path(__file__).resolve().parents[1]
 

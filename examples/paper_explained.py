@@ -21,9 +21,12 @@ import time
 from pathlib import Path
 
 from tsmpc.datasets import path_or_dataset
-from tsmpc.report.paper_explained import generate, update_block
 
 ROOT = Path(__file__).resolve().parents[1]
+# the study lives beside the docs generator (docs/generator: project tooling, not in the package)
+sys.path.append(str(ROOT / "docs"))
+from generator.paper_explained import generate, update_block  # noqa: E402
+
 DOCS = (ROOT / "README.md", ROOT / "docs" / "paper.md")
 
 

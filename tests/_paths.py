@@ -4,10 +4,24 @@ tests find the paper's reference and the race tracks (not a test module)."""
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
+
+#: The repository's docs/ folder: the documentation generator and the Table 5 study live there
+#: (package ``generator``), project tooling outside the installed package.
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+def tooling_on_path() -> None:
+    """Make the project's tooling importable: the repository's docs/ folder on ``sys.path``, so
+    ``import generator.published`` (the docs generator), ``generator.blocks`` and the Table 5 study
+    (``generator.paper_explained``, ``generator.paper_explained_runs``) work. Called once, by
+    conftest.py."""
+    if str(DOCS) not in sys.path:
+        sys.path.append(str(DOCS))
 
 
 def circle_window(R: float, v: float, Tc: float, n: int, *, left: bool = True,

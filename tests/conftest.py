@@ -13,8 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from _paths import need_data
+from _paths import need_data, tooling_on_path
 from tsmpc.config import Config
+
+tooling_on_path()  # the docs generator and the Table 5 study (docs/generator) for the tests
 
 
 @pytest.fixture(scope="session")

@@ -10,9 +10,8 @@ import re
 from pathlib import Path
 
 import pytest
-
-from tsmpc.report.docs import BlockId, blocks_in, check_files, drift, numbers, read_block, update_block
-from tsmpc.report.published import PRODUCERS, TIMING_COLUMNS, TIMING_LINES, Context, precise
+from generator.blocks import BlockId, blocks_in, check_files, drift, numbers, read_block, update_block
+from generator.published import PRODUCERS, TIMING_COLUMNS, TIMING_LINES, Context, precise
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
@@ -91,7 +90,8 @@ def test_published_numbers_match_a_fresh_run(paper_reference_path: Path, tracks_
 
 def _user_facing() -> dict[str, str]:
     src = {str(p.relative_to(ROOT)): p.read_text(encoding="utf-8")
-           for p in [*(ROOT / "src" / "tsmpc").rglob("*.py"), *(ROOT / "examples").glob("*.py")]}
+           for p in [*(ROOT / "src" / "tsmpc").rglob("*.py"), *(ROOT / "examples").glob("*.py"),
+                     *(ROOT / "docs" / "generator").glob("*.py")]}
     return {**TEXTS, **src}
 
 

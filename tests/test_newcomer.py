@@ -206,7 +206,7 @@ def test_documented_commands_write_only_under_results() -> None:
 def test_published_tables_have_short_cells() -> None:
     """The ablation is two narrow tables (at 1400 px the site's content column holds about seven
     short columns; the one wide table scrolled and its rows were four lines tall)."""
-    from tsmpc.report.docs import BlockId, read_block
+    from generator.blocks import BlockId, read_block
 
     for page in ("README.md", "docs/paper.md"):
         text = (ROOT / page).read_text(encoding="utf-8")

@@ -386,7 +386,7 @@ def test_feasibility_design_certificates_recomputed(as_run: Config) -> None:
 # --- the walk -----------------------------------------------------------------------------------
 
 def test_the_walk_removes_one_switch_per_row_and_ends_on_the_paper_preset() -> None:
-    from tsmpc.sim.paper_explained import QUIRKS, walk_rows
+    from generator.paper_explained_runs import QUIRKS, walk_rows
 
     rows = walk_rows()
     assert rows[0].config == Config.preset(AS_RUN) and len(rows) == len(QUIRKS) + 1
@@ -409,7 +409,8 @@ def test_the_walk_removes_one_switch_per_row_and_ends_on_the_paper_preset() -> N
 def test_steady_straight_is_the_fixed_point_of_the_law(as_run: Config) -> None:
     """The speed-headroom evidence: the (F₁, ζ) it solves for leave the law's filters where they
     are when stepped (checked by stepping the law itself)."""
-    from tsmpc.sim.paper_explained import steady_straight
+    from generator.paper_explained_runs import steady_straight
+
     from tsmpc.synthesis.cache import load_or_design_dynamic
 
     d = load_or_design_dynamic(as_run)
@@ -432,7 +433,8 @@ def test_the_preset_gains_fall_short_on_the_fastest_stretch(as_run: Config,
     the speed entry × 2.5) covers it. The needed force is μ_dry M g + drag (hand formula)."""
     from dataclasses import replace as dc_replace
 
-    from tsmpc.sim.paper_explained import speed_headroom
+    from generator.paper_explained_runs import speed_headroom
+
     from tsmpc.synthesis.cache import load_or_design_dynamic
 
     d = load_or_design_dynamic(as_run)
@@ -452,7 +454,7 @@ def test_the_preset_gains_fall_short_on_the_fastest_stretch(as_run: Config,
 def test_design_points_and_divergence_onset(paper_reference_path: Path) -> None:
     """The design-points study (3 outer steps each): the centre and Clarabel's answer certify and
     differ, the physical-units answer does not certify; the onset of two runs' difference."""
-    from tsmpc.sim.paper_explained import design_points, divergence_onset
+    from generator.paper_explained_runs import design_points, divergence_onset
 
     pts = design_points(paper_reference_path, max_steps=3, uncertified_steps=3)
     assert [p.certified for p in pts] == [True, True, False]
@@ -467,7 +469,7 @@ def test_design_points_and_divergence_onset(paper_reference_path: Path) -> None:
 
 def test_the_transient_grows_as_the_steering_zeta_gain_shrinks(paper_reference_path: Path) -> None:
     """SPEC §14: the transient's size depends on the steering row's δ_f / ζ ratio (8 s runs)."""
-    from tsmpc.sim.paper_explained import gain_sensitivity
+    from generator.paper_explained_runs import gain_sensitivity
 
     res = gain_sensitivity(paper_reference_path, (1.0, 0.5), max_steps=80)
     peaks = [abs(r.transient.ey_peak_m) for r in res]
@@ -579,7 +581,7 @@ def test_cascade_selects_the_uio_form(paper_reference_path: Path) -> None:
 # --- docs generator pieces ----------------------------------------------------------------------
 
 def test_update_block_replaces_only_between_its_markers() -> None:
-    from tsmpc.report.paper_explained import update_block
+    from generator.paper_explained import update_block
 
     text = "a\n<!-- paper-explained:t:begin -->\nold\n<!-- paper-explained:t:end -->\nb\n"
     out = update_block(text, "t", "| new |\n")
@@ -606,8 +608,9 @@ def test_paper_as_run_end_to_end(as_run: Config, paper_reference_path: Path) -> 
     speed headroom on the fastest stretch), so the test asserts that stretch and that x is within
     the band outside it; the transient bounds bracket what the analytic centre's gains give
     (δ_f / ζ ≈ −1.6: e_y peak 0.72 m, e_θ peak 10.2°; the published ≈ 1.9 m is not reached)."""
+    from generator.paper_explained_runs import longitudinal_stretch
+
     from tsmpc.sim.metrics import PAPER_TABLE5, compute_metrics
-    from tsmpc.sim.paper_explained import longitudinal_stretch
 
     sc = load_scenario(as_run, paper_reference_path)
     log = simulate(as_run, Method.REF, sc)

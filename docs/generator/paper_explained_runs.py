@@ -1,7 +1,7 @@
 """Table 5 explained: the paper as it was run, and each step from there to ours.
 
 The runs behind the explained table of README.md and docs/paper.md, every row measured here
-(:mod:`tsmpc.report.paper_explained` formats them; ``examples/paper_explained.py`` is the script):
+(:mod:`generator.paper_explained` formats them; ``examples/paper_explained.py`` is the script):
 
 * the ``paper-as-run`` preset (the published run's quirks, each its own switch) with FZN, REF, NL
   beside the paper's Table 5, in both RMSE conventions;

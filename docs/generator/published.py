@@ -1,5 +1,5 @@
 """Every result the documentation publishes, produced from real runs: the producers of the
-generated blocks of README.md and docs/*.md (:mod:`tsmpc.report.docs`) and of the figures in
+generated blocks of README.md and docs/*.md (:mod:`generator.blocks`) and of the figures in
 docs/img. ``python docs/generate.py`` is the one command that runs them all (``--only`` a subset,
 ``--check`` compares with the published numbers instead of writing).
 
@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from tsmpc.report.docs import BlockId
+from .blocks import BlockId
 
 __all__ = [
     "PRODUCERS",
@@ -139,7 +139,7 @@ _EXTRA_DIGITS = [0]
 @contextlib.contextmanager
 def precise(extra: int = 4) -> Iterator[None]:
     """Within the block, producers print every number with ``extra`` more decimals (for
-    :func:`tsmpc.report.docs.drift`: the tolerance is then 2 % plus half a unit of the published
+    :func:`generator.blocks.drift`: the tolerance is then 2 % plus half a unit of the published
     number's last digit, not of both numbers')."""
     old = _EXTRA_DIGITS[0]
     _EXTRA_DIGITS[0] = extra
@@ -933,7 +933,7 @@ def sweep_example(ctx: Context) -> Produced:
 # -- Table 5 explained (issue 22's producer) ---------------------------------------------------
 
 def paper_explained(ctx: Context) -> Produced:
-    from tsmpc.report.paper_explained import generate
+    from .paper_explained import generate
 
     p = Produced()
     rep = generate(ctx.paper_reference, ctx.img_dir if ctx.img_dir is not None else ctx.scratch / "img",

@@ -1,5 +1,5 @@
 """Table 5 explained, the presentation (the published run): Markdown tables and figures from the rows
-measured by :mod:`tsmpc.sim.paper_explained`, and the marked blocks of README.md and
+measured by :mod:`generator.paper_explained_runs`, and the marked blocks of README.md and
 docs/paper.md that ``examples/paper_explained.py --update-docs`` rewrites.
 
 A docs generator calls :func:`generate` (runs, tables, figures) and :func:`update_block` (text)."""
@@ -18,7 +18,8 @@ import numpy as np
 
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.metrics import PAPER_TABLE5, RMSE_KEYS, tracking_errors
-from tsmpc.sim.paper_explained import RowResult
+
+from .paper_explained_runs import RowResult
 
 __all__ = [
     "ExplainedReport",
@@ -156,8 +157,8 @@ def evidence_text(headroom: Any, stretch: Any, as_run: Sequence[RowResult],
                   onset: tuple[float, float] | None = None) -> str:
     """The measured facts behind the columns that leave the ½–2× band (a Markdown list):
     the speed headroom (x, v), NL's divergence (``onset``: when NL's e_y first departs from
-    REF's, :func:`~tsmpc.sim.paper_explained.divergence_onset`; ``counterfactual``: the runs of
-    :func:`~tsmpc.sim.paper_explained.headroom_counterfactuals`) and the start-up transient."""
+    REF's, :func:`~generator.paper_explained_runs.divergence_onset`; ``counterfactual``: the runs of
+    :func:`~generator.paper_explained_runs.headroom_counterfactuals`) and the start-up transient."""
     h = headroom
     short = h.force_needed_N - h.force_at_bound_N
     need = h.v_ref_bound + short / h.gain_N_per_mps
@@ -281,7 +282,7 @@ def trends_text(sets: dict[str, Sequence[RowResult]], after_s: float = 10.0) -> 
 
 
 def design_points_table(points: Sequence[Any]) -> str:
-    """The feasibility LMI's points (:func:`~tsmpc.sim.paper_explained.design_points`): solver,
+    """The feasibility LMI's points (:func:`~generator.paper_explained_runs.design_points`): solver,
     certificates, the two gain properties that decide the misses, and the REF run (paper-run
     RMSE; a shortened run for an uncertified point)."""
     lines = ["| point of the feasible set | solver | certificates (worst relative margin) "
@@ -306,7 +307,7 @@ def design_points_table(points: Sequence[Any]) -> str:
 
 def counterfactual_table(as_run: Sequence[RowResult], rows: Sequence[RowResult]) -> str:
     """``paper-as-run`` and the counterfactuals of
-    :func:`~tsmpc.sim.paper_explained.headroom_counterfactuals` per method (paper-run RMSE and
+    :func:`~generator.paper_explained_runs.headroom_counterfactuals` per method (paper-run RMSE and
     its ratio to Table 5, max |e_x|)."""
     lines = ["| change | method | run | x | y | θ | v | ω | ÷ Table 5 (x, y, θ, v, ω) "
              "| max \\|e_x\\| [m] |", "|---|---|---|---|---|---|---|---|---|---|"]
@@ -447,10 +448,10 @@ def estimator_forms_figure(columns: dict[str, dict[str, RunLog]]) -> Any:
 def update_block(text: str, name: str, body: str) -> str:
     """``text`` with the block between ``<!-- paper-explained:NAME:begin -->`` and
     ``<!-- paper-explained:NAME:end -->`` replaced by ``body`` (the docs' one marker scheme,
-    :func:`tsmpc.report.docs.update_block`). Raises ValueError when the markers are missing (a
+    :func:`generator.blocks.update_block`). Raises ValueError when the markers are missing (a
     generator must never append blindly)."""
-    from tsmpc.report.docs import BlockId
-    from tsmpc.report.docs import update_block as update
+    from .blocks import BlockId
+    from .blocks import update_block as update
 
     return update(text, BlockId("paper-explained", name), body)
 
@@ -467,10 +468,12 @@ class ExplainedReport:
 def generate(reference: Path, img_dir: Path | None = None, *, max_steps: int | None = None,
              progress: Callable[[str], None] | None = None, estimator_forms: bool = True
              ) -> ExplainedReport:
-    """Measure every row (:mod:`tsmpc.sim.paper_explained`), format the tables and, with
+    """Measure every row (:mod:`generator.paper_explained_runs`), format the tables and, with
     ``img_dir``, write ``paper_explained_startup.png`` and ``paper_explained_estimator.png``.
     ``max_steps`` shortens every run (tests)."""
-    from tsmpc.sim.paper_explained import (
+    from tsmpc.sim.simulator import Method
+
+    from .paper_explained_runs import (
         ablation_rows,
         design_points,
         divergence_onset,
@@ -479,7 +482,6 @@ def generate(reference: Path, img_dir: Path | None = None, *, max_steps: int | N
         measure,
         walk_rows,
     )
-    from tsmpc.sim.simulator import Method
 
     walk = walk_rows()
     as_run = measure(reference, walk[:1], methods=(Method.FZN, Method.REF, Method.NL),
@@ -489,8 +491,9 @@ def generate(reference: Path, img_dir: Path | None = None, *, max_steps: int | N
     as_run_ref = next(r for r in as_run if r.method == "REF")
     from tsmpc.config import Config
     from tsmpc.sim.compare import load_scenario
-    from tsmpc.sim.paper_explained import longitudinal_stretch, speed_headroom
     from tsmpc.synthesis.cache import load_or_design_dynamic
+
+    from .paper_explained_runs import longitudinal_stretch, speed_headroom
 
     cfg = Config.preset("paper-as-run")
     v_d_max = float(np.max(load_scenario(cfg, reference).reference.v))
@@ -563,7 +566,8 @@ def _estimator_runs(reference: Path, as_run_ref: RowResult, max_steps: int | Non
     computed but unused there (the inner law runs on the true state, no compensation), so both
     forms estimate from the same run."""
     from tsmpc.config import Config, replace
-    from tsmpc.sim.paper_explained import ExplainedRow, run_row
+
+    from .paper_explained_runs import ExplainedRow, run_row
 
     cfg = Config.preset("paper-as-run")
     noisy = replace(cfg, noise=replace(cfg.noise, scale=1.0))
