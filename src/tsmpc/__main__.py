@@ -16,7 +16,7 @@ def _early_handler(signum: int, _frame: object) -> None:
 for _s in (signal.SIGINT, signal.SIGTERM):
     signal.signal(_s, _early_handler)
 try:
-    from tsmpc.cli import main
+    from tsmpc._entry import main  # (says which extra to install when typer/rich are missing)
 except KeyboardInterrupt:
     sys.exit(128 + (_early[0] if _early else signal.SIGINT))
 

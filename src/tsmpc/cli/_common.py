@@ -476,6 +476,15 @@ def _output_problem(err: OSError) -> str:
 _guarded_out: list[Path] = []
 
 
+def _extra_hint(err: BaseException) -> str | None:
+    """The install line when ``err`` is a missing optional dependency (tsmpc.extras), else None."""
+    from tsmpc.extras import MissingExtraError, from_import_error
+
+    if isinstance(err, MissingExtraError):
+        return str(err)
+    return from_import_error(err) if isinstance(err, ImportError) else None
+
+
 def late_interrupt(signum: int) -> None:
     """A signal that arrived after the guarded work had finished (its PARTIAL removed): the
     process exits 128 + signal all the same, so the folder says so too — its files are complete
@@ -519,6 +528,10 @@ def guarded_run(out: Path, *, what: str = "run", on_interrupt: str | None = None
                 fail(f"{msg} ({out} is incomplete, see {out / PARTIAL_MARKER})", EXIT_FAILED)
             if not isinstance(err, Exception):  # GeneratorExit, SystemExit(0): not ours to map
                 raise
+            hint = _extra_hint(err)
+            if hint is not None:  # an optional dependency is missing: the extra that brings it
+                mark_partial(out, "failed", reason=hint)
+                fail(hint, EXIT_INVALID)
             if isinstance(err, DesignError):
                 mark_partial(out, "failed", reason=str(err))
                 fail(err, EXIT_INVALID)

@@ -14,15 +14,16 @@ from tsmpc.cli._common import check_out_file, console, data_path, fail, refuse_i
 def animate_cmd(
     run_dir: Path = typer.Argument(..., help="Output folder of tsmpc compare / tsmpc run."),
     method: str | None = typer.Option(None, "--method", help="Method (default: REF, else the first)."),
-    out: Path | None = typer.Option(None, "--out", help="GIF path, or an MP4 path (needs ffmpeg: pip "
-                                    "install 'tsmpc[video]'); default: RUN_DIR/animation_M.gif."),
+    out: Path | None = typer.Option(None, "--out", help="GIF path, or an MP4 path (needs ffmpeg: the "
+                                    "[video] extra); default: RUN_DIR/animation_M.gif."),
     track: Path | None = typer.Option(None, "--track", help="TUMFTM track file (or a track name: "
                                       "monza, …) whose borders are drawn."),
     road_width: float | None = typer.Option(
         None, "--road-width", min=0.1, help="Draw borders at ± width/2 around the reference [m] (no --track)."
     ),
     fps: float = typer.Option(10.0, "--fps", min=0.1, max=100.0, help="Frames per second of the files."),
-    every: int = typer.Option(1, "--every", min=1, help="One frame every N MPC steps."),
+    every: int | None = typer.Option(None, "--every", min=1, help="One frame every N MPC steps "
+                                     "(default: at most 500 frames, a GIF under 3 MB; 1: every step)."),
     start: float = typer.Option(0.0, "--start", min=0.0, help="First simulated second shown [s]."),
     duration: float | None = typer.Option(None, "--duration", min=0.1, help="Seconds shown [s]."),
     view: float = typer.Option(30.0, "--view", min=2.0, help="Width of the car-following view [m]."),

@@ -1,10 +1,14 @@
 """Animation of a run: the car driving its reference, with the MPC's predicted path.
 
-One frame per MPC step (T_c) by default. The top-left panel follows the car: the track borders
-(when known), the reference, the driven path, the car as a rotated rectangle and the path the MPC
-predicted at that step (its predicted errors x_pred mapped back to poses along the reference
-window, inverting :func:`tsmpc.models.kinematic.pose_to_errors`). The top-right panel shows the
-whole path; the strip below shows e_y and v over the run with a cursor.
+At most :data:`MAX_FRAMES` frames by default: one every ``every`` MPC steps, ``every`` the
+smallest that keeps within it (the built-in circuit's 1344 steps play as 448 frames, a
+fast-forward at 10 fps; ``every=1`` renders every step). With the palette trimmed to the colours
+used, the default GIF stays under 3 MB on the built-in circuit and on a race track (one frame per
+step and an untrimmed palette made 14 MB and 31 MB). The top-left panel follows the car: the
+track borders (when known), the reference, the driven path, the car as a rotated rectangle and
+the path the MPC predicted at that step (its predicted errors x_pred mapped back to poses along
+the reference window, inverting :func:`tsmpc.models.kinematic.pose_to_errors`). The top-right
+panel shows the whole path; the strip below shows e_y and v over the run with a cursor.
 
 Rendering is blitted: the static parts are drawn once and every frame redraws only the moving
 artists, so a 127 s run (1344 frames at 10 fps) renders in well under a minute. GIF through
@@ -31,10 +35,14 @@ from PIL import Image, ImageDraw, ImageFont
 
 from tsmpc.config import VehicleParams
 from tsmpc.errors import ConfigError
+from tsmpc.extras import install_hint
 from tsmpc.planning.tracks import Track
 from tsmpc.sim.log import RunLog
 
-__all__ = ["AnimationResult", "animate_run", "car_outline", "predicted_poses"]
+__all__ = ["MAX_FRAMES", "AnimationResult", "animate_run", "car_outline", "predicted_poses"]
+
+#: Most frames of an animation by default (``every=None``): about 2.5 MB of GIF at 800×600.
+MAX_FRAMES = 500
 
 
 @dataclass(frozen=True)
@@ -49,7 +57,7 @@ class AnimationResult:
 
 def ffmpeg_executable() -> str | None:
     """The ffmpeg that writes MP4s: the one on the PATH, else the binary of the pip-installable
-    ``imageio-ffmpeg`` (``pip install "tsmpc[video]"``); None when neither exists."""
+    ``imageio-ffmpeg`` (the ``[video]`` extra); None when neither exists."""
     exe = shutil.which("ffmpeg")
     if exe is not None:
         return exe
@@ -64,8 +72,8 @@ def ffmpeg_executable() -> str | None:
 
 
 #: How to get an MP4 writer, for error messages.
-FFMPEG_HINT = ('MP4 needs ffmpeg: pip install "tsmpc[video]" (imageio-ffmpeg, a bundled ffmpeg) or put '
-               "ffmpeg on the PATH; or write a GIF (--out NAME.gif)")
+FFMPEG_HINT = (f"MP4 needs ffmpeg: {install_hint('video')} (imageio-ffmpeg, a bundled ffmpeg) or "
+               "put ffmpeg on the PATH; or write a GIF (--out NAME.gif)")
 
 
 def predicted_poses(log: RunLog, k: int) -> NDArray[np.float64]:
@@ -107,7 +115,7 @@ def animate_run(
     track: Track | None = None,
     road_width: float | None = None,
     fps: float = 10.0,
-    every: int = 1,
+    every: int | None = None,
     start_s: float = 0.0,
     duration_s: float | None = None,
     view_m: float = 30.0,
@@ -126,7 +134,8 @@ def animate_run(
         track: race track whose borders are drawn (when the run is on one).
         road_width: draw borders at ± road_width/2 around the reference instead (no track) [m].
         fps: frames per second of the files; with ``every = 1`` and fps = 1/T_c it plays in real time.
-        every: one frame every ``every`` MPC steps.
+        every: one frame every ``every`` MPC steps (None: the fewest steps that keep the
+            animation within :data:`MAX_FRAMES` frames).
         start_s: first simulated second rendered [s].
         duration_s: seconds rendered (None: to the end) [s].
         view_m: width of the car-following view [m].
@@ -141,7 +150,7 @@ def animate_run(
     """
     if not (fps > 0 and np.isfinite(fps)):
         raise ConfigError(f"animate: fps must be positive, got {fps}")
-    if every < 1:
+    if every is not None and every < 1:
         raise ConfigError(f"animate: every must be >= 1, got {every}")
     if view_m <= 0 or (road_width is not None and road_width <= 0):
         raise ConfigError("animate: view_m and road_width must be positive")
@@ -157,6 +166,8 @@ def animate_run(
     t0 = time.perf_counter()
     k0 = max(0, round(start_s / log.Tc))
     k1 = log.n_outer if duration_s is None else min(log.n_outer, k0 + round(duration_s / log.Tc))
+    if every is None:  # the default keeps the GIF small (~5 kB a frame): at most MAX_FRAMES frames
+        every = max(1, -(-(k1 - k0) // MAX_FRAMES))
     steps = np.arange(k0, k1, every)
     if steps.size == 0:
         raise ConfigError(f"animate: no MPC step in [{start_s}, {start_s + (duration_s or 0)}] s "
@@ -320,8 +331,10 @@ def _write_gif(frames: list[Image.Image], path: Path, fps: float) -> None:
     """Quantized frames (one shared palette, no dithering: no flicker) to a temporary file, renamed."""
     tmp = path.with_name(f".{path.name}.tmp")
     try:
+        # optimize: Pillow trims the palette to the colours used, which shortens the LZW codes
+        # (a quarter of the size; the shared palette's colours are unchanged: no flicker).
         frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:],
-                       duration=round(1000 / fps), loop=0, optimize=False, disposal=1)
+                       duration=round(1000 / fps), loop=0, optimize=True, disposal=1)
         tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)

@@ -1,4 +1,4 @@
-"""CommonRoad's vehicle models as tsmpc plants (optional extra: ``pip install "tsmpc[commonroad]"``,
+"""CommonRoad's vehicle models as tsmpc plants (optional extra: ``pip install -e ".[commonroad]"``,
 package ``commonroad-vehicle-models``, imported as ``vehiclemodels``).
 
 :class:`CommonRoadPlant` implements the :class:`~tsmpc.sim.plant.Plant` protocol on CommonRoad's
@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tsmpc.config import Config, VehicleParams, replace
 from tsmpc.errors import ConfigError, NonFiniteError
+from tsmpc.extras import missing_message
 
 __all__ = ["COMMONROAD_MODELS", "CommonRoadPlant", "commonroad_config", "commonroad_parameters"]
 
@@ -38,8 +39,7 @@ __all__ = ["COMMONROAD_MODELS", "CommonRoadPlant", "commonroad_config", "commonr
 #: computation per simulated second at h = 1 ms, converged: h = 0.5 ms changes v by 1e-5 m/s).
 COMMONROAD_MODELS = {"commonroad-st": "st", "commonroad-mb": "mb"}
 
-_INSTALL = ('the CommonRoad plant needs the extra: pip install "tsmpc[commonroad]" '
-            '(from a checkout: pip install -e ".[commonroad]")')
+_INSTALL = missing_message("vehiclemodels", "the CommonRoad plant")
 
 
 def _vehiclemodels(module: str) -> Any:
