@@ -26,14 +26,14 @@ it, so the gate only acts on a model mismatch.
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tsmpc.kernels.jit import exact_hypot, jitable
 from tsmpc.models.kinematic import pose_to_errors
 
-__all__ = ["SlipGate", "outer_loop_errors", "velocity_frame_errors"]
+__all__ = ["SlipGate", "outer_loop_errors", "slip_gate_update", "velocity_frame_errors"]
 
 #: Half-width of the band around the course-based slip that α̂ must lie in [rad], plus the
 #: course's own noise (4 σ from the position noise over the chord). The course lags α in fast
@@ -77,8 +77,35 @@ def outer_loop_errors(
     return velocity_frame_errors(pose, r, alpha_hat)
 
 
+@jitable
+def slip_gate_update(sigma: float, poses: NDArray[np.float64], n: int, px: float, py: float, pth: float,
+                     alpha_hat: float) -> tuple[float, int]:
+    """One MPC step of the gate (the block's one definition, :mod:`tsmpc.kernels.jit`): (the slip
+    to use, the new number of poses held). ``poses`` (``BASELINE`` + 1, 3) holds the last ``n`` MPC
+    poses, oldest first, and takes (px, py, pth) in place; ``sigma``: the position noise σ [m]."""
+    a = alpha_hat if math.isfinite(alpha_hat) else 0.0
+    if n == BASELINE + 1:  # the oldest pose leaves the chord
+        for r in range(n - 1):
+            poses[r, 0], poses[r, 1], poses[r, 2] = poses[r + 1, 0], poses[r + 1, 1], poses[r + 1, 2]
+        n -= 1
+    poses[n, 0], poses[n, 1], poses[n, 2] = px, py, pth
+    n += 1
+    if n < 2:
+        return a, n
+    dx, dy = px - poses[0, 0], py - poses[0, 1]
+    chord = exact_hypot(dx, dy)
+    if not chord >= MIN_CHORD_M:  # standing, slow, or held poses: no course to compare
+        return a, n
+    d_th = (pth - poses[0, 2] + math.pi) % (2 * math.pi) - math.pi
+    mean_th = poses[0, 2] + 0.5 * d_th
+    a_course = (math.atan2(dy, dx) - mean_th + math.pi) % (2 * math.pi) - math.pi
+    band = GATE_RAD + 4.0 * math.sqrt(2.0) * sigma / chord
+    return min(max(a, a_course - band), a_course + band), n
+
+
 class SlipGate:
-    """α̂ bounded by the course over ground of the MPC poses (see the module docstring).
+    """α̂ bounded by the course over ground of the MPC poses (see the module docstring; the online
+    wrapper of :func:`slip_gate_update`).
 
     The course is the direction of the chord over the last ``BASELINE`` MPC steps (a longer chord
     divides the position noise); the slip it measures is that minus the mean body heading at the
@@ -96,25 +123,13 @@ class SlipGate:
 
     def reset(self) -> None:
         """Forget the previous poses."""
-        self._poses: deque[NDArray[np.float64]] = deque(maxlen=BASELINE + 1)
+        self.poses = np.zeros((BASELINE + 1, 3))  #: the last MPC poses, oldest first
+        self.n_poses = 0  #: rows of ``poses`` held
         self.n_gated = 0
 
     def __call__(self, pose: NDArray[np.float64], alpha_hat: float) -> float:
         """The slip to use at this MPC step, from the measured pose (X, Y, θ) and α̂."""
-        a = alpha_hat if math.isfinite(alpha_hat) else 0.0
-        self._poses.append(np.array(pose[:3], dtype=float))
-        first = self._poses[0]
-        n = len(self._poses) - 1
-        if n < 1:
-            return a
-        dx, dy = float(pose[0] - first[0]), float(pose[1] - first[1])
-        chord = math.hypot(dx, dy)
-        if not chord >= MIN_CHORD_M:  # standing, slow, or held poses: no course to compare
-            return a
-        d_th = (float(pose[2]) - float(first[2]) + math.pi) % (2 * math.pi) - math.pi
-        mean_th = float(first[2]) + 0.5 * d_th
-        a_course = (math.atan2(dy, dx) - mean_th + math.pi) % (2 * math.pi) - math.pi
-        band = GATE_RAD + 4.0 * math.sqrt(2.0) * self.sigma / chord
-        out = min(max(a, a_course - band), a_course + band)
-        self.n_gated += out != a
+        out, self.n_poses = slip_gate_update(self.sigma, self.poses, self.n_poses, float(pose[0]),
+                                             float(pose[1]), float(pose[2]), alpha_hat)
+        self.n_gated += out != (alpha_hat if math.isfinite(alpha_hat) else 0.0)
         return out

@@ -35,6 +35,7 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 from tsmpc.control.gates import GateParams, dead_reckon, plausible_speeds, pose_consistent
+from tsmpc.control.slip_aware import slip_gate_update
 from tsmpc.estimation.friction_step import (
     FrictionStepParams,
     FrictionStepState,
@@ -123,7 +124,6 @@ LOI_STATUS, LOI_IT, LOI_QPIT, LOI_CLIP = range(4)
 
 # Constants of the blocks ported here (their modules: tsmpc.control.cascade, .slip_aware,
 # tsmpc.estimation.fusion); tsmpc.sim.engine checks that they still agree before every run.
-GATE_RAD, GATE_MIN_CHORD_M, GATE_BASELINE = 0.01, 0.3, 5
 BASELINE, MIN_CHORD_M, SLIP_MEMORY_S, SPEED_MEMORY_S = 5, 2.0, 30.0, 10.0
 SLIP_CORRECTION_MAX, SPEED_OFFSET_MAX = 0.05, 2.0
 SLIP_PRIOR = (0.005, 0.02)
@@ -381,32 +381,6 @@ def _pose_errors(X, Y, th, xd, yd, thd, out):
     out[0] = c * dx + s * dy
     out[1] = -s * dx + c * dy
     out[2] = _wrap(thd - th)
-
-
-@njit(cache=True, fastmath=False)
-def _slip_gate(px, py, pth, a_hat, gate, sf, si, fp):
-    """``SlipGate.__call__``: α̂ bounded by the course over the last BASELINE MPC poses
-    (``gate`` (BASELINE + 1, 3), oldest first)."""
-    a = a_hat if math.isfinite(a_hat) else 0.0
-    n = si[SI_GATEN]
-    if n == GATE_BASELINE + 1:
-        for r in range(n - 1):
-            gate[r, 0], gate[r, 1], gate[r, 2] = gate[r + 1, 0], gate[r + 1, 1], gate[r + 1, 2]
-        n -= 1
-    gate[n, 0], gate[n, 1], gate[n, 2] = px, py, pth
-    n += 1
-    si[SI_GATEN] = n
-    if n - 1 < 1:
-        return a
-    dx, dy = px - gate[0, 0], py - gate[0, 1]
-    chord = hypot_py(dx, dy)
-    if not chord >= GATE_MIN_CHORD_M:
-        return a
-    d_th = (pth - gate[0, 2] + math.pi) % (2 * math.pi) - math.pi
-    mean_th = gate[0, 2] + 0.5 * d_th
-    a_course = (math.atan2(dy, dx) - mean_th + math.pi) % (2 * math.pi) - math.pi
-    band = GATE_RAD + 4.0 * math.sqrt(2.0) * fp[FP_GATE_SIGMA] / chord
-    return _pmin(_pmax(a, a_course - band), a_course + band)
 
 
 @njit(cache=True, fastmath=False)
@@ -932,7 +906,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                                                -SLIP_CORRECTION_MAX), SLIP_CORRECTION_MAX)
                         a_hat += corr
                     if slip:
-                        a_hat = _slip_gate(px, py, pth, a_hat, gate, sf, si, fp)
+                        a_hat, si[SI_GATEN] = slip_gate_update(fp[FP_GATE_SIGMA], gate, si[SI_GATEN],
+                                                               px, py, pth, a_hat)
                     th_d = th_tan[kc] if ip[IP_TANGENT] != 0 else ref_th[kc]
                     a = a_hat if math.isfinite(a_hat) else 0.0
                     _pose_errors(px, py, pth + a, ref_x[kc], ref_y[kc], th_d + 0.5 * 0.0, e_meas)

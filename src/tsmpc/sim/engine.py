@@ -139,7 +139,6 @@ _PORTED: dict[str, str] = {
     "tsmpc.estimation.fusion:CourseFusion": "c3c66ce9b3ae99d0",
     "tsmpc.estimation.fusion:MassEstimator": "d73e4cf873cfe3df",
     "tsmpc.estimation.fusion:Fusion": "f8e25eefdcfffb99",
-    "tsmpc.control.slip_aware:SlipGate": "914a291e0a0ef199",
     "tsmpc.control.slip_aware:outer_loop_errors": "3775c2395e80851d",
     "tsmpc.control.slip_aware:velocity_frame_errors": "b81a30dfed8c53bb",
     "tsmpc.models.kinematic:pose_to_errors": "21aace1283045776",
@@ -175,9 +174,6 @@ _PORTED: dict[str, str] = {
 }
 #: Constants of the ported modules that the kernel holds as its own (name in the kernel module).
 _CONSTANTS = (
-    ("tsmpc.control.slip_aware", "GATE_RAD", "GATE_RAD"),
-    ("tsmpc.control.slip_aware", "MIN_CHORD_M", "GATE_MIN_CHORD_M"),
-    ("tsmpc.control.slip_aware", "BASELINE", "GATE_BASELINE"),
     *(("tsmpc.estimation.fusion", n, n) for n in (
         "BASELINE", "MIN_CHORD_M", "SLIP_MEMORY_S", "SPEED_MEMORY_S", "SLIP_CORRECTION_MAX", "SLIP_PRIOR",
         "SPEED_OFFSET_MAX", "MASS_MIN_SPEED", "MASS_HIGHPASS_S", "MASS_MEMORY_S", "MASS_EXCITATION",
@@ -728,6 +724,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     sf[ke.SF_POSE:ke.SF_POSE + 3] = cascade._pose
     sf[ke.SF_HELD:ke.SF_HELD + 3] = cascade._pose_held
     sf[ke.SF_POSET] = cascade._pose_t
+    si[ke.SI_GATEN] = cascade._slip_gate.n_poses
     sf[ke.SF_UPREV:ke.SF_UPREV + 2] = cascade._u_prev
     sf[ke.SF_UAPP:ke.SF_UAPP + 2] = cascade._u_applied
     sf[ke.SF_LOW] = cascade._low_applied
@@ -761,7 +758,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
         gnss=_f64(gnss), fifo=fifo, frb=frb, patches=_f64(patches), events=_f64(events),
         ref_x=_f64(ref.x), ref_y=_f64(ref.y), ref_th=_f64(ref.theta), ref_v=_f64(ref.v),
         ref_w=_f64(ref.omega), th_tan=_f64(cascade._theta_tangent), mv=mv, mw=mw,
-        gate=np.zeros((ke.GATE_BASELINE + 1, 3)), cur=np.zeros(ke.N_IV),
+        gate=cascade._slip_gate.poses.copy(), cur=np.zeros(ke.N_IV),
         ivs=np.zeros((ke.BASELINE, ke.N_IV)), mass_v=np.zeros(cfg.mhe.N + 1),
         mY=mhe._Y, mW=mhe._W, mU=mhe._U, mXS=mhe._XS, mA=mhe._Ab, mB=mhe._Bb, mX=mhe._Xb, mp=mp,
         ls=lqr._s, Kv=Kv, zlo=zlo, zhi=zhi, bits=bits, prm=prm,
