@@ -41,6 +41,7 @@ from tsmpc.estimation.friction_step import (
     FrictionStepState,
     friction_step_update,
 )
+from tsmpc.kernels.jit import cpython_hypot
 from tsmpc.kernels.lqr import lqr_step
 from tsmpc.kernels.mhe import window_step
 from tsmpc.kernels.mpc import guarded_step
@@ -137,7 +138,6 @@ MASS_RANGE, STIFF_RANGE = (MASS_RANGE_LO, MASS_RANGE_HI), (STIFF_RANGE_LO, STIFF
 # friction programs (the profiles of tsmpc.scenarios / tsmpc.conditions as data)
 FR_CONST, FR_PAPER, FR_PATCH = 0, 1, 2
 
-_VELTKAMP = 134217729.0  # 2**27 + 1: splits a double into two halves with exact products
 
 
 # ============================================================================ primitives
@@ -196,56 +196,8 @@ def _wrap(a):
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-@njit(cache=True, fastmath=False)
-def hypot_py(a, b):
-    """``math.hypot(a, b)`` of CPython ≤ 3.11 to the last bit (libm's hypot rounds differently):
-    the arguments scaled by a power of two, squared exactly through Veltkamp splits into
-    compensated sums, the root corrected once by the residual (CPython's ``vector_norm``)."""
-    x0, x1 = abs(a), abs(b)
-    if math.isinf(x0) or math.isinf(x1):
-        return math.inf
-    if x0 != x0 or x1 != x1:
-        return math.nan
-    mx = x1 if x1 > x0 else x0
-    if mx == 0.0:
-        return mx
-    e = math.frexp(mx)[1]
-    if e < -1021:  # subnormal range: never met by positions in metres
-        return math.sqrt(x0 * x0 + x1 * x1)
-    scale = math.ldexp(1.0, -e)
-    csum, f1, f2, f3 = 1.0, 0.0, 0.0, 0.0
-    for i in range(2):
-        x = (x0 if i == 0 else x1) * scale
-        t = x * _VELTKAMP
-        hi = t - (t - x)
-        lo = x - hi
-        x = hi * hi
-        old = csum
-        csum += x
-        f1 += (old - csum) + x
-        x = 2.0 * hi * lo
-        old = csum
-        csum += x
-        f2 += (old - csum) + x
-        f3 += lo * lo
-    h = math.sqrt(csum - 1.0 + (f1 + f2 + f3))
-    t = h * _VELTKAMP
-    hi = t - (t - h)
-    lo = h - hi
-    x = -hi * hi
-    old = csum
-    csum += x
-    f1 += (old - csum) + x
-    x = -2.0 * hi * lo
-    old = csum
-    csum += x
-    f2 += (old - csum) + x
-    x = -lo * lo
-    old = csum
-    csum += x
-    f3 += (old - csum) + x
-    x = csum - 1.0 + (f1 + f2 + f3)
-    return (h + x / (2.0 * h)) / scale
+#: ``math.hypot`` of CPython ≤ 3.11 to the last bit, compiled (:func:`tsmpc.kernels.jit.cpython_hypot`)
+hypot_py = njit(cache=True, fastmath=False)(cpython_hypot)
 
 
 @njit(cache=True, fastmath=False)

@@ -27,7 +27,7 @@ import os
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-__all__ = ["BLOCK_MODULES", "exact_hypot", "jitable"]
+__all__ = ["BLOCK_MODULES", "cpython_hypot", "exact_hypot", "jitable"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -71,9 +71,64 @@ def jitable(fn: F) -> F:
     return register_jitable(fn)  # type: ignore[no-any-return]
 
 
+_VELTKAMP = 134217729.0  # 2**27 + 1: splits a double into two halves with exact products
+
+
+@jitable
+def cpython_hypot(a: float, b: float) -> float:
+    """``math.hypot(a, b)`` of CPython ≤ 3.11 to the last bit (libm's hypot rounds differently):
+    the arguments scaled by a power of two, squared exactly through Veltkamp splits into
+    compensated sums, the root corrected once by the residual (CPython's ``vector_norm``)."""
+    x0, x1 = abs(a), abs(b)
+    if math.isinf(x0) or math.isinf(x1):
+        return math.inf
+    if x0 != x0 or x1 != x1:
+        return math.nan
+    mx = x1 if x1 > x0 else x0
+    if mx == 0.0:
+        return mx
+    e = math.frexp(mx)[1]
+    if e < -1021:  # subnormal range: never met by positions in metres
+        return math.sqrt(x0 * x0 + x1 * x1)
+    scale = math.ldexp(1.0, -e)
+    csum, f1, f2, f3 = 1.0, 0.0, 0.0, 0.0
+    for i in range(2):
+        x = (x0 if i == 0 else x1) * scale
+        t = x * _VELTKAMP
+        hi = t - (t - x)
+        lo = x - hi
+        x = hi * hi
+        old = csum
+        csum += x
+        f1 += (old - csum) + x
+        x = 2.0 * hi * lo
+        old = csum
+        csum += x
+        f2 += (old - csum) + x
+        f3 += lo * lo
+    h = math.sqrt(csum - 1.0 + (f1 + f2 + f3))
+    t = h * _VELTKAMP
+    hi = t - (t - h)
+    lo = h - hi
+    x = -hi * hi
+    old = csum
+    csum += x
+    f1 += (old - csum) + x
+    x = -2.0 * hi * lo
+    old = csum
+    csum += x
+    f2 += (old - csum) + x
+    x = -lo * lo
+    old = csum
+    csum += x
+    f3 += (old - csum) + x
+    x = csum - 1.0 + (f1 + f2 + f3)
+    return (h + x / (2.0 * h)) / scale
+
+
 def exact_hypot(a: float, b: float) -> float:
     """``math.hypot(a, b)``; compiled, CPython's own algorithm to the last bit
-    (:func:`tsmpc.kernels.engine.hypot_py`), so a gate decides the same in both loops."""
+    (:func:`cpython_hypot`), so a gate decides the same in both loops."""
     return math.hypot(a, b)
 
 
@@ -82,9 +137,7 @@ if _numba_ready():
 
     @overload(exact_hypot, jit_options={"cache": True})
     def _exact_hypot_compiled(a, b):  # type: ignore[no-untyped-def]  # numba matches the signatures
-        from tsmpc.kernels.engine import hypot_py
-
         def impl(a, b):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-            return hypot_py(a, b)
+            return cpython_hypot(a, b)
 
         return impl
