@@ -4,7 +4,7 @@ tracks — where to download them (pinned commits, pinned SHA-256) and where to 
 Two datasets:
 
 * ``paper`` — the reference trajectory of the paper's planner (6 rows x_d, y_d, θ_d, v_d, α_d,
-  ω_d; one column per 0.1 s; SPEC §10), published by the paper's first author with his code in
+  ω_d; one column per 0.1 s), published by the paper's first author with his code in
   the public repository ``euge2838/Autonomous_Guidance_MPC_and_LQR-LMI`` **without a licence**:
   tsmpc downloads it for the user and never redistributes it (no copy in the package, the
   repository or a wheel). The upstream file ``Planner_References_100ms.txt`` is already the
