@@ -265,3 +265,12 @@ def test_missing_data_skips_or_fails(tmp_path: Path, monkeypatch: pytest.MonkeyP
     with pytest.raises(BaseException) as outcome:
         need_data("tracks")
     assert outcome.type is pytest.fail.Exception and "`tsmpc data fetch tracks`" in str(outcome.value)
+
+
+def test_without_pooch_the_install_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """pooch is the [data] extra: without it the fetch says how to install it (exit 2)."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "pooch", None)  # import pooch -> ImportError
+    res = runner.invoke(app, ["data", "fetch", "paper", "--dir", str(tmp_path / "d")])
+    assert res.exit_code == 2 and '".[data]"' in res.output and res.output.count("error:") == 1, res.output

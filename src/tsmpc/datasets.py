@@ -314,11 +314,13 @@ def fetch(which: str = "all", *, mirror: str | None = None, root: Path | None = 
     kept. Returns the paths of the dataset files.
 
     Raises :class:`DataHashError` for a wrong hash (the file is not written), :class:`DataFetchError`
-    for a failed download and :class:`~tsmpc.errors.ConfigError` for a bad ``which`` or mirror."""
-    import pooch
-    import requests
-
+    for a failed download, :class:`~tsmpc.errors.ConfigError` for a bad ``which`` or mirror and
+    :class:`~tsmpc.extras.MissingExtraError` without pooch (the ``[data]`` extra)."""
+    from tsmpc.extras import require
     from tsmpc.io import _umask, atomic_write_text
+
+    pooch = require("pooch", "tsmpc data fetch")  # the [data] extra (it brings requests)
+    import requests
 
     key = which.strip().lower()
     if key == "all":
