@@ -8,7 +8,8 @@ numbers in the text, the figures in docs/img and the README's GIF — or check t
 
 Every generated block sits between ``<!-- SECTION:NAME:begin -->`` and ``<!-- SECTION:NAME:end -->``
 (``generator.blocks``); SECTION is one of the sections below (``generator.published``). The
-paper's reference and the race tracks are read from ../shared/data next to the repository.
+paper's reference and the race tracks are found by tsmpc.datasets ($TSMPC_DATA_DIR, the cache of
+``tsmpc data fetch``, then ../shared/data next to the repository).
 ``--check`` fails (exit 1) when a published number differs from the fresh run by more than 2 %
 beyond half a unit of its last printed digit; timings are regenerated but never checked.
 """
