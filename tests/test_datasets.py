@@ -274,3 +274,17 @@ def test_without_pooch_the_install_line(tmp_path: Path, monkeypatch: pytest.Monk
     monkeypatch.setitem(sys.modules, "pooch", None)  # import pooch -> ImportError
     res = runner.invoke(app, ["data", "fetch", "paper", "--dir", str(tmp_path / "d")])
     assert res.exit_code == 2 and '".[data]"' in res.output and res.output.count("error:") == 1, res.output
+
+
+def test_where_names_the_folder_or_the_command(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("TSMPC_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv(datasets.DATA_DIR_ENV, str(tmp_path / "env"))
+    monkeypatch.setattr(datasets, "checkout_data_dir", lambda: None)
+    res = runner.invoke(app, ["data", "where"])
+    assert res.exit_code == 1, res.output
+    assert "paper: missing: run `tsmpc data fetch paper`" in res.output
+    assert "tracks: missing: run `tsmpc data fetch tracks`" in res.output
+    _layout(tmp_path / "env", "env")
+    res = runner.invoke(app, ["data", "where"])
+    assert res.exit_code == 0, res.output
+    assert f"paper: {tmp_path / 'env' / datasets.PAPER_FILE}" in res.output

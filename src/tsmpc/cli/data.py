@@ -52,7 +52,7 @@ def fetch_cmd(
 @data_app.command("where")
 def where_cmd() -> None:
     """Print where each dataset is read from (first found: $TSMPC_DATA_DIR, the cache, the
-    checkout's ../shared/data) or the command that downloads it."""
+    checkout's ../shared/data) or the command that downloads it; exit 1 when one is missing."""
     from tsmpc import datasets
 
     check_environment(kernels=False)
