@@ -11,6 +11,8 @@ Units are SI throughout (m, s, kg, N, rad) unless a field name says otherwise (`
 from __future__ import annotations
 
 import math
+import re
+import sys
 import tomllib
 from enum import StrEnum
 from pathlib import Path
@@ -1126,15 +1128,49 @@ def load_config(path: str | Path | None = None, preset: str | None = None) -> Co
 MAX_CONFIG_BYTES = 1024 * 1024
 
 
+def _too_many_digits(text: str, source: str | Path) -> ConfigError:
+    """The error for an integer longer than Python converts (``int()`` raises ``ValueError``
+    beyond ``sys.get_int_max_str_digits()`` = 4300 digits), naming the line when it is found."""
+    limit = sys.get_int_max_str_digits() or 4300
+    m = re.search("[0-9A-Fa-f_]{" + str(limit + 1) + ",}", text)
+    where = f"line {text.count(chr(10), 0, m.start()) + 1}: " if m and "\n" in text else ""
+    return ConfigError(f"{source}: {where}a number of more than {limit} digits: no value needs "
+                       f"that many (at most {limit} digits)")
+
+
+def _has_huge_int(value: Any) -> bool:
+    """Does ``value`` (parsed TOML) hold an integer of more than 4300 decimal digits? Hex, octal
+    and binary literals (``0xfff…``) parse at any length, but such a number cannot even be printed
+    in an error message (``str()`` raises ``ValueError``). Iterative: the nesting may be deep."""
+    limit = 10 ** (sys.get_int_max_str_digits() or 4300)
+    stack = [value]
+    while stack:
+        v = stack.pop()
+        if isinstance(v, dict):
+            stack.extend(v.values())
+        elif isinstance(v, list):
+            stack.extend(v)
+        elif isinstance(v, int) and not isinstance(v, bool) and abs(v) >= limit:
+            return True
+    return False
+
+
 def parse_toml(text: str, source: str | Path) -> dict[str, Any]:
-    """``tomllib.loads`` raising :class:`ConfigError` naming ``source`` for invalid TOML and for
-    absurd nesting (tomllib recurses: 100 000 nested arrays end in RecursionError)."""
+    """``tomllib.loads`` raising :class:`ConfigError` naming ``source`` for invalid TOML, for
+    absurd nesting (tomllib recurses: 100 000 nested arrays end in RecursionError) and for an
+    integer of more than 4300 digits (Python's ``int()`` refuses it with a bare ``ValueError``).
+    The one parser of every value a user types: config and sweep files, and ``--set``."""
     try:
-        return tomllib.loads(text)
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{source}: invalid TOML: {err}") from None
     except RecursionError:
         raise ConfigError(f"{source}: invalid TOML: nested too deeply") from None
+    except ValueError:  # int() of a number longer than sys.get_int_max_str_digits()
+        raise _too_many_digits(text, source) from None
+    if _has_huge_int(data):
+        raise _too_many_digits(text, source)
+    return data
 
 
 def resolve_preset(data: dict[str, Any], preset: str | None = None, source: str = "config") -> dict[str, Any]:
@@ -1158,16 +1194,30 @@ def apply_overrides(cfg: Config, assignments: list[str], source: str = "--set") 
     file. Raises :class:`ConfigError` naming the assignment or the field."""
     data = cfg.model_dump(mode="json")
     for text in assignments:
+        item = f"{source} {_short(text)}"
+        bad = re.search(r"[\x00-\x1f\x7f]", text)
+        if bad:  # a newline would start TOML of its own ("700\n[mpc]\nN=2"): one value only
+            raise ConfigError(f"{item}: contains a control character ({bad.group()!r}); one "
+                              "KEY=VALUE per --set, on one line")
         key, sep, raw = text.partition("=")
         key = key.strip()
         parts = key.split(".")
         if not sep or not key or any(not p.strip() for p in parts):
-            raise ConfigError(f"{source} {text!r}: expected KEY=VALUE with a dotted key, e.g. "
+            raise ConfigError(f"{item}: expected KEY=VALUE with a dotted key, e.g. "
                               "scenario.plant.mass_scale=1.2")
         try:
-            value: Any = tomllib.loads(f"v = {raw.strip()}")["v"]
+            doc = tomllib.loads(f"v = {raw.strip()}")
         except tomllib.TOMLDecodeError:
-            value = raw.strip()  # a bare word: an enum value or a name
+            doc = {"v": raw.strip()}  # a bare word: an enum value or a name
+        except RecursionError:
+            raise ConfigError(f"{item}: the value is nested too deeply") from None
+        except ValueError:  # int() of a number longer than sys.get_int_max_str_digits()
+            raise _too_many_digits(raw, item) from None
+        if set(doc) != {"v"}:  # unreachable without a newline; never drop a part silently
+            raise ConfigError(f"{item}: VALUE must be one TOML value")
+        if _has_huge_int(doc):
+            raise _too_many_digits(raw, item)
+        value: Any = doc["v"]
         node = data
         for p in parts[:-1]:
             nxt = node.get(p) if isinstance(node, dict) else None
