@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tsmpc.config import NoiseSettings, SensorFaults, TyreParams, VehicleParams
 from tsmpc.errors import ConfigError
+from tsmpc.kernels.jit import jitable
 from tsmpc.planning.reference import Reference
 from tsmpc.vehicle.actuators import Actuators
 
@@ -37,8 +38,12 @@ __all__ = [
     "SensorModel",
     "SensorNoise",
     "SurfacePatch",
+    "apply_events",
+    "event_weight",
     "mu_array",
     "paper_friction_profile",
+    "paper_mu",
+    "patch_mu",
 ]
 
 
@@ -82,16 +87,10 @@ class PaperFriction:
     wet: float = 0.6
 
     def mu(self, t: float, s: float = 0.0) -> float:
-        dry = self.dry + self.ripple * math.sin(0.5 * t)
-        if 15.0 <= t < 40.0:
-            return _ramp(t, 15.0, 16.0, 39.0, 40.0, dry, self.earth)
-        if 70.0 <= t < 70.1:
-            return self.ice
-        if 110.1 <= t < 120.0:
-            return _ramp(t, 110.1, 111.1, 119.0, 120.0, dry, self.wet)
-        return dry
+        return paper_mu(t, self.dry, self.ripple, self.earth, self.ice, self.wet)
 
 
+@jitable
 def _ramp(t: float, a: float, b: float, c: float, d: float, base: float, level: float) -> float:
     """``level`` on [b, c], linear ramps from/to ``base`` on [a, b] and [c, d]."""
     if t < b:
@@ -101,6 +100,59 @@ def _ramp(t: float, a: float, b: float, c: float, d: float, base: float, level: 
     else:
         w = (d - t) / (d - c)
     return (1.0 - w) * base + w * level
+
+
+@jitable
+def paper_mu(t: float, dry: float, ripple: float, earth: float, ice: float, wet: float) -> float:
+    """μ(road) of :class:`PaperFriction` at time ``t`` (the block's one definition,
+    :mod:`tsmpc.kernels.jit`)."""
+    d = dry + ripple * math.sin(0.5 * t)
+    if 15.0 <= t < 40.0:
+        return _ramp(t, 15.0, 16.0, 39.0, 40.0, d, earth)
+    if 70.0 <= t < 70.1:
+        return ice
+    if 110.1 <= t < 120.0:
+        return _ramp(t, 110.1, 111.1, 119.0, 120.0, d, wet)
+    return d
+
+
+@jitable
+def patch_mu(s: float, base: float, lap: float, patches: NDArray[np.float64]) -> float:
+    """μ(road) of :class:`PatchFriction` at path distance ``s``; ``patches`` rows [start, end, μ,
+    ramp] [m, m, –, m]."""
+    if lap > 0:
+        s = s % lap
+    for i in range(patches.shape[0]):
+        p0, p1, pm, pr = patches[i, 0], patches[i, 1], patches[i, 2], patches[i, 3]
+        if p0 <= s < p1:
+            r = max(pr, 1e-9)
+            w = min(1.0, (s - p0) / r, (p1 - s) / r)
+            return (1.0 - w) * base + w * pm
+    return base
+
+
+@jitable
+def event_weight(x: float, start: float, ramp: float, end: float) -> float:
+    """Weight of a friction event at ``x`` (its time or distance): 0 before ``start``, ramps to 1
+    over ``ramp``, 1 until ``end``, back to 0 over ``ramp`` after."""
+    if x < start:
+        return 0.0
+    if x < end:
+        return 1.0 if ramp <= 0.0 or x >= start + ramp else (x - start) / ramp
+    if ramp <= 0.0 or x >= end + ramp:
+        return 0.0
+    return 1.0 - (x - end) / ramp
+
+
+@jitable
+def apply_events(m: float, t: float, s: float, events: NDArray[np.float64]) -> float:
+    """μ after the friction ``events`` (rows [by time, start, ramp, end, μ]), applied in order:
+    each blends from the μ in force before it — the base's or an earlier event's — to its own."""
+    for i in range(events.shape[0]):
+        w = event_weight(t if events[i, 0] != 0.0 else s, events[i, 1], events[i, 2], events[i, 3])
+        if w > 0.0:
+            m = (1.0 - w) * m + w * events[i, 4]
+    return m
 
 
 def paper_friction_profile() -> PaperFriction:
@@ -134,15 +186,14 @@ class PatchFriction:
     patches: Sequence[SurfacePatch] = ()
     lap_length_m: float = 0.0
 
+    @property
+    def table(self) -> NDArray[np.float64]:
+        """The patches as rows [start, end, μ, ramp] (what :func:`patch_mu` reads)."""
+        return np.array([[p.start_m, p.end_m, p.mu, p.ramp_m] for p in self.patches],
+                        dtype=float).reshape(-1, 4)
+
     def mu(self, t: float, s: float = 0.0) -> float:
-        if self.lap_length_m > 0:
-            s = s % self.lap_length_m
-        for p in self.patches:
-            if p.start_m <= s < p.end_m:
-                r = max(p.ramp_m, 1e-9)
-                w = min(1.0, (s - p.start_m) / r, (p.end_m - s) / r)
-                return (1.0 - w) * self.base + w * p.mu
-        return self.base
+        return patch_mu(s, self.base, self.lap_length_m, _table_of(self))
 
 
 class SensorNoise:
@@ -197,9 +248,10 @@ class NaNBurstFault:
         return y
 
 
+@jitable
 def _in_burst(t: float, start: float, period: float, duration: float) -> bool:
     # A tiny tolerance so that sample instants k·T_d on a burst edge are classified consistently.
-    return t >= start - 1e-9 and math.fmod(t - start + 1e-9, period) < duration
+    return t >= start - 1e-9 and bool(np.fmod(t - start + 1e-9, period) < duration)
 
 
 @dataclass(frozen=True)
@@ -214,15 +266,7 @@ class ResolvedEvent:
 
     def weight(self, t: float, s: float) -> float:
         """0 before, ramps to 1 over ``ramp``, 1 until ``end``, back to 0 over ``ramp`` after."""
-        x = t if self.by_time else s
-        if x < self.start:
-            return 0.0
-        r = self.ramp
-        if x < self.end:
-            return 1.0 if r <= 0.0 or x >= self.start + r else (x - self.start) / r
-        if r <= 0.0 or x >= self.end + r:
-            return 0.0
-        return 1.0 - (x - self.end) / r
+        return event_weight(t if self.by_time else s, self.start, self.ramp, self.end)
 
 
 @dataclass(frozen=True)
@@ -233,13 +277,23 @@ class EventFriction:
     base: FrictionProfile
     events: tuple[ResolvedEvent, ...]
 
+    @property
+    def table(self) -> NDArray[np.float64]:
+        """The events as rows [by time, start, ramp, end, μ] (what :func:`apply_events` reads)."""
+        return np.array([[1.0 if e.by_time else 0.0, e.start, e.ramp, e.end, e.mu]
+                         for e in self.events], dtype=float).reshape(-1, 5)
+
     def mu(self, t: float, s: float = 0.0) -> float:
-        m = self.base.mu(t, s)
-        for e in self.events:
-            w = e.weight(t, s)
-            if w > 0.0:
-                m = (1.0 - w) * m + w * e.mu
-        return m
+        return apply_events(self.base.mu(t, s), t, s, _table_of(self))
+
+
+def _table_of(profile: Any) -> NDArray[np.float64]:
+    """``profile.table``, computed once and kept beside the frozen dataclass's fields."""
+    cached = profile.__dict__.get("_table_cache")
+    if cached is None:
+        cached = profile.table
+        object.__setattr__(profile, "_table_cache", cached)
+    return cached
 
 
 class SensorModel:

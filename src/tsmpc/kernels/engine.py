@@ -46,7 +46,7 @@ from tsmpc.kernels.lqr import lqr_step
 from tsmpc.kernels.mhe import window_step
 from tsmpc.kernels.mpc import guarded_step
 from tsmpc.kernels.plant import rk4_block
-from tsmpc.scenarios import _ramp as _scenario_ramp
+from tsmpc.scenarios import _in_burst, apply_events, paper_mu, patch_mu
 
 __all__ = ["friction_mu", "hypot_py", "run", "ticks", "warm"]
 
@@ -211,61 +211,19 @@ def _matvec2(p00, p01, x0, x1, fma_mode):
 
 
 @njit(cache=True, fastmath=False)
-def _in_burst(t, start, period, duration):
-    """``tsmpc.robustness._in_burst``."""
-    return t >= start - 1e-9 and np.fmod(t - start + 1e-9, period) < duration
-
-
-# ============================================================================ scenario as data
-#: ``tsmpc.scenarios._ramp`` itself, compiled (one source for both loops)
-_ramp = njit(cache=True, fastmath=False)(_scenario_ramp)
-
-
-@njit(cache=True, fastmath=False)
 def friction_mu(t, s, frb, patches, events):
-    """μ(road) at time t and travelled distance s: ``frb`` = [kind, …] the base profile
-    (ConstantFriction [value], PaperFriction [dry, ripple, earth, ice, wet], PatchFriction [base,
-    lap length] with ``patches`` rows [start, end, μ, ramp]), then the ``events`` of an
-    EventFriction, rows [by time, start, ramp, end, μ], applied in order."""
+    """μ(road) at time t and travelled distance s, a friction profile of :mod:`tsmpc.scenarios` as
+    data: ``frb`` = [kind, …] the base profile (ConstantFriction [value], PaperFriction [dry,
+    ripple, earth, ice, wet], PatchFriction [base, lap length] with ``patches`` its table), then the
+    ``events`` table of an EventFriction. The profiles' own functions (one definition each)."""
     kind = int(frb[0])
     if kind == FR_CONST:
         m = frb[1]
     elif kind == FR_PAPER:
-        dry = frb[1] + frb[2] * math.sin(0.5 * t)
-        if 15.0 <= t < 40.0:
-            m = _ramp(t, 15.0, 16.0, 39.0, 40.0, dry, frb[3])
-        elif 70.0 <= t < 70.1:
-            m = frb[4]
-        elif 110.1 <= t < 120.0:
-            m = _ramp(t, 110.1, 111.1, 119.0, 120.0, dry, frb[5])
-        else:
-            m = dry
+        m = paper_mu(t, frb[1], frb[2], frb[3], frb[4], frb[5])
     else:
-        base, lap = frb[1], frb[2]
-        if lap > 0:
-            s = s % lap
-        m = base
-        for i in range(patches.shape[0]):
-            p0, p1, pm, pr = patches[i, 0], patches[i, 1], patches[i, 2], patches[i, 3]
-            if p0 <= s < p1:
-                r = _pmax(pr, 1e-9)
-                w = _pmin(_pmin(1.0, (s - p0) / r), (p1 - s) / r)
-                m = (1.0 - w) * base + w * pm
-                break
-    for i in range(events.shape[0]):
-        x = t if events[i, 0] != 0.0 else s
-        start, r, end = events[i, 1], events[i, 2], events[i, 3]
-        if x < start:
-            w = 0.0
-        elif x < end:
-            w = 1.0 if r <= 0.0 or x >= start + r else (x - start) / r
-        elif r <= 0.0 or x >= end + r:
-            w = 0.0
-        else:
-            w = 1.0 - (x - end) / r
-        if w > 0.0:
-            m = (1.0 - w) * m + w * events[i, 4]
-    return m
+        m = patch_mu(s, frb[1], frb[2], patches)
+    return apply_events(m, t, s, events)
 
 
 @njit(cache=True, fastmath=False)

@@ -38,6 +38,7 @@ BLOCK_MODULES = (
     "tsmpc.control.slip_aware",
     "tsmpc.estimation.friction_step",
     "tsmpc.kernels.jit",
+    "tsmpc.scenarios",
 )
 
 

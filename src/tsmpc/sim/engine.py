@@ -158,19 +158,12 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
     "tsmpc.vehicle.plant:VehiclePlant": "0b52c004a843c73b",
     "tsmpc.scenarios:SensorNoise": "1ba1c9047847d421",
-    "tsmpc.scenarios:ConstantFriction": "5a88ca3acb13f3c8",
-    "tsmpc.scenarios:PaperFriction": "9996087ab3f255ca",
-    "tsmpc.scenarios:_ramp": "5ef54bc2be16b7ea",
-    "tsmpc.scenarios:PatchFriction": "36dea15235f73f7a",
-    "tsmpc.scenarios:ResolvedEvent": "03e17e620babc9f7",
-    "tsmpc.scenarios:EventFriction": "dded7e7a165222e6",
     "tsmpc.scenarios:SensorModel": "c74cbfe146a3669c",
     "tsmpc.scenarios:DropoutFault": "7308cac71f886cf1",
     "tsmpc.scenarios:NaNBurstFault": "b02fcedb0d1277fb",
     "tsmpc.vehicle.actuators:Actuators": "2a6874a58d3e14a2",
     "tsmpc.vehicle.actuators:_gain": "8f043d71c729db22",
     "tsmpc.vehicle.actuators:ActuatedPlant": "7e59609bd713f2c4",
-    "tsmpc.scenarios:_in_burst": "e7abf687d4c8006c",
 }
 #: Constants of the ported modules that the kernel holds as its own (name in the kernel module).
 _CONSTANTS = (
@@ -299,8 +292,7 @@ def _friction_program(profile: Any) -> tuple[NDArray[np.float64], NDArray[np.flo
     events = np.zeros((0, 5))
     base = profile
     if type(profile) is EventFriction:
-        events = np.array([[1.0 if e.by_time else 0.0, e.start, e.ramp, e.end, e.mu]
-                           for e in profile.events], dtype=float).reshape(-1, 5)
+        events = profile.table
         base = profile.base
     patches = np.zeros((0, 4))
     if type(base) is ConstantFriction:
@@ -309,8 +301,7 @@ def _friction_program(profile: Any) -> tuple[NDArray[np.float64], NDArray[np.flo
         frb = np.array([1.0, base.dry, base.ripple, base.earth, base.ice, base.wet], dtype=float)
     elif type(base) is PatchFriction:
         frb = np.array([2.0, base.base, base.lap_length_m], dtype=float)
-        patches = np.array([[p.start_m, p.end_m, p.mu, p.ramp_m] for p in base.patches],
-                           dtype=float).reshape(-1, 4)
+        patches = base.table
     else:
         return None
     return frb, patches, events
