@@ -48,6 +48,7 @@ FILES = [
     ("sweep-config-mass-inf.toml", 'name = "t"\nduration_s = 1.0\n[config.vehicle]\nmass = inf\n'),
     ("sweep-lateral-nan.toml", 'name = "t"\nduration_s = 1.0\nmax_lateral_m = nan\n'),
     ("sweep-duration-inf.toml", 'name = "t"\nduration_s = inf\n'),
+    ("wp.csv", "x,y\n0,0\n60,5\n120,40\n150,100\n"),
 ]
 
 CASES: list[tuple[str, list[str], str]] = [
@@ -88,6 +89,13 @@ CASES: list[tuple[str, list[str], str]] = [
     ("set-mass-overflow", [*RUN, "--set", "vehicle.mass=1e999"], "vehicle.mass"),
     ("set-Q-inf", [*RUN, "--set", "mpc.Q=[1, inf, 1]"], "mpc.Q"),
     ("set-divergence-nan", [*RUN, "--set", "divergence_bound_m=nan"], "divergence_bound_m"),
+    # plan --out is a file: a name that reads as a folder is refused (it wrote a file "out/new")
+    ("plan-out-trailing-slash", ["plan", "{D}/wp.csv", "--open", "--out", "{O}/"], "names a folder"),
+    ("plan-out-trailing-slash-existing", ["plan", "{D}/wp.csv", "--open", "--out", "{D}/"],
+     "names a folder"),
+    ("plan-out-dot", ["plan", "{D}/wp.csv", "--open", "--out", "{O}/."], "names a folder"),
+    ("plan-out-empty", ["plan", "{D}/wp.csv", "--open", "--out", ""], "--out: empty"),
+    ("show-out-empty", ["show-reference", "{D}/wp.csv", "--out", ""], "--out: empty"),
 ]
 
 
@@ -139,3 +147,90 @@ def test_apply_overrides_refuses_with_a_config_error(item: str, word: str) -> No
 def test_a_single_value_still_works() -> None:
     cfg = apply_overrides(Config(), ["vehicle.mass=700", "mpc.N=20", "seed=4300"])
     assert (cfg.vehicle.mass, cfg.mpc.N, cfg.seed) == (700.0, 20, 4300)
+
+
+# -- a failed allocation ends with one line (issue 38 item 3) ---------------------------------
+def _no_memory(*_a, **_k):
+    raise MemoryError("Unable to allocate 15.0 GiB for an array with shape (8000000, 250)")
+
+
+#: (id, module, attribute made to raise MemoryError, argv): in the run, in the sweep's client.
+MEMORY = [
+    ("run-experiment", "tsmpc.sim.experiment", "run", ["run", "--duration", "1", "--no-plots"]),
+    ("sweep-aggregate", "tsmpc.sweep", "aggregate", ["sweep", "{S}", "--dry-run", "--workers", "1",
+                                                      "--no-plots"]),
+]
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize(("module", "attr", "argv"), [pytest.param(m, a, v, id=i) for i, m, a, v in MEMORY])
+def test_a_memory_error_ends_with_one_line_and_partial(tmp_path: Path, monkeypatch, module: str,
+                                                       attr: str, argv: list[str]) -> None:
+    import importlib
+    import json
+
+    sweep = tmp_path / "s.toml"
+    sweep.write_text('name = "t"\nduration_s = 1.0\n[grid]\nseed = [1]\n')
+    monkeypatch.setattr(importlib.import_module(module), attr, _no_memory)
+    out = tmp_path / "out"
+    res = runner.invoke(app, [a.replace("{S}", str(sweep)) for a in argv] + ["--out", str(out)])
+    text = res.output
+    assert isinstance(res.exception, SystemExit), repr(res.exception)
+    assert res.exit_code == 1, text
+    assert "Traceback" not in text and "internal error" not in text, text
+    errors = [ln for ln in text.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and "out of memory" in errors[0], text
+    marker = json.loads((out / "PARTIAL").read_text())
+    assert marker["status"] == "failed" and "out of memory" in marker["reason"]
+
+
+@pytest.mark.timeout(60)
+def test_a_memory_error_outside_the_guarded_work_ends_with_one_line(tmp_path: Path) -> None:
+    """Before the output folder exists (loading the config): the entry point's last net."""
+    import subprocess
+    import sys
+
+    code = ("import sys, tsmpc.config as c\n"
+            "def oom(*a, **k): raise MemoryError()\n"
+            "c.load_config = oom\n"
+            "import tsmpc.cli._common as k; k.load_config = oom\n"
+            "from tsmpc.cli import main\n"
+            "sys.argv = ['tsmpc', 'design']\n"
+            "main()\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=50,
+                         cwd=tmp_path)
+    assert res.returncode == 1, res.stderr
+    assert "Traceback" not in res.stderr and "internal error" not in res.stderr, res.stderr
+    assert res.stderr.startswith("error: out of memory") and res.stderr.count("\n") == 1, res.stderr
+
+
+@pytest.mark.parametrize(("exc", "status"), [(MemoryError("no"), "failed"), (ValueError("bad"), "error")])
+def test_a_run_that_ran_out_of_memory_is_failed_not_a_result(monkeypatch, tmp_path: Path,
+                                                             exc: Exception, status: str) -> None:
+    """The machine failed the run, not the controller: ``failed`` (re-run by --resume)."""
+    import tsmpc.sweep as sw
+
+    sweep = tmp_path / "s.toml"
+    sweep.write_text('name = "t"\nduration_s = 1.0\n')
+    (task,) = sw.expand(sw.load_sweep(sweep))
+
+    def boom(_task):
+        raise exc
+    monkeypatch.setattr(sw, "_simulate", boom)
+    monkeypatch.setattr(sw, "_prepare", boom)
+    assert sw.run_task(task)["status"] == status
+    assert [r["status"] for r in sw.run_batch([task])] == [status]
+
+
+@pytest.mark.timeout(60)
+def test_show_reference_out_with_a_trailing_slash_writes_into_that_folder(tmp_path: Path) -> None:
+    """``show-reference … --out DIR/`` (docs/planning.md) writes DIR/FILE-stem.png, never a
+    file named DIR (``Path`` drops the trailing slash: the option is read as typed)."""
+    wp = tmp_path / "wp.csv"
+    wp.write_text("x,y\n0,0\n60,5\n120,40\n150,100\n")
+    ref = tmp_path / "ref.csv"
+    assert runner.invoke(app, ["plan", str(wp), "--open", "--out", str(ref)]).exit_code == 0
+    res = runner.invoke(app, ["show-reference", str(ref), "--out", f"{tmp_path / 'new'}/"])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "new").is_dir()
+    assert (tmp_path / "new" / "ref.png").read_bytes()[:4] == b"\x89PNG"

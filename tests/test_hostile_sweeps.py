@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import socket
 import threading
@@ -57,7 +58,43 @@ def _copy(done: tuple[Path, list[str]], tmp_path: Path) -> Path:
     return tmp_path / "out"
 
 
+#: Records that parse but make no sense (issue 38): (how, dotted field, value). A number of the
+#: aggregate table out of range or of the wrong type, or the params of another run.
+SEMANTIC = [
+    ("rmse-y-minus-1e300", "metrics.rmse.y", -1e300),
+    ("rmse-y-oops", "metrics.rmse.y", "oops"),  # pyarrow's ArrowInvalid: "internal error"
+    ("rmse-y-inf", "metrics.rmse.y", math.inf),
+    ("rmse-x-true", "metrics.rmse.x", True),
+    ("rmse-y-list", "metrics.rmse.y", [1.0]),
+    ("rmse-extra-key", "metrics.rmse.zz", 0.1),
+    ("lateral-negative", "metrics.max_abs_lateral_m", -1.0),
+    ("mpc-median-oops", "metrics.mpc_ms.median", "oops"),
+    ("wall-inf", "metrics.wall_s", math.inf),
+    ("events-negative", "metrics.events.mpc_fallback", -3),
+    ("events-float", "metrics.events.mpc_fallback", 1.5),
+    ("elapsed-oops", "elapsed_s", "oops"),
+    ("elapsed-negative", "elapsed_s", -1.0),
+    ("reason-number", "reason", 7),
+    ("params-seed-other-run", "params.seed", 99),
+    ("params-method-number", "params.method", 7),
+    ("params-unknown-field", "params.colour", "red"),
+]
+
+
+def _set(rec: dict, dotted: str, value: object) -> None:
+    *path, last = dotted.split(".")
+    for k in path:
+        rec = rec.setdefault(k, {})
+    rec[last] = value
+
+
 def _spoil(path: Path, how: str, rid: str) -> None:
+    semantic = {h: (f, v) for h, f, v in SEMANTIC}
+    if how in semantic:
+        rec = json.loads(path.read_text())
+        _set(rec, *semantic[how])
+        path.write_text(json.dumps(rec))
+        return
     path.unlink()
     if how == "empty":
         path.write_text("")
@@ -89,7 +126,8 @@ def _spoil(path: Path, how: str, rid: str) -> None:
 
 
 SPOILS = ["empty", "garbage", "list", "object-without-fields", "other-id", "unknown-status",
-          "metrics-not-object", "nested", "binary", "folder", "fifo", "huge"]
+          "metrics-not-object", "nested", "binary", "folder", "fifo", "huge",
+          *(how for how, _, _ in SEMANTIC)]
 
 
 @pytest.mark.timeout(120)
@@ -100,8 +138,9 @@ def test_resume_sets_an_unreadable_record_aside_and_runs_it_again(done, tmp_path
     ids = done[1]
     victim = out / "runs" / f"{ids[1]}.json"
     _spoil(victim, how, ids[1])
-    assert read_record(victim) is None
     spec = load_sweep(tmp_path / "s.toml")
+    params = {t.id: t.params.model_dump(mode="json") for t in expand(spec)}
+    assert read_record(victim, params=params[ids[1]]) is None
     res = run_sweep(spec, out, scheduler=cluster.scheduler_address, run_fn=dry_run, resume=True,
                     plots=False)
     assert (res.skipped, res.executed) == (3, 1)
@@ -129,6 +168,20 @@ def test_failed_records_are_retried_on_resume_unless_told_not_to(done, tmp_path:
         assert res.executed == 0 and again["status"] == "failed"
     else:  # None: on by default with resume
         assert res.executed == 1 and again["status"] == "completed"
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("how", [how for how, _, _ in SEMANTIC])
+def test_a_record_that_makes_no_sense_is_never_aggregated(done, tmp_path: Path, how: str) -> None:
+    from tsmpc.sweep import aggregate
+
+    out = _copy(done, tmp_path)
+    victim = done[1][1]
+    _spoil(out / "runs" / f"{victim}.json", how, victim)
+    params = {t.id: t.params.model_dump(mode="json") for t in expand(load_sweep(tmp_path / "s.toml"))}
+    table = aggregate(out, {i: params[i] for i in done[1]})
+    assert victim not in set(table["id"]) and len(table) == 3
+    table.to_parquet(tmp_path / "t.parquet")  # the types stay uniform
 
 
 @pytest.mark.timeout(120)
@@ -220,3 +273,77 @@ def test_a_scheduler_that_accepts_but_never_speaks_is_given_up_in_time() -> None
         for c in held:
             c.close()
     assert time.monotonic() - t0 < 10.0  # it held the client for ~60 s
+
+
+# -- the outputs of a sweep: written together or not at all (issue 38) ------------------------
+def _plotter(table, folder: Path, axes) -> list[Path]:
+    files = []
+    for name in ("by_seed.png", "solve_times.png"):
+        (folder / name).write_bytes(b"png of %d rows" % len(table))
+        files.append(folder / name)
+    return files
+
+
+def _failing(what: str):
+    def fail(*_a, **_k):
+        raise OSError(28, f"No space left on device ({what})")
+    return fail
+
+
+#: (how the second write goes wrong, the outputs left: "old" = the first write's, intact;
+#: "none" = no output at all; "new" = the second write's, complete)
+OUTPUT_FAILURES = [
+    ("plotter-raises", "old"),
+    ("parquet-refuses-the-table", "old"),
+    ("csv-write-fails", "old"),
+    ("move-fails-half-way", "none"),
+    ("no-plots-this-time", "new"),
+]
+
+
+@pytest.mark.parametrize(("how", "left"), OUTPUT_FAILURES)
+def test_a_sweeps_outputs_are_written_together_or_not_at_all(tmp_path: Path, monkeypatch,
+                                                             how: str, left: str) -> None:
+    import tsmpc.sweep as sw
+
+    out = tmp_path / "out"
+    out.mkdir()
+    first = pd.DataFrame({"id": ["a", "b"], "rmse_y": [0.1, 0.2]})
+    sw.write_outputs(first, out, plotter=_plotter)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert set(before) == {"aggregate.csv", "aggregate.parquet", "by_seed.png", "solve_times.png"}
+    second = pd.DataFrame({"id": ["a", "b", "c"], "rmse_y": [0.1, 0.2, 0.3]})
+    plots, plotter = True, _plotter
+    if how == "plotter-raises":
+        plotter = _failing("plot")
+    elif how == "parquet-refuses-the-table":
+        second["rmse_y"] = [0.1, "oops", 0.3]
+    elif how == "csv-write-fails":
+        monkeypatch.setattr(sw, "atomic_write_text", _failing("csv"))
+    elif how == "move-fails-half-way":
+        real, calls = os.replace, []
+
+        def replace(a, b):
+            if Path(b).parent == out:  # a move into the folder (not a write into the stage)
+                calls.append(b)
+            if len(calls) == 2:
+                raise OSError(28, "No space left on device")
+            real(a, b)
+        monkeypatch.setattr(sw.os, "replace", replace)
+    elif how == "no-plots-this-time":
+        plots = False
+    if left == "new":
+        files = sw.write_outputs(second, out, plots=plots, plotter=plotter)
+        assert sorted(f.name for f in files) == ["aggregate.csv", "aggregate.parquet"]
+    else:
+        with pytest.raises(Exception):  # noqa: B017 -- whatever the failure, the outputs hold
+            sw.write_outputs(second, out, plots=plots, plotter=plotter)
+    after = {p.name: p.read_bytes() for p in out.iterdir()}
+    if left == "old":
+        assert after == before
+    elif left == "none":
+        assert after == {}
+    else:  # the plots of the first write are gone with it: nothing stale next to the new table
+        assert set(after) == {"aggregate.csv", "aggregate.parquet"}
+        assert pd.read_parquet(out / "aggregate.parquet").equals(second)
+        assert pd.read_csv(out / "aggregate.csv").equals(second)

@@ -47,6 +47,7 @@ tasks lost to worker failures (status ``failed``) are re-run too (``retry_failed
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import itertools
 import json
@@ -522,8 +523,14 @@ def run_task(task: RunTask) -> dict[str, Any]:
     try:
         metrics, status, reason = _simulate(task)
     except Exception as err:  # a failing run is data, not a crash
-        metrics, status, reason = {}, "error", f"{type(err).__name__}: {err}"
+        metrics, status, reason = {}, _error_status(err), f"{type(err).__name__}: {err}"
     return _record(task, status, reason, metrics, time.perf_counter() - t0)
+
+
+def _error_status(err: BaseException) -> str:
+    """``failed`` when the machine failed the run (out of memory: not a result of the controller,
+    re-run by ``--resume``), else ``error`` (the run itself raised: data)."""
+    return "failed" if isinstance(err, MemoryError) else "error"
 
 
 def run_batch(tasks: list[RunTask]) -> list[dict[str, Any]]:
@@ -545,7 +552,7 @@ def run_batch(tasks: list[RunTask]) -> list[dict[str, Any]]:
         try:
             prep = _prepare(task)
         except Exception as err:  # a failing run is data, not a crash
-            out[i] = _record(task, "error", f"{type(err).__name__}: {err}", {}, 0.0)
+            out[i] = _record(task, _error_status(err), f"{type(err).__name__}: {err}", {}, 0.0)
             continue
         prepared[i] = prep
         controller = prep.cfg.model_dump(mode="json")
@@ -567,7 +574,7 @@ def run_batch(tasks: list[RunTask]) -> list[dict[str, Any]]:
             try:
                 metrics, status, reason = _verdict(prepared[i], log)
             except Exception as err:
-                metrics, status, reason = {}, "error", f"{type(err).__name__}: {err}"
+                metrics, status, reason = {}, _error_status(err), f"{type(err).__name__}: {err}"
             out[i] = _record(tasks[i], status, reason, metrics, float("nan"))
             batched.append(i)
     share = (time.perf_counter() - t0) / max(1, len(tasks))  # a batched run's share of the batch
@@ -709,9 +716,13 @@ ProgressFn = Callable[[int, int, dict[str, Any]], None]
 PlotFn = Callable[[Any, Path, tuple[str, ...]], list[Path]]
 
 
-def read_record(path: Path, rid: str | None = None) -> dict[str, Any] | None:
-    """The run record at ``path`` if it is one (a JSON object with this ``id``, a known status
-    and its params), else None: empty, garbage, ``[]``, a folder, too large, too deeply nested."""
+def read_record(path: Path, rid: str | None = None, params: dict[str, Any] | None = None
+                ) -> dict[str, Any] | None:
+    """The run record at ``path`` if it is one, else None. A record is a JSON object with this
+    ``id`` (``rid``, default the file's stem), a known status, valid params (``params``: equal to
+    these, the run's own) and metrics that make sense (:func:`record_problem`). Not a record:
+    empty, garbage, ``[]``, a folder, too large, too deeply nested, an RMSE of ``-1e300`` or
+    ``"oops"`` — resume sets it aside and re-runs it, aggregation never sees it."""
     from tsmpc.errors import TsmpcError
     from tsmpc.textfile import read_text
 
@@ -719,13 +730,87 @@ def read_record(path: Path, rid: str | None = None) -> dict[str, Any] | None:
         rec = json.loads(read_text(path, "run record", limit=16 * 1024 * 1024))
     except (TsmpcError, ValueError, RecursionError):
         return None
-    if not isinstance(rec, dict) or not isinstance(rec.get("params"), dict):
+    if not isinstance(rec, dict) or rec.get("id") != (rid or path.stem):
         return None
-    if rec.get("id") != (rid or path.stem) or rec.get("status") not in RECORD_STATUSES:
-        return None
-    if not isinstance(rec.get("metrics", {}), dict):
+    if record_problem(rec, params) is not None:
         return None
     return rec
+
+
+#: The timing blocks and scalar metrics a record may carry (the columns of the aggregate table):
+#: each a number >= 0, or NaN (not measured: no samples, no such force in the plant).
+_TIMINGS = ("mpc_ms", "mhe_ms")
+_SCALARS = ("max_abs_lateral_m", "friction_rmse_N", "slip_rmse_rad", "simulated_s", "wall_s")
+_RMSE_KEYS = ("x", "y", "theta", "v", "omega")
+
+
+def _measure(v: Any, *, inf_ok: bool = False) -> bool:
+    """A measured quantity: a number (not a bool), >= 0, NaN (not measured) or finite
+    (``inf_ok``: +inf too, e.g. the real-time factor of a run that took no measurable time)."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        return False
+    if isinstance(v, int):
+        return v >= 0
+    return math.isnan(v) or (v >= 0 and (inf_ok or math.isfinite(v)))
+
+
+def record_problem(rec: dict[str, Any], params: dict[str, Any] | None = None) -> str | None:
+    """What makes ``rec`` not a valid run record (None: valid): status, params (strictly the
+    :class:`RunParams` schema; equal to ``params`` when given), reason, elapsed time, and every
+    metric the aggregate table reads in range (an RMSE, a time, a count: >= 0; NaN = not
+    measured; never ±inf, a string or a bool)."""
+    if rec.get("status") not in RECORD_STATUSES:
+        return f"status {_clip(rec.get('status'))}: not one of {', '.join(RECORD_STATUSES)}"
+    p = rec.get("params")
+    if not isinstance(p, dict):
+        return "params: not an object"
+    try:
+        RunParams(**p)
+    except (ValidationError, TypeError, ValueError):
+        return "params: not the parameters of a run"
+    if params is not None and p != params:
+        return "params: not this run's"
+    if not isinstance(rec.get("reason", ""), str):
+        return "reason: not a string"
+    if "elapsed_s" in rec and not _measure(rec["elapsed_s"]):
+        return f"elapsed_s = {_clip(rec['elapsed_s'])}: not a time >= 0"
+    m = rec.get("metrics", {})
+    if not isinstance(m, dict):
+        return "metrics: not an object"
+    rmse = m.get("rmse", {})
+    if not isinstance(rmse, dict) or set(rmse) - set(_RMSE_KEYS):
+        return "metrics.rmse: not an object of x, y, theta, v, omega"
+    for k, v in rmse.items():
+        if not _measure(v):
+            return f"metrics.rmse.{k} = {_clip(v)}: an RMSE is a finite number >= 0"
+    for block in _TIMINGS:
+        t = m.get(block, {})
+        if not isinstance(t, dict):
+            return f"metrics.{block}: not an object"
+        for q in ("median", "p99"):
+            if q in t and not _measure(t[q]):
+                return f"metrics.{block}.{q} = {_clip(t[q])}: a time is a finite number >= 0"
+    for k in _SCALARS:
+        if k in m and not _measure(m[k]):
+            return f"metrics.{k} = {_clip(m[k])}: must be a finite number >= 0"
+    if "realtime_factor" in m and not _measure(m["realtime_factor"], inf_ok=True):
+        return f"metrics.realtime_factor = {_clip(m['realtime_factor'])}: must be >= 0"
+    events = m.get("events", {})
+    if not isinstance(events, dict):
+        return "metrics.events: not an object"
+    for k, v in events.items():
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            return f"metrics.events.{_clip(k)} = {_clip(v)}: a count is an integer >= 0"
+    return None
+
+
+def _clip(v: Any) -> str:
+    """A short repr of a value read from a file (huge ints and strings cut)."""
+    try:
+        text = repr(v)
+    except ValueError:  # an int beyond sys.get_int_max_str_digits()
+        return "<a huge integer>"
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def _set_aside(path: Path, runs_dir: Path) -> None:
@@ -736,18 +821,20 @@ def _set_aside(path: Path, runs_dir: Path) -> None:
     os.replace(path, target)
 
 
-def records_on_disk(runs_dir: Path, ids: set[str], *, repair: bool, retry_failed: bool
-                    ) -> tuple[set[str], int, int]:
+def records_on_disk(runs_dir: Path, ids: set[str] | dict[str, dict[str, Any]], *, repair: bool,
+                    retry_failed: bool) -> tuple[set[str], int, int]:
     """(ids whose record on disk counts as done, unreadable records, failed records to retry).
+    ``ids`` may map each id to its run's params (a record must then hold exactly those).
     ``repair``: unreadable records are set aside under ``runs/.unreadable/``."""
     done: set[str] = set()
     unreadable = retry = 0
     if not runs_dir.is_dir():
         return done, 0, 0
+    expected = ids if isinstance(ids, dict) else {}
     for path in sorted(runs_dir.glob("*.json")):
         if path.stem not in ids:
             continue
-        rec = read_record(path)
+        rec = read_record(path, params=expected.get(path.stem))
         if rec is None:
             unreadable += 1
             if repair:
@@ -799,7 +886,8 @@ def run_sweep(
     if any_on_disk and not resume:
         raise ConfigError(f"{out}: already holds records of this sweep; "
                           "use --resume to finish it or choose another --out")
-    on_disk, _, _ = records_on_disk(runs_dir, ids, repair=resume, retry_failed=retry_failed)
+    expected = {t.id: t.params.model_dump(mode="json") for t in tasks}
+    on_disk, _, _ = records_on_disk(runs_dir, expected, repair=resume, retry_failed=retry_failed)
     pending = [t for t in tasks if t.id not in on_disk]
     skipped = len(tasks) - len(pending)
     written: set[str] = set()
@@ -873,12 +961,8 @@ def run_sweep(
             client.close()
             if cluster is not None:
                 cluster.close()
-    table = aggregate(out, [t.id for t in tasks])
-    files = _write_table(table, out)
-    if plots and len(table):
-        if plotter is None:
-            from tsmpc.report.sweep_plots import save_sweep_plots as plotter
-        files += plotter(table, out, AXES)
+    table = aggregate(out, expected)
+    files = write_outputs(table, out, plots=plots, plotter=plotter)
     return SweepResult(out, len(tasks), len(written), skipped, failed, duplicates, table, files)
 
 
@@ -1047,28 +1131,64 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
-def aggregate(out: str | Path, ids: list[str] | None = None) -> Any:
-    """The aggregate table (pandas DataFrame, one row per run record in ``out/runs``; restricted
-    to ``ids`` in that order when given)."""
+def aggregate(out: str | Path, ids: list[str] | dict[str, dict[str, Any]] | None = None) -> Any:
+    """The aggregate table (pandas DataFrame, one row per valid run record in ``out/runs``;
+    restricted to ``ids`` in that order when given; ``ids`` may map each id to its run's params,
+    which a record must then hold)."""
     import pandas as pd
 
     runs_dir = Path(out) / "runs"
+    expected = ids if isinstance(ids, dict) else {}
     recs = {}
     for p in sorted(runs_dir.glob("*.json")):
-        rec = read_record(p)  # an unreadable record is no row (resume sets it aside and re-runs it)
+        # An unreadable or senseless record is no row (resume sets it aside and re-runs it).
+        rec = read_record(p, params=expected.get(p.stem))
         if rec is not None:
             recs[rec["id"]] = rec
     order = [i for i in ids if i in recs] if ids is not None else list(recs)
     return pd.DataFrame([_row(recs[i]) for i in order])
 
 
-def _write_table(table: Any, out: Path) -> list[Path]:
-    import io
+#: The files a sweep writes next to ``runs/`` (the plots' names: tsmpc.report.sweep_plots).
+OUTPUT_NAMES = ("aggregate.csv", "aggregate.parquet", "solve_times.png",
+                *(f"by_{axis}.png" for axis in AXES))
 
-    csv, parquet = out / "aggregate.csv", out / "aggregate.parquet"
-    atomic_write_text(csv, table.to_csv(index=False))
-    buf = io.BytesIO()
-    table.to_parquet(buf, index=False)
-    atomic_write_bytes(parquet, buf.getvalue())
-    return [csv, parquet]
+
+def write_outputs(table: Any, out: Path, *, plots: bool = True, plotter: PlotFn | None = None
+                  ) -> list[Path]:
+    """Write the aggregate table (CSV, Parquet) and the plots of ``table`` into ``out``, together
+    or not at all: every file is made in a staging folder first (``out/.tsmpc-outputs-*``), then
+    the outputs of an earlier call that this one does not make are removed (no stale plot or
+    Parquet next to a rewritten CSV) and the new files are moved in. A failure before the move
+    leaves the earlier outputs as they were; one during the move removes them all."""
+    import io
+    import shutil
+    import tempfile
+
+    stage = Path(tempfile.mkdtemp(dir=out, prefix=".tsmpc-outputs-"))
+    try:
+        made = [stage / "aggregate.csv", stage / "aggregate.parquet"]
+        buf = io.BytesIO()
+        table.to_parquet(buf, index=False)  # may refuse the table: before any file is made
+        atomic_write_text(made[0], table.to_csv(index=False))
+        atomic_write_bytes(made[1], buf.getvalue())
+        if plots and len(table):
+            if plotter is None:
+                from tsmpc.report.sweep_plots import save_sweep_plots as plotter
+            made += [Path(f) for f in plotter(table, stage, AXES)]
+        names = {f.name for f in made}
+        try:
+            for name in OUTPUT_NAMES:
+                if name not in names:
+                    (out / name).unlink(missing_ok=True)
+            for f in made:
+                os.replace(f, out / f.name)
+        except BaseException:  # half moved: no mix of new and old outputs is left
+            for name in OUTPUT_NAMES:
+                with contextlib.suppress(OSError):
+                    (out / name).unlink(missing_ok=True)
+            raise
+        return [out / f.name for f in made]
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
 

@@ -86,6 +86,8 @@ def main() -> None:
             raise
         if isinstance(exc, OSError):
             what = f"cannot write{' ' + str(exc.filename) if exc.filename else ''}: {exc.strerror or exc}"
+        elif isinstance(exc, MemoryError):  # a failed allocation is not a bug of tsmpc
+            what = _common.out_of_memory(exc)
         else:
             what = f"internal error {type(exc).__name__}: {' '.join(str(exc).split())[:500]}"
         with contextlib.suppress(Exception):

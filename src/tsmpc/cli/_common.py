@@ -64,6 +64,7 @@ __all__ = [
     "late_interrupt",
     "load_config_or_exit",
     "mark_partial",
+    "out_of_memory",
     "pending_signal",
     "record_signals_only",
     "refuse_ineffective",
@@ -476,6 +477,13 @@ def _output_problem(err: OSError) -> str:
 _guarded_out: list[Path] = []
 
 
+def out_of_memory(err: BaseException) -> str:
+    """One line for a failed allocation (``MemoryError``: numpy, numba, Python itself)."""
+    detail = " ".join(str(err).split())[:200]
+    return ("out of memory" + (f" ({detail})" if detail else "")
+            + ": free memory, shorten the run (--duration) or use fewer --workers")
+
+
 def _extra_hint(err: BaseException) -> str | None:
     """The install line when ``err`` is a missing optional dependency (tsmpc.extras), else None."""
     from tsmpc.extras import MissingExtraError, from_import_error
@@ -503,6 +511,7 @@ def guarded_run(out: Path, *, what: str = "run", on_interrupt: str | None = None
     * :class:`~tsmpc.errors.DesignError` (no LMI design for this config): PARTIAL ``failed``, exit 2;
     * another :class:`TsmpcError`: PARTIAL ``failed``, exit 1;
     * ``OSError`` (disk full, name too long, stdout closed or full): PARTIAL ``failed``, exit 1;
+    * ``MemoryError`` (a failed allocation): PARTIAL ``failed``, exit 1, "out of memory";
     * any other exception: PARTIAL ``failed``, exit 1, the exception's one-line summary
       (``TSMPC_DEBUG=1`` re-raises it, with its traceback).
     """
@@ -538,6 +547,10 @@ def guarded_run(out: Path, *, what: str = "run", on_interrupt: str | None = None
             if isinstance(err, TsmpcError):
                 mark_partial(out, "failed", reason=str(err))
                 fail(err, EXIT_FAILED)
+            if isinstance(err, MemoryError):  # numpy's _ArrayMemoryError too: no traceback
+                msg = f"{what} failed: {out_of_memory(err)}"
+                mark_partial(out, "failed", reason=msg)
+                fail(f"{msg} ({out} is incomplete, see {out / PARTIAL_MARKER})", EXIT_FAILED)
             if isinstance(err, OSError):
                 msg = f"{what} failed: {_output_problem(err)}"
                 _quiet_broken_stdout(err)

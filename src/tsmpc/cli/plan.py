@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import os
 from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -39,7 +40,8 @@ def plan(
     source: Path = typer.Argument(..., help="TUMFTM track CSV (recognised by its header), a track name "
                                   "(monza, spa, …: tsmpc data fetch tracks) or an x,y waypoints CSV "
                                   "(optional column v: speed cap to the next point)."),
-    out: Path = typer.Option(..., "--out", "-o", help="Reference file to write."),
+    out_text: str = typer.Option(..., "--out", "-o", help="Reference file to write (a file name: "
+                                 "a folder, or a name ending in '/', is refused)."),
     v_max: float = typer.Option(14.7, help="Maximum speed [m/s]."),
     a_lat: float = typer.Option(3.0, help="Lateral acceleration limit [m/s^2]."),
     a_lon: float = typer.Option(2.6, help="Longitudinal acceleration limit [m/s^2]."),
@@ -64,6 +66,7 @@ def plan(
     from tsmpc.planning.planner import plan_path
     from tsmpc.planning.tracks import is_tumftm, load_tumftm
 
+    out = _file_option(out_text, example=f"{Path(source).stem or 'reference'}.csv")
     finite("--dt", dt, lo=0.0, lo_open=True, hi=10.0)
     finite("--tail", tail, lo=0.0, hi=3600.0)
     check_laps(laps)
@@ -107,6 +110,24 @@ def plan(
     _warn_envelope(ref)
 
 
+def _names_folder(text: str) -> bool:
+    """Does the ``--out`` text name a folder by its form (a trailing separator, ``.``, ``..``)?
+    ``Path`` drops a trailing ``/``, so the text is read as typed."""
+    return text.replace(os.sep, "/").rsplit("/", 1)[-1] in ("", ".", "..")
+
+
+def _file_option(text: str, *, example: str, option: str = "--out") -> Path:
+    """``plan --out``: the reference *file* to write. A name that reads as a folder
+    (``out/new/``) is refused, exit 2 (an existing folder is refused by check_out_file): the
+    file was once written under the folder's own name."""
+    if not text.strip():
+        fail(ConfigError(f"{option}: empty; give the file to write, e.g. {example}"))
+    if _names_folder(text):
+        fail(ConfigError(f"{option} {text}: names a folder (it ends in '/'); give the file to "
+                         f"write, e.g. {text.rstrip('/' + os.sep) or '.'}/{example}"))
+    return Path(text)
+
+
 def _warn_envelope(ref: object) -> None:
     """Warn when the plan leaves the default design box (beyond the paper): runs will widen it."""
     from tsmpc.config import Config
@@ -128,8 +149,9 @@ def _warn_envelope(ref: object) -> None:
 def show_reference(
     file: Path = typer.Argument(..., help="Reference (planned CSV or paper format), TUMFTM track, or "
                                 "a dataset name (paper, monza, …: tsmpc data fetch)."),
-    out: Path | None = typer.Option(None, "--out", "-o", help="PNG to write, or an existing folder "
-                                    "(writes FOLDER/FILE-stem.png) [default: FILE.png]."),
+    out_text: str | None = typer.Option(None, "--out", "-o", help="PNG to write, or a folder (an "
+                                        "existing one, or a name ending in '/': writes "
+                                        "FOLDER/FILE-stem.png) [default: FILE.png]."),
     window: str | None = typer.Option(None, help="Paper-format columns 'FIRST,LAST' (1-based) "
                                       "[default: all]."),
 ) -> None:
@@ -147,9 +169,12 @@ def show_reference(
         except ValueError:
             fail(ConfigError(f"--window must be 'FIRST,LAST' (1-based columns), got {window!r}"))
         win = (a, b)
+    if out_text is not None and not out_text.strip():
+        fail(ConfigError("--out: empty; give a PNG file or a folder"))
+    out = Path(out_text) if out_text is not None else None
     png_path = out or file.with_suffix(".png")
-    if out is not None and (out.is_dir() or str(out).endswith(("/", "\\"))):
-        png_path = out / f"{file.stem}.png"
+    if out is not None and out_text is not None and (out.is_dir() or _names_folder(out_text)):
+        png_path = out / f"{file.stem}.png"  # the folder is made by check_out_file
     title = file.stem
     file = data_path(file, "FILE") or file  # a dataset name: its PNG goes to the working folder
     refuse_ineffective({"window": (is_tumftm(file), "a track is planned whole: --window picks "
