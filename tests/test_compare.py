@@ -25,7 +25,8 @@ SCHEMA_KEYS = {"rmse", "max_abs_lateral_m", "mpc_ms", "mhe_ms", "friction_rmse_N
 @pytest.fixture(scope="module")
 def cli_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("compare")
-    res = CliRunner().invoke(app, ["compare", "--duration", "20", "--out", str(out), "--seed", "3"])
+    res = CliRunner().invoke(app, ["compare", "--duration", "20", "--out", str(out), "--seed", "3",
+                                   "--mat"])  # .mat on request (the default writes .npz only)
     assert res.exit_code == 0, res.output
     return out
 

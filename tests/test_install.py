@@ -5,7 +5,6 @@ works from a checkout (tsmpc is not on PyPI)."""
 
 from __future__ import annotations
 
-import os
 import re
 import subprocess
 import sys
@@ -42,9 +41,8 @@ def _blocked(code: str, blocked: tuple[str, ...] = OPTIONAL, timeout: float = 60
                 return None
         sys.meta_path.insert(0, _NotInstalled())
     """)
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")])}
     return subprocess.run([sys.executable, "-c", prelude + textwrap.dedent(code), *args],
-                          capture_output=True, text=True, timeout=timeout, env=env, cwd=ROOT)
+                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
 
 
 @pytest.mark.slow

@@ -229,7 +229,7 @@ def test_an_mp4_without_ffmpeg_is_refused_never_a_gif_named_mp4(run_dir: Path, t
 
     monkeypatch.setattr(animation, "ffmpeg_executable", lambda: None)
     log = load_run(run_dir).logs["REF"]
-    with pytest.raises(ConfigError, match=r"a\.mp4: MP4 needs ffmpeg: pip install \"tsmpc\[video\]\""):
+    with pytest.raises(ConfigError, match=r"a\.mp4: MP4 needs ffmpeg: .*pip install -e \"\.\[video\]\""):
         animation.animate_run(log, tmp_path / "a.mp4", duration_s=0.5)
     assert not list(tmp_path.iterdir())  # refused before rendering: nothing written
     res = animation.animate_run(log, tmp_path / "a.gif", duration_s=0.5, size_px=(320, 240))

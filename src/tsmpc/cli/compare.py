@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 from pathlib import Path
 from typing import Any
 
@@ -45,16 +47,69 @@ _OUTPUT_FILES = ("metrics.json", "rmse.csv", "rmse.md", "rmse.tex", "comfort.csv
                  "timeseries.npz", "timeseries.mat", "report.html", PARTIAL_MARKER)
 
 
+def _is_output(p: Path) -> bool:
+    """A file a compare/run (or ``tsmpc animate`` of it) writes into its folder."""
+    figures: Any = ()  # no [report] extra: this install writes no figures
+    with contextlib.suppress(ImportError):
+        from tsmpc.report.figures import FIGURES as figures
+    return p.is_file() and (p.name in _OUTPUT_FILES
+                            or (p.suffix in (".png", ".pdf") and p.stem in figures)
+                            or (p.suffix in (".gif", ".mp4") and p.stem.startswith("animation_")))
+
+
 def _remove_previous_outputs(out: Path) -> None:
     """--overwrite: remove tsmpc's files of an earlier run (never anything else) so the folder
     never mixes new and stale results."""
-    from tsmpc.report.figures import FIGURES
-
     for p in out.iterdir():
-        if p.is_file() and (p.name in _OUTPUT_FILES
-                            or (p.suffix in (".png", ".pdf") and p.stem in FIGURES)
-                            or (p.suffix in (".gif", ".mp4") and p.stem.startswith("animation_"))):
+        if _is_output(p):
             p.unlink()
+
+
+def _holds_previous_result(out: Path) -> bool:
+    """``out`` holds the complete result of an earlier compare/run: its ``metrics.json``, no
+    PARTIAL marker (an unfinished run is not moved aside: the user decides) and nothing but
+    tsmpc's output files (a folder with anything else is refused as before)."""
+    try:
+        if not out.is_dir() or out.resolve() in (Path.cwd().resolve(), *Path.cwd().resolve().parents):
+            return False
+        entries = [p for p in out.iterdir() if not p.name.startswith(".tsmpc-probe-")]
+    except OSError:
+        return False
+    names = {p.name for p in entries}
+    return "metrics.json" in names and PARTIAL_MARKER not in names and all(map(_is_output, entries))
+
+
+def _timed_in(exp: Any) -> dict[str, str]:
+    """Where each method's per-step times are measured: "engine" (inside the compiled run engine,
+    :mod:`tsmpc.sim.engine`: FZN, REF, ITER when it applies) or "Python" (the Python loop, with
+    its call overhead: NL, the baselines, and any case the engine does not run)."""
+    from tsmpc.sim import engine
+
+    plant = None if exp.plant == "tsmpc" else exp.plant
+    return {m.value: "engine" if engine.enabled() and engine.applicability(
+        exp.config, m, exp.scenario, oracle=exp.oracle, plant=plant) is None else "Python"
+        for m in exp.methods}
+
+
+def _compile_engine(say: Any) -> None:
+    """Compile the run engine before the progress bars when its cache is cold, and say when that
+    ends and how long it took (the engine's own line says it starts: "compiling the run engine
+    (first run only)…"). A warm cache costs nothing here."""
+    import time
+
+    from tsmpc import kernels
+    from tsmpc.sim import engine
+
+    if not engine.enabled() or engine._load_kernel() is None:  # prints the "compiling" line if cold
+        return
+    folder = kernels._tree_folder(kernels.numba_cache_dir())
+    if any(folder.glob("engine.run-*.nbi")):  # compiled before: loaded on the first run
+        return
+    t0 = time.perf_counter()
+    ok = engine.warmup()
+    seconds = time.perf_counter() - t0
+    say(f"tsmpc: compiling the run engine (first run only)… done in {seconds:.0f} s"
+        if ok else f"tsmpc: the run engine could not be compiled ({seconds:.0f} s): the Python loop runs")
 
 
 def _execute(
@@ -64,7 +119,7 @@ def _execute(
     overwrite: bool = False, preset: str | None = None,
     laps: int = 1, dt: float | None = None, strict_box: bool = False,
     plant: str = "tsmpc", cr_vehicle: int = 2, command: str = "compare",
-    sets: list[str] | None = None,
+    sets: list[str] | None = None, mat: bool = False,
 ) -> None:
     """The body of ``compare`` and ``run``: a thin shell over :mod:`tsmpc.sim.experiment`
     (``prepare`` validates every input before any work, ``run`` solves the designs and runs).
@@ -80,7 +135,7 @@ def _execute(
     check_environment()  # cache folders, BLAS threads: before any work
     limit_blas_threads()
     console = Console(emoji=False)  # user strings are escaped where printed (markup)
-    if not console.is_terminal:  # piped to a file or CI log: do not squeeze the tables to 80 columns
+    if not console.is_terminal and "COLUMNS" not in os.environ:  # piped to a file or CI log
         console = Console(width=140, emoji=False)
     # Every input is checked before any work: options, config, reference, envelope, output folder.
     finite("--duration", duration, lo=0.1)
@@ -108,12 +163,22 @@ def _execute(
     except (TsmpcError, OSError) as err:
         fail(err)
     check_scenario_options(exp.scenario, reference=reference, laps=laps, plant=plant)
+    _check_extras(exp, plots=not no_plots)
+    err_console = Console(stderr=True, highlight=False, soft_wrap=True)
     if out is None:  # a new folder: never another run's (issue 23)
         from tsmpc.cli._outdir import claim_default_out
 
         out = claim_default_out(command)
-        Console(stderr=True, highlight=False, soft_wrap=True).print(f"output folder: {out}",
-                                                                   markup=False)
+        err_console.print(f"output folder: {out}", markup=False)
+    elif not overwrite and _holds_previous_result(out):  # the quick start, run again (docs/outputs.md)
+        from tsmpc.cli._outdir import move_aside
+
+        try:
+            moved = move_aside(out)
+        except OSError as err:
+            fail(ConfigError(f"--out {out}: holds an earlier result that cannot be moved aside "
+                             f"({err.strerror or err}); choose another folder or pass --overwrite"))
+        err_console.print(f"the earlier result in {out} was moved to {moved}", markup=False)
     check_out_dir(out, overwrite=overwrite)
     if exp.envelope.widened:
         console.print(exp.envelope.message, markup=False, highlight=False)
@@ -128,8 +193,11 @@ def _execute(
         designs = design_status(exp.config)  # no design for this config: DesignError (exit 2)
         from tsmpc import kernels
 
+        timed_in = _timed_in(exp)
         with deferred_interrupts():  # numba/LLVM call back into Python: never raise in there
             kernels.warmup()  # compile/load before the progress bars (the first run says so)
+            if "engine" in timed_in.values():  # and the run engine, saying when it is done
+                _compile_engine(lambda text: err_console.print(text, markup=False))
         with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
                       TextColumn("{task.completed}/{task.total} MPC steps"),
                       TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
@@ -146,8 +214,8 @@ def _execute(
             # after every MPC step (check_interrupted in the progress callback).
             with deferred_interrupts():
                 result = experiment.run(exp, out, plots=not no_plots, progress_factory=factory,
-                                        designs=designs)
-        _print_tables(console, result.metrics)
+                                        designs=designs, mat=mat)
+        _print_tables(console, result.metrics, timed_in)
         console.print(f"wrote {len(result.files)} files to [bold]{escape(str(out))}[/bold]")
         sick = _unhealthy(result.metrics)
         if sick:
@@ -172,11 +240,26 @@ def _unhealthy(metrics: dict[str, Any]) -> list[str]:
     return out
 
 
-def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
+def _check_extras(exp: Any, *, plots: bool) -> None:
+    """Before any work: the optional dependencies this run needs are installed, else exit 2 with
+    the install line of their extra (tsmpc.extras)."""
+    from tsmpc.config import Method
+    from tsmpc.extras import is_available, missing_message
+
+    if Method.NL in exp.methods and not is_available("casadi"):
+        fail(ConfigError(missing_message("casadi", "method nl (NL-MPC)") + "; or leave nl out of --methods"))
+    if plots and not is_available("matplotlib"):
+        fail(ConfigError(missing_message("matplotlib", "the figures") + "; or pass --no-plots"))
+
+
+def _print_tables(console: Any, metrics: dict[str, Any], timed_in: dict[str, str] | None = None) -> None:
+    """The RMSE, timing, tracking and comfort tables, each within 80 columns (compact units,
+    short two-line heads); ``timed_in`` (method -> "engine" or "Python") says under the timing
+    table where each method's times were measured."""
     from rich.markup import escape
     from rich.table import Table
 
-    from tsmpc.report.tables import rmse_rows
+    from tsmpc.report.tables import factor_cell, rmse_rows, time_cell, timed_in_note
 
     paper = bool(metrics["scenario"].get("paper_reference"))
     t = Table(title=f"RMSE — {escape(str(metrics['scenario']['name']))}"
@@ -190,24 +273,34 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
         style = "dim" if label.endswith("(paper)") else None
         t.add_row(label, *(f"{v:.3f}" for v in vals), style=style)
     console.print(t)
-    tt = Table(title=escape("Per-step solve times [ms], tracking and real-time factor"))
-    for col in ("method", "MPC med", "MPC p95", "MPC p99", "MPC max", "×REF",
-                "MHE med", "MHE p99", "max|e_y| [m]", "F̂ RMSE [N]", "RT×", "events"):
-        tt.add_column(escape(col), justify="right", no_wrap=col == "events")
+    tt = Table(title="Per-step solve times (median, p99, max)")
+    for col in ("method", "MPC\nmedian", "MPC\np99", "MPC\nmax", "MPC\n×REF", "MHE\nmedian",
+                "MHE\np99"):
+        tt.add_column(escape(col), justify="right" if col != "method" else "left", no_wrap=True)
+    for name, m in metrics["methods"].items():
+        if m.get("status") == "diverged":  # timings of a run cut short are not comparable
+            tt.add_row(name, *(["—"] * 6), style="bold red")
+            continue
+        mpc, mhe = m["mpc_ms"], m["mhe_ms"]
+        tt.add_row(name, time_cell(mpc["median"]), time_cell(mpc["p99"]), time_cell(mpc["max"]),
+                   factor_cell(m.get("mpc_ms_ratio_to_REF")), time_cell(mhe["median"]),
+                   time_cell(mhe["p99"]))
+    console.print(tt)
+    note = timed_in_note({n: w for n, w in (timed_in or {}).items() if n in metrics["methods"]})
+    if note:
+        console.print(note, markup=False, highlight=False)
+    tr = Table(title="Tracking, friction estimate, real time")
+    for col in ("method", "max |e_y|\n[m]", "F̂ RMSE\n[N]", "real-time\nfactor", "events"):
+        tr.add_column(escape(col), justify="right" if col not in ("method", "events") else "left",
+                      no_wrap=True)
     for name, m in metrics["methods"].items():
         ev = "\n".join(f"{k}={v}" for k, v in m["events"].items() if v) or "-"
-        if m.get("status") == "diverged":  # timings of a run cut short are not comparable
-            tt.add_row(name, *(["—"] * 7), f"{m['max_abs_lateral_m']:.3f}", "—", "—", ev,
-                       style="bold red")
+        if m.get("status") == "diverged":
+            tr.add_row(name, f"{m['max_abs_lateral_m']:.3f}", "—", "—", ev, style="bold red")
             continue
-        ratio = m.get("mpc_ms_ratio_to_REF")
-        tt.add_row(name, f"{m['mpc_ms']['median']:.3f}", f"{m['mpc_ms']['p95']:.3f}",
-                   f"{m['mpc_ms']['p99']:.3f}", f"{m['mpc_ms']['max']:.2f}",
-                   "-" if ratio is None else f"{ratio:.1f}",
-                   f"{m['mhe_ms']['median']:.3f}", f"{m['mhe_ms']['p99']:.3f}",
-                   f"{m['max_abs_lateral_m']:.3f}", f"{m['friction_rmse_N']:.0f}",
-                   f"{m['realtime_factor']:.1f}", ev)
-    console.print(tt)
+        tr.add_row(name, f"{m['max_abs_lateral_m']:.3f}", f"{m['friction_rmse_N']:.0f}",
+                   factor_cell(m["realtime_factor"]), ev)
+    console.print(tr)
     _print_comfort(console, metrics)
     for name, m in metrics["methods"].items():
         if m.get("max_abs_lateral_per_lap_m"):
@@ -218,20 +311,24 @@ def _print_tables(console: Any, metrics: dict[str, Any]) -> None:
 
 
 def _print_comfort(console: Any, metrics: dict[str, Any]) -> None:
-    """The comfort and effort table (tsmpc.sim.comfort) below the timing table."""
+    """The comfort and effort tables (tsmpc.sim.comfort) below the timing tables: two tables of
+    at most six values with short heads, so each fits 80 columns."""
     from rich.markup import escape
     from rich.table import Table
 
-    from tsmpc.report.tables import COMFORT_COLUMNS, comfort_cell, comfort_rows
+    from tsmpc.report.tables import COMFORT_COLUMNS, COMFORT_CONSOLE, comfort_cell, comfort_rows
 
-    t = Table(title=escape("Comfort and effort (5 Hz zero-phase low-pass before each derivative)"))
-    t.add_column("method", no_wrap=True)
-    for _, head, _ in COMFORT_COLUMNS:
-        t.add_column(escape(head), justify="right")
-    for label, vals in comfort_rows(metrics):
-        cells = [comfort_cell(v, d) for v, (_, _, d) in zip(vals, COMFORT_COLUMNS, strict=True)]
-        t.add_row(label, *cells, style="bold red" if label.endswith("(diverged)") else None)
-    console.print(t)
+    index = {key: i for i, (key, _, _) in enumerate(COMFORT_COLUMNS)}
+    rows = comfort_rows(metrics)
+    for title, columns in COMFORT_CONSOLE:
+        t = Table(title=escape(title))
+        t.add_column("method", overflow="fold")  # "ITER (diverged)" wraps: the values never do
+        for _, head in columns:
+            t.add_column(escape(head), justify="right", no_wrap=True)
+        for label, vals in rows:
+            cells = [comfort_cell(vals[index[k]], COMFORT_COLUMNS[index[k]][2]) for k, _ in columns]
+            t.add_row(label, *cells, style="bold red" if label.endswith("(diverged)") else None)
+        console.print(t)
 
 
 _SCENARIO_HELP = ("Robustness scenario: nominal, ice_patch, wet_section, noise_x10, sensor_dropout, "
@@ -272,6 +369,8 @@ _OPT_PLANT = typer.Option("tsmpc", "--plant", help=_PLANT_HELP)
 _OPT_CR_VEHICLE = typer.Option(2, "--cr-vehicle", help="CommonRoad parameter set (1, 2, 3).")
 _OPT_OVERWRITE = typer.Option(False, "--overwrite", help="Write into a non-empty --out folder, "
                               "replacing tsmpc's outputs of an earlier run (other files are kept).")
+_OPT_MAT = typer.Option(False, "--mat", help="Also write the time series as timeseries.mat (MATLAB); "
+                        "timeseries.npz is always written.")
 _OPT_SET = typer.Option(None, "--set", help="KEY=VALUE over the config, repeatable: a dotted field "
                         "and a TOML value, e.g. --set scenario.plant.mass_scale=1.2 --set "
                         "scenario.sensors.dropout_probability=0.05 (docs/mismatch.md).")
@@ -283,8 +382,9 @@ def compare_cmd(
     window: str | None = _OPT_WINDOW,
     methods: str = typer.Option("fzn,ref,iter,nl", "--methods", help="Comma-separated: fzn,ref,iter,nl "
                                 "(TS-MPC modes, NL-MPC) and the baselines pure_pursuit,stanley,lqr,ltv."),
-    out: Path | None = typer.Option(None, "--out", help="Output folder (new or empty; default: a new "
-                                    "folder results/compare, results/compare-2, …)."),
+    out: Path | None = typer.Option(None, "--out", help="Output folder (new, empty, or holding an "
+                                    "earlier complete result, which is moved to OUT.prev first; "
+                                    "default: a new folder results/compare, results/compare-2, …)."),
     seed: int | None = _OPT_SEED,
     config: Path | None = _OPT_CONFIG,
     no_plots: bool = _OPT_NO_PLOTS,
@@ -299,6 +399,7 @@ def compare_cmd(
     plant: str = _OPT_PLANT,
     cr_vehicle: int = _OPT_CR_VEHICLE,
     sets: list[str] | None = _OPT_SET,
+    mat: bool = _OPT_MAT,
 ) -> None:
     """Run the paper's comparison (FZN, REF, ITER, NL) and write tables, data and figures."""
     options = dict(locals())
@@ -311,8 +412,9 @@ def run_cmd(
                                "stanley, lqr, ltv."),
     reference: Path | None = _OPT_REFERENCE,
     window: str | None = _OPT_WINDOW,
-    out: Path | None = typer.Option(None, "--out", help="Output folder (new or empty; default: a new "
-                                    "folder results/run, results/run-2, …)."),
+    out: Path | None = typer.Option(None, "--out", help="Output folder (new, empty, or holding an "
+                                    "earlier complete result, which is moved to OUT.prev first; "
+                                    "default: a new folder results/run, results/run-2, …)."),
     seed: int | None = _OPT_SEED,
     config: Path | None = _OPT_CONFIG,
     no_plots: bool = _OPT_NO_PLOTS,
@@ -327,6 +429,7 @@ def run_cmd(
     plant: str = _OPT_PLANT,
     cr_vehicle: int = _OPT_CR_VEHICLE,
     sets: list[str] | None = _OPT_SET,
+    mat: bool = _OPT_MAT,
 ) -> None:
     """Run one method on one scenario (same outputs as compare, for one method)."""
     options = dict(locals())

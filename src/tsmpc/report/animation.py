@@ -72,8 +72,8 @@ def ffmpeg_executable() -> str | None:
 
 
 #: How to get an MP4 writer, for error messages.
-FFMPEG_HINT = (f"MP4 needs ffmpeg: {install_hint('video')} (imageio-ffmpeg, a bundled ffmpeg) or "
-               "put ffmpeg on the PATH; or write a GIF (--out NAME.gif)")
+FFMPEG_HINT = ("MP4 needs ffmpeg: put it on the PATH, or install imageio-ffmpeg (a bundled ffmpeg, the "
+               f"[video] extra): {install_hint('video')}; or write a GIF (--out NAME.gif)")
 
 
 def predicted_poses(log: RunLog, k: int) -> NDArray[np.float64]:

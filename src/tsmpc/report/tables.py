@@ -8,8 +8,9 @@ from typing import Any
 
 from tsmpc.sim.metrics import PAPER_TABLE5, RMSE_KEYS
 
-__all__ = ["COMFORT_COLUMNS", "comfort_cell", "comfort_csv", "comfort_markdown", "comfort_rows",
-           "is_diverged", "rmse_csv", "rmse_latex", "rmse_markdown", "rmse_rows", "timing_rows"]
+__all__ = ["COMFORT_COLUMNS", "COMFORT_CONSOLE", "comfort_cell", "comfort_csv", "comfort_markdown",
+           "comfort_rows", "factor_cell", "is_diverged", "rmse_csv", "rmse_latex", "rmse_markdown",
+           "rmse_rows", "time_cell", "timed_in_note", "timing_rows"]
 
 _HEAD = ("approach", "x [m]", "y [m]", "theta [rad]", "v [m/s]", "omega [rad/s]")
 
@@ -81,6 +82,46 @@ def timing_rows(metrics: dict[str, Any]) -> list[tuple[str, dict[str, float], di
             for name, m in metrics["methods"].items()]
 
 
+def time_cell(ms: float | None) -> str:
+    """A per-step time [ms] in at most 7 characters with its own unit, 3 significant digits:
+    ``2.97 µs``, ``366 µs``, ``2.07 ms``, ``1.25 s``; '—' when undefined. (The timing columns
+    span four decades, FZN's microseconds to NL's milliseconds: one fixed unit would print
+    ``0.00297`` or ``2070``.)"""
+    if ms is None or not math.isfinite(ms):
+        return "—"
+    if ms < 1.0:
+        return f"{ms * 1e3:.3g} µs"
+    if ms < 1e3:
+        return f"{ms:.3g} ms"
+    return f"{ms / 1e3:.3g} s"
+
+
+def factor_cell(x: float | None) -> str:
+    """A ratio as ``976×`` (≥ 10) or ``1.3×``; '—' when undefined."""
+    if x is None or not math.isfinite(x):
+        return "—"
+    return f"{x:.0f}×" if abs(x) >= 10 else f"{x:.1f}×"
+
+
+#: Where a method's per-step times are measured, for the note under the timing table.
+_WHERE = {"engine": "inside the compiled run engine",
+          "Python": "in the Python loop (its call overhead included)"}
+
+
+def timed_in_note(timed_in: dict[str, str]) -> str:
+    """One note naming where each method was timed (method -> "engine" or "Python"), e.g.
+    "Times measured inside the compiled run engine: FZN, REF, ITER; in the Python loop (its call
+    overhead included): NL. Compare times within a group." Empty when ``timed_in`` is."""
+    groups: dict[str, list[str]] = {}
+    for name, where in timed_in.items():
+        groups.setdefault(where, []).append(name)
+    if not groups:
+        return ""
+    parts = [f"{_WHERE.get(w, w)}: {', '.join(names)}" for w, names in groups.items()]
+    tail = " Compare times within a group." if len(groups) > 1 else ""
+    return "Times measured " + "; ".join(parts) + "." + tail
+
+
 #: (metrics.json key under ``comfort``, column head, decimals) of the comfort table.
 COMFORT_COLUMNS: tuple[tuple[str, str, int], ...] = (
     ("lat_accel_max", "max |a_y| [m/s²]", 2),
@@ -96,6 +137,19 @@ COMFORT_COLUMNS: tuple[tuple[str, str, int], ...] = (
     ("settling_time_s", "settling [s]", 1),
 )
 _KILO = {"force_rate_max", "force_rate_rms"}  # N/s shown as kN/s
+
+#: The console's comfort tables: (title, ((key, short two-line head), ...)), at most six values
+#: each, so that each table fits 80 columns (the files keep the one table of COMFORT_COLUMNS).
+COMFORT_CONSOLE: tuple[tuple[str, tuple[tuple[str, str], ...]], ...] = (
+    ("Comfort (5 Hz zero-phase low-pass before each derivative)", (
+        ("lat_accel_max", "max|a_y|\nm/s²"), ("lat_accel_rms", "RMS a_y\nm/s²"),
+        ("lat_jerk_max", "max|j_y|\nm/s³"), ("lat_jerk_rms", "RMS j_y\nm/s³"),
+        ("lon_jerk_max", "max|j_x|\nm/s³"), ("lon_jerk_rms", "RMS j_x\nm/s³"))),
+    ("Effort and settling", (
+        ("steering_rate_max", "max|δ̇|\nrad/s"), ("steering_rate_rms", "RMS δ̇\nrad/s"),
+        ("force_rate_max", "max|Ḟ|\nkN/s"), ("force_rate_rms", "RMS Ḟ\nkN/s"),
+        ("settling_time_s", "settling\ns"))),
+)
 
 
 def comfort_rows(metrics: dict[str, Any]) -> list[tuple[str, list[float]]]:

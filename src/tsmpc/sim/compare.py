@@ -166,6 +166,7 @@ def compare(
     plant_factory: Callable[[], Plant] | None = None,
     figures: FigureFn | None = None,
     designs: tuple[Any, Any] | None = None,
+    mat: bool = False,
 ) -> CompareResult:
     """Run ``methods`` on ``scenario`` and write metrics, tables, time series and figures.
 
@@ -178,7 +179,8 @@ def compare(
     non-finite plant) has ``status`` ``"diverged"``; ``metrics["diverged"]`` lists those methods.
     Interrupted (KeyboardInterrupt, which the CLI raises for SIGINT and SIGTERM), the methods that
     had finished are written (without figures; ``metrics["interrupted"]`` names them and the ones
-    that did not finish) before the interrupt propagates.
+    that did not finish) before the interrupt propagates. ``mat``: also write the time series as
+    ``timeseries.mat`` (MATLAB; ``timeseries.npz`` is always written).
     """
     from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
@@ -199,12 +201,12 @@ def compare(
             metrics = _metrics(cfg, scenario, logs, max_steps, oracle, kd)
             metrics["interrupted"] = {"finished": list(logs),
                                       "not_finished": [m.value for m in methods if m.value not in logs]}
-            write_outputs(cfg, metrics, logs, Path(out_dir), plots=False)
+            write_outputs(cfg, metrics, logs, Path(out_dir), plots=False, mat=mat)
         raise
     metrics = _metrics(cfg, scenario, logs, max_steps, oracle, kd)
     files: list[Path] = []
     if out_dir is not None:
-        files = write_outputs(cfg, metrics, logs, Path(out_dir), plots=plots, figures=figures)
+        files = write_outputs(cfg, metrics, logs, Path(out_dir), plots=plots, figures=figures, mat=mat)
     return CompareResult(metrics, logs, tuple(files))
 
 
@@ -254,10 +256,11 @@ def _config_toml(cfg: Config, methods: list[str]) -> str:
 
 def write_outputs(
     cfg: Config, metrics: dict[str, Any], logs: dict[str, RunLog], out: Path, *, plots: bool,
-    figures: FigureFn | None = None,
+    figures: FigureFn | None = None, mat: bool = False,
 ) -> list[Path]:
-    """metrics.json, rmse.{csv,md,tex}, comfort.{csv,md}, timeseries.{npz,mat}, config.toml,
-    versions.json, figures, and last report.html (one self-contained page of all of it)."""
+    """metrics.json, rmse.{csv,md,tex}, comfort.{csv,md}, timeseries.npz (and timeseries.mat when
+    ``mat``), config.toml, versions.json, figures, and last report.html (one self-contained page of
+    all of it)."""
     from tsmpc.report.tables import comfort_csv, comfort_markdown, rmse_csv, rmse_latex, rmse_markdown
 
     out.mkdir(parents=True, exist_ok=True)
@@ -277,8 +280,10 @@ def write_outputs(
         atomic_write_text(out / name, text)
         files.append(out / name)
     save_logs_npz(logs, out / "timeseries.npz")
-    save_logs_mat(logs, out / "timeseries.mat")
-    files += [out / "timeseries.npz", out / "timeseries.mat"]
+    files.append(out / "timeseries.npz")
+    if mat:  # one time-series format by default; MATLAB's on request (tsmpc compare --mat)
+        save_logs_mat(logs, out / "timeseries.mat")
+        files.append(out / "timeseries.mat")
     if plots:
         if figures is None:
             from tsmpc.report.figures import save_all as figures

@@ -202,10 +202,11 @@ def run(
     status: StatusFn | None = None,
     designs: tuple[Any, Any] | None = None,
     figures: FigureFn | None = None,
+    mat: bool = False,
 ) -> CompareResult:
     """Solve and certify the designs (unless given), load the kernels and run every method of
     ``exp``; write the outputs into ``out_dir`` (None: nothing written). A diverged method is a
-    result (``metrics["diverged"]``), not an exception."""
+    result (``metrics["diverged"]``), not an exception. ``mat``: also write ``timeseries.mat``."""
     from tsmpc import kernels
 
     if designs is None:
@@ -213,4 +214,4 @@ def run(
     kernels.warmup()  # compile/load before the first timed step (the first run says so)
     return compare(exp.config, exp.scenario, list(exp.methods), out_dir, plots=plots,
                    oracle=exp.oracle, max_steps=exp.max_steps, progress_factory=progress_factory,
-                   designs=designs, plant_factory=exp.plant_factory(), figures=figures)
+                   designs=designs, plant_factory=exp.plant_factory(), figures=figures, mat=mat)
