@@ -14,10 +14,11 @@ from pathlib import Path
 
 import pytest
 
+import tsmpc
 from tsmpc.extras import EXTRAS, MissingExtraError, from_import_error, install_hint, require
 
 ROOT = Path(__file__).resolve().parents[1]
-SRC = ROOT / "src" / "tsmpc"
+SRC = Path(tsmpc.__file__).parent  # the package under test (a copy on PYTHONPATH too)
 #: What a deployment must not need (the extras' heavy packages).
 OPTIONAL = ("dask", "distributed", "pandas", "pyarrow", "casadi", "matplotlib", "typer", "rich",
             "PIL", "imageio_ffmpeg")
