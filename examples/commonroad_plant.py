@@ -1,6 +1,6 @@
 """REF on the built-in circuit driving CommonRoad's single-track model (vehicle 2, a BMW 320i)
 behind a 50 ms steering servo, next to tsmpc's own plant with the same parameters (linear tyres,
-same servo), default sensor noise. Needs the extra: pip install "tsmpc[commonroad]".
+same servo), default sensor noise. Needs the extra: pip install -e ".[commonroad]".
 
     python examples/commonroad_plant.py                        # the whole circuit
     TSMPC_EXAMPLE_STEPS=150 python examples/commonroad_plant.py  # the first 15 s

@@ -155,3 +155,14 @@ def test_every_install_line_in_the_source_works_from_a_checkout() -> None:
             found += 1
             assert set(m.group(1).split(",")) <= extras, (path, m.group(0))
     assert found >= 1
+
+
+def test_every_install_line_in_the_docs_and_examples_names_a_defined_extra() -> None:
+    extras = set(_pyproject()["project"]["optional-dependencies"])
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")),
+             *sorted((ROOT / "examples").glob("*.py"))]
+    for page in pages:
+        text = page.read_text(encoding="utf-8")
+        assert 'install "tsmpc[' not in text and "install 'tsmpc[" not in text, page
+        for m in re.finditer(r"pip install[^\n`]*?\.\[([a-z_,]+)\]", text):
+            assert set(m.group(1).split(",")) <= extras, (page.name, m.group(0))
