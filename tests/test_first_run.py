@@ -56,6 +56,30 @@ def test_a_warm_engine_cache_compiles_nothing_and_says_nothing(monkeypatch: pyte
     assert calls == [] and said == []
 
 
+def test_the_compile_step_runs_one_step_of_the_run_itself(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The CLI compiles the engine with one MPC step of the run's own config, scenario and designs
+    (no second design solve for the default config); the method is the first the engine runs."""
+    from tsmpc.cli.compare import _one_engine_step
+    from tsmpc.config import Config
+    from tsmpc.sim import experiment
+
+    exp = experiment.prepare(Config(), ["nl", "ref"], duration=1.0)
+    designs = experiment.solve_designs(exp.config)
+    calls = []
+    import tsmpc.sim.simulator as sim
+
+    real = sim.simulate
+
+    def spy(cfg, method, scenario, **kw):
+        calls.append((method.value, scenario.name, kw["max_steps"], kw["engine"],
+                      kw["kinematic_design"] is designs[0]))
+        return real(cfg, method, scenario, **kw)
+
+    monkeypatch.setattr(sim, "simulate", spy)
+    assert _one_engine_step(exp, {"NL": "Python", "REF": "engine"}, designs) is True
+    assert calls == [("REF", exp.scenario.name, 1, True, True)]
+
+
 # -- the quick start twice ------------------------------------------------------------------
 @pytest.mark.slow
 @pytest.mark.timeout(600)

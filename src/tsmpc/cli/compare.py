@@ -91,10 +91,22 @@ def _timed_in(exp: Any) -> dict[str, str]:
         for m in exp.methods}
 
 
-def _compile_engine(say: Any) -> None:
+def _one_engine_step(exp: Any, timed_in: dict[str, str], designs: tuple[Any, Any]) -> bool:
+    """One MPC step of this run's first engine method through the engine: compiles it."""
+    from tsmpc.sim.simulator import simulate
+
+    method = next(m for m in exp.methods if timed_in.get(m.value) == "engine")
+    simulate(exp.config, method, exp.scenario, oracle=exp.oracle, max_steps=1, engine=True,
+             kinematic_design=designs[0], dynamic_design=designs[1])
+    return True
+
+
+def _compile_engine(say: Any, warm: Any = None) -> None:
     """Compile the run engine before the progress bars when its cache is cold, and say when that
     ends and how long it took (the engine's own line says it starts: "compiling the run engine
-    (first run only)…"). A warm cache costs nothing here."""
+    (first run only)…"). ``warm()`` compiles it (default :func:`tsmpc.sim.engine.warmup`; the
+    CLI passes one MPC step of the run itself, whose designs are solved already). A warm cache
+    costs nothing here."""
     import time
 
     from tsmpc import kernels
@@ -106,7 +118,7 @@ def _compile_engine(say: Any) -> None:
     if any(folder.glob("engine.run-*.nbi")):  # compiled before: loaded on the first run
         return
     t0 = time.perf_counter()
-    ok = engine.warmup()
+    ok = (warm or engine.warmup)()
     seconds = time.perf_counter() - t0
     say(f"tsmpc: compiling the run engine (first run only)… done in {seconds:.0f} s"
         if ok else f"tsmpc: the run engine could not be compiled ({seconds:.0f} s): the Python loop runs")
@@ -197,7 +209,8 @@ def _execute(
         with deferred_interrupts():  # numba/LLVM call back into Python: never raise in there
             kernels.warmup()  # compile/load before the progress bars (the first run says so)
             if "engine" in timed_in.values():  # and the run engine, saying when it is done
-                _compile_engine(lambda text: err_console.print(text, markup=False))
+                _compile_engine(lambda text: err_console.print(text, markup=False),
+                                lambda: _one_engine_step(exp, timed_in, designs))
         with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
                       TextColumn("{task.completed}/{task.total} MPC steps"),
                       TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
