@@ -41,8 +41,8 @@ def test_a_cold_engine_compile_ends_with_a_done_line(monkeypatch: pytest.MonkeyP
     said: list[str] = []
     _compile_engine(said.append)
     assert calls == [1]
-    assert len(said) == 1 and re.fullmatch(r"tsmpc: compiling the run engine \(first run only\)… "
-                                           r"done in \d+ s", said[0]), said
+    assert len(said) == 1 and re.fullmatch(r"tsmpc: run engine compiled … done in \d+ s \(later runs "
+                                           r"load it from the cache\)", said[0]), said
 
 
 def test_a_warm_engine_cache_compiles_nothing_and_says_nothing(monkeypatch: pytest.MonkeyPatch,

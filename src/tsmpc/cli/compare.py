@@ -120,7 +120,7 @@ def _compile_engine(say: Any, warm: Any = None) -> None:
     t0 = time.perf_counter()
     ok = (warm or engine.warmup)()
     seconds = time.perf_counter() - t0
-    say(f"tsmpc: compiling the run engine (first run only)… done in {seconds:.0f} s"
+    say(f"tsmpc: run engine compiled … done in {seconds:.0f} s (later runs load it from the cache)"
         if ok else f"tsmpc: the run engine could not be compiled ({seconds:.0f} s): the Python loop runs")
 
 
