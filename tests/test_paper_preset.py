@@ -44,9 +44,11 @@ def test_paper_preset_is_the_published_cascade() -> None:
     assert all(getattr(default.fusion, f) for f in fusion)
     assert paper.lqr.low_speed_resistance is False and default.lqr.low_speed_resistance is True
     assert paper.lqr.friction_step is False and default.lqr.friction_step is True
+    assert paper.recovery.enabled is False and default.recovery.enabled is True  # issue 38
     beyond = {"lqr": {"speed_feedback", "friction_estimate", "low_speed_resistance", "friction_step"},
               "mpc": set(outer),
-              "fusion": fusion}
+              "fusion": fusion,
+              "recovery": {"enabled"}}
     assert paper.model_dump(exclude=beyond) == default.model_dump(exclude=beyond)
     assert Config.preset("default") == default
 

@@ -47,6 +47,7 @@ __all__ = [
     "PlantScales",
     "PurePursuitSettings",
     "Rates",
+    "RecoverySettings",
     "ScenarioActuators",
     "ScenarioSettings",
     "SchedulingMode",
@@ -946,6 +947,24 @@ class FusionSettings(_Frozen):
         "compensation and given to the speed feedback's mass")
 
 
+class RecoverySettings(_Frozen):
+    """What the cascade does when its sensors fail for longer than its estimator can bridge, and
+    how it recovers (issue 38; beyond the paper, off in the ``paper`` presets)."""
+
+    enabled: _Flag = Field(
+        True, description="blind stop, recovery and the pose gate's re-initialisation (below)")
+    blind_after_s: PositiveFloat = Field(
+        0.5, le=10.0, description="no speed / yaw-rate sample accepted for this long [s]: the "
+        "cascade is blind and brakes to a stop on its last steering (a minimal-risk manoeuvre) "
+        "until a valid sample comes; (0, 10]")
+    stop_decel: PositiveFloat = Field(
+        3.0, le=10.0, description="deceleration of the blind stop [m/s^2], (0, 10] (within the "
+        "force limits)")
+    pose_reinit_s: PositiveFloat = Field(
+        2.0, le=60.0, description="fresh poses rejected as jumps for this long [s], each "
+        "consistent with the one before: the dead-reckoned pose is wrong, not them; the gate "
+        "takes them (0, 60]")
+
 
 class Config(_Frozen):
     """Everything a run needs. ``Config()`` is the paper's setting."""
@@ -966,6 +985,7 @@ class Config(_Frozen):
     baselines: BaselineSettings = BaselineSettings()
     scenario: ScenarioSettings = ScenarioSettings()  # the conditions a run meets (issue 21)
     fusion: FusionSettings = FusionSettings()  # fusion and adaptation beyond the paper (issue 21)
+    recovery: RecoverySettings = RecoverySettings()  # blind stop and recovery (issue 38)
     seed: StrictInt = Field(0, ge=0, lt=2**63, description="seed of every random draw of a run, "
                             "0 to 2^63 - 1")
     divergence_bound_m: PositiveFloat = Field(
@@ -1023,7 +1043,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio", "low_speed_resistance": False,
                       "friction_step": False},
               "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False},
-              "fusion": _FUSION_OFF},
+              "fusion": _FUSION_OFF, "recovery": {"enabled": False}},
     # The paper as it was run (the published run): the ``paper`` preset plus every quirk of the published
     # simulation, each its own switch. Quirks of that run, not recommendations; never the default.
     "paper-as-run": {
@@ -1044,6 +1064,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "noise": {"scale": 0.0},  # the noise model existed but was not called
         "metrics": {"paper_run_rmse": True},
         "fusion": _FUSION_OFF,
+        "recovery": {"enabled": False},
     },
 }
 

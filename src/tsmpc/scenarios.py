@@ -118,8 +118,8 @@ def paper_mu(t: float, dry: float, ripple: float, earth: float, ice: float, wet:
 
 @jitable
 def patch_mu(s: float, base: float, lap: float, patches: NDArray[np.float64]) -> float:
-    """μ(road) of :class:`PatchFriction` at path distance ``s``; ``patches`` rows [start, end, μ,
-    ramp] [m, m, –, m]."""
+    """μ(road) of :class:`PatchFriction` at path distance ``s``; ``patches`` rows (start [m],
+    end [m], μ, ramp [m])."""
     if lap > 0:
         s = s % lap
     for i in range(patches.shape[0]):

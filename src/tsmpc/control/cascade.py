@@ -45,7 +45,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
-from tsmpc.control.gates import GateParams, dead_reckon, plausible_speeds, pose_consistent
+from tsmpc.control.gates import (
+    GateParams,
+    blind_stop,
+    dead_reckon,
+    jump_run,
+    nearest_sample,
+    plausible_speeds,
+    pose_consistent,
+)
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep
@@ -68,6 +76,9 @@ EVENT_NAMES = (
     "stamp_rejected",  # samples stamped in the future or with a non-finite stamp
     "speed_rejected",  # samples with an impossible speed or yaw rate (negative, absurd)
     "pose_jump_rejected",  # poses further than the car can have moved since the last good one
+    "pose_reinit",  # poses taken after a run of consistent jump rejections (recovery)
+    "blind_steps",  # calls in the blind stop (no speed / yaw-rate sample for recovery.blind_after_s)
+    "recoveries",  # returns from the blind stop (the reference re-anchored at the car)
 )
 
 
@@ -242,6 +253,9 @@ class Cascade:
         self._heading_noise = 5.0 * nz.theta * nz.scale
         self._gates = GateParams(self._v_range[0], self._v_range[1], self._w_limit, self._pose_noise,
                                  self._heading_noise, self.Td)
+        # beyond the paper: blind stop and recovery (gates.py)
+        self._recovery = cfg.recovery if cfg.recovery.enabled else None
+        self._force_limits = cfg.lqr.force_limits(cfg.vehicle)
         from tsmpc.estimation.fusion import Fusion
 
         self._fusion = Fusion(cfg)  # beyond the paper: cfg.fusion's switches (issue 21)
@@ -279,6 +293,17 @@ class Cascade:
         self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
         self._u_applied = np.zeros(2)
         self._low_applied = 0.0  # lqr.low_speed_resistance's part of the applied force
+        # recovery (gates.py): the last accepted speed / yaw-rate sample, the blind stop, the
+        # reference time offset, the run of poses rejected as jumps
+        self._t_meas: float | None = None
+        self._blind_since: float | None = None
+        self._reanchor = False
+        self._pose_free = False
+        self._t_offset = 0.0
+        self._outage_s = 0.0
+        self._catch_up = False  # after a re-anchoring: the reference waits for the car's speed
+        self._jump_t0 = math.nan
+        self._jump_last = (math.nan, math.nan, math.nan, math.nan)
         self._last: Command | None = None
         self._plan: MPCResult | None = None
         self._events = dict.fromkeys(EVENT_NAMES, 0)
@@ -387,13 +412,73 @@ class Cascade:
         return False
 
     def _accept_pose(self, t: float, X: float, Y: float, th: float) -> bool:
-        """Is a finite, fresh pose consistent with where the car can be (the dead-reckoned pose)?"""
+        """Is a finite, fresh pose consistent with where the car can be (the dead-reckoned pose)?
+        With ``recovery``: the first pose after a blind stop is, and so is one that ends
+        ``pose_reinit_s`` of consistent jump rejections (gates.py)."""
         p = self._pose
-        if p is None or pose_consistent(self._gates, X, Y, th, float(p[0]), float(p[1]), float(p[2]),
-                                        t - self._pose_t):
+        if p is None or self._pose_free or pose_consistent(
+                self._gates, X, Y, th, float(p[0]), float(p[1]), float(p[2]), t - self._pose_t):
+            self._pose_free, self._jump_t0 = False, math.nan
             return True
+        rc = self._recovery
+        if rc is not None:
+            take, self._jump_t0 = jump_run(self._gates, rc.pose_reinit_s, self._jump_t0, *self._jump_last,
+                                           X, Y, th, t)
+            self._jump_last = (X, Y, th, t)
+            if take:
+                self._events["pose_reinit"] += 1
+                self._jump_t0 = math.nan
+                return True
         self._events["pose_jump_rejected"] += 1
         return False
+
+    def _watch_samples(self, t: float, ok: bool) -> None:
+        """recovery: the blind stop begins after ``blind_after_s`` without a usable speed / yaw-rate
+        sample and ends at the next one (the gates then take the next pose, and the reference is
+        re-anchored at the car at the next MPC step)."""
+        rc = self._recovery
+        if rc is None:
+            return
+        if self._t_meas is None:
+            self._t_meas = t  # the blind clock starts at the first call
+        if ok:
+            if self._blind_since is not None:
+                self._events["recoveries"] += 1
+                self._reanchor = self._pose_free = True
+                self._outage_s = t - self._t_meas
+                self.lqr.reset()  # its filter did not run while blind
+            self._t_meas, self._blind_since = t, None
+        elif self._blind_since is None and t - self._t_meas > rc.blind_after_s:
+            self._blind_since = t
+
+    def _wait_for_car(self, t: float) -> None:
+        """After a re-anchoring, until the car has the reference's speed: the reference time advances
+        at the car's speed over the reference's (it waits for the car instead of running ahead of
+        a car that starts from rest); 1 again once the car is as fast."""
+        Tc, ref = self.Tc, self.reference
+        kr = min(max(math.floor((t - self._t_offset) / Tc + 1e-6), 0), len(ref) - 1)
+        last = self._last
+        v_hat = float(last.estimate.x[0]) if last is not None else math.nan
+        rate = min(max(v_hat / ref.v[kr], 0.0), 1.0) if ref.v[kr] > 0.0 and math.isfinite(v_hat) else 1.0
+        if rate >= 1.0:
+            self._catch_up = False
+        else:
+            self._t_offset += (1.0 - rate) * Tc
+
+    def _reanchored(self, t: float, X: float, Y: float, v: float, om: float) -> None:
+        """After a blind stop: the reference time moves back to the reference sample nearest to the
+        car (searched over the blind time and one more second), the MPC starts afresh."""
+        Tc, ref = self.Tc, self.reference
+        kr = min(max(math.floor((t - self._t_offset) / Tc + 1e-6), 0), len(ref) - 1)
+        back = math.ceil((self._outage_s + 1.0) / Tc)
+        k = nearest_sample(ref.x, ref.y, max(kr - back, 0), kr, X, Y)
+        self._t_offset += (kr - k) * Tc
+        self._reanchor = False
+        self._catch_up = True
+        self.mpc.reset()
+        self._plan = None
+        if _finite(v, om):
+            self._u_prev = np.array([max(v, 0.0), om])
 
     def _dead_reckon(self, est: Estimate) -> None:
         """Advance the pose by one T_d on the estimate (until the next accepted measurement)."""
@@ -416,6 +501,7 @@ class Cascade:
         ev = self._events
         fresh = self._fresh(t, m)
         speeds_ok = self._plausible_speeds(v, om)
+        self._watch_samples(t, fresh and speeds_ok and _finite(v, om))
         fu, fs = self._fusion, self.cfg.fusion  # issue 21: estimation/fusion.py
         stamp = -math.inf if m.stamp is None else float(m.stamp)  # a new stamp is a new sample
         if fs.reject_repeated_samples and fu.guard.repeated((X, Y, th, v, om, stamp)):
@@ -432,15 +518,19 @@ class Cascade:
             if not pose_ok:  # the MPC never sees NaN nor a jump: the dead-reckoned pose
                 ev["pose_rejected"] += 1
             if fu.any_course:  # an MPC step closes the course fusion's interval
-                kc = min(max(math.floor(t / self.Tc + 1e-6), 0), len(self.reference) - 1)
+                kc = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(self.reference) - 1)
                 fu.course.close(np.array([X, Y, th]) if pose_ok else None,
                                 v if fresh and speeds_ok else math.nan,
                                 om if fresh and speeds_ok else math.nan,
                                 float(self.reference.v[kc] * self.reference.omega[kc]))
                 if fs.stiffness_estimate:
                     self._apply_stiffness(fu.course.stiffness)
+            if self._reanchor and pose_ok:
+                self._reanchored(t, X, Y, v, om)
+            elif self._catch_up:
+                self._wait_for_car(t)
             if self.cfg.rates.inner_steps_per_outer is None:
-                k = max(math.floor(t / self.Tc + 1e-6), 0)
+                k = max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0)
             else:  # a fixed number of calls per reference sample (the published run's time base)
                 k = self._calls // self.n_inner
             ref = self.reference
@@ -520,15 +610,23 @@ class Cascade:
                              est.F_fr_raw, est.status, est.solve_time_s)
         else:
             inner = _oracle_estimate(m.state)
-        out = self.lqr.step(inner, v_ref, w_ref)
+        if self._blind_since is None:
+            out = self.lqr.step(inner, v_ref, w_ref)
+            F, delta, sat, low = out.F_xR, out.delta, bool(out.saturated), out.F_low_speed
+        else:  # recovery: blind, the minimal-risk stop (gates.py)
+            rc = self._recovery
+            assert rc is not None
+            F, delta = blind_stop(float(est.x[0]), float(self._u_applied[1]), self.cfg.vehicle.mass,
+                                  rc.stop_decel, *self._force_limits)
+            sat, low = False, 0.0
+            ev["blind_steps"] += 1
         t3 = time.perf_counter()
-        self._u_applied = np.array([out.F_xR, out.delta])
-        self._low_applied = out.F_low_speed
+        self._u_applied = np.array([F, delta])
+        self._low_applied = low
         ev["mhe_rejected"] += est.status == EstimatorStatus.REJECTED
         ev["mhe_failed"] += est.status == EstimatorStatus.FAILED
-        ev["inner_saturated"] += bool(out.saturated)
-        return Command(out.F_xR, out.delta, bool(out.saturated), v_ref, w_ref, est, plan, e_meas,
-                       t_mpc, t2 - t1, t3 - t2)
+        ev["inner_saturated"] += sat
+        return Command(F, delta, sat, v_ref, w_ref, est, plan, e_meas, t_mpc, t2 - t1, t3 - t2)
 
 
 def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> bool:

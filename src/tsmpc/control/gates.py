@@ -12,12 +12,29 @@ calls it as Python, the run engine and the batch compile it.
   ``HEADING_DRIFT_RAD_PER_S`` per second (plus five σ) is a jump, not a measurement.
 * :func:`dead_reckon`: between accepted poses the pose advances by one T_d on the estimate
   (v̂, α̂, ω̂): the course is θ + α̂ (paper eq. "kinematic model": Ẋ = v cos(θ + α)).
+
+Recovery (``[recovery]``, issue 38): whatever came before, a run of valid samples brings the cascade
+back —
+
+* :func:`jump_run`: poses rejected as jumps for ``pose_reinit_s``, each consistent with the one
+  before, re-initialise the pose (the dead reckoning drifted, not the sensor);
+* :func:`blind_stop`: with no speed / yaw-rate sample for ``blind_after_s`` the cascade cannot
+  estimate the car any more: it brakes to a stop on its last steering (a minimal-risk manoeuvre)
+  instead of driving on a model's open-loop prediction;
+* :func:`nearest_sample`: on the first valid sample after a blind stop, the reference time is
+  re-anchored at the reference sample nearest to the car, so the car resumes the plan from where it
+  stands instead of chasing a reference that went on without it. The gates and the MHE-UIO take
+  the new samples at once (the pose gate accepts the first finite pose; the window fills in
+  N T_d).
 """
 
 from __future__ import annotations
 
 import math
 from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
 
 from tsmpc.kernels.jit import exact_hypot, jitable
 
@@ -27,7 +44,10 @@ __all__ = [
     "POSE_DRIFT_M_PER_S",
     "POSE_JUMP_M",
     "GateParams",
+    "blind_stop",
     "dead_reckon",
+    "jump_run",
+    "nearest_sample",
     "plausible_speeds",
     "pose_consistent",
 ]
@@ -93,3 +113,40 @@ def dead_reckon(p: GateParams, px: float, py: float, pth: float, v: float, alpha
     heading = pth + alpha
     return (px + v * math.cos(heading) * p.Td, py + v * math.sin(heading) * p.Td,
             pth + omega * p.Td)
+
+
+@jitable
+def jump_run(p: GateParams, reinit_s: float, run_t0: float, lx: float, ly: float, lth: float, lt: float,
+             X: float, Y: float, theta: float, t: float) -> tuple[bool, float]:
+    """A pose rejected as a jump, against the run of rejected poses before it (the last one at
+    (lx, ly, lth), time ``lt``; the run began at ``run_t0``, NaN: no run): (take it, the run's new
+    start). Poses that agree with one another for ``reinit_s`` while the dead-reckoned pose
+    disagrees with all of them are the car: the dead reckoning drifted (an estimate that ran away
+    while the sensors were out), and the gate takes them instead of locking the car out."""
+    if run_t0 != run_t0 or not pose_consistent(p, X, Y, theta, lx, ly, lth, t - lt):
+        return False, t  # a new run starts here
+    return t - run_t0 >= reinit_s, run_t0
+
+
+@jitable
+def blind_stop(v_hat: float, delta_last: float, mass: float, decel: float, f_min: float,
+               f_max: float) -> tuple[float, float]:
+    """The command of the blind stop (F_xR [N], δ [rad]): brake at ``decel`` on the estimated
+    speed's sign, within the force limits, on the last steering (the car keeps the curvature it
+    had); no force once the estimate says it stands."""
+    F = 0.0
+    if v_hat > 0.05:
+        F = max(min(-mass * decel, f_max), f_min)
+    return F, delta_last
+
+
+@jitable
+def nearest_sample(ref_x: NDArray[np.float64], ref_y: NDArray[np.float64], k_lo: int, k_hi: int, X: float,
+                   Y: float) -> int:
+    """The reference sample in [k_lo, k_hi] nearest to (X, Y) (the first of equals)."""
+    best, kb = math.inf, k_lo
+    for k in range(k_lo, k_hi + 1):
+        d = (ref_x[k] - X) ** 2 + (ref_y[k] - Y) ** 2
+        if d < best:
+            best, kb = d, k
+    return kb

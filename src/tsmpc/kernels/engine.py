@@ -34,7 +34,7 @@ from numba import njit
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-from tsmpc.control.gates import GateParams, dead_reckon, plausible_speeds, pose_consistent
+from tsmpc.control.gates import GateParams, dead_reckon, jump_run, plausible_speeds, pose_consistent
 from tsmpc.control.slip_aware import slip_gate_update
 from tsmpc.estimation.friction_step import (
     FrictionStepParams,
@@ -59,9 +59,9 @@ ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP = 1, 2, 3, 4
 MPC_OPTIMAL, MPC_SOFT, MPC_FALLBACK = 1, 2, 3
 # event counters, in the order of Cascade.events
 (EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_MHE_REJ, EV_MHE_FAIL, EV_SAT, EV_POSE_REJ, EV_TIME_REJ,
- EV_STAMP_REJ, EV_SPEED_REJ, EV_JUMP_REJ, EV_STALE_REJ, EV_STEP_ERR, EV_REPEATED,
- EV_FSTEP) = range(15)
-N_EVENTS = 15
+ EV_STAMP_REJ, EV_SPEED_REJ, EV_JUMP_REJ, EV_REINIT, EV_BLIND, EV_RECOVER, EV_STALE_REJ,
+ EV_STEP_ERR, EV_REPEATED, EV_FSTEP) = range(18)
+N_EVENTS = 18
 
 # ---------------------------------------------------------------------------- float parameters
 (FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_V_LO, FP_V_HI, FP_W_LIM, FP_POSE_NOISE, FP_HEAD_NOISE,
@@ -70,15 +70,15 @@ N_EVENTS = 15
  FP_F_THB, FP_F_THD, FP_F_VB, FP_F_VD, FP_F_WB, FP_F_WD, FP_F_ESIG, FP_F_PDROP,
  FP_I_PERIOD, FP_I_DUR, FP_I_START,
  FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU, FP_VG,
- FP_A_GF, FP_A_GD, FP_A_RMAX, FP_FS_H) = range(45)
-N_FP = 45
+ FP_A_GF, FP_A_GD, FP_A_RMAX, FP_FS_H, FP_REINIT) = range(46)
+N_FP = 46
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
  IP_FMA, IP_F_MODEL, IP_F_DELAY, IP_F_HOLD, IP_F_INNER, IP_F_GNSS, IP_F_DROP,
- IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP) = range(33)
-N_IP = 33
+ IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV) = range(34)
+N_IP = 34
 # inner sensor faults (robustness scenarios), IP_F_INNER
 FAULT_NONE, FAULT_HOLD_BURST, FAULT_NAN_BURST = 0, 1, 2
 # ---------------------------------------------------------------------------- MHE parameters
@@ -94,8 +94,8 @@ N_MP = 30
  SF_LF, SF_LA, SF_SXY, SF_SXX, SF_ACCEL, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2, SF_FHELD, _FH1, _FH2, _FH3, _FH4, SF_FLAST, _FL1, _FL2, _FL3, _FL4,
  SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM, SF_PRIORD, _RD1, SF_N2,
- SF_N1) = range(71)
-N_SF = 71
+ SF_N1, SF_JUMP, _J1, _J2, _J3, SF_JT0) = range(76)
+N_SF = 76
 # ---------------------------------------------------------------------------- integer state
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_HASCUR, SI_NCHORDS,
  SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
@@ -774,8 +774,20 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             pose_ok = fresh and math.isfinite(X) and math.isfinite(Y) and math.isfinite(th)
             if pose_ok and not pose_consistent(gates, X, Y, th, sf[SF_POSE], sf[SF_POSE + 1],
                                                sf[SF_POSE + 2], t - sf[SF_POSET]):
-                ev[EV_JUMP_REJ] += 1  # Cascade._accept_pose: a jump from the dead-reckoned pose
-                pose_ok = False
+                take = False  # Cascade._accept_pose: a jump from the dead-reckoned pose
+                if ip[IP_RECOV] != 0:  # ... unless a run of consistent ones (recovery)
+                    take, sf[SF_JT0] = jump_run(gates, fp[FP_REINIT], sf[SF_JT0], sf[SF_JUMP],
+                                                sf[SF_JUMP + 1], sf[SF_JUMP + 2], sf[SF_JUMP + 3],
+                                                X, Y, th, t)
+                    sf[SF_JUMP], sf[SF_JUMP + 1], sf[SF_JUMP + 2], sf[SF_JUMP + 3] = X, Y, th, t
+                if take:
+                    ev[EV_REINIT] += 1
+                    sf[SF_JT0] = math.nan
+                else:
+                    ev[EV_JUMP_REJ] += 1
+                    pose_ok = False
+            elif pose_ok:
+                sf[SF_JT0] = math.nan
             if pose_ok:
                 sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2] = X, Y, th
                 sf[SF_POSET] = t

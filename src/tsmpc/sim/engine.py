@@ -58,6 +58,7 @@ __all__ = ["LAST_RUN", "EngineFallback", "applicability", "enabled", "exact", "r
 
 #: Event names in the order of :attr:`Cascade.events` (the kernel's counter array).
 _EVENTS = (*EVENT_NAMES, "stale_rejected", "step_errors", "repeated_rejected", "friction_steps")
+assert len(_EVENTS) == 18  # kernels/engine.py's EV_* order
 _MHE_STATUS = {1: EstimatorStatus.OK, 2: EstimatorStatus.REJECTED, 3: EstimatorStatus.FAILED,
                4: EstimatorStatus.WARMUP}
 _MHE_CODE = {v: k for k, v in _MHE_STATUS.items()}
@@ -107,6 +108,9 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
     why = _fault_problem(scenario.sensor_fault)
     if why is not None:
         return why
+    why = _blinding_fault(cfg, scenario.sensor_fault)
+    if why is not None:
+        return why
     why = _changed_since_port()
     if why is not None:
         return why
@@ -125,10 +129,10 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
     "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
-    "tsmpc.control.cascade:Cascade.__init__": "f8ff02cddbec47fa",
-    "tsmpc.control.cascade:Cascade.reset": "4766309803084b40",
+    "tsmpc.control.cascade:Cascade.__init__": "7b538f709795a497",
+    "tsmpc.control.cascade:Cascade.reset": "785fc6ab4ab07772",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "13ae8ed035175e67",
+    "tsmpc.control.cascade:Cascade._step": "58e36572bd6c64c5",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
     "tsmpc.control.cascade:Cascade._apply_stiffness": "64539bcf90245f1d",
@@ -359,6 +363,25 @@ def _fault_problem(fault: Any) -> str | None:
     if model is not None and type(model) is SensorModel and model._t is not None \
             and not model._t > 1e-12:
         return "a sensor model in the middle of a run (its first call would not restart it)"
+    return None
+
+
+def _blinding_fault(cfg: Config, fault: Any) -> str | None:
+    """Why not, when the sensor fault can leave the cascade without a usable speed sample for
+    ``recovery.blind_after_s`` (the blind stop and recovery run in the Python loop only): a burst
+    that long, or dropouts so frequent that such a run of them is not negligible (p > 0.5)."""
+    from tsmpc.scenarios import DropoutFault, NaNBurstFault, SensorModel
+
+    rc = cfg.recovery
+    if fault is None or not rc.enabled:
+        return None
+    model, inner = _split_fault(fault)
+    if type(inner) in (DropoutFault, NaNBurstFault) and \
+            inner.duration_s + 2.0 * cfg.rates.Td > rc.blind_after_s:
+        return (f"a sensor burst of {inner.duration_s:g} s can blind the cascade "
+                "(recovery.blind_after_s; the blind stop runs in the Python loop)")
+    if type(model) is SensorModel and model.faults.dropout_probability > 0.5:
+        return "dropouts with probability > 0.5 can blind the cascade (the Python loop runs)"
     return None
 
 
@@ -715,6 +738,11 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     sf[ke.SF_POSE:ke.SF_POSE + 3] = cascade._pose
     sf[ke.SF_HELD:ke.SF_HELD + 3] = cascade._pose_held
     sf[ke.SF_POSET] = cascade._pose_t
+    rc = cascade._recovery  # recovery: the run of poses rejected as jumps (the blind stop is
+    ip[ke.IP_RECOV] = rc is not None  # not reproduced: applicability() keeps such runs in Python)
+    fp[ke.FP_REINIT] = 0.0 if rc is None else rc.pose_reinit_s
+    sf[ke.SF_JT0] = cascade._jump_t0
+    sf[ke.SF_JUMP:ke.SF_JUMP + 4] = cascade._jump_last
     si[ke.SI_GATEN] = cascade._slip_gate.n_poses
     sf[ke.SF_UPREV:ke.SF_UPREV + 2] = cascade._u_prev
     sf[ke.SF_UAPP:ke.SF_UAPP + 2] = cascade._u_applied
