@@ -41,8 +41,15 @@ booleans), an axis may be in ``[grid]`` or in ``[random]`` but not both, a sweep
 ``max_runs`` runs (:data:`MAX_RUNS` unless raised with ``--max-runs``), names are short and
 printable. Nothing is written before the file, the base config and its LMI designs are valid.
 ``resume`` re-reads every record on disk: one that is not a valid record of this sweep (empty,
-garbage, ``[]``, a folder) is set aside under ``runs/.unreadable/`` and re-run, and records of
-tasks lost to worker failures (status ``failed``) are re-run too (``retry_failed``).
+garbage, ``[]``, a folder, or numbers out of range: :func:`record_problem`) is set aside under
+``runs/.unreadable/`` and re-run, and records of tasks lost to worker failures (status
+``failed``) are re-run too (``retry_failed``).
+
+Dask's lifecycle (issue 38): a task the cluster lost (cancelled — e.g. the scheduler's
+connection lost —, a closed comm, a timeout) gets no record; :class:`SweepResult` lists it in
+``incomplete`` with the ``failed`` runs, and the CLI ends such a sweep non-zero with ``PARTIAL``
+naming them. The cluster's start-up and shutdown run inside ``shield`` (uninterruptible), and
+the outputs are written together or not at all (:func:`write_outputs`).
 """
 
 from __future__ import annotations
@@ -54,7 +61,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
@@ -323,6 +330,16 @@ class SweepResult:
     duplicates: int  #: results that arrived for an id already written (never rewritten)
     table: Any = None  #: the aggregate pandas DataFrame
     files: list[Path] = field(default_factory=list)
+    #: runs with no result at the end: no valid record on disk (their tasks were lost with the
+    #: cluster: cancelled, scheduler connection lost) or a ``failed`` one; --resume runs them
+    incomplete: list[str] = field(default_factory=list)
+    lost: int = 0  #: runs of this call whose tasks the cluster lost (no record written)
+    lost_reason: str = ""  #: why, the first such error (e.g. FutureCancelledError: …)
+
+    @property
+    def complete(self) -> bool:
+        """Every run has a result record (none missing, none ``failed``)."""
+        return not self.incomplete
 
 
 # -- loading and expansion ----------------------------------------------------------------
@@ -853,6 +870,7 @@ def run_sweep(
     progress: ProgressFn | None = None, plots: bool = True, plotter: PlotFn | None = None,
     connect_timeout: float = 5.0, design_fn: Callable[[Config], tuple[Any, Any]] | None = None,
     retry_failed: bool | None = None,
+    shield: Callable[[], contextlib.AbstractContextManager[Any]] = contextlib.nullcontext,
 ) -> SweepResult:
     """Run every task of ``spec`` on Dask and write the records, the aggregate and the plots.
 
@@ -874,6 +892,14 @@ def run_sweep(
             imports no plotting code at import time).
         connect_timeout: seconds to wait for ``scheduler`` before giving up (ConfigError).
         design_fn: loads or solves the LMI designs of the base config (e.g. with a status line).
+        shield: a context manager around the cluster's start-up and shutdown, which must not be
+            cut in the middle (the CLI's ``deferred_interrupts``: a signal is acted on once the
+            cluster is whole or gone; a LocalCluster interrupted in its start-up left a Dask
+            traceback at exit).
+
+    A task the *cluster* lost — cancelled, the scheduler's connection lost, a comm closed — is
+    not a result: no record is written for it, and it is listed in ``incomplete`` (with the runs
+    whose record says ``failed``); the caller reports the sweep unfinished and ``resume`` runs them.
     """
     from dask.distributed import as_completed
 
@@ -891,11 +917,13 @@ def run_sweep(
     pending = [t for t in tasks if t.id not in on_disk]
     skipped = len(tasks) - len(pending)
     written: set[str] = set()
-    failed = duplicates = 0
+    failed = duplicates = lost = 0
+    lost_reason = ""
     done = skipped
     # Connect first (a wrong address fails in seconds), then the designs: nothing is written
     # before both worked.
-    client, cluster = connect(scheduler, workers, connect_timeout) if pending else (None, None)
+    with shield():  # a cluster is started whole, or not at all
+        client, cluster = connect(scheduler, workers, connect_timeout) if pending else (None, None)
     try:
         if client is not None and run_fn is run_task:
             # The axes never touch the controller settings, so one pair of LMI designs serves
@@ -915,10 +943,8 @@ def run_sweep(
             pending = [RunTask(t.id, t.params, t.config, t.duration_s, t.max_lateral_m, t.root,
                                designs, cfg.model_dump(mode="json")) for t in pending]
     except BaseException:
-        if client is not None:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+        with shield():
+            _close(client, cluster)
         raise
     runs_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "sweep.json", json.dumps(
@@ -926,44 +952,100 @@ def run_sweep(
          "runs": [{"id": t.id, **t.params.model_dump()} for t in tasks]}, indent=1))
     if client is not None:
         try:
-            chunks: list[list[RunTask]] = []
-            singles = pending
-            if run_fn is run_task:
-                n_workers = max(1, len(client.scheduler_info().get("workers", {})) or workers)
-                chunks, singles = batches(pending, spec.batch, n_workers, among=tasks)
-            futures = {client.submit(run_batch, c, key=batch_key(c), retries=spec.retries,
-                                     pure=False): c for c in chunks}
-            futures.update({client.submit(run_fn, t, key=f"tsmpc-run-{t.id}", retries=spec.retries,
-                                          pure=False): [t] for t in singles})
-            for fut in as_completed(futures):
-                chunk = futures.pop(fut)
-                try:
-                    got = fut.result()
-                    recs = got if isinstance(got, list) else [got]
-                except Exception as err:  # e.g. KilledWorker after repeated worker deaths
-                    failed += len(chunk)
-                    recs = [_record(t, "failed", f"{type(err).__name__}: {err}", {}, float("nan"))
-                            for t in chunk]
-                # Forget the result on the cluster at once: a finished task whose result still
-                # sits in a worker's memory would be recomputed if that worker died.
-                fut.release()
-                del fut
-                for task, rec in zip(chunk, recs, strict=True):
-                    if task.id in written:
-                        duplicates += 1
-                        continue
-                    atomic_write_text(runs_dir / f"{task.id}.json", json.dumps(rec, indent=1))
-                    written.add(task.id)
-                    done += 1
-                    if progress is not None:
-                        progress(done, len(tasks), rec)
+            with _quiet_dask():
+                chunks: list[list[RunTask]] = []
+                singles = pending
+                if run_fn is run_task:
+                    n_workers = max(1, len(client.scheduler_info().get("workers", {})) or workers)
+                    chunks, singles = batches(pending, spec.batch, n_workers, among=tasks)
+                futures = {client.submit(run_batch, c, key=batch_key(c), retries=spec.retries,
+                                         pure=False): c for c in chunks}
+                futures.update({client.submit(run_fn, t, key=f"tsmpc-run-{t.id}", retries=spec.retries,
+                                              pure=False): [t] for t in singles})
+                for fut in as_completed(futures):
+                    chunk = futures.pop(fut)
+                    try:
+                        got = fut.result()
+                        recs = got if isinstance(got, list) else [got]
+                    except Exception as err:
+                        if _cluster_lost(err):  # not a result: no record; resume runs it
+                            lost += len(chunk)
+                            lost_reason = lost_reason or " ".join(f"{type(err).__name__}: {err}".split())
+                            with contextlib.suppress(Exception):
+                                fut.release()
+                            continue
+                        # e.g. KilledWorker after repeated worker deaths: a record says so
+                        failed += len(chunk)
+                        recs = [_record(t, "failed", f"{type(err).__name__}: {err}", {}, float("nan"))
+                                for t in chunk]
+                    # Forget the result on the cluster at once: a finished task whose result still
+                    # sits in a worker's memory would be recomputed if that worker died.
+                    with contextlib.suppress(Exception):  # the scheduler may be gone by now
+                        fut.release()
+                    del fut
+                    for task, rec in zip(chunk, recs, strict=True):
+                        if task.id in written:
+                            duplicates += 1
+                            continue
+                        atomic_write_text(runs_dir / f"{task.id}.json", json.dumps(rec, indent=1))
+                        written.add(task.id)
+                        done += 1
+                        if progress is not None:
+                            progress(done, len(tasks), rec)
         finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            with shield():
+                _close(client, cluster)
     table = aggregate(out, expected)
     files = write_outputs(table, out, plots=plots, plotter=plotter)
-    return SweepResult(out, len(tasks), len(written), skipped, failed, duplicates, table, files)
+    done_ids, _, _ = records_on_disk(runs_dir, expected, repair=False, retry_failed=True)
+    incomplete = [t.id for t in tasks if t.id not in done_ids]
+    return SweepResult(out, len(tasks), len(written), skipped, failed, duplicates, table, files,
+                       incomplete, lost, lost_reason)
+
+
+def _cluster_lost(err: BaseException) -> bool:
+    """Did the cluster, not the task, fail (``FutureCancelledError`` — e.g. reason
+    "scheduler-connection-lost" —, a closed comm, a timeout, a lost connection)? A task of the
+    sweep never raises for a bad run (its failures are records), so these are no results."""
+    import asyncio
+    import concurrent.futures
+
+    from distributed.comm.core import CommClosedError
+
+    return isinstance(err, concurrent.futures.CancelledError | asyncio.CancelledError
+                      | CommClosedError | OSError | TimeoutError)
+
+
+@contextlib.contextmanager
+def _quiet_dask() -> Iterator[None]:
+    """This process's Dask log lines silenced: a lost scheduler logs errors (and tracebacks) of
+    its own, while the sweep reports, in one line and in PARTIAL, what is missing."""
+    import logging
+
+    # Dask's logging config gives some children a level of their own (distributed.client):
+    # each is silenced, not only the parent.
+    names = ["distributed", *(n for n in list(logging.root.manager.loggerDict)
+                              if n.startswith("distributed."))]
+    levels = {n: logging.getLogger(n).level for n in names}
+    for n in names:
+        logging.getLogger(n).setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for n, level in levels.items():
+            logging.getLogger(n).setLevel(level)
+
+
+def _close(client: Any, cluster: Any) -> None:
+    """Close the client and the local cluster, whatever state they are in: a client whose
+    scheduler is gone raises or waits on close (bounded here)."""
+    with _quiet_dask():
+        if client is not None:
+            with contextlib.suppress(Exception):
+                client.close(timeout=10)
+        if cluster is not None:
+            with contextlib.suppress(Exception):
+                cluster.close(timeout=20)
 
 
 #: Runs of one controller a sweep must hold for them to be batched: below it, the batch kernel's
@@ -1071,8 +1153,11 @@ def connect(scheduler: str | None, workers: int, timeout: float = 5.0) -> tuple[
     from dask.distributed import Client, LocalCluster
 
     if scheduler is None:
+        # The workers' own log lines (a task cancelled at shutdown, a lost connection) are not
+        # the user's: what a sweep lost, it reports itself (records, PARTIAL).
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               host="127.0.0.1", dashboard_address=":0")
+                               host="127.0.0.1", dashboard_address=":0",
+                               silence_logs=logging.CRITICAL)
         return Client(cluster), cluster
     if not math.isfinite(timeout) or timeout <= 0:
         raise ConfigError(f"--connect-timeout = {timeout}: must be a finite number > 0")

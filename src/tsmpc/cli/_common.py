@@ -497,7 +497,8 @@ def late_interrupt(signum: int) -> None:
     """A signal that arrived after the guarded work had finished (its PARTIAL removed): the
     process exits 128 + signal all the same, so the folder says so too — its files are complete
     (the entry point calls this)."""
-    if _guarded_out and not (_guarded_out[-1] / PARTIAL_MARKER).exists():
+    # A folder removed since (a sweep's empty folder on interrupt) is not made again.
+    if _guarded_out and _guarded_out[-1].is_dir() and not (_guarded_out[-1] / PARTIAL_MARKER).exists():
         mark_partial(_guarded_out[-1], "interrupted", signal=signal.Signals(signum).name,
                      after="the run had finished when the signal arrived: its files are complete")
 

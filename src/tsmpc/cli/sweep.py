@@ -52,12 +52,8 @@ def sweep_cmd(
 ) -> None:
     """Run every point of a sweep as a Dask task; write one record per run, the aggregate table
     (CSV, Parquet) and summary plots."""
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-    from rich.text import Text
-
     from tsmpc.errors import TsmpcError
-    from tsmpc.sweep import base_config, expand, load_sweep, run_sweep, run_task
-    from tsmpc.sweep import dry_run as dry_fn
+    from tsmpc.sweep import load_sweep
 
     con = console()
     check_environment(kernels=not dry_run)
@@ -93,6 +89,44 @@ def sweep_cmd(
         check_out_dir(out, overwrite=True)  # records on disk are kept and skipped
     else:
         check_out_dir(out, overwrite=False, hint="pass --resume to finish the sweep in it")
+    try:
+        _sweep(con, spec, out, created, scheduler=scheduler, workers=workers, resume=resume,
+               retry_failed=retry_failed, no_plots=no_plots, dry_run=dry_run,
+               connect_timeout=connect_timeout)
+    except BaseException:  # interrupted or failed: a folder this sweep made and left empty goes
+        if created:
+            _remove_if_empty(out)
+        raise
+
+
+def _remove_if_empty(out: Path) -> None:
+    """Remove ``out`` (made by this sweep) when it holds no run record: only its marker, an
+    empty ``runs/`` and ``sweep.json`` — nothing to resume, nothing to look at."""
+    import shutil
+
+    try:
+        runs = out / "runs"
+        if runs.is_dir() and any(runs.iterdir()):
+            return
+        if any(p.name not in (PARTIAL_MARKER, "runs", "sweep.json") and not p.name.startswith(".tsmpc-")
+               for p in out.iterdir()):
+            return
+        shutil.rmtree(out)
+    except OSError:
+        pass  # leave it: PARTIAL says what it is
+
+
+def _sweep(con: Any, spec: Any, out: Path, created: bool, *, scheduler: str | None, workers: int,
+           resume: bool, retry_failed: bool | None, no_plots: bool, dry_run: bool,
+           connect_timeout: float) -> None:
+    """The sweep's work on its checked output folder ``out`` (see :func:`sweep_cmd`)."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.text import Text
+
+    from tsmpc.errors import TsmpcError
+    from tsmpc.sweep import base_config, expand, run_sweep, run_task
+    from tsmpc.sweep import dry_run as dry_fn
+
     designs = None
     if not dry_run:  # one pair of designs serves every run: solved before any run starts
         try:
@@ -131,7 +165,7 @@ def sweep_cmd(
                                 run_fn=dry_fn if dry_run else run_task, progress=on_record,
                                 plots=not no_plots, connect_timeout=connect_timeout,
                                 design_fn=(lambda _cfg: designs) if designs else design_status,
-                                retry_failed=retry_failed)
+                                retry_failed=retry_failed, shield=deferred_interrupts)
             except ConfigError as err:  # e.g. no scheduler answered: nothing ran
                 (out / PARTIAL_MARKER).unlink(missing_ok=True)
                 if created and not any(out.iterdir()):  # leave no trace of a sweep that never ran
@@ -139,7 +173,31 @@ def sweep_cmd(
                 fail(err)
             progress.stop()
             _summary(con, spec.name, res, out)
+            if not res.complete:  # the cluster lost tasks, or runs failed: not a finished sweep
+                _unfinished(res, out)
             (out / PARTIAL_MARKER).unlink(missing_ok=True)
+
+
+def _unfinished(res: Any, out: Path) -> None:
+    """A sweep that ended without a result for every run: PARTIAL ``failed`` naming the runs
+    (``missing``: no record; ``failed``: a record saying ``failed``) and one line, exit 1.
+    ``--resume`` runs exactly those."""
+    from tsmpc.cli._common import EXIT_FAILED
+
+    failed = [] if res.table is None or not len(res.table) else \
+        [str(i) for i in res.table.loc[res.table["status"] == "failed", "id"]]
+    failed_set = set(failed)
+    missing = [i for i in res.incomplete if i not in failed_set]
+    why = []
+    if missing:
+        why.append(f"{len(missing)} have no record"
+                   + (f" (the cluster lost their tasks: {res.lost_reason[:300]})" if res.lost else ""))
+    if failed:
+        why.append(f"{len(failed)} failed (lost to worker failures or out of memory)")
+    msg = (f"sweep unfinished: {len(res.incomplete)} of {res.n_runs} runs have no result — "
+           f"{'; '.join(why)}; {out / PARTIAL_MARKER} names them; finish with --resume --out {out}")
+    mark_partial(out, "failed", reason=msg, missing=missing, failed=failed)
+    fail(msg, EXIT_FAILED)
 
 
 def _summary(con: Any, name: str, res: Any, out: Path) -> None:
@@ -161,7 +219,9 @@ def _summary(con: Any, name: str, res: Any, out: Path) -> None:
     for _, row in bad.iterrows():
         con.print(Text.assemble((str(row["id"]), "yellow"), f" {row['method']} {row['scenario']} "
                                 f"{row['track']}: {row['status']}: {row['reason']}"))
-    con.print(Text.assemble(f"wrote {len(res.files)} files and {res.n_runs} records to ",
+    have = set(tab["id"]) if tab is not None and len(tab) else set()
+    records = res.n_runs - sum(1 for i in res.incomplete if i not in have)
+    con.print(Text.assemble(f"wrote {len(res.files)} files; {records} of {res.n_runs} records in ",
                             (str(out), "bold")))
 
 
