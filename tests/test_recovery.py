@@ -111,3 +111,20 @@ def test_the_recovery_blocks_on_their_own(cfg: Config) -> None:
     assert nearest_sample(x, np.zeros(5), 0, 4, 2.1, 0.0) == 2
     assert nearest_sample(x, np.zeros(5), 3, 4, 2.1, 0.0) == 4  # only [k_lo, k_hi] is searched
     assert nearest_sample(np.array([1.0, 3.0]), np.zeros(2), 0, 1, 2.0, 0.0) == 0  # the first of equals
+
+
+def test_every_ignored_sample_is_counted(cfg: Config) -> None:
+    """A NaN pose on a call where the MPC does not run was counted nowhere (issue 38); now every
+    call with a fresh non-finite pose counts under pose_nan."""
+    ref = builtin_circuit(dt=cfg.rates.Tc)
+    x0 = np.array([ref.x[0], ref.y[0], ref.theta[0], ref.v[0], 0.0, 0.0])
+    cas = Cascade(cfg, "ref", ref, x0=x0)
+    n_in = cfg.rates.inner_per_outer
+    nan_calls = 0
+    for i in range(300):
+        nan_pose = i % n_in != 0 and i < 200  # only between the MPC's steps
+        nan_calls += nan_pose
+        pose = NAN_POSE if nan_pose else (float(x0[0]), float(x0[1]), float(x0[2]))
+        cas.step(i * cfg.rates.Td, Measurement(pose, float(x0[3]), 0.0))
+    assert nan_calls == 180
+    assert cas.events["pose_nan"] == nan_calls  # (the MPC steps: pose_rejected, repeated_rejected)

@@ -76,6 +76,7 @@ EVENT_NAMES = (
     "stamp_rejected",  # samples stamped in the future or with a non-finite stamp
     "speed_rejected",  # samples with an impossible speed or yaw rate (negative, absurd)
     "pose_jump_rejected",  # poses further than the car can have moved since the last good one
+    "pose_nan",  # calls whose (fresh) pose was not finite
     "pose_reinit",  # poses taken after a run of consistent jump rejections (recovery)
     "blind_steps",  # calls in the blind stop (no speed / yaw-rate sample for recovery.blind_after_s)
     "recoveries",  # returns from the blind stop (the reference re-anchored at the car)
@@ -489,87 +490,132 @@ class Cascade:
                                           float(est.x[0]), float(est.x[1]), float(est.x[2])))
 
     def _step(self, t: float, m: Measurement) -> Command:
+        """One call: the block diagram of paper Fig. 1 (gates → outer MPC every T_c/T_d calls →
+        MHE-UIO → friction compensation → TS-LQR), each block a method below."""
         X, Y, th = (float(c) for c in m.pose)
         v, om = float(m.v), float(m.omega)
-        if self._x0 is None:  # start from the first measurement (its garbage made harmless)
-            x0 = np.nan_to_num(np.array([X, Y, th, v, 0.0, om]), posinf=0.0, neginf=0.0)
-            x0[3] = min(max(x0[3], 0.0), self._v_range[1])
-            x0[5] = min(max(x0[5], -self._w_limit), self._w_limit)
-            t_last = self._t_last
-            self.reset(x0)
-            self._t_last, self._pose_t = t_last, t
+        if self._x0 is None:
+            self._start_from(t, X, Y, th, v, om)
+        fresh, speeds_ok, pose_ok = self._gate(t, m, X, Y, th, v, om)
+        plan = e_meas = None
+        t_mpc = 0.0
+        if self._calls % self.n_inner == 0:
+            plan, e_meas, t_mpc = self._outer(t, X, Y, th, v, om, fresh, speeds_ok, pose_ok)
+        v_ref, w_ref = float(self._u_prev[0]), float(self._u_prev[1])
+        t1 = time.perf_counter()
+        est, u_model = self._estimate(m, v, om, fresh and speeds_ok, t1)
+        t2 = time.perf_counter()
+        self._dead_reckon(est)
+        if self._fusion.any_course:
+            # only samples the gates accepted: a rejected heading or speed is garbage
+            self._fusion.course.sample(pose_ok and speeds_ok, th, v, float(est.x[1]),
+                                       float(est.x[0] * est.x[2]), om, float(u_model[1]),
+                                       float(u_model[0]))
+        F, delta, sat, low = self._inner(self._compensated(m, est, v_ref), est, v_ref, w_ref)
+        t3 = time.perf_counter()
+        self._u_applied = np.array([F, delta])
+        self._low_applied = low
+        ev = self._events
+        ev["mhe_rejected"] += est.status == EstimatorStatus.REJECTED
+        ev["mhe_failed"] += est.status == EstimatorStatus.FAILED
+        ev["inner_saturated"] += sat
+        return Command(F, delta, sat, v_ref, w_ref, est, plan, e_meas, t_mpc, t2 - t1, t3 - t2)
+
+    def _start_from(self, t: float, X: float, Y: float, th: float, v: float, om: float) -> None:
+        """Start from the first measurement (its garbage made harmless)."""
+        x0 = np.nan_to_num(np.array([X, Y, th, v, 0.0, om]), posinf=0.0, neginf=0.0)
+        x0[3] = min(max(x0[3], 0.0), self._v_range[1])
+        x0[5] = min(max(x0[5], -self._w_limit), self._w_limit)
+        t_last = self._t_last
+        self.reset(x0)
+        self._t_last, self._pose_t = t_last, t
+
+    def _gate(self, t: float, m: Measurement, X: float, Y: float, th: float, v: float,
+              om: float) -> tuple[bool, bool, bool]:
+        """The sample gates (gates.py): (fresh, speeds plausible, pose accepted)."""
         ev = self._events
         fresh = self._fresh(t, m)
         speeds_ok = self._plausible_speeds(v, om)
         self._watch_samples(t, fresh and speeds_ok and _finite(v, om))
-        fu, fs = self._fusion, self.cfg.fusion  # issue 21: estimation/fusion.py
         stamp = -math.inf if m.stamp is None else float(m.stamp)  # a new stamp is a new sample
-        if fs.reject_repeated_samples and fu.guard.repeated((X, Y, th, v, om, stamp)):
+        if self.cfg.fusion.reject_repeated_samples and self._fusion.guard.repeated((X, Y, th, v, om, stamp)):
             fresh = False  # a stalled bus re-delivering the last sample: missing, like NaN
             ev["repeated_rejected"] += 1
         # The pose, every call: accepted when fresh, finite and where the car can be; else the
         # dead-reckoned pose stands (advanced at the end of the call) for the plausibility gate.
-        pose_ok = fresh and _finite(X, Y, th) and self._accept_pose(t, X, Y, th)
+        pose_finite = _finite(X, Y, th)
+        if fresh and not pose_finite:
+            ev["pose_nan"] += 1  # counted at every call (pose_rejected: at the MPC's steps)
+        pose_ok = fresh and pose_finite and self._accept_pose(t, X, Y, th)
         if pose_ok:
             self._pose, self._pose_t = np.array([X, Y, th]), t
-        plan = e_meas = None
-        t_mpc = 0.0
-        if self._calls % self.n_inner == 0:
-            if not pose_ok:  # the MPC never sees NaN nor a jump: the dead-reckoned pose
-                ev["pose_rejected"] += 1
-            if fu.any_course:  # an MPC step closes the course fusion's interval
-                kc = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(self.reference) - 1)
-                fu.course.close(np.array([X, Y, th]) if pose_ok else None,
-                                v if fresh and speeds_ok else math.nan,
-                                om if fresh and speeds_ok else math.nan,
-                                float(self.reference.v[kc] * self.reference.omega[kc]))
-                if fs.stiffness_estimate:
-                    self._apply_stiffness(fu.course.stiffness)
-            if self._reanchor and pose_ok:
-                self._reanchored(t, X, Y, v, om)
-            elif self._catch_up:
-                self._wait_for_car(t)
-            if self.cfg.rates.inner_steps_per_outer is None:
-                k = max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0)
-            else:  # a fixed number of calls per reference sample (the published run's time base)
-                k = self._calls // self.n_inner
-            ref = self.reference
-            kk = min(k, len(ref) - 1)
-            # fusion.predict_pose: a missing pose is dead-reckoned on the estimate; off (the
-            # paper), the MPC sees the pose of its last step, held
-            if pose_ok:
-                self._pose_held = self._pose.copy()
-            p = self._pose if pose_ok or fs.predict_pose else self._pose_held
-            window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
-            mpc_cfg = self.cfg.mpc
-            if mpc_cfg.slip_aware or mpc_cfg.tangent_heading:  # beyond the paper: slip_aware.py
-                last = self._last
-                a_hat = float(last.estimate.x[1]) if mpc_cfg.slip_aware and last is not None else 0.0
-                if mpc_cfg.slip_aware and last is not None:
-                    # the course-fitted model error at the reference's lateral acceleration (a
-                    # feed-forward: the measured one would close a fast loop through ω, fusion.py)
-                    a_hat += fu.slip_correction(float(ref.v[kk] * ref.omega[kk]))
-                if mpc_cfg.slip_aware:  # α̂ bounded by the measured course over ground
-                    a_hat = self._slip_gate(p, a_hat)
-                th_d = self._theta_tangent[kk] if mpc_cfg.tangent_heading else ref.theta[kk]
-                e_meas = outer_loop_errors(p, np.array([ref.x[kk], ref.y[kk], th_d]), a_hat)
-            else:
-                e_meas = np.array(pose_to_errors(p[0], p[1], p[2], ref.x[kk], ref.y[kk],
-                                                 ref.theta[kk]))
-            t0 = time.perf_counter()
-            try:
-                plan = self.mpc.step(e_meas, self._u_prev, window)
-            except Exception as err:  # a solver bug must not stop the car: shifted plan
-                self._caught(err)
-                plan = shifted_plan(self._plan, e_meas, self._u_prev, self.cfg.mpc.N, t0, 0, 0, 0)
-            t_mpc = time.perf_counter() - t0
-            self._u_prev = np.asarray(plan.u, dtype=float)
-            self._plan = plan
-            ev["mpc_soft"] += plan.status == MPCStatus.SOFT
-            ev["mpc_fallback"] += plan.status == MPCStatus.FALLBACK
-            ev["mpc_scheduling_clipped"] += int(plan.n_clipped)
-        v_ref, w_ref = float(self._u_prev[0]), float(self._u_prev[1])
-        y = np.array([v - fu.speed_offset(), om]) if fresh and speeds_ok else np.full(2, np.nan)
+        return fresh, speeds_ok, pose_ok
+
+    def _outer(self, t: float, X: float, Y: float, th: float, v: float, om: float, fresh: bool,
+               speeds_ok: bool, pose_ok: bool) -> tuple[MPCResult, NDArray[np.float64], float]:
+        """An MPC step: (the plan, the errors it saw, its wall time)."""
+        ev, fu, fs = self._events, self._fusion, self.cfg.fusion
+        if not pose_ok:  # the MPC never sees NaN nor a jump: the dead-reckoned pose
+            ev["pose_rejected"] += 1
+        if fu.any_course:  # an MPC step closes the course fusion's interval
+            kc = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(self.reference) - 1)
+            fu.course.close(np.array([X, Y, th]) if pose_ok else None,
+                            v if fresh and speeds_ok else math.nan,
+                            om if fresh and speeds_ok else math.nan,
+                            float(self.reference.v[kc] * self.reference.omega[kc]))
+            if fs.stiffness_estimate:
+                self._apply_stiffness(fu.course.stiffness)
+        if self._reanchor and pose_ok:
+            self._reanchored(t, X, Y, v, om)
+        elif self._catch_up:
+            self._wait_for_car(t)
+        if self.cfg.rates.inner_steps_per_outer is None:
+            k = max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0)
+        else:  # a fixed number of calls per reference sample (the published run's time base)
+            k = self._calls // self.n_inner
+        # fusion.predict_pose: a missing pose is dead-reckoned on the estimate; off (the
+        # paper), the MPC sees the pose of its last step, held
+        if pose_ok:
+            self._pose_held = self._pose.copy()
+        p = self._pose if pose_ok or fs.predict_pose else self._pose_held
+        e_meas = self._outer_errors(p, min(k, len(self.reference) - 1))
+        window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
+        t0 = time.perf_counter()
+        try:
+            plan = self.mpc.step(e_meas, self._u_prev, window)
+        except Exception as err:  # a solver bug must not stop the car: shifted plan
+            self._caught(err)
+            plan = shifted_plan(self._plan, e_meas, self._u_prev, self.cfg.mpc.N, t0, 0, 0, 0)
+        t_mpc = time.perf_counter() - t0
+        self._u_prev = np.asarray(plan.u, dtype=float)
+        self._plan = plan
+        ev["mpc_soft"] += plan.status == MPCStatus.SOFT
+        ev["mpc_fallback"] += plan.status == MPCStatus.FALLBACK
+        ev["mpc_scheduling_clipped"] += int(plan.n_clipped)
+        return plan, e_meas, t_mpc
+
+    def _outer_errors(self, p: NDArray[np.float64], kk: int) -> NDArray[np.float64]:
+        """The errors [e_x, e_y, e_θ] the MPC sees of pose ``p`` against reference sample ``kk``:
+        body frame (the paper), or slip-aware against the tangent heading (slip_aware.py)."""
+        ref, mpc_cfg = self.reference, self.cfg.mpc
+        if not (mpc_cfg.slip_aware or mpc_cfg.tangent_heading):
+            return np.array(pose_to_errors(p[0], p[1], p[2], ref.x[kk], ref.y[kk], ref.theta[kk]))
+        last = self._last
+        a_hat = float(last.estimate.x[1]) if mpc_cfg.slip_aware and last is not None else 0.0
+        if mpc_cfg.slip_aware and last is not None:
+            # the course-fitted model error at the reference's lateral acceleration (a
+            # feed-forward: the measured one would close a fast loop through ω, fusion.py)
+            a_hat += self._fusion.slip_correction(float(ref.v[kk] * ref.omega[kk]))
+        if mpc_cfg.slip_aware:  # α̂ bounded by the measured course over ground
+            a_hat = self._slip_gate(p, a_hat)
+        th_d = self._theta_tangent[kk] if mpc_cfg.tangent_heading else ref.theta[kk]
+        return outer_loop_errors(p, np.array([ref.x[kk], ref.y[kk], th_d]), a_hat)
+
+    def _estimate(self, m: Measurement, v: float, om: float, speeds_ok: bool,
+                  t1: float) -> tuple[Estimate, NDArray[np.float64]]:
+        """The MHE-UIO's step on the measured speeds (NaN when the gates refused them) and the
+        input the plant received: (the estimate, that input as the MHE's model sees it)."""
+        y = np.array([v - self._fusion.speed_offset(), om]) if speeds_ok else np.full(2, np.nan)
         u_mhe = self._u_applied
         if m.force is not None or m.steering is not None:
             u_mhe = np.array([self._u_applied[0] if m.force is None else float(m.force),
@@ -577,7 +623,6 @@ class Cascade:
         # lqr.low_speed_resistance: the MHE's model has the clipped resistance, so it sees the force
         # net of the part the law added for it (ts_lqr.py)
         u_model = u_mhe if self._low_applied == 0.0 else u_mhe - np.array([self._low_applied, 0.0])
-        t1 = time.perf_counter()
         try:
             est = self.mhe.step(y, u_model)
         except Exception as err:  # e.g. a LinAlgError: keep the last estimate, flagged FAILED
@@ -586,47 +631,42 @@ class Cascade:
             x_hat = last.x.copy() if last is not None else np.array([v, 0.0, om])
             est = Estimate(x_hat, last.F_fr if last is not None else 0.0, 0.0,
                            EstimatorStatus.FAILED, time.perf_counter() - t1)
-        t2 = time.perf_counter()
-        self._dead_reckon(est)
-        if fu.any_course:
-            # only samples the gates accepted: a rejected heading or speed is garbage
-            fu.course.sample(pose_ok and speeds_ok, th, v, float(est.x[1]), float(est.x[0] * est.x[2]), om,
-                             float(u_model[1]), float(u_model[0]))
+        return est, u_model
+
+    def _compensated(self, m: Measurement, est: Estimate, v_ref: float) -> Estimate:
+        """What the TS-LQR gets: the estimate with the friction force to compensate (the window
+        fit, stepped by friction_step.py, less the mass error's inertia), or the oracle's state."""
         F_c = est.F_fr  # the compensated window estimate (friction_step.py)
         if self._friction_step is not None:  # (reset together with the events)
             F_c = self._friction_step.step(float(est.F_fr), float(est.F_fr_raw),
                                            est.status == EstimatorStatus.OK)
-            ev["friction_steps"] = self._friction_step.n_steps
+            self._events["friction_steps"] = self._friction_step.n_steps
         if m.state is None:
             inner = est if F_c == est.F_fr else Estimate(est.x, F_c, est.F_fr_raw, est.status,
                                                          est.solve_time_s)
-            if fs.mass_estimate:  # the mass error's inertia is not friction (fusion.py)
-                dF = fu.inertia_terms(float(est.x[0]), float(est.F_fr), v_ref)
+            if self.cfg.fusion.mass_estimate:  # the mass error's inertia is not friction (fusion.py)
+                dF = self._fusion.inertia_terms(float(est.x[0]), float(est.F_fr), v_ref)
                 if dF != 0.0:
                     inner = Estimate(est.x, F_c + dF, est.F_fr_raw + dF, est.status,
                                      est.solve_time_s)
-        elif self.cfg.lqr.true_state_feedback:  # the published run: true state, F̂ as configured
-            inner = Estimate(np.asarray(m.state, dtype=float).reshape(3).copy(), F_c,
-                             est.F_fr_raw, est.status, est.solve_time_s)
-        else:
-            inner = _oracle_estimate(m.state)
+            return inner
+        if self.cfg.lqr.true_state_feedback:  # the published run: true state, F̂ as configured
+            return Estimate(np.asarray(m.state, dtype=float).reshape(3).copy(), F_c,
+                            est.F_fr_raw, est.status, est.solve_time_s)
+        return _oracle_estimate(m.state)
+
+    def _inner(self, inner: Estimate, est: Estimate, v_ref: float,
+               w_ref: float) -> tuple[float, float, bool, float]:
+        """The TS-LQR's command (F_xR, δ, saturated, its low-speed part), or the blind stop's."""
         if self._blind_since is None:
             out = self.lqr.step(inner, v_ref, w_ref)
-            F, delta, sat, low = out.F_xR, out.delta, bool(out.saturated), out.F_low_speed
-        else:  # recovery: blind, the minimal-risk stop (gates.py)
-            rc = self._recovery
-            assert rc is not None
-            F, delta = blind_stop(float(est.x[0]), float(self._u_applied[1]), self.cfg.vehicle.mass,
-                                  rc.stop_decel, *self._force_limits)
-            sat, low = False, 0.0
-            ev["blind_steps"] += 1
-        t3 = time.perf_counter()
-        self._u_applied = np.array([F, delta])
-        self._low_applied = low
-        ev["mhe_rejected"] += est.status == EstimatorStatus.REJECTED
-        ev["mhe_failed"] += est.status == EstimatorStatus.FAILED
-        ev["inner_saturated"] += sat
-        return Command(F, delta, sat, v_ref, w_ref, est, plan, e_meas, t_mpc, t2 - t1, t3 - t2)
+            return out.F_xR, out.delta, bool(out.saturated), out.F_low_speed
+        rc = self._recovery  # recovery: blind, the minimal-risk stop (gates.py)
+        assert rc is not None
+        F, delta = blind_stop(float(est.x[0]), float(self._u_applied[1]), self.cfg.vehicle.mass,
+                              rc.stop_decel, *self._force_limits)
+        self._events["blind_steps"] += 1
+        return F, delta, False, 0.0
 
 
 def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> bool:

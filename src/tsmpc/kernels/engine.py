@@ -59,9 +59,9 @@ ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP = 1, 2, 3, 4
 MPC_OPTIMAL, MPC_SOFT, MPC_FALLBACK = 1, 2, 3
 # event counters, in the order of Cascade.events
 (EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_MHE_REJ, EV_MHE_FAIL, EV_SAT, EV_POSE_REJ, EV_TIME_REJ,
- EV_STAMP_REJ, EV_SPEED_REJ, EV_JUMP_REJ, EV_REINIT, EV_BLIND, EV_RECOVER, EV_STALE_REJ,
- EV_STEP_ERR, EV_REPEATED, EV_FSTEP) = range(18)
-N_EVENTS = 18
+ EV_STAMP_REJ, EV_SPEED_REJ, EV_JUMP_REJ, EV_POSE_NAN, EV_REINIT, EV_BLIND, EV_RECOVER,
+ EV_STALE_REJ, EV_STEP_ERR, EV_REPEATED, EV_FSTEP) = range(19)
+N_EVENTS = 19
 
 # ---------------------------------------------------------------------------- float parameters
 (FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_V_LO, FP_V_HI, FP_W_LIM, FP_POSE_NOISE, FP_HEAD_NOISE,
@@ -772,6 +772,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                     fresh = False
                     ev[EV_REPEATED] += 1
             pose_ok = fresh and math.isfinite(X) and math.isfinite(Y) and math.isfinite(th)
+            if fresh and not pose_ok:
+                ev[EV_POSE_NAN] += 1
             if pose_ok and not pose_consistent(gates, X, Y, th, sf[SF_POSE], sf[SF_POSE + 1],
                                                sf[SF_POSE + 2], t - sf[SF_POSET]):
                 take = False  # Cascade._accept_pose: a jump from the dead-reckoned pose

@@ -58,7 +58,7 @@ __all__ = ["LAST_RUN", "EngineFallback", "applicability", "enabled", "exact", "r
 
 #: Event names in the order of :attr:`Cascade.events` (the kernel's counter array).
 _EVENTS = (*EVENT_NAMES, "stale_rejected", "step_errors", "repeated_rejected", "friction_steps")
-assert len(_EVENTS) == 18  # kernels/engine.py's EV_* order
+assert len(_EVENTS) == 19  # kernels/engine.py's EV_* order
 _MHE_STATUS = {1: EstimatorStatus.OK, 2: EstimatorStatus.REJECTED, 3: EstimatorStatus.FAILED,
                4: EstimatorStatus.WARMUP}
 _MHE_CODE = {v: k for k, v in _MHE_STATUS.items()}
@@ -132,7 +132,18 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade.__init__": "7b538f709795a497",
     "tsmpc.control.cascade:Cascade.reset": "785fc6ab4ab07772",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "58e36572bd6c64c5",
+    "tsmpc.control.cascade:Cascade._step": "1b77b0acc6c113f8",
+    "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
+    "tsmpc.control.cascade:Cascade._gate": "748ed28374e52348",
+    "tsmpc.control.cascade:Cascade._outer": "2f5a808a1b314d1d",
+    "tsmpc.control.cascade:Cascade._outer_errors": "30f045ef5dfb210e",
+    "tsmpc.control.cascade:Cascade._estimate": "6741a91ddeef6f00",
+    "tsmpc.control.cascade:Cascade._compensated": "7bfaf70f34cf6d62",
+    "tsmpc.control.cascade:Cascade._inner": "3a018d7e1029a195",
+    "tsmpc.control.cascade:Cascade._plausible_speeds": "4b22de6905cbdf56",
+    "tsmpc.control.cascade:Cascade._accept_pose": "e64d04fe6f2a523d",
+    "tsmpc.control.cascade:Cascade._dead_reckon": "a357e386e2e7595b",
+    "tsmpc.control.cascade:Cascade._watch_samples": "7a7df27fe2b75dfc",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
     "tsmpc.control.cascade:Cascade._apply_stiffness": "64539bcf90245f1d",
