@@ -133,10 +133,7 @@ def _graph() -> dict[str, set[str]]:
         for d in _imported_names(p, name):
             while d not in mods and "." in d:
                 d = d.rsplit(".", 1)[0]
-            # typer's registration idiom: the CLI package imports its command modules, which add
-            # their commands to the package's ``app`` (the shell over the library, nothing below)
-            cli_registration = name.startswith("tsmpc.cli.") and d == "tsmpc.cli"
-            if d in mods and d != name and not cli_registration:
+            if d in mods and d != name:
                 deps.add(d)
         g[name] = deps
     return g

@@ -9,7 +9,7 @@ from typing import Any
 
 import typer
 
-from tsmpc.cli import app
+from tsmpc.cli._app import app
 from tsmpc.cli._common import (
     PARTIAL_MARKER,
     check_environment,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from tsmpc.cli import app
+from tsmpc.cli._app import app
 from tsmpc.cli._common import EXIT_FAILED, EXIT_INVALID, check_environment, check_path_text, fail
 
 data_app = typer.Typer(name="data", help="The paper's reference and the race tracks: download them, "

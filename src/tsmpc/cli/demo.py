@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from tsmpc.cli import app
+from tsmpc.cli._app import app
 from tsmpc.cli._common import (
     check_environment,
     check_interrupted,

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from tsmpc.cli import app
+from tsmpc.cli._app import app
 from tsmpc.cli._common import check_environment, fail, load_config_or_exit, solve_design
 
 

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from tsmpc.cli import app
+from tsmpc.cli._app import app
 from tsmpc.cli._common import check_laps, check_out_file, data_path, fail, finite, refuse_ineffective
 from tsmpc.errors import ConfigError
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from tsmpc.cli import app
+from tsmpc.cli._app import app
 from tsmpc.cli._common import check_environment, deferred_interrupts, fail, handle_interrupts
 
 
