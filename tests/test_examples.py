@@ -19,6 +19,7 @@ EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
 BLOCKS = re.findall(r"^```python\n(.*?)^```", README.read_text(encoding="utf-8"), re.S | re.M)
 #: The datasets an example reads (not bundled): missing, its test skips naming `tsmpc data fetch`.
 NEEDS = {"baseline_table.py": ("paper", "tracks"), "fusion_ablation.py": ("paper",),
+         "mechanism_ablation.py": ("paper",),
          "paper_ablation.py": ("paper",), "paper_explained.py": ("paper",), "race_tracks.py": ("tracks",)}
 
 

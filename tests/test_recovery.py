@@ -81,7 +81,7 @@ def test_a_wrong_start_pose_is_replaced_by_consistent_measurements(cfg: Config) 
     pose_reinit_s (2 s) of poses consistent with one another the gate takes them; without the
     recovery only the jump allowance's growth (2 m/s) would, after 14.5 s — a dead reckoning that
     runs away faster than that (an open-loop estimate while blind) is never caught up with."""
-    ey, _, ev = _drive(cfg, 6.0, pose_offset=30.0)
+    _, _, ev = _drive(cfg, 6.0, pose_offset=30.0)
     assert ev["pose_reinit"] == 1
     assert 150 <= ev["pose_jump_rejected"] <= 210  # 2 s at 100 Hz, then none
     off = replace(cfg, recovery=replace(cfg.recovery, enabled=False))

@@ -61,7 +61,11 @@ class Context:
     max_steps: int | None = None  #: shortened runs (examples under test); never for the docs
     reference: Path | None = None  #: the paper's reference file (default: tsmpc.datasets.resolve)
     cache: dict[str, Any] = field(default_factory=dict)
-    scratch: Path = field(default_factory=lambda: Path(tempfile.mkdtemp(prefix="tsmpc-docs-")))
+    #: where the runs of one invocation go; $TSMPC_DOCS_SCRATCH keeps them between invocations (a
+    #: sweep there is finished, not run again: its records are reused)
+    scratch: Path = field(default_factory=lambda: Path(os.environ["TSMPC_DOCS_SCRATCH"])
+                          if os.environ.get("TSMPC_DOCS_SCRATCH")
+                          else Path(tempfile.mkdtemp(prefix="tsmpc-docs-")))
 
     @property
     def paper_reference(self) -> Path:
@@ -1003,6 +1007,16 @@ def fusion_ablation(ctx: Context) -> Produced:
     return p
 
 
+def mechanisms(ctx: Context) -> Produced:
+    """Which default-on mechanisms pay (examples/mechanisms.toml, 672 runs; docs/mismatch.md)."""
+    p = Produced()
+    ctx.progress("examples/mechanism_ablation.py (the sweep of examples/mechanisms.toml)")
+    for name, body in _example(ctx, "mechanism_ablation").mechanism_blocks(
+            ctx.scratch / "mechanisms", steps=ctx.max_steps).items():
+        p.add("mechanisms", name, body)
+    return p
+
+
 def race_speeds(ctx: Context) -> Produced:
     """The public tracks at 22 and 25 m/s and three S-bends (docs/mismatch.md)."""
     p = Produced()
@@ -1167,6 +1181,7 @@ PRODUCERS: tuple[Producer, ...] = (
     Producer("paper-explained", paper_explained, "Table 5 explained (≈ 25 runs, 10–15 min)"),
     Producer("mismatch", mismatch, "the mismatch benchmark: 135 runs, 10–20 min"),
     Producer("fusion-ablation", fusion_ablation, "the fusion switches' ablation (63 runs)"),
+    Producer("mechanisms", mechanisms, "which default-on mechanisms pay (672 runs, ≈ 45 min)"),
     Producer("race-speeds", race_speeds, "the public tracks at 22 and 25 m/s, S-bends"),
     Producer("baselines", baselines, "the baselines against the TS-MPC on five cases (6 compares)"),
     Producer("baseline-tuning", baseline_tuning, "the baselines' tuning search (≈ 700 runs)"),
