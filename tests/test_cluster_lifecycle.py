@@ -150,6 +150,29 @@ def test_the_cli_says_unfinished_exits_1_and_partial_names_the_runs(tmp_path: Pa
     assert "6 of 6 records" in res.output
 
 
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("error", [RuntimeError("Nanny failed to start."), MemoryError(),
+                                   OSError(24, "Too many open files")])
+def test_a_local_cluster_that_does_not_start_ends_with_one_line(tmp_path: Path, monkeypatch,
+                                                                error: Exception) -> None:
+    """The machine, not the input: exit 1, one line (never "internal error"), no folder left."""
+    import dask.distributed
+
+    def broken(*_a, **_k):
+        raise error
+    monkeypatch.setattr(dask.distributed, "LocalCluster", broken)
+    sweep = tmp_path / "s.toml"
+    sweep.write_text(SWEEP)
+    out = tmp_path / "out"
+    res = runner.invoke(app, ["sweep", str(sweep), "--dry-run", "--workers", "1", "--out", str(out)])
+    assert isinstance(res.exception, SystemExit), repr(res.exception)
+    assert res.exit_code == 1, res.output
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and "local Dask cluster" in errors[0], res.output
+    assert "internal error" not in res.output and "Traceback" not in res.output
+    assert not out.exists()
+
+
 # -- a real external scheduler, killed -9 mid-sweep ---------------------------------------------
 def _exe(name: str) -> str:
     here = Path(sys.executable).parent / name

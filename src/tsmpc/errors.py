@@ -8,6 +8,7 @@ from __future__ import annotations
 
 __all__ = [
     "CertificateError",
+    "ClusterError",
     "ConfigError",
     "DataFormatError",
     "DesignError",
@@ -45,3 +46,7 @@ class DesignError(TsmpcError, ValueError):
     """No certified LMI design exists for a configuration (its boxes, weights, vehicle or rates):
     an input problem — the message names the LMI, where it fails and the settings that would
     help."""
+
+
+class ClusterError(TsmpcError, RuntimeError):
+    """The Dask cluster of a sweep could not be started (the machine, not the input: exit 1)."""

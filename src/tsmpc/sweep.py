@@ -79,7 +79,7 @@ from tsmpc.config import (
     resolve_preset,
     validate,
 )
-from tsmpc.errors import ConfigError
+from tsmpc.errors import ClusterError, ConfigError
 from tsmpc.io import atomic_write_bytes, atomic_write_text
 from tsmpc.robustness import ROBUSTNESS_SCENARIOS
 from tsmpc.sweep_axes import _CHOICE_AXES, _FLOAT_AXES, AXES
@@ -1155,10 +1155,21 @@ def connect(scheduler: str | None, workers: int, timeout: float = 5.0) -> tuple[
     if scheduler is None:
         # The workers' own log lines (a task cancelled at shutdown, a lost connection) are not
         # the user's: what a sweep lost, it reports itself (records, PARTIAL).
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               host="127.0.0.1", dashboard_address=":0",
-                               silence_logs=logging.CRITICAL)
-        return Client(cluster), cluster
+        try:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   host="127.0.0.1", dashboard_address=":0",
+                                   silence_logs=logging.CRITICAL)
+        except Exception as err:  # e.g. "Nanny failed to start." on a machine short of memory
+            raise ClusterError(f"the local Dask cluster of {workers} worker processes did not "
+                               f"start ({type(err).__name__}: {' '.join(str(err).split())[:200]}); "
+                               "the machine may be short of memory or processes: try fewer "
+                               "--workers") from None
+        try:
+            return Client(cluster), cluster
+        except Exception as err:
+            _close(None, cluster)
+            raise ClusterError(f"could not connect to the local Dask cluster ({type(err).__name__}: "
+                               f"{' '.join(str(err).split())[:200]})") from None
     if not math.isfinite(timeout) or timeout <= 0:
         raise ConfigError(f"--connect-timeout = {timeout}: must be a finite number > 0")
     from distributed.comm import parse_address
