@@ -1,0 +1,178 @@
+"""The blocks' one definitions (tsmpc.kernels.jit): each runs as Python from the cascade and compiled
+inside the engine. Here: both ways agree to the bit on random inputs, and the arithmetic of each
+gate, fit and blend is pinned by hand-computed values (a mutation of it fails a test)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tsmpc import kernels
+from tsmpc.control import gates
+from tsmpc.control.slip_aware import BASELINE, GATE_RAD, slip_gate_update
+from tsmpc.estimation.friction_step import (
+    DRIFT,
+    MIN_SAMPLES,
+    FrictionStepParams,
+    FrictionStepState,
+    friction_step_update,
+)
+from tsmpc.kernels.jit import cpython_hypot, exact_hypot
+from tsmpc.scenarios import _in_burst, _ramp, apply_events, event_weight, paper_mu, patch_mu
+
+def _hypot_call(a: float, b: float) -> float:
+    """exact_hypot as a compiled caller sees it (its overload; njit of exact_hypot itself would
+    compile its Python body, libm's hypot)."""
+    return exact_hypot(a, b)
+
+
+G = gates.GateParams(v_lo=-1.0, v_hi=40.0, w_limit=4.0, pose_noise=0.05, heading_noise=0.01, Td=0.01)
+
+
+def _compiled(fn):
+    """``fn`` compiled by numba as the engine compiles it (a plain njit of the same source)."""
+    if kernels.load("mpc") is None:
+        pytest.skip("compiled kernels unavailable")
+    from numba import njit
+
+    return njit(cache=False)(fn)
+
+
+@pytest.mark.parametrize("fn, draw", [
+    (gates.plausible_speeds, lambda r: (G, r.normal(0, 30), r.normal(0, 4))),
+    (gates.pose_consistent, lambda r: (G, *r.normal(0, 2, 3), *r.normal(0, 2, 3), r.uniform(-0.1, 2))),
+    (gates.dead_reckon, lambda r: (G, *r.normal(0, 100, 3), r.normal(10, 10), *r.normal(0, 0.2, 2))),
+    (gates.jump_run, lambda r: (G, 2.0, r.uniform(0, 3), *r.normal(0, 2, 3), 1.0, *r.normal(0, 2, 3),
+                                r.uniform(1, 4))),
+    (gates.blind_stop, lambda r: (r.normal(2, 3), r.normal(0, 0.2), 683.0, 3.0, -2000.0, 10000.0)),
+    (_hypot_call, lambda r: tuple(r.normal(0, 1e3, 2) * r.choice([1e-6, 1.0, 1e3], 2))),
+    (event_weight, lambda r: (r.uniform(-5, 25), 2.0, r.choice([0.0, 1.5]), 12.0)),
+    (paper_mu, lambda r: (r.uniform(0, 130), 0.9, 0.002, 0.68, 0.1, 0.6)),
+    (_in_burst, lambda r: (r.uniform(0, 30), 3.0, 7.0, 0.05)),
+    (_ramp, lambda r: (r.uniform(0, 5), 1.0, 2.0, 3.0, 4.0, 0.9, 0.3)),
+])
+def test_compiled_equals_python_to_the_bit(fn, draw) -> None:
+    """Random inputs through both ways of one definition: identical results (the engine's
+    bit-identity with the Python loop rests on it)."""
+    nb = _compiled(fn)
+    rng = np.random.default_rng(7)
+    for _ in range(400):
+        args = draw(rng)
+        args = tuple(float(a) if isinstance(a, np.floating) else a for a in args)
+        assert nb(*args) == fn(*args), (fn.__name__, args)
+
+
+def test_friction_step_compiled_equals_python() -> None:
+    nb = _compiled(friction_step_update)
+    p = FrictionStepParams(30, 5.0)
+    rng = np.random.default_rng(3)
+    s_py = s_nb = FrictionStepState()
+    for i in range(3000):
+        Fw, Fr = 100.0 + rng.normal(0, 5), 100.0 + rng.normal(0, 300) + (900.0 if i > 1500 else 0.0)
+        ok = bool(rng.random() > 0.02)
+        a = friction_step_update(p, s_py, Fw, Fr, ok)
+        b = nb(p, s_nb, Fw, Fr, ok)
+        assert a[0] == b[0] and a[2] == b[2] and tuple(a[1]) == tuple(b[1])
+        s_py, s_nb = a[1], FrictionStepState(*b[1])
+
+
+def test_slip_gate_and_patches_compiled_equal_python() -> None:
+    nb_gate, nb_patch, nb_events = (_compiled(f) for f in (slip_gate_update, patch_mu, apply_events))
+    rng = np.random.default_rng(5)
+    pa, pb = np.zeros((BASELINE + 1, 3)), np.zeros((BASELINE + 1, 3))
+    na = nb = 0
+    x = y = th = 0.0
+    for _ in range(300):
+        x, y, th = x + rng.uniform(0, 2), y + rng.normal(0, 0.3), th + rng.normal(0, 0.02)
+        a_hat = float(rng.normal(0, 0.03))
+        ra, na = slip_gate_update(0.01, pa, na, x, y, th, a_hat)
+        rb, nb = nb_gate(0.01, pb, nb, x, y, th, a_hat)
+        assert ra == rb and na == nb and np.array_equal(pa, pb)
+    patches = np.array([[10.0, 30.0, 0.4, 5.0], [50.0, 60.0, 0.2, 0.0]])
+    events = np.array([[1.0, 2.0, 1.0, 8.0, 0.5], [0.0, 20.0, 4.0, math.inf, 0.3]])
+    for s in rng.uniform(-5, 200, 300):
+        assert nb_patch(s, 0.9, 100.0, patches) == patch_mu(s, 0.9, 100.0, patches)
+        m = float(rng.uniform(0.2, 1.0))
+        t = float(rng.uniform(0, 10))
+        assert nb_events(m, t, s, events) == apply_events(m, t, s, events)
+
+
+def test_gate_arithmetic_by_hand() -> None:
+    assert gates.plausible_speeds(G, 39.9, -3.9) and not gates.plausible_speeds(G, 40.1, 0.0)
+    assert not gates.plausible_speeds(G, -1.1, 0.0) and not gates.plausible_speeds(G, 0.0, 4.1)
+    assert gates.plausible_speeds(G, math.nan, 100.0)  # NaN: the MHE's to reject
+    # distance allowance 1 m + 2 m/s dt + 0.05 m; heading 0.3 + 0.5 rad/s dt + 0.01 rad
+    assert gates.pose_consistent(G, 1.04, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    assert not gates.pose_consistent(G, 1.06, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    assert gates.pose_consistent(G, 3.04, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    assert not gates.pose_consistent(G, 3.06, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    assert gates.pose_consistent(G, 0.0, 0.0, 0.80, 0.0, 0.0, 0.0, 0.98)  # 0.3 + 0.49 + 0.01
+    assert not gates.pose_consistent(G, 0.0, 0.0, 0.81, 0.0, 0.0, 0.0, 0.98)
+    assert gates.pose_consistent(G, 0.0, 0.0, 2 * math.pi - 0.2, 0.0, 0.0, 0.0, 0.0)  # wrapped
+    assert not gates.pose_consistent(G, 1.06, 0.0, 0.0, 0.0, 0.0, 0.0, -5.0)  # dt < 0 counts as 0
+    X, Y, th = gates.dead_reckon(G, 1.0, 2.0, 0.5, 10.0, 0.1, 0.2)
+    assert (X, Y, th) == pytest.approx((1.0 + 0.1 * math.cos(0.6), 2.0 + 0.1 * math.sin(0.6), 0.502),
+                                       abs=1e-15)
+    assert gates.dead_reckon(G, 1.0, 2.0, 0.5, -3.0, 0.1, 0.2)[:2] == (1.0, 2.0)  # v clipped to 0
+    assert gates.dead_reckon(G, 1.0, 2.0, 0.5, 80.0, 0.0, 0.0)[0] == pytest.approx(1.0 + 0.4 * math.cos(0.5))  # v_hi
+    assert gates.dead_reckon(G, 1.0, 2.0, 0.5, math.nan, 0.0, 0.0) == (1.0, 2.0, 0.5)
+    assert cpython_hypot(3e-200, 4e-200) == math.hypot(3e-200, 4e-200)
+
+
+def test_friction_step_arithmetic_by_hand() -> None:
+    p = FrictionStepParams(window=3, threshold=5.0)
+    s = FrictionStepState()
+    for i in range(MIN_SAMPLES):  # the variance learns: mean of d² over the first samples
+        F, s, dec = friction_step_update(p, s, 0.0, 10.0 if i % 2 else -10.0, True)
+        assert F == 0.0 and not dec
+    assert s.var == pytest.approx(100.0) and s.n_var == MIN_SAMPLES
+    # a 3.5σ innovation: z = 3.5, g⁺ = 3.5 − k = 2.5 (beyond 3σ: the variance does not learn it)
+    F, s, dec = friction_step_update(p, s, 0.0, 35.0, True)
+    assert s.g_plus == pytest.approx(3.5 - DRIFT) and s.var == pytest.approx(100.0) and not dec
+    F, s, dec = friction_step_update(p, s, 0.0, 35.0, True)  # g⁺ = 5: not beyond h yet
+    assert s.g_plus == pytest.approx(5.0) and not dec and F == 0.0
+    F, s, dec = friction_step_update(p, s, 0.0, 35.0, True)  # g⁺ = 7.5 > 5: a step, F_raw used
+    assert dec and F == 35.0 and s.since == 1
+    for k in (2, 3):  # compensated for the window (3 samples), then the window fit again
+        F, s, dec = friction_step_update(p, s, 0.0, 40.0, True)
+        assert F == 40.0 and s.since == k
+    F, s, dec = friction_step_update(p, s, 0.0, 40.0, True)
+    assert F == 0.0 and s.since == 0 and s.g_plus == 0.0
+    assert friction_step_update(p, s, 0.0, math.nan, True)[0] == 0.0
+
+
+def test_slip_gate_arithmetic_by_hand() -> None:
+    poses = np.zeros((BASELINE + 1, 3))
+    a, n = slip_gate_update(0.0, poses, 0, 0.0, 0.0, 0.0, 0.05)
+    assert (a, n) == (0.05, 1)  # one pose: no chord yet
+    a, n = slip_gate_update(0.0, poses, n, 10.0, 0.0, 0.0, 0.05)
+    assert n == 2 and a == pytest.approx(GATE_RAD)  # the course says 0: α̂ bounded to the band
+    a, n = slip_gate_update(0.0, poses, n, 20.0, 1.0, 0.0, -0.05)
+    assert a == pytest.approx(math.atan2(1.0, 20.0) - GATE_RAD)  # course atan2(1, 20), band below
+    for k in range(10):  # the ring keeps BASELINE + 1 poses, oldest first
+        a, n = slip_gate_update(0.0, poses, n, 30.0 + k, 1.0, 0.0, 0.0)
+    assert n == BASELINE + 1 and poses[0, 0] == 39.0 - BASELINE
+    band = GATE_RAD + 4.0 * math.sqrt(2.0) * 0.1 / 10.0  # the position noise widens the band
+    p2 = np.zeros((BASELINE + 1, 3))
+    slip_gate_update(0.1, p2, 0, 0.0, 0.0, 0.0, 0.0)
+    assert slip_gate_update(0.1, p2, 1, 10.0, 0.0, 0.0, 1.0)[0] == pytest.approx(band)
+
+
+def test_friction_programs_by_hand() -> None:
+    assert paper_mu(0.0, 0.9, 0.002, 0.68, 0.1, 0.6) == 0.9
+    assert paper_mu(15.5, 0.9, 0.0, 0.68, 0.1, 0.6) == pytest.approx(0.79)  # half-way down the ramp
+    assert paper_mu(70.05, 0.9, 0.0, 0.68, 0.1, 0.6) == 0.1
+    assert paper_mu(119.5, 0.9, 0.0, 0.68, 0.1, 0.6) == pytest.approx(0.75)
+    patches = np.array([[10.0, 30.0, 0.4, 5.0]])
+    assert patch_mu(12.5, 0.9, 0.0, patches) == pytest.approx(0.65)  # half the entry ramp
+    assert patch_mu(20.0, 0.9, 0.0, patches) == pytest.approx(0.4)
+    assert patch_mu(27.5, 0.9, 0.0, patches) == pytest.approx(0.65)  # half the exit ramp (inside)
+    assert patch_mu(112.5, 0.9, 100.0, patches) == pytest.approx(0.65)  # the next lap
+    assert event_weight(3.0, 2.0, 2.0, 10.0) == 0.5 and event_weight(11.0, 2.0, 2.0, 10.0) == 0.5
+    assert event_weight(1.9, 2.0, 0.0, 10.0) == 0.0 and event_weight(2.0, 2.0, 0.0, 10.0) == 1.0
+    ev = np.array([[1.0, 0.0, 0.0, math.inf, 0.5], [1.0, 5.0, 2.0, math.inf, 0.1]])
+    assert apply_events(0.9, 6.0, 0.0, ev) == pytest.approx(0.3)  # from the running 0.5, not 0.9
+    assert _in_burst(3.02, 3.0, 7.0, 0.05) and not _in_burst(3.06, 3.0, 7.0, 0.05)
+    assert _in_burst(10.02, 3.0, 7.0, 0.05) and not _in_burst(2.9, 3.0, 7.0, 0.05)
