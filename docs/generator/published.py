@@ -1012,7 +1012,7 @@ def mechanisms(ctx: Context) -> Produced:
     p = Produced()
     ctx.progress("examples/mechanism_ablation.py (the sweep of examples/mechanisms.toml)")
     for name, body in _example(ctx, "mechanism_ablation").mechanism_blocks(
-            ctx.scratch / "mechanisms", steps=ctx.max_steps).items():
+            ctx.scratch / "mechanisms", workers=2, steps=ctx.max_steps).items():
         p.add("mechanisms", name, body)
     return p
 
