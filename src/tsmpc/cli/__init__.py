@@ -26,9 +26,15 @@ def main() -> None:
     import signal
     import sys
 
-    from tsmpc.cli import _common
+    from tsmpc.cli import _common, _memory, _watchdog
 
     _common.install_signal_handlers()
+    _watchdog.enable()  # a signal ends the command within a bounded time (docs/outputs.md)
+    problem = _memory.early_problem(sys.argv[1:])  # a ulimit -v too low for the imports: refuse
+    if problem is not None:
+        with contextlib.suppress(Exception):
+            sys.stderr.write(f"error: {problem}\n")
+        sys.exit(2)
     code: object = 0
     try:
         try:
@@ -46,11 +52,13 @@ def main() -> None:
         from tsmpc.extras import from_import_error
 
         hint = from_import_error(exc)
+        code = 2
+        if hint is None and "failed to map segment" in str(exc):  # the address space ran out
+            hint, code = _common.out_of_memory(exc), 1
         if hint is None or os.environ.get("TSMPC_DEBUG"):
             raise
         with contextlib.suppress(Exception):
             sys.stderr.write(f"error: {hint}\n")
-        code = 2
     except Exception as exc:  # the last net: one line, never a traceback (TSMPC_DEBUG=1 shows it)
         if os.environ.get("TSMPC_DEBUG"):
             raise

@@ -369,6 +369,9 @@ _raised = [False]
 
 
 def _handler(signum: int, _frame: Any) -> None:
+    from tsmpc.cli import _watchdog  # a bound on the time to the exit (armed by the entry point)
+
+    _watchdog.on_signal(signum)
     _pending.append(signum)
     _seen.append(signum)
     if _defer[0] == 0 and not _raised[0]:

@@ -167,6 +167,13 @@ def _execute(
         fail(ConfigError("--methods is empty"))
     check_laps(laps)
     reference = data_path(reference, "--reference")  # `--reference paper`: a downloaded dataset
+    from tsmpc.cli import _memory  # memory bound (issue 38): the file's size and samples, then the run
+
+    problem = _memory.reference_problem(
+        reference, methods=methods, duration=duration, window=_parse_window(window), laps=laps,
+        Tc=cfg.rates.Tc, Td=cfg.rates.Td, horizon=cfg.mpc.N)
+    if problem is not None:
+        fail(ConfigError(problem))
     try:
         exp = experiment.prepare(
             cfg, methods, reference=reference,
@@ -175,6 +182,9 @@ def _execute(
     except (TsmpcError, OSError) as err:
         fail(err)
     check_scenario_options(exp.scenario, reference=reference, laps=laps, plant=plant)
+    problem = _memory.experiment_problem(exp)
+    if problem is not None:
+        fail(ConfigError(problem))
     _check_extras(exp, plots=not no_plots)
     err_console = Console(stderr=True, highlight=False, soft_wrap=True)
     if out is None:  # a new folder: never another run's (issue 23)
