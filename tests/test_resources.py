@@ -5,6 +5,7 @@ line instead of spinning inside OpenBLAS."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -100,8 +101,10 @@ def test_a_signal_ends_a_busy_command_within_the_bound(tmp_path: Path, busy: str
     assert ("second signal" in lines[0]) == (len(signals) > 1)
     if len(signals) == 1:
         assert elapsed >= GRACE - 0.5  # the command had its grace period
-    # the folder says it is unfinished: nothing in it looks complete
-    assert (tmp_path / "out" / "PARTIAL").is_file()
+    # the folder says it was interrupted, as after a clean interrupt: nothing in it looks complete
+    marker = json.loads((tmp_path / "out" / "PARTIAL").read_text())
+    assert marker["status"] == "interrupted" and marker["signal"] == signal.Signals(signals[0]).name
+    assert not [p.name for p in (tmp_path / "out").iterdir() if p.name != "PARTIAL"]
 
 
 @pytest.mark.timeout(30)

@@ -371,12 +371,20 @@ _raised = [False]
 def _handler(signum: int, _frame: Any) -> None:
     from tsmpc.cli import _watchdog  # a bound on the time to the exit (armed by the entry point)
 
-    _watchdog.on_signal(signum)
+    _watchdog.on_signal(signum, _mark_hard_exit)
     _pending.append(signum)
     _seen.append(signum)
     if _defer[0] == 0 and not _raised[0]:
         _raised[0] = True
         raise Interrupted(signum)
+
+
+def _mark_hard_exit(signum: int) -> None:
+    """Before the watchdog's hard exit (:mod:`tsmpc.cli._watchdog`): an unfinished guarded folder
+    says ``interrupted``, as after a clean interrupt."""
+    if _guarded_out and (_guarded_out[-1] / PARTIAL_MARKER).exists():
+        mark_partial(_guarded_out[-1], "interrupted", signal=signal.Signals(signum).name,
+                     after="the command was still busy: it exited without its clean-up")
 
 
 def pending_signal() -> int | None:

@@ -10,7 +10,8 @@ on it at the next check, so a command stuck in compiled code would never end. Tw
 * **second signal**: a second SIGINT/SIGTERM ends the process at once the same way.
 
 The hard exit skips clean-up: the results are written atomically (a file is complete or absent)
-and the output folder keeps its ``PARTIAL`` marker ("running"), so only the unfinished run is lost.
+and the output folder keeps its ``PARTIAL`` marker, rewritten to ``interrupted`` just before the
+exit, so only the unfinished run is lost.
 Limit: the watchdog is a Python thread, so it needs the interpreter lock; compiled code that holds
 it for good (a library constructor spinning inside ``import``) is not bounded by it — the memory
 check (:mod:`tsmpc.cli._memory`) refuses the low ``ulimit -v`` that caused such a spin.
@@ -23,6 +24,7 @@ import math
 import os
 import signal
 import threading
+from collections.abc import Callable
 
 __all__ = ["ENV_GRACE", "GRACE_S", "enable", "grace_s", "on_signal"]
 
@@ -33,6 +35,7 @@ ENV_GRACE = "TSMPC_SIGNAL_GRACE_S"
 
 _first: list[int] = []
 _enabled = [False]
+_before_exit: list[Callable[[int], None]] = []
 
 
 def enable() -> None:
@@ -52,7 +55,11 @@ def grace_s() -> float:
 
 
 def _hard_exit(signum: int, why: str) -> None:
-    """One line on stderr (a raw write: no lock, no Python stream) and the exit, skipping clean-up."""
+    """The last words (the caller's ``before_exit``: the CLI marks its folder ``interrupted``),
+    one line on stderr (a raw write: no lock, no Python stream) and the exit, skipping clean-up."""
+    if _before_exit:
+        with contextlib.suppress(Exception):
+            _before_exit[0](signum)
     with contextlib.suppress(OSError):
         os.write(2, f"error: interrupted ({signal.Signals(signum).name}); {why}, exiting\n".encode())
     os._exit(128 + signum)
@@ -63,11 +70,14 @@ def _watch(signum: int, seconds: float) -> None:
     _hard_exit(signum, f"still busy in compiled code after {seconds:g} s")
 
 
-def on_signal(signum: int) -> None:
+def on_signal(signum: int, before_exit: Callable[[int], None] | None = None) -> None:
     """Called by the CLI's handler for every SIGINT/SIGTERM: the first starts the watchdog, a
-    second one exits at once with the first signal's code. Nothing before :func:`enable`."""
+    second one exits at once with the first signal's code; ``before_exit(signal)`` runs just before
+    a hard exit. Nothing before :func:`enable`."""
     if not _enabled[0]:
         return
+    if before_exit is not None and not _before_exit:
+        _before_exit.append(before_exit)
     if _first:
         _hard_exit(_first[0], "a second signal arrived")
     _first.append(signum)
