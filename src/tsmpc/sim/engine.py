@@ -693,24 +693,19 @@ def _f64(a: Any) -> NDArray[np.float64]:
     return np.array(a, dtype=np.float64, order="C")
 
 
-def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: int,
-             x0: NDArray[np.float64], ke: Any) -> _Arrays:
-    """The kernel's arrays from a reset cascade, the plant (a VehiclePlant, or the ActuatedPlant
-    around one) and the scenario."""
-    plant = plant if scenario.actuators is None else plant.plant
-    ref, n_in, N = cascade.reference, cascade.n_inner, cfg.mpc.N
-    M = K * n_in
-    mpc, mhe, lqr, fu = cascade.mpc, cascade.mhe, cascade.lqr, cascade._fusion
+def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
+                ke: Any) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The kernel's float and integer parameters (``fp``, ``ip``) of a reset cascade."""
     fp, ip = np.zeros(ke.N_FP), np.zeros(ke.N_IP, dtype=np.int64)
-    sf, si = np.zeros(ke.N_SF), np.zeros(ke.N_SI, dtype=np.int64)
+    ref, n_in, N = cascade.reference, cascade.n_inner, cfg.mpc.N
+    mhe, lqr, fu = cascade.mhe, cascade.lqr, cascade._fusion
     veh, fs = cfg.vehicle, cfg.fusion
     fp[ke.FP_TD], fp[ke.FP_TC], fp[ke.FP_H] = cascade.Td, cascade.Tc, plant.model.h
     fp[ke.FP_MU_NOM], fp[ke.FP_MG] = plant.vehicle.mu_nominal, plant._mg
     fp[ke.FP_V_LO], fp[ke.FP_V_HI] = cascade._v_range
     fp[ke.FP_W_LIM], fp[ke.FP_POSE_NOISE] = cascade._w_limit, cascade._pose_noise
     fp[ke.FP_HEAD_NOISE], fp[ke.FP_GATE_SIGMA] = cascade._heading_noise, cascade._slip_gate.sigma
-    course = fu.course
-    fp[ke.FP_COURSE_SIGMA] = course.sigma
+    fp[ke.FP_COURSE_SIGMA] = fu.course.sigma
     fp[ke.FP_CF0], fp[ke.FP_CR0] = veh.C_f, veh.C_r
     fp[ke.FP_VM], fp[ke.FP_VI], fp[ke.FP_VA], fp[ke.FP_VB] = veh.mass, veh.inertia, veh.a, veh.b
     fp[ke.FP_VG] = veh.g
@@ -719,7 +714,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     bound = scenario.divergence_bound_m or cfg.divergence_bound_m
     ip[ke.IP_HASBOUND] = bound is not None
     fp[ke.FP_BOUND] = math.inf if bound is None else float(bound)
-    (Kv, zlo, zhi, bits, prm, lam, afilt, lTd, Fmin, Fmax, dmin, dmax, sfb, tau) = lqr._kargs
+    (lam, afilt, lTd, Fmin, Fmax, dmin, dmax, sfb, tau) = lqr._kargs[5:]
     fp[ke.FP_L_LAM], fp[ke.FP_L_AF], fp[ke.FP_L_TD] = lam, afilt, lTd
     fp[ke.FP_L_FMIN], fp[ke.FP_L_FMAX], fp[ke.FP_L_DMIN], fp[ke.FP_L_DMAX] = Fmin, Fmax, dmin, dmax
     fp[ke.FP_L_TAU] = tau
@@ -738,20 +733,30 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     ip[ke.IP_LOWRES] = lqr.settings.low_speed_resistance
     fstep = cascade._friction_step
     ip[ke.IP_FSTEP] = fstep is not None
-    if fstep is not None:  # its state after reset
+    if fstep is not None:
         fp[ke.FP_FS_H] = fstep.threshold
+    ip[ke.IP_MFORCE], ip[ke.IP_MSTEER] = scenario.measured_force, scenario.measured_steering
+    ip[ke.IP_FMA] = _matvec_mode()
+    rc = cascade._recovery
+    ip[ke.IP_RECOV] = rc is not None
+    fp[ke.FP_REINIT] = 0.0 if rc is None else rc.pose_reinit_s
+    return fp, ip
+
+
+def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The kernel's float and integer state (``sf``, ``si``): the cascade's after reset(x0)."""
+    sf, si = np.zeros(ke.N_SF), np.zeros(ke.N_SI, dtype=np.int64)
+    mhe, course = cascade.mhe, cascade._fusion.course
+    fstep = cascade._friction_step
+    if fstep is not None:
         st = fstep.state
         sf[ke.SF_FSVAR], sf[ke.SF_FSGP], sf[ke.SF_FSGM] = st.var, st.g_plus, st.g_minus
         si[ke.SI_FSN], si[ke.SI_FSSINCE] = st.n_var, st.since
-    ip[ke.IP_MFORCE], ip[ke.IP_MSTEER] = scenario.measured_force, scenario.measured_steering
-    ip[ke.IP_FMA] = _matvec_mode()
-    # the cascade's state after reset(x0)
     sf[ke.SF_POSE:ke.SF_POSE + 3] = cascade._pose
     sf[ke.SF_HELD:ke.SF_HELD + 3] = cascade._pose_held
     sf[ke.SF_POSET] = cascade._pose_t
-    rc = cascade._recovery  # recovery: the run of poses rejected as jumps (the blind stop is
-    ip[ke.IP_RECOV] = rc is not None  # not reproduced: applicability() keeps such runs in Python)
-    fp[ke.FP_REINIT] = 0.0 if rc is None else rc.pose_reinit_s
+    # recovery: the run of poses rejected as jumps (the blind stop is not reproduced:
+    # applicability() keeps runs that can blind the cascade in Python)
     sf[ke.SF_JT0] = cascade._jump_t0
     sf[ke.SF_JUMP:ke.SF_JUMP + 4] = cascade._jump_last
     si[ke.SI_GATEN] = cascade._slip_gate.n_poses
@@ -769,6 +774,20 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
     sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival
+    return sf, si
+
+
+def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: int,
+             x0: NDArray[np.float64], ke: Any) -> _Arrays:
+    """The kernel's arrays from a reset cascade, the plant (a VehiclePlant, or the ActuatedPlant
+    around one) and the scenario."""
+    plant = plant if scenario.actuators is None else plant.plant
+    ref, n_in, N = cascade.reference, cascade.n_inner, cfg.mpc.N
+    M = K * n_in
+    mpc, mhe, lqr = cascade.mpc, cascade.mhe, cascade.lqr
+    fp, ip = _parameters(cfg, cascade, scenario, plant, ke)
+    sf, si = _state(cascade, ke)
+    (Kv, zlo, zhi, bits, prm) = lqr._kargs[:5]
     mp = np.array([*mhe._kargs[0], *mhe._kargs[1], *mhe._kargs[2], mhe._kargs[3], *mhe._kargs[4],
                    *mhe._kargs[5], *mhe._kargs[6], *mhe._kargs[7], *mhe._kargs[8:17]], dtype=float)
     u_drop, gnss, fifo = _fault_data(scenario.sensor_fault, M, fp, ip, sf, si)
