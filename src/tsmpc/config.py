@@ -956,14 +956,14 @@ class RecoverySettings(_Frozen):
     blind_after_s: PositiveFloat = Field(
         0.5, le=10.0, description="no speed / yaw-rate sample accepted for this long [s]: the "
         "cascade is blind and brakes to a stop on its last steering (a minimal-risk manoeuvre) "
-        "until a valid sample comes; (0, 10]")
+        "until a valid sample comes; within (0, 10]")
     stop_decel: PositiveFloat = Field(
-        3.0, le=10.0, description="deceleration of the blind stop [m/s^2], (0, 10] (within the "
-        "force limits)")
+        3.0, le=10.0, description="deceleration of the blind stop [m/s^2], within (0, 10] (and "
+        "the force limits)")
     pose_reinit_s: PositiveFloat = Field(
         2.0, le=60.0, description="fresh poses rejected as jumps for this long [s], each "
         "consistent with the one before: the dead-reckoned pose is wrong, not them; the gate "
-        "takes them (0, 60]")
+        "takes them; within (0, 60]")
 
 
 class Config(_Frozen):
