@@ -48,16 +48,23 @@ COLUMNS = {"rmse_x": "RMSE x", "rmse_y": "RMSE y", "rmse_theta": "RMSE θ", "rms
 PAYS = 1.05
 
 
+def _track_name(t: Any) -> str:
+    stem = Path(str(t)).stem
+    return "paper ref." if stem.startswith("planner_references") else stem
+
+
 def verdicts(table: Any) -> list[dict[str, Any]]:
     """Per switch: the largest gain (the run without it over the default run, any completed case
-    and column), where, and the cases that complete only with it."""
-    track = table["track"].map(lambda t: Path(str(t)).stem)
+    and column) and the largest cost (the default run over the run without it), where, and the
+    cases that complete only with it."""
+    track = table["track"].map(_track_name)
     rows = {(tr, c, k): r for (tr, (_, r)) in zip(track, table.iterrows(), strict=True)
             for c, k in [(r["case"], r["controller"])]}
     cases = sorted({(tr, c) for tr, c, _ in rows})
     out = []
     for ctrl, (switch, what) in MECHANISMS.items():
         best, where, only = 0.0, "", []
+        cost, cost_where = 0.0, ""
         for tr, case in cases:
             d, o = rows.get((tr, case, "default")), rows.get((tr, case, ctrl))
             if d is None or o is None:
@@ -71,17 +78,21 @@ def verdicts(table: Any) -> list[dict[str, Any]]:
                 g = float(o[col]) / max(float(d[col]), 1e-12)
                 if g > best:
                     best, where = g, f"{tr} {case}, {label}"
+                c = float(d[col]) / max(float(o[col]), 1e-12)
+                if c > cost:
+                    cost, cost_where = c, f"{tr} {case}, {label}"
         out.append({"switch": switch, "what": what, "gain": best, "where": where, "only": only,
-                    "keep": best >= PAYS or bool(only)})
+                    "cost": cost, "cost_where": cost_where, "keep": best >= PAYS or bool(only)})
     return out
 
 
 def verdict_table(rows: list[dict[str, Any]]) -> str:
-    lines = ["| switch | mechanism | largest gain | where | completes only with it | verdict |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| switch | mechanism | largest gain | where | largest cost | where | completes only "
+             "with it | verdict |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         only = ", ".join(r["only"]) or "–"
-        lines.append(f"| `{r['switch']}` | {r['what']} | {r['gain']:.2f}× | {r['where']} | {only} | "
+        lines.append(f"| `{r['switch']}` | {r['what']} | {r['gain']:.2f}× | {r['where']} | "
+                     f"{r['cost']:.2f}× | {r['cost_where']} | {only} | "
                      f"{'kept' if r['keep'] else '**removed**'} |")
     return "\n".join(lines)
 
