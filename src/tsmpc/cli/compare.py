@@ -215,8 +215,8 @@ def _execute(
         designs = design_status(exp.config)  # no design for this config: DesignError (exit 2)
         from tsmpc import kernels
 
-        timed_in = _timed_in(exp)
         with deferred_interrupts():  # numba/LLVM call back into Python: never raise in there
+            timed_in = _timed_in(exp)  # may load (or, on a cold cache, compile) the kernels
             kernels.warmup()  # compile/load before the progress bars (the first run says so)
             if "engine" in timed_in.values():  # and the run engine, saying when it is done
                 _compile_engine(lambda text: err_console.print(text, markup=False),
