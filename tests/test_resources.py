@@ -270,10 +270,14 @@ def test_a_huge_reference_is_refused_quickly(tmp_path: Path) -> None:
 def test_timeout_ends_a_run_in_its_grace_period(tmp_path: Path) -> None:
     """``timeout``'s SIGTERM in the middle of a real run: exit 143 within the grace period."""
     out = tmp_path / "out"
-    proc = subprocess.Popen([TSMPC, "run", "--duration", "60", "--no-plots", "--out", str(out)],
+    proc = subprocess.Popen([TSMPC, "run", "--duration", "600", "--no-plots", "--out", str(out)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "TSMPC_SIGNAL_GRACE_S": str(GRACE)})
-    time.sleep(6)
+    deadline = time.monotonic() + 30
+    while not (out / "PARTIAL").exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.0)  # in the designs, the kernels' loading or the loop
+    assert proc.poll() is None, "a 600 s run ended by itself"
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     try:
