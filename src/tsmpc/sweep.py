@@ -901,8 +901,6 @@ def run_sweep(
     not a result: no record is written for it, and it is listed in ``incomplete`` (with the runs
     whose record says ``failed``); the caller reports the sweep unfinished and ``resume`` runs them.
     """
-    from dask.distributed import as_completed
-
     out = Path(out)
     runs_dir = out / "runs"
     tasks = expand(spec)
@@ -919,7 +917,6 @@ def run_sweep(
     written: set[str] = set()
     failed = duplicates = lost = 0
     lost_reason = ""
-    done = skipped
     # Connect first (a wrong address fails in seconds), then the designs: nothing is written
     # before both worked.
     with shield():  # a cluster is started whole, or not at all
@@ -953,54 +950,69 @@ def run_sweep(
     if client is not None:
         try:
             with _quiet_dask():
-                chunks: list[list[RunTask]] = []
-                singles = pending
-                if run_fn is run_task:
-                    n_workers = max(1, len(client.scheduler_info().get("workers", {})) or workers)
-                    chunks, singles = batches(pending, spec.batch, n_workers, among=tasks)
-                futures = {client.submit(run_batch, c, key=batch_key(c), retries=spec.retries,
-                                         pure=False): c for c in chunks}
-                futures.update({client.submit(run_fn, t, key=f"tsmpc-run-{t.id}", retries=spec.retries,
-                                              pure=False): [t] for t in singles})
-                for fut in as_completed(futures):
-                    chunk = futures.pop(fut)
-                    try:
-                        got = fut.result()
-                        recs = got if isinstance(got, list) else [got]
-                    except Exception as err:
-                        if _cluster_lost(err):  # not a result: no record; resume runs it
-                            lost += len(chunk)
-                            lost_reason = lost_reason or " ".join(f"{type(err).__name__}: {err}".split())
-                            with contextlib.suppress(Exception):
-                                fut.release()
-                            continue
-                        # e.g. KilledWorker after repeated worker deaths: a record says so
-                        failed += len(chunk)
-                        recs = [_record(t, "failed", f"{type(err).__name__}: {err}", {}, float("nan"))
-                                for t in chunk]
-                    # Forget the result on the cluster at once: a finished task whose result still
-                    # sits in a worker's memory would be recomputed if that worker died.
-                    with contextlib.suppress(Exception):  # the scheduler may be gone by now
-                        fut.release()
-                    del fut
-                    for task, rec in zip(chunk, recs, strict=True):
-                        if task.id in written:
-                            duplicates += 1
-                            continue
-                        atomic_write_text(runs_dir / f"{task.id}.json", json.dumps(rec, indent=1))
-                        written.add(task.id)
-                        done += 1
-                        if progress is not None:
-                            progress(done, len(tasks), rec)
+                tally = _collect(client, pending, tasks, spec, run_fn, workers, runs_dir, progress, skipped)
         finally:
             with shield():
                 _close(client, cluster)
+        written, failed, duplicates, lost, lost_reason = tally
     table = aggregate(out, expected)
     files = write_outputs(table, out, plots=plots, plotter=plotter)
     done_ids, _, _ = records_on_disk(runs_dir, expected, repair=False, retry_failed=True)
     incomplete = [t.id for t in tasks if t.id not in done_ids]
     return SweepResult(out, len(tasks), len(written), skipped, failed, duplicates, table, files,
                        incomplete, lost, lost_reason)
+
+
+def _collect(client: Any, pending: list[RunTask], tasks: list[RunTask], spec: SweepSpec,
+             run_fn: Callable[[RunTask], dict[str, Any]], workers: int, runs_dir: Path,
+             progress: ProgressFn | None, done: int) -> tuple[set[str], int, int, int, str]:
+    """Submit the pending runs (in batches where the engine batches them), write each record as
+    it comes: (ids written, runs failed, duplicates, runs the cluster lost, why it lost them)."""
+    from dask.distributed import as_completed
+
+    written: set[str] = set()
+    failed = duplicates = lost = 0
+    lost_reason = ""
+    chunks: list[list[RunTask]] = []
+    singles = pending
+    if run_fn is run_task:
+        n_workers = max(1, len(client.scheduler_info().get("workers", {})) or workers)
+        chunks, singles = batches(pending, spec.batch, n_workers, among=tasks)
+    futures = {client.submit(run_batch, c, key=batch_key(c), retries=spec.retries,
+                             pure=False): c for c in chunks}
+    futures.update({client.submit(run_fn, t, key=f"tsmpc-run-{t.id}", retries=spec.retries,
+                                  pure=False): [t] for t in singles})
+    for fut in as_completed(futures):
+        chunk = futures.pop(fut)
+        try:
+            got = fut.result()
+            recs = got if isinstance(got, list) else [got]
+        except Exception as err:
+            if _cluster_lost(err):  # not a result: no record; resume runs it
+                lost += len(chunk)
+                lost_reason = lost_reason or " ".join(f"{type(err).__name__}: {err}".split())
+                with contextlib.suppress(Exception):
+                    fut.release()
+                continue
+            # e.g. KilledWorker after repeated worker deaths: a record says so
+            failed += len(chunk)
+            recs = [_record(t, "failed", f"{type(err).__name__}: {err}", {}, float("nan"))
+                    for t in chunk]
+        # Forget the result on the cluster at once: a finished task whose result still sits in
+        # a worker's memory would be recomputed if that worker died.
+        with contextlib.suppress(Exception):  # the scheduler may be gone by now
+            fut.release()
+        del fut
+        for task, rec in zip(chunk, recs, strict=True):
+            if task.id in written:
+                duplicates += 1
+                continue
+            atomic_write_text(runs_dir / f"{task.id}.json", json.dumps(rec, indent=1))
+            written.add(task.id)
+            done += 1
+            if progress is not None:
+                progress(done, len(tasks), rec)
+    return written, failed, duplicates, lost, lost_reason
 
 
 def _cluster_lost(err: BaseException) -> bool:
