@@ -56,15 +56,16 @@ _MB = 1024 * 1024
 # Baselines measured on `tsmpc run --duration 3 --no-plots` (cached designs, 2 cores, Linux x86-64,
 # /usr/bin/time -v and /proc/self/status): max RSS 254 MB, VmPeak 749 MB; `tsmpc compare --methods
 # ref,nl` (CasADi loaded): RSS 274 MB, VmPeak 1029 MB. Rounded up with a margin; the virtual part
-# grows with the cores (OpenBLAS reserves a 32 MB buffer per thread in each of its two copies).
+# grows with OpenBLAS's threads (a 32 MB buffer per thread in each of its two copies, and stacks).
 #: Resident memory of any run before its arrays [MB].
 RESIDENT_BASE_MB = 320.0
 #: Extra resident memory when the NL-MPC (CasADi + IPOPT) runs [MB].
 RESIDENT_NL_MB = 60.0
 #: Virtual address space of any run before its arrays, without the per-core part [MB].
 VIRTUAL_BASE_MB = 700.0
-#: Virtual address space per core (OpenBLAS thread buffers) [MB].
-VIRTUAL_PER_CORE_MB = 64.0
+#: Virtual address space per core (OpenBLAS thread buffers) [MB]: VmPeak 667 MB with
+#: OPENBLAS_NUM_THREADS=1, 749 MB with 2 threads.
+VIRTUAL_PER_CORE_MB = 80.0
 #: Extra virtual address space when the NL-MPC (CasADi + IPOPT) runs [MB].
 VIRTUAL_NL_MB = 350.0
 #: Bytes a reference file costs while it is parsed, per byte of the file (measured: lines, lists
@@ -82,6 +83,10 @@ class MemoryEstimate:
 
 
 def _cores() -> int:
+    """The threads OpenBLAS starts at import: ``OPENBLAS_NUM_THREADS`` when set, else the cores."""
+    text = os.environ.get("OPENBLAS_NUM_THREADS", "").strip()[:6]
+    if text.isdigit() and int(text) > 0:
+        return int(text)
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):
