@@ -32,6 +32,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from tsmpc.errors import TsmpcError
+from tsmpc.textfile import read_bytes
+
 __all__ = [
     "DEFAULT_FRACTION",
     "ENV_LIMIT",
@@ -123,9 +126,11 @@ def _physical_mb() -> float:
     except (ValueError, OSError, AttributeError):
         pass
     for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        if not os.path.isfile(path):
+            continue
         try:
-            text = Path(path).read_text().strip()
-        except OSError:
+            text = read_bytes(path, "cgroup memory limit", limit=4096, head=True).decode().strip()
+        except (TsmpcError, OSError, UnicodeDecodeError):
             continue
         if text.isdigit() and int(text) < 1 << 60:  # "max" or a huge number: no limit
             total = min(total, int(text) / _MB)
@@ -172,19 +177,13 @@ def memory_problem(est: MemoryEstimate) -> str | None:
     return None
 
 
-def reference_samples_upper(path: Path, *, chunk: int = 1 << 24) -> tuple[int, bool]:
+def reference_samples_upper(path: Path) -> tuple[int, bool]:
     """An upper bound of a reference file's samples without parsing it, and whether it reads as a
     paper-format file (at most 8 lines: 6 rows, one sample a column): the larger of its lines (a
-    planned CSV: one sample a row) and its commas / 6. Reads the file in chunks (a 237 MB file in
-    well under a second)."""
-    lines = commas = 0
-    with open(path, "rb") as fh:
-        while True:
-            block = fh.read(chunk)
-            if not block:
-                break
-            lines += block.count(b"\n")
-            commas += block.count(b",")
+    planned CSV: one sample a row) and its commas / 6. Counting a 237 MB file takes about a
+    second. Read through the safe reader (regular file, size cap): its errors propagate."""
+    data = read_bytes(path, "reference")
+    lines, commas = data.count(b"\n"), data.count(b",")
     return max(lines + 1, commas // 6), lines <= 8
 
 
@@ -221,8 +220,8 @@ def reference_problem(path: Path | None, *, methods: Sequence[str], duration: fl
             return None  # not a regular file: the reader says what is wrong
         size = Path(path).stat().st_size
         samples, paper = reference_samples_upper(Path(path))
-    except OSError:
-        return None
+    except (OSError, TsmpcError):
+        return None  # the reader says what is wrong
     steps = samples * max(int(laps), 1)
     if window is not None:
         steps = min(steps, (window[1] - window[0] + 1) * max(int(laps), 1))
