@@ -369,7 +369,7 @@ _raised = [False]
 
 
 def _handler(signum: int, _frame: Any) -> None:
-    from tsmpc.cli import _watchdog  # a bound on the time to the exit (armed by the entry point)
+    import tsmpc.cli._watchdog as _watchdog  # a bound on the time to the exit (armed by the entry point)
 
     _watchdog.on_signal(signum, _mark_hard_exit)
     _pending.append(signum)

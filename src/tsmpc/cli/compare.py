@@ -167,7 +167,7 @@ def _execute(
         fail(ConfigError("--methods is empty"))
     check_laps(laps)
     reference = data_path(reference, "--reference")  # `--reference paper`: a downloaded dataset
-    from tsmpc.cli import _memory  # memory bound (issue 38): the file's size and samples, then the run
+    import tsmpc.cli._memory as _memory  # memory bound (issue 38): the file's size and samples, then the run
 
     problem = _memory.reference_problem(
         reference, methods=methods, duration=duration, window=_parse_window(window), laps=laps,
