@@ -23,6 +23,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -199,25 +200,13 @@ def animate_run(
     return AnimationResult(out, mp4_path if ok else None, len(frames), time.perf_counter() - t0)
 
 
-def _render(
-    log: RunLog, steps: NDArray[np.int64], vehicle: VehicleParams, track: Track | None,
-    road_width: float | None, view_m: float, size_px: tuple[int, int],
-    progress: Callable[[int, int], None] | None,
-) -> Iterator[Image.Image]:
-    dpi = 100
-    w, h = size_px
-    fig = plt.figure(figsize=(w / dpi, h / dpi), dpi=dpi)
-    gs = fig.add_gridspec(3, 2, height_ratios=[3.2, 1, 1], width_ratios=[1.55, 1],
-                          left=0.08, right=0.98, top=0.95, bottom=0.08, hspace=0.35, wspace=0.12)
-    ax = fig.add_subplot(gs[0, 0])
-    ov = fig.add_subplot(gs[0, 1])
-    ae = fig.add_subplot(gs[1, :])
-    av = fig.add_subplot(gs[2, :], sharex=ae)
+def _static_layers(log: RunLog, steps: NDArray[np.int64], track: Track | None, road_width: float | None,
+                   view_m: float, half_w: float, half_h: float, ax: Any, ov: Any, ae: Any,
+                   av: Any) -> list[NDArray[np.float64]]:
+    """What every frame shares: the overview, the e_y and v strips, the follow view's frame and
+    scale bar; returns the road's borders (the track's, or a road of constant width around the
+    reference; none without either)."""
     ref, st = log.ref, log.state_outer
-    half_w = view_m / 2
-    bbox = ax.get_position()
-    half_h = half_w * (bbox.height * h) / (bbox.width * w)
-
     # Borders: the track's, or a road of constant width around the reference.
     borders: list[NDArray[np.float64]] = []
     if track is not None:
@@ -259,6 +248,31 @@ def _render(
         a.grid(alpha=0.3)
         a.set_xlim(t[steps[0]], t[steps[-1]] + log.Tc)
     plt.setp(ae.get_xticklabels(), visible=False)
+    return borders
+
+
+def _render(
+    log: RunLog, steps: NDArray[np.int64], vehicle: VehicleParams, track: Track | None,
+    road_width: float | None, view_m: float, size_px: tuple[int, int],
+    progress: Callable[[int, int], None] | None,
+) -> Iterator[Image.Image]:
+    dpi = 100
+    w, h = size_px
+    fig = plt.figure(figsize=(w / dpi, h / dpi), dpi=dpi)
+    gs = fig.add_gridspec(3, 2, height_ratios=[3.2, 1, 1], width_ratios=[1.55, 1],
+                          left=0.11, right=0.98, top=0.95, bottom=0.08, hspace=0.35, wspace=0.12)
+    ax = fig.add_subplot(gs[0, 0])
+    ov = fig.add_subplot(gs[0, 1])
+    ae = fig.add_subplot(gs[1, :])
+    av = fig.add_subplot(gs[2, :], sharex=ae)
+    ref, st = log.ref, log.state_outer
+    half_w = view_m / 2
+    bbox = ax.get_position()
+    half_h = half_w * (bbox.height * h) / (bbox.width * w)
+
+    borders = _static_layers(log, steps, track, road_width, view_m, half_w, half_h, ax, ov, ae, av)
+    t = log.t_outer
+    e_y = log.errors[:, 1]
 
     # Moving artists (drawn with draw_artist on top of the cached background).
     moving = []
