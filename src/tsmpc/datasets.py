@@ -31,13 +31,13 @@ mirror serves the same relative paths ``<owner>/<repo>/<commit>/<path>`` (a loca
 from __future__ import annotations
 
 import os
-import shutil
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import quote, unquote, urlsplit
 
 from tsmpc.errors import ConfigError, TsmpcError
+from tsmpc.textfile import read_bytes
 
 __all__ = [
     "DATASETS",
@@ -70,6 +70,8 @@ MIRROR_ENV = "TSMPC_DATA_MIRROR"
 UPSTREAM = "https://raw.githubusercontent.com"
 #: Seconds without an answer before a download is given up.
 TIMEOUT_S = 60.0
+#: Largest file a mirror folder may serve [bytes] (the datasets' files are below 1 MB).
+MAX_FILE_BYTES = 64 * 1024 * 1024
 
 
 class DataNotFoundError(TsmpcError, LookupError):
@@ -288,15 +290,14 @@ def _copy_local(url: str, output_file: object, _pooch: object = None,
     src = Path(unquote(urlsplit(url).path))
     if check_only:
         return src.is_file()
+    data = read_bytes(src, "dataset file", DataFetchError, limit=MAX_FILE_BYTES)  # the safe reader
     try:
-        with open(src, "rb") as fin:
-            if isinstance(output_file, (str, os.PathLike)):
-                with open(output_file, "wb") as fout:
-                    shutil.copyfileobj(fin, fout)
-            else:
-                shutil.copyfileobj(fin, output_file)  # type: ignore[misc]
+        if isinstance(output_file, (str, os.PathLike)):
+            Path(output_file).write_bytes(data)
+        else:
+            output_file.write(data)  # type: ignore[attr-defined]
     except OSError as err:
-        raise DataFetchError(f"{url}: cannot read it ({err.strerror or err})") from None
+        raise DataFetchError(f"{url}: cannot copy it ({err.strerror or err})") from None
     return None
 
 
