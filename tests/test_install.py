@@ -166,3 +166,18 @@ def test_every_install_line_in_the_docs_and_examples_names_a_defined_extra() -> 
         assert 'install "tsmpc[' not in text and "install 'tsmpc[" not in text, page
         for m in re.finditer(r"pip install[^\n`]*?\.\[([a-z_,]+)\]", text):
             assert set(m.group(1).split(",")) <= extras, (page.name, m.group(0))
+
+
+@pytest.mark.parametrize("blocked", ["distributed", "pyarrow"])
+def test_sweep_without_the_sweep_extra_exits_2_before_any_work(tmp_path: Path, blocked: str) -> None:
+    """`tsmpc sweep` needs Dask, pandas and pyarrow: without them it says so at once (it said so
+    only after compiling the batch kernel, minutes later)."""
+    sweep = tmp_path / "s.toml"
+    sweep.write_text('name = "s"\nduration_s = 1.0\n[grid]\nseed = [1]\n')
+    out = tmp_path / "out"
+    res = _blocked("import sys; from tsmpc.cli import main; sys.argv = ['tsmpc', *sys.argv[1:]]; main()",
+                   blocked=(blocked,), timeout=120, args=("sweep", str(sweep), "--out", str(out)))
+    assert res.returncode == 2, (res.returncode, res.stdout[-2000:], res.stderr[-2000:])
+    errors = [ln for ln in res.stderr.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and 'pip install -e ".[sweep]"' in errors[0], res.stderr
+    assert "compiling" not in res.stderr and not out.exists()

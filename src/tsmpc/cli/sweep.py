@@ -56,6 +56,13 @@ def sweep_cmd(
     from tsmpc.sweep import load_sweep
 
     con = console()
+    from tsmpc.extras import MissingExtraError, require
+
+    try:  # before any work (the batch kernel's compile takes minutes): a sweep needs Dask
+        for module in ("distributed", "pandas", "pyarrow"):
+            require(module, "tsmpc sweep")
+    except MissingExtraError as err:
+        fail(err)
     check_environment(kernels=not dry_run)
     finite("--connect-timeout", connect_timeout, lo=0.0, lo_open=True, hi=600.0)
     if workers > 64:
