@@ -4,6 +4,7 @@ tests find the paper's reference and the race tracks (not a test module)."""
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 from pathlib import Path
 from types import SimpleNamespace
@@ -81,3 +82,15 @@ def need_data(name: str) -> Path:
     if os.environ.get(REQUIRE_DATA_ENV, "") not in ("", "0"):
         pytest.fail(f"{msg} ({REQUIRE_DATA_ENV} is set: missing data fails)")
     pytest.skip(msg)
+
+
+def console_script(name: str) -> str:
+    """The console script ``name`` of this interpreter's environment (CI may not have it on
+    PATH)."""
+    import pytest
+
+    here = Path(sys.executable).parent / name
+    found = str(here) if here.is_file() else shutil.which(name)
+    if found is None:
+        pytest.fail(f"{name!r} not found next to {sys.executable} or on PATH")
+    return found

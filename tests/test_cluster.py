@@ -21,10 +21,8 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
 import signal
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -33,6 +31,7 @@ from typing import IO, Any
 
 import pytest
 
+from _paths import console_script
 from tsmpc.sweep import expand, load_sweep, read_record
 
 # 24 runs of 15 simulated seconds in batches of 4 (tsmpc.sim.batch): ~0.2–0.6 s a run once a
@@ -54,13 +53,7 @@ KILL_AFTER = 3  # records on disk before a worker is killed
 TIMING_METRICS = frozenset({"mpc_ms", "mhe_ms", "lqr_ms", "wall_s", "realtime_factor"})
 
 
-def _exe(name: str) -> str:
-    """The console script of this interpreter's environment (CI may not have it on PATH)."""
-    here = Path(sys.executable).parent / name
-    found = str(here) if here.is_file() else shutil.which(name)
-    if found is None:
-        pytest.fail(f"{name!r} not found next to {sys.executable} or on PATH")
-    return found
+_exe = console_script
 
 
 def _tail(path: Path, n: int = 30) -> str:

@@ -21,7 +21,6 @@ from __future__ import annotations
 import concurrent.futures
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -32,6 +31,7 @@ from typing import Any
 import pytest
 from typer.testing import CliRunner
 
+from _paths import console_script
 from tsmpc.cli import app
 from tsmpc.cli._common import PARTIAL_MARKER
 from tsmpc.sweep import RunTask, dry_run, expand, load_sweep, read_record, run_sweep
@@ -174,12 +174,7 @@ def test_a_local_cluster_that_does_not_start_ends_with_one_line(tmp_path: Path, 
 
 
 # -- a real external scheduler, killed -9 mid-sweep ---------------------------------------------
-def _exe(name: str) -> str:
-    here = Path(sys.executable).parent / name
-    found = str(here) if here.is_file() else shutil.which(name)
-    if found is None:
-        pytest.fail(f"{name!r} not found next to {sys.executable} or on PATH")
-    return found
+_exe = console_script
 
 
 def _stop(procs: list[subprocess.Popen]) -> None:
