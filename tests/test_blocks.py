@@ -178,3 +178,17 @@ def test_friction_programs_by_hand() -> None:
     assert apply_events(0.9, 6.0, 0.0, ev) == pytest.approx(0.3)  # from the running 0.5, not 0.9
     assert _in_burst(3.02, 3.0, 7.0, 0.05) and not _in_burst(3.06, 3.0, 7.0, 0.05)
     assert _in_burst(10.02, 3.0, 7.0, 0.05) and not _in_burst(2.9, 3.0, 7.0, 0.05)
+
+
+def test_every_module_with_a_block_is_in_the_engine_cache_key() -> None:
+    """The engine's machine code holds the ``@jitable`` blocks it calls, and numba keys a cache
+    entry by its own file only: every module defining one must be in BLOCK_MODULES (hashed into
+    the engine's cache stamp), else an edit of it would leave a stale engine."""
+    from pathlib import Path
+
+    from tsmpc.kernels.jit import BLOCK_MODULES
+
+    src = Path(__file__).resolve().parents[1] / "src"
+    with_blocks = {".".join(p.relative_to(src).with_suffix("").parts)
+                   for p in (src / "tsmpc").rglob("*.py") if "\n@jitable\n" in p.read_text(encoding="utf-8")}
+    assert with_blocks and with_blocks <= set(BLOCK_MODULES), with_blocks - set(BLOCK_MODULES)

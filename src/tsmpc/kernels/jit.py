@@ -32,7 +32,7 @@ __all__ = ["BLOCK_MODULES", "cpython_hypot", "exact_hypot", "jitable"]
 F = TypeVar("F", bound=Callable[..., Any])
 
 #: The modules that define ``@jitable`` blocks (their sources are part of the engine's cache key;
-#: tests/test_architecture.py checks the list is complete).
+#: tests/test_blocks.py checks the list is complete).
 BLOCK_MODULES = (
     "tsmpc.control.gates",
     "tsmpc.control.slip_aware",
