@@ -129,6 +129,11 @@ def test_a_cache_that_cannot_be_cleaned_or_rebuilt_is_named_in_one_line(monkeypa
                                                                         capsys) -> None:
     from tsmpc import kernels
 
+    # _import_all forgets the kernel modules (sys.modules) to re-import them: restore this
+    # process's afterwards, or the run engine of later tests sees "replaced" kernels and steps aside
+    for m in kernels._MODULES:
+        if f"tsmpc.kernels.{m}" in sys.modules:
+            monkeypatch.setitem(sys.modules, f"tsmpc.kernels.{m}", sys.modules[f"tsmpc.kernels.{m}"])
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     folder = kernels._tree_folder(tmp_path)
     folder.mkdir(parents=True)

@@ -196,8 +196,10 @@ def _wrap(a):
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-#: ``math.hypot`` of CPython ≤ 3.11 to the last bit, compiled (:func:`tsmpc.kernels.jit.cpython_hypot`)
-hypot_py = njit(cache=True, fastmath=False)(cpython_hypot)
+#: ``math.hypot`` of CPython ≤ 3.11 to the last bit, compiled (:func:`tsmpc.kernels.jit.cpython_hypot`;
+#: not cached on its own: its cache entry would be keyed by kernels/jit.py, outside the engine's
+#: entries that a broken cache's repair deletes)
+hypot_py = njit(cache=False, fastmath=False)(cpython_hypot)
 
 
 @njit(cache=True, fastmath=False)

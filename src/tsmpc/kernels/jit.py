@@ -136,7 +136,7 @@ def exact_hypot(a: float, b: float) -> float:
 if _numba_ready():
     from numba.extending import overload
 
-    @overload(exact_hypot, jit_options={"cache": True})
+    @overload(exact_hypot)  # compiled into its callers (and their cache entries)
     def _exact_hypot_compiled(a, b):  # type: ignore[no-untyped-def]  # numba matches the signatures
         def impl(a, b):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             return cpython_hypot(a, b)
