@@ -38,7 +38,8 @@ def _run(cfg: Config, dd, *, compensation: bool, mu_of_t, v_of_t, w_of_t, T: flo
         e = mhe.step(y, u)
         cmd = lqr.step(e, v_of_t(t), w_of_t(t))
         u = np.array([cmd.F_xR, cmd.delta])
-        assert cfg.lqr.force_min - 1e-9 <= u[0] <= cfg.lqr.force_max + 1e-9
+        f_min, f_max = cfg.lqr.force_limits(cfg.vehicle)
+        assert f_min - 1e-9 <= u[0] <= f_max + 1e-9
         assert abs(u[1]) <= cfg.lqr.delta_max + 1e-12
         rows.append([t, x[3], v_of_t(t), x[5], w_of_t(t), x[4], e.x[1], e.F_fr,
                      (mu - cfg.vehicle.mu_nominal) * cfg.vehicle.mass * cfg.vehicle.g])

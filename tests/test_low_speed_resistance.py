@@ -49,7 +49,8 @@ def test_the_law_adds_the_resistance_the_clipped_premise_leaves_out(cfg: Config,
         want = full - _lpv_resistance(v, v_min, cfg)
         assert outs[0].F_low_speed == pytest.approx(want, rel=1e-9, abs=1e-9)
         assert outs[1].F_low_speed == 0.0
-        if outs[0].F_xR < cfg.lqr.force_max and outs[1].F_xR < cfg.lqr.force_max:
+        f_max = cfg.lqr.force_limits(cfg.vehicle)[1]
+        if outs[0].F_xR < f_max and outs[1].F_xR < f_max:
             assert outs[0].F_xR - outs[1].F_xR == pytest.approx(want, rel=1e-9, abs=1e-6)
         assert outs[0].delta == outs[1].delta
         assert (want > 1.0) == (v < v_min)  # nothing changes inside the box

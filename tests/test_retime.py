@@ -53,7 +53,7 @@ def test_braking_is_never_harder_than_the_original() -> None:
 
 def test_force_budget_is_the_force_left_after_resistance_and_drag(cfg: Config) -> None:
     p = replace(cfg.vehicle, mass=1.2 * cfg.vehicle.mass)
-    a = force_budget_acceleration(p, cfg.lqr, 0.9)
+    a = force_budget_acceleration(p, cfg.lqr, 0.9, limits_vehicle=cfg.vehicle)  # the controllers' limits
     expect = (0.9 * 10000.0 - 0.9 * p.mass * p.g - p.drag_factor * 100.0) / p.mass
     assert a(10.0) == pytest.approx(expect)
     # with a friction ellipse the driven axle's grip also caps the traction
@@ -62,4 +62,4 @@ def test_force_budget_is_the_force_left_after_resistance_and_drag(cfg: Config) -
     grip = 0.9 * tyre.mu_tyre * cfg.vehicle.static_loads[1]
     assert a2(0.0) == pytest.approx(grip / cfg.vehicle.mass)
     with pytest.raises(ConfigError, match="force limit"):
-        force_budget_acceleration(replace(cfg.vehicle, mass=1500.0), cfg.lqr, 0.9)
+        force_budget_acceleration(replace(cfg.vehicle, mass=1500.0), cfg.lqr, 0.9, limits_vehicle=cfg.vehicle)

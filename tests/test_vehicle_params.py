@@ -57,7 +57,12 @@ def test_force_limits_scale_with_mass(tmp_path) -> None:
     s = LQRSettings(force_max_per_kg=5.0, force_min_per_kg=-8.0)
     assert s.force_limits(VehicleParams(mass=1000.0)) == (-8000.0, 5000.0)
     assert s.force_limits(VehicleParams(mass=2000.0)) == (-16000.0, 10000.0)
-    assert LQRSettings().force_limits(VehicleParams(mass=2000.0)) == (-2000.0, 10000.0)
+    # default: per kg, the paper's limits at its 683 kg; absolute limits do not follow the mass
+    assert LQRSettings().force_limits(VehicleParams()) == (-2000.0, 10000.0)
+    assert LQRSettings().force_limits(VehicleParams(mass=2000.0)) == pytest.approx((-2000.0 * 2000 / 683,
+                                                                                   10000.0 * 2000 / 683))
+    absolute = LQRSettings(force_min=-2000.0, force_max=10000.0)
+    assert absolute.force_limits(VehicleParams(mass=2000.0)) == (-2000.0, 10000.0)
     with pytest.raises(ConfigError, match="F_min = 50 N >= F_max = 10 N"):
         LQRSettings(force_min=50.0, force_max_per_kg=0.01).force_limits(VehicleParams(mass=1000.0))
     cfg = replace(Config(), lqr=s, vehicle=SPLIT)

@@ -160,7 +160,8 @@ def apply_conditions(cfg: Config, scenario: Scenario) -> RobustnessCase:
         from tsmpc.planning.retime import retime_for_force_budget
 
         mu = _budget_mu(dc_replace(scenario, friction=friction), cfg, ref.duration)
-        ref = retime_for_force_budget(ref, veh, cfg.lqr, mu, tyre=tyre)
+        ref = retime_for_force_budget(ref, veh, cfg.lqr, mu, tyre=tyre,  # the controllers' limits:
+                                      limits_vehicle=veh if sc.oracle_tuned else cfg.vehicle)
         changes["reference"] = ref
     if sc.friction:
         friction = EventFriction(friction, resolve_events(sc.friction, ref))

@@ -23,6 +23,8 @@ from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, fiel
 from tsmpc.errors import ConfigError
 
 __all__ = [
+    "DEFAULT_FORCE_MAX_PER_KG",
+    "DEFAULT_FORCE_MIN_PER_KG",
     "PRESETS",
     "BaselineSettings",
     "Config",
@@ -544,22 +546,45 @@ class MPCSettings(_Frozen):
         return self
 
 
+#: The force limits per kg by default: the paper's [-2000, 10000] N at its 683 kg (× 683 gives them
+#: back exactly in floating point, so a run at the nominal mass is bit-identical to the absolute ones).
+DEFAULT_FORCE_MIN_PER_KG = -2000.0 / 683.0
+DEFAULT_FORCE_MAX_PER_KG = 10000.0 / 683.0
+
+
+def _force_bound(absolute: float | None, per_kg: float | None, default_per_kg: float, mass: float) -> float:
+    """One force bound [N]: per kg × mass where given, else absolute, else the default per kg × mass."""
+    if per_kg is not None:
+        return per_kg * mass
+    return absolute if absolute is not None else default_per_kg * mass
+
+
 class LQRSettings(_Frozen):
     """Inner-loop TS-LQR (the paper's inner loop)."""
 
-    force_min: FiniteFloat = Field(-2000.0, ge=-1e6, le=1e6,
-                                   description="F_xR lower saturation [N], within [-1e6, 1e6]")
-    force_max: FiniteFloat = Field(10000.0, ge=-1e6, le=1e6,
-                                   description="F_xR upper saturation [N], within [-1e6, 1e6]")
+    # Each force bound is given absolute [N] or per kg [N/kg]; neither: the per-kg default (the
+    # paper's limits at its 683 kg, so a heavier car keeps the same acceleration margin); both:
+    # they must agree at the vehicle's mass (Config refuses an inconsistent pair before the run).
+    force_min: FiniteFloat | None = Field(
+        None, ge=-1e6, le=1e6,
+        description="F_xR lower saturation [N], within [-1e6, 1e6], absolute (does not follow the mass); "
+        "None = force_min_per_kg x mass (the paper presets: the published -2000 N)")
+    force_max: FiniteFloat | None = Field(
+        None, ge=-1e6, le=1e6,
+        description="F_xR upper saturation [N], within [-1e6, 1e6], absolute (does not follow the mass); "
+        "None = force_max_per_kg x mass (the paper presets: the published 10000 N)")
     delta_max: PositiveFloat = Field(math.radians(25.0), le=math.pi / 2,
                                      description="|δ| saturation [rad], (0, π/2]")
     force_min_per_kg: FiniteFloat | None = Field(
         None, ge=-100.0, le=0.0,
-        description="F_xR lower saturation per kg of vehicle mass [N/kg = m/s^2], [-100, 0]; "
-        "overrides force_min when set (limits that scale with the mass)")
+        description="F_xR lower saturation per kg of vehicle mass [N/kg = m/s^2], [-100, 0]; None "
+        "(and no force_min) = -2000 N / 683 kg = -2.928 N/kg (the paper's limit at its mass, "
+        "following the mass); with force_min too, both must agree at vehicle.mass")
     force_max_per_kg: FiniteFloat | None = Field(
         None, gt=0.0, le=100.0,
-        description="F_xR upper saturation per kg of vehicle mass [N/kg], (0, 100]; overrides force_max")
+        description="F_xR upper saturation per kg of vehicle mass [N/kg], (0, 100]; None (and no "
+        "force_max) = 10000 N / 683 kg = 14.64 N/kg (the paper's limit at its mass, following the "
+        "mass); with force_max too, both must agree at vehicle.mass")
     friction_compensation: StrictBool = Field(True, description="add F̂_fr to the force command")
     friction_estimate: FrictionEstimate = Field(
         FrictionEstimate.WINDOW, description="compensated F̂_fr: MHE window fit or the paper's UIO formula"
@@ -618,7 +643,8 @@ class LQRSettings(_Frozen):
 
     @model_validator(mode="after")
     def _check(self) -> LQRSettings:
-        _interval(self.force_min, self.force_max, "force_min/force_max")
+        if self.force_min is not None and self.force_max is not None:
+            _interval(self.force_min, self.force_max, "force_min/force_max")
         if self.initial_filter_state is not None:
             _within(self.initial_filter_state[:1], "initial_filter_state[F]", -1e6, 1e6, "N")
             _within(self.initial_filter_state[1:], "initial_filter_state[σ]", -math.pi, math.pi, "rad")
@@ -634,9 +660,11 @@ class LQRSettings(_Frozen):
         return self
 
     def force_limits(self, vehicle: VehicleParams) -> tuple[float, float]:
-        """(F_min, F_max) [N] for ``vehicle``: the per-kg limits × its mass where set."""
-        lo = self.force_min if self.force_min_per_kg is None else self.force_min_per_kg * vehicle.mass
-        hi = self.force_max if self.force_max_per_kg is None else self.force_max_per_kg * vehicle.mass
+        """(F_min, F_max) [N] for ``vehicle``: the per-kg limits × its mass where set, else the
+        absolute ones where set, else the per-kg defaults × its mass (at the paper's 683 kg exactly
+        the published -2000 N and 10000 N)."""
+        lo = _force_bound(self.force_min, self.force_min_per_kg, DEFAULT_FORCE_MIN_PER_KG, vehicle.mass)
+        hi = _force_bound(self.force_max, self.force_max_per_kg, DEFAULT_FORCE_MAX_PER_KG, vehicle.mass)
         if not lo < hi:
             raise ConfigError(f"lqr: force limits for a {vehicle.mass:g} kg vehicle give "
                               f"F_min = {lo:g} N >= F_max = {hi:g} N")
@@ -1005,6 +1033,22 @@ class Config(_Frozen):
             raise ConfigError(f"mhe.N * rates.Td = {t_mhe:g} s: the MHE window must be <= 10 s")
         return self
 
+    @model_validator(mode="after")
+    def _force_pairs(self) -> Config:
+        # Before the run: a bound given both absolute and per kg must agree at this vehicle's mass
+        # (else which one the car has is a guess), and the limits must leave F_min < F_max.
+        m = self.vehicle.mass
+        for side, absolute, per_kg in (("min", self.lqr.force_min, self.lqr.force_min_per_kg),
+                                       ("max", self.lqr.force_max, self.lqr.force_max_per_kg)):
+            if absolute is not None and per_kg is not None and not math.isclose(
+                    absolute, per_kg * m, rel_tol=1e-9, abs_tol=1e-6):
+                raise ConfigError(
+                    f"lqr.force_{side} = {absolute:g} N and lqr.force_{side}_per_kg = {per_kg:g} N/kg "
+                    f"disagree for a {m:g} kg vehicle ({per_kg * m:g} N): set one of them (per kg "
+                    "follows vehicle.mass, absolute does not)")
+        self.lqr.force_limits(self.vehicle)
+        return self
+
     @classmethod
     def preset(cls, name: str) -> Config:
         """A named configuration (:data:`PRESETS`): ``"default"`` (our best cascade),
@@ -1040,8 +1084,9 @@ PRESETS: dict[str, dict[str, Any]] = {
     # reference gain, friction compensation with the paper's UIO formula (P-disturb_estimation),
     # no speed-error feedback, the body-frame kinematic error model against the reference heading
     # as given (no slip-aware loop, no tangent heading). The weights are the paper's already.
+    # Its force limits are the published absolute [-2000, 10000] N (they do not follow the mass).
     "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio", "low_speed_resistance": False,
-                      "friction_step": False},
+                      "friction_step": False, "force_min": -2000.0, "force_max": 10000.0},
               "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False},
               "fusion": _FUSION_OFF, "recovery": {"enabled": False}},
     # The paper as it was run (the published run): the ``paper`` preset plus every quirk of the published
@@ -1055,7 +1100,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         # converges to without objective, in any units)
         "dynamic_lmi": {"formulation": "feasibility-euler", "feasible_point": "analytic-center"},
         "lqr": {"speed_feedback": False, "friction_estimate": "uio", "low_speed_resistance": False,
-                "friction_step": False,
+                "friction_step": False, "force_min": -2000.0, "force_max": 10000.0,  # published, absolute
                 "friction_compensation": False,  # the force command was the clipped LQR output
                 "true_state_feedback": True,  # the inner law on the true states; MHE unused
                 "law": "as-run", "steering_bias_rad": 0.5236, "scheduling_speed_shift": 2.0,

@@ -11,6 +11,12 @@ resamples it in time. :func:`retime_for_force_budget` takes the limit from the f
 ``a(v) = (η F_max − μ M g − ½ρC_dA_r v²)/M`` with the headroom η (90 %: the inner loop keeps room
 for its feedback) and, for a plant whose rear tyre has a friction ellipse, a traction of at most
 η μ_t F_zR (the grip of the driven axle).
+
+Capping a plan the vehicle cannot drive (issue 36, :mod:`tsmpc.planning.feasibility`): ``retime``
+also takes a speed cap per sample (the lateral cap ``v ≤ sqrt(a_lat/|κ|)`` of
+:func:`lateral_speed_cap`) and a deceleration limit (:func:`braking_budget_deceleration`): the cap
+first, then the forward pass, then a backward pass ``w_k = min(w_k, sqrt(w_{k+1}² + 2 d(w_{k+1})
+Δs_{k+1}))`` that brakes before a capped corner instead of arriving too fast.
 """
 
 from __future__ import annotations
@@ -23,28 +29,35 @@ from tsmpc.config import LQRSettings, TyreParams, VehicleParams
 from tsmpc.errors import ConfigError
 from tsmpc.planning.reference import Reference
 
-__all__ = ["FORCE_HEADROOM", "force_budget_acceleration", "retime", "retime_for_force_budget"]
+__all__ = ["FORCE_HEADROOM", "braking_budget_deceleration", "force_budget_acceleration",
+           "lateral_speed_cap", "path_curvature", "retime", "retime_for_force_budget"]
 
 #: Share of the upper force limit a re-timed reference may use for acceleration and resistance.
 FORCE_HEADROOM = 0.9
 
 
+def _rear_grip_mu(tyre: TyreParams, mu_road: float) -> float:
+    """The driven (rear) tyre's peak μ on a road of ``mu_road`` (scaled when grip follows the road)."""
+    return mu_road * tyre.mu_tyre / tyre.mu_dry if tyre.scale_grip_with_road else tyre.mu_tyre
+
+
 def force_budget_acceleration(vehicle: VehicleParams, lqr: LQRSettings, mu_road: float,
-                              headroom: float = FORCE_HEADROOM, tyre: TyreParams | None = None
-                              ) -> Callable[[float], float]:
+                              headroom: float = FORCE_HEADROOM, tyre: TyreParams | None = None,
+                              limits_vehicle: VehicleParams | None = None) -> Callable[[float], float]:
     """a(v) [m/s²]: what ``headroom`` × the upper force limit leaves for acceleration at speed v
     against the road resistance μ(road) M g and the drag; with a ``tyre`` that has
     ``combined_slip``, also at most ``headroom`` × the rear tyre's grip μ_t F_zR as traction.
+    ``limits_vehicle``: the vehicle whose mass per-kg force limits follow (the controllers' one,
+    which applies the saturation; default ``vehicle``).
     Raises :class:`ConfigError` when nothing is left at standstill."""
-    f_max = headroom * lqr.force_limits(vehicle)[1]
+    f_max = headroom * lqr.force_limits(limits_vehicle or vehicle)[1]
     res = mu_road * vehicle.mass * vehicle.g
     if f_max <= res:
         raise ConfigError(f"scenario: a {vehicle.mass:g} kg vehicle needs {res:.0f} N against "
                           f"mu(road) = {mu_road:g}, more than {headroom:g} x its force limit")
     traction = f_max - res
     if tyre is not None and tyre.combined_slip:
-        mu_t = mu_road * tyre.mu_tyre / tyre.mu_dry if tyre.scale_grip_with_road else tyre.mu_tyre
-        traction = min(traction, headroom * mu_t * vehicle.static_loads[1])
+        traction = min(traction, headroom * _rear_grip_mu(tyre, mu_road) * vehicle.static_loads[1])
     d, m = vehicle.drag_factor, vehicle.mass
 
     def a(v: float) -> float:
@@ -53,20 +66,65 @@ def force_budget_acceleration(vehicle: VehicleParams, lqr: LQRSettings, mu_road:
     return a
 
 
-def retime(ref: Reference, a_max: Callable[[float], float]) -> Reference:
+def braking_budget_deceleration(vehicle: VehicleParams, lqr: LQRSettings, mu_road: float,
+                                headroom: float = FORCE_HEADROOM, tyre: TyreParams | None = None,
+                                limits_vehicle: VehicleParams | None = None) -> Callable[[float], float]:
+    """d(v) > 0 [m/s²]: the deceleration ``headroom`` × the lower force limit gives at speed v with
+    the road resistance μ(road) M g and the drag helping (pass the *lowest* μ(road) of the run:
+    the least help); with a ``tyre`` that has ``combined_slip``, the rear tyre's braking is at most
+    ``headroom`` × its grip μ_t F_zR. ``limits_vehicle`` as in :func:`force_budget_acceleration`."""
+    brake = headroom * max(-lqr.force_limits(limits_vehicle or vehicle)[0], 0.0)
+    res = mu_road * vehicle.mass * vehicle.g
+    if tyre is not None and tyre.combined_slip:  # the tyre transmits F_xR − F_res: brake + res
+        grip = headroom * _rear_grip_mu(tyre, mu_road) * vehicle.static_loads[1]
+        brake, res = min(brake + res, grip), 0.0
+    d, m = vehicle.drag_factor, vehicle.mass
+
+    def dec(v: float) -> float:
+        return (brake + res + d * v * v) / m
+
+    return dec
+
+
+def path_curvature(ref: Reference) -> np.ndarray:
+    """κ [1/m] of each sample: ω/v where the reference moves (v > 0.1 m/s), else its own κ."""
+    v = np.asarray(ref.v, dtype=float)
+    return np.where(v > 0.1, np.asarray(ref.omega) / np.maximum(v, 0.1), np.asarray(ref.kappa))
+
+
+def lateral_speed_cap(ref: Reference, a_lat: float) -> np.ndarray:
+    """The speed [m/s] at which each sample's curvature κ gives the lateral acceleration ``a_lat``:
+    ``sqrt(a_lat / |κ|)`` (inf on a straight)."""
+    k = np.abs(path_curvature(ref))
+    with np.errstate(divide="ignore"):
+        return np.where(k > 1e-9, np.sqrt(a_lat / np.maximum(k, 1e-12)), np.inf)
+
+
+def retime(ref: Reference, a_max: Callable[[float], float], v_cap: np.ndarray | None = None,
+           d_max: Callable[[float], float] | None = None) -> Reference:
     """``ref``'s path with its speed profile lowered where accelerating from sample k−1 to k would
     need more than ``a_max(speed)``; resampled at ``ref.dt`` (the result is longer in time). A
-    reference that already complies is returned unchanged. Closed laps are re-timed cyclically."""
+    reference that already complies is returned unchanged. Closed laps are re-timed cyclically.
+
+    ``v_cap`` (n,): a speed cap per sample applied first (:func:`lateral_speed_cap`); ``d_max``:
+    a deceleration limit for a backward pass after the forward one, so the speed comes down to a
+    cap before it (without it, the original's braking is kept: w only meets v from below)."""
     x, y = np.asarray(ref.x), np.asarray(ref.y)
     v = np.maximum(np.asarray(ref.v, dtype=float), 0.0)
     n = v.size
     # ds[k]: the step into sample k (ds[0]: from the last sample, a closed lap's wrap)
     ds = np.hypot(np.diff(x, prepend=x[-1]), np.diff(y, prepend=y[-1]))
-    w = v.copy()
+    top = v if v_cap is None else np.minimum(v, np.maximum(np.asarray(v_cap, dtype=float), 0.0))
+    w = top.copy()
     order = [k % n for k in range(1, 2 * n)] if ref.closed else list(range(1, n))
     for k in order:  # a closed lap twice round, so its start sees the end of the lap
         prev = w[k - 1]
-        w[k] = min(v[k], float(np.sqrt(prev * prev + 2.0 * a_max(prev) * ds[k])))
+        w[k] = min(top[k], float(np.sqrt(prev * prev + 2.0 * a_max(prev) * ds[k])))
+    if d_max is not None:  # backward: w_k may exceed w_{k+1} by what braking over Δs_{k+1} takes off
+        back = [k % n for k in range(2 * n - 2, -1, -1)] if ref.closed else list(range(n - 2, -1, -1))
+        for k in back:
+            nxt = w[(k + 1) % n]
+            w[k] = min(w[k], float(np.sqrt(nxt * nxt + 2.0 * d_max(nxt) * ds[(k + 1) % n])))
     if np.all(w >= v - 1e-9):
         return ref
     # Time of each step: the original T where neither end changed (so the unchanged stretches keep
@@ -78,7 +136,7 @@ def retime(ref: Reference, a_max: Callable[[float], float]) -> Reference:
     tau = np.concatenate([[0.0], np.cumsum(step)])
     m = int(np.floor(tau[-1] / dt + 1e-9)) + 1
     t_new = np.arange(m) * dt
-    kappa = np.where(v > 0.1, np.asarray(ref.omega) / np.maximum(v, 0.1), np.asarray(ref.kappa))
+    kappa = path_curvature(ref)
     vv = np.interp(t_new, tau, w)
     out = Reference(ref.t[0] + t_new, np.interp(t_new, tau, x), np.interp(t_new, tau, y),
                     np.interp(t_new, tau, np.asarray(ref.theta)), vv, np.interp(t_new, tau, kappa) * vv,
@@ -87,7 +145,9 @@ def retime(ref: Reference, a_max: Callable[[float], float]) -> Reference:
 
 
 def retime_for_force_budget(ref: Reference, vehicle: VehicleParams, lqr: LQRSettings,
-                            mu_road: float, tyre: TyreParams | None = None) -> Reference:
+                            mu_road: float, tyre: TyreParams | None = None,
+                            limits_vehicle: VehicleParams | None = None) -> Reference:
     """:func:`retime` with :func:`force_budget_acceleration` of ``vehicle`` (and ``tyre``) at
-    ``mu_road``."""
-    return retime(ref, force_budget_acceleration(vehicle, lqr, mu_road, tyre=tyre))
+    ``mu_road``, the force limits those of ``limits_vehicle`` (default ``vehicle``)."""
+    return retime(ref, force_budget_acceleration(vehicle, lqr, mu_road, tyre=tyre,
+                                                 limits_vehicle=limits_vehicle))

@@ -211,7 +211,7 @@ def control_figure(logs: dict[str, RunLog], cfg: Config | None = None) -> Figure
         axs[1, 1].plot(log.t_outer, log.u_c[:, 1], lw=0.9, label=name, **so)
     lq, mpc = cfg.lqr, cfg.mpc
     limits = [
-        (axs[0, 0], (lq.force_min, lq.force_max), "F_xR saturation"),
+        (axs[0, 0], lq.force_limits(cfg.vehicle), "F_xR saturation"),
         (axs[1, 0], (-np.degrees(lq.delta_max), np.degrees(lq.delta_max)), "δ saturation"),
         (axs[0, 1], (mpc.u_min[0], mpc.u_max[0]), "MPC bound"),
         (axs[1, 1], (mpc.u_min[1], mpc.u_max[1]), "MPC bound"),

@@ -86,7 +86,7 @@ def commonroad_config(cfg: Config, vehicle_id: int = 2) -> Config:
                                             mu_nominal=cfg.vehicle.mu_nominal)
     lo, hi = cfg.lqr.force_limits(cfg.vehicle)
     m = cfg.vehicle.mass
-    lqr = replace(cfg.lqr, force_min_per_kg=lo / m, force_max_per_kg=hi / m)
+    lqr = replace(cfg.lqr, force_min=None, force_max=None, force_min_per_kg=lo / m, force_max_per_kg=hi / m)
     return replace(cfg, vehicle=vehicle, lqr=lqr)
 
 
