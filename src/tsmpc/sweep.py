@@ -724,6 +724,12 @@ def _verdict(prep: _Prepared, log: Any) -> tuple[dict[str, Any], str, str]:
         problem = health_problem(metrics)  # completed, but the controller did not work
         if problem:
             status, reason = "degraded", problem
+        else:
+            from tsmpc.sim.health import degradation
+
+            problem = degradation(metrics, log, prep.cfg)  # or the car could not do it (issue 36)
+            if problem:
+                status, reason = "degraded", problem
     return metrics, status, reason
 
 

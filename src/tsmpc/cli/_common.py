@@ -1,9 +1,10 @@
 """Helpers shared by the CLI commands: config loading, error reporting, output-folder checks,
 interrupts and the status line shown while LMI designs are solved.
 
-Exit codes (README "Exit codes"): 0 done, 1 a run diverged or failed, 2 invalid input (reported
-before any work starts; also a configuration no LMI design exists for), 128 + signal number when
-interrupted (130 SIGINT, 143 SIGTERM).
+Exit codes (docs/outputs.md "Exit codes"): 0 done, 1 a run diverged or failed, 2 invalid input
+(reported before any work starts; also a configuration no LMI design exists for), 3 a run completed
+but degraded (tsmpc.sim.health.degradation), 128 + signal number when interrupted (130 SIGINT,
+143 SIGTERM).
 
 Mechanisms against hostile inputs and environments (issue 24):
 
@@ -41,6 +42,7 @@ from tsmpc.config import Config, load_config
 from tsmpc.errors import ConfigError, DesignError, TsmpcError
 
 __all__ = [
+    "EXIT_DEGRADED",
     "EXIT_FAILED",
     "EXIT_INVALID",
     "MAX_LAPS",
@@ -76,6 +78,9 @@ __all__ = [
 EXIT_INVALID = 2
 #: Exit code of a run that failed (diverged, a write failed, an unexpected error).
 EXIT_FAILED = 1
+#: Exit code of a run that completed beyond its health bounds (tsmpc.sim.health.degradation):
+#: its results are written, but the car could not do what the plan asked.
+EXIT_DEGRADED = 3
 #: File left in an output folder whose run did not finish (interrupted or in progress).
 PARTIAL_MARKER = "PARTIAL"
 #: Most characters of one error message (a 10 MB name is not echoed back).

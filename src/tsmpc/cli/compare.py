@@ -11,6 +11,7 @@ import typer
 
 from tsmpc.cli._app import app
 from tsmpc.cli._common import (
+    EXIT_DEGRADED,
     PARTIAL_MARKER,
     check_environment,
     check_interrupted,
@@ -129,7 +130,7 @@ def _execute(
     seed: int | None,
     config: Path | None, no_plots: bool, oracle: bool, duration: float | None, robustness: str = "nominal",
     overwrite: bool = False, preset: str | None = None,
-    laps: int = 1, dt: float | None = None, strict_box: bool = False,
+    laps: int = 1, dt: float | None = None, strict_box: bool = False, strict_plan: bool = False,
     plant: str = "tsmpc", cr_vehicle: int = 2, command: str = "compare",
     sets: list[str] | None = None, mat: bool = False,
 ) -> None:
@@ -178,7 +179,8 @@ def _execute(
         exp = experiment.prepare(
             cfg, methods, reference=reference,
             window=_parse_window(window), laps=laps, dt=dt, robustness=robustness, duration=duration,
-            seed=seed, plant=plant, cr_vehicle=cr_vehicle, strict_box=strict_box, oracle=oracle)
+            seed=seed, plant=plant, cr_vehicle=cr_vehicle, strict_box=strict_box, oracle=oracle,
+            strict_plan=strict_plan)
     except (TsmpcError, OSError) as err:
         fail(err)
     check_scenario_options(exp.scenario, reference=reference, laps=laps, plant=plant)
@@ -204,6 +206,8 @@ def _execute(
     check_out_dir(out, overwrite=overwrite)
     if exp.envelope.widened:
         console.print(exp.envelope.message, markup=False, highlight=False)
+    if exp.plan_note:  # the plan exceeded the vehicle's limits: capped (or the published one, exempt)
+        console.print(exp.plan_note, markup=False, highlight=False)
 
     # Every ending that is not success is one line, a non-zero exit and PARTIAL saying why
     # (interrupted, no design for this config: exit 2, a failed write, an unexpected error).
@@ -249,6 +253,12 @@ def _execute(
     bad = [n for n, m in result.metrics["methods"].items() if m["termination"] != "completed"]
     if bad:
         raise typer.Exit(1)
+    degraded = [f"{n}: {m['degraded']}" if len(result.metrics["methods"]) > 1 else m["degraded"]
+                for n, m in result.metrics["methods"].items() if m.get("status") == "degraded"]
+    if degraded:  # results written; the car could not do what the plan asked (one line, exit 3)
+        with contextlib.suppress(OSError, ValueError):
+            typer.secho("; ".join(degraded), err=True, fg=typer.colors.YELLOW)
+        raise typer.Exit(EXIT_DEGRADED)
 
 
 def _unhealthy(metrics: dict[str, Any]) -> list[str]:
@@ -365,6 +375,9 @@ _PRESET_HELP = ("Named configuration under --config: 'default' (our best cascade
                 "'paper-as-run' (the published run's quirks: not a recommendation).")
 _STRICT_HELP = ("Refuse a reference that leaves the designs' scheduling boxes (default: widen the boxes "
                 "by a margin and re-solve and re-certify the designs, cached).")
+_STRICT_PLAN_HELP = ("Refuse a reference whose lateral acceleration or acceleration exceeds the "
+                     "vehicle's grip or force budget (with their margins; docs/planning.md) instead of "
+                     "capping its speed profile along the same path.")
 _DT_HELP = ("Column period [s] of a paper-format file (default: measured from the data; a value the "
             "data contradict is refused).")
 _LAPS_HELP = "Laps of a closed track (a planned track CSV); the look-ahead wraps around the lap."
@@ -388,6 +401,7 @@ _OPT_PRESET = typer.Option(None, "--preset", help=_PRESET_HELP)
 _OPT_LAPS = typer.Option(1, "--laps", min=1, help=_LAPS_HELP)
 _OPT_DT = typer.Option(None, "--dt", help=_DT_HELP)
 _OPT_STRICT = typer.Option(False, "--strict-box", help=_STRICT_HELP)
+_OPT_STRICT_PLAN = typer.Option(False, "--strict-plan", help=_STRICT_PLAN_HELP)
 _OPT_PLANT = typer.Option("tsmpc", "--plant", help=_PLANT_HELP)
 _OPT_CR_VEHICLE = typer.Option(2, "--cr-vehicle", help="CommonRoad parameter set (1, 2, 3).")
 _OPT_OVERWRITE = typer.Option(False, "--overwrite", help="Write into a non-empty --out folder, "
@@ -419,6 +433,7 @@ def compare_cmd(
     laps: int = _OPT_LAPS,
     dt: float | None = _OPT_DT,
     strict_box: bool = _OPT_STRICT,
+    strict_plan: bool = _OPT_STRICT_PLAN,
     plant: str = _OPT_PLANT,
     cr_vehicle: int = _OPT_CR_VEHICLE,
     sets: list[str] | None = _OPT_SET,
@@ -449,6 +464,7 @@ def run_cmd(
     laps: int = _OPT_LAPS,
     dt: float | None = _OPT_DT,
     strict_box: bool = _OPT_STRICT,
+    strict_plan: bool = _OPT_STRICT_PLAN,
     plant: str = _OPT_PLANT,
     cr_vehicle: int = _OPT_CR_VEHICLE,
     sets: list[str] | None = _OPT_SET,

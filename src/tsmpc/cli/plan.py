@@ -18,6 +18,8 @@ if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
+    from tsmpc.planning.reference import Reference
+
 __all__ = ["OutputFormat"]
 
 
@@ -56,8 +58,13 @@ def plan(
     fmt: OutputFormat = typer.Option(OutputFormat.csv, "--format",
                                      help="csv: t,x,y,theta,v,omega,kappa rows; paper: 6-row format."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing --out file."),
+    strict_plan: bool = typer.Option(False, "--strict-plan", help="Refuse a plan whose lateral "
+                                     "acceleration or acceleration exceeds the default vehicle's grip or "
+                                     "force budget (with their margins; docs/planning.md) instead of "
+                                     "capping its speed profile along the same path."),
 ) -> None:
-    """Plan a smooth reference (continuous curvature, limited speed profile) from a track or waypoints."""
+    """Plan a smooth reference (continuous curvature, limited speed profile) from a track or waypoints;
+    a plan beyond the default vehicle's grip or force budget is capped (one line says so)."""
     from pydantic import ValidationError
 
     from tsmpc.config import PlannerSettings
@@ -96,6 +103,9 @@ def plan(
         else:
             wp, cap = _read_waypoints(source)
             ref = plan_path(wp, settings, closed=is_closed, dt=dt, laps=laps, tail_s=tail, v_cap=cap)
+        ref, limit, note = _feasible(ref, strict_plan)  # before writing: capped, or refused (--strict-plan)
+        if note:
+            meta["plan_capped"] = limit.replace(" ", "_")
         if fmt is OutputFormat.paper:
             save_paper_format(ref, out)
         else:
@@ -107,7 +117,20 @@ def plan(
         fail(f"--out {out}: cannot write ({err.strerror or err})")
     typer.echo(f"{out}: {len(ref)} samples, {ref.duration:.1f} s, max v {ref.v.max():.2f} m/s, "
                f"max |omega| {abs(ref.omega).max():.3f} rad/s")
+    if note:
+        typer.secho(note, err=True, fg=typer.colors.YELLOW)
     _warn_envelope(ref)
+
+
+def _feasible(ref: Reference, strict: bool) -> tuple[Reference, str, str]:
+    """The plan checked against the default vehicle (:func:`tsmpc.planning.feasibility.feasible_plan_for`):
+    (the capped plan, the limit, one line) or (the plan, "", "") when it is within the limits;
+    ``strict`` refuses it (a ConfigError naming the limit: exit 2)."""
+    from tsmpc.config import Config
+    from tsmpc.planning.feasibility import feasible_plan_for
+
+    out, check, line = feasible_plan_for(Config(), ref, strict=strict)
+    return out, check.limit, line
 
 
 def _names_folder(text: str) -> bool:

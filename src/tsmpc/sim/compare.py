@@ -177,6 +177,8 @@ def compare(
     ``designs``: the (kinematic, dynamic) LMI designs of ``cfg`` when the caller has them
     (default: the design cache). A run that stops early (|e_y| beyond the scenario's bound,
     non-finite plant) has ``status`` ``"diverged"``; ``metrics["diverged"]`` lists those methods.
+    One that completed beyond the health bounds (:func:`tsmpc.sim.health.degradation`) has
+    ``status`` ``"degraded"`` and the cause in ``"degraded"``; ``metrics["degraded"]`` lists them.
     Interrupted (KeyboardInterrupt, which the CLI raises for SIGINT and SIGTERM), the methods that
     had finished are written (without figures; ``metrics["interrupted"]`` names them and the ones
     that did not finish) before the interrupt propagates. ``mat``: also write the time series as
@@ -228,9 +230,15 @@ def _metrics(cfg: Config, scenario: Scenario, logs: dict[str, RunLog], max_steps
             e = abs(log.errors[:, 1])
             metrics["methods"][name]["max_abs_lateral_per_lap_m"] = [
                 float(e[i:i + lap_len].max()) for i in range(0, e.size, lap_len)]
-    for m in metrics["methods"].values():  # any early stop (|e_y| bound, plant blew up) diverged
+    from tsmpc.sim.health import degradation
+
+    for name, m in metrics["methods"].items():  # any early stop (|e_y| bound, plant blew up) diverged
         m["status"] = "completed" if m["termination"] == "completed" else "diverged"
+        problem = degradation(m, logs[name], cfg) if m["status"] == "completed" else None
+        if problem:  # completed, but beyond the car: saturated most of the time, errors past the bounds
+            m["status"], m["degraded"] = "degraded", problem
     metrics["diverged"] = [n for n, m in metrics["methods"].items() if m["status"] == "diverged"]
+    metrics["degraded"] = [n for n, m in metrics["methods"].items() if m["status"] == "degraded"]
     ref_m = metrics["methods"].get("REF")
     if ref_m:
         for m in metrics["methods"].values():

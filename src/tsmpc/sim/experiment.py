@@ -36,7 +36,8 @@ from tsmpc.sim.compare import CompareResult, FigureFn, ProgressFactory, compare,
 from tsmpc.sim.plant import Plant
 from tsmpc.sim.simulator import Scenario
 
-__all__ = ["PLANTS", "Experiment", "StatusFn", "prepare", "run", "solve_designs"]
+__all__ = ["PLANTS", "PUBLISHED_EXEMPT", "Experiment", "StatusFn", "check_plan_limits", "prepare", "run",
+           "solve_designs"]
 
 #: One line of progress for the user (design solving, kernel compilation).
 StatusFn = Callable[[str], None]
@@ -58,6 +59,8 @@ class Experiment:
         cr_vehicle: CommonRoad parameter set (1, 2, 3) of a CommonRoad plant.
         oracle: the inner loop gets the true state (the ablation; no friction compensation).
         max_steps: track only the first ``max_steps`` MPC steps (None: the whole reference).
+        plan_note: one line when the reference exceeded the vehicle's limits (capped, or exempt:
+            :func:`tsmpc.planning.feasibility.feasible_plan`); "" when it is within them.
     """
 
     config: Config
@@ -68,6 +71,7 @@ class Experiment:
     cr_vehicle: int = 2
     oracle: bool = False
     max_steps: int | None = None
+    plan_note: str = ""
 
     def plant_factory(self) -> Callable[[], Plant] | None:
         """A fresh plant per method (None: tsmpc's own, built by the simulator)."""
@@ -94,6 +98,7 @@ def prepare(
     cr_vehicle: int = 2,
     strict_box: bool = False,
     oracle: bool = False,
+    strict_plan: bool = False,
 ) -> Experiment:
     """Validate every input and assemble the experiment; nothing is solved or written.
 
@@ -101,7 +106,9 @@ def prepare(
     a path, or a dataset name (``"paper"``: :func:`tsmpc.datasets.resolve`);
     ``window`` 1-based (FIRST, LAST) columns/rows; ``duration`` [s] tracks only the first part;
     ``robustness`` a named scenario of :mod:`tsmpc.robustness`; ``strict_box`` refuses a
-    reference beyond the designs' boxes instead of widening them.
+    reference beyond the designs' boxes instead of widening them; ``strict_plan`` refuses a
+    reference beyond the vehicle's grip or force budget instead of capping its speed profile
+    (:func:`check_plan_limits`).
 
     Raises :class:`~tsmpc.errors.TsmpcError` (a ``ValueError``) naming the bad input.
     """
@@ -130,12 +137,45 @@ def prepare(
         raise ConfigError(f"unknown plant {plant!r}; allowed: {', '.join(PLANTS)}")
     if name != "tsmpc":
         cfg, scenario = _commonroad_setup(name, cr_vehicle, cfg, scenario)
+    scenario, plan_note = check_plan_limits(cfg, scenario, strict=strict_plan)
     fit = fit_envelope(cfg, scenario.reference, strict=strict_box)
     if fit.widened:
         scenario = dc_replace(scenario, meta={
             **scenario.meta, "envelope_widened": sorted({s.field for s in fit.widened})})
     max_steps = None if duration is None else max(1, round(duration / fit.config.rates.Tc))
-    return Experiment(fit.config, scenario, parsed, fit, name, cr_vehicle, oracle, max_steps)
+    return Experiment(fit.config, scenario, parsed, fit, name, cr_vehicle, oracle, max_steps, plan_note)
+
+
+#: Why the published reference is tracked as it is (:func:`check_plan_limits`).
+PUBLISHED_EXEMPT = ("the published reference, the benchmark of the paper's Table 5 (its v row "
+                    "jumps in single samples)")
+
+
+def check_plan_limits(cfg: Config, scenario: Scenario, *, strict: bool = False) -> tuple[Scenario, str]:
+    """(scenario, line): the reference checked against the vehicle's grip and force budget on the
+    scenario's μ(road) (:func:`tsmpc.planning.feasibility.feasible_plan`), before any work.
+    Beyond them it is capped (the line says how much and which limit; the scenario's meta records
+    it), or with ``strict`` refused (:class:`ConfigError`). The published reference is exempt
+    (:data:`PUBLISHED_EXEMPT`); the line says so when it exceeds them.
+
+    The check uses what the controllers know: the config's vehicle and tyre (μ_tyre), with the
+    road the scenario declares — its μ(road) profile, and whether the tyre has a friction ellipse
+    or its grip follows the road. A plant that differs from the config (``scenario.plant`` scales
+    and μ_tyre) is the mismatch an experiment measures, not a planning input
+    (``scenario.replan_for_force_budget`` plans for it, explicitly)."""
+    from tsmpc.planning.feasibility import feasible_plan
+
+    exempt = PUBLISHED_EXEMPT if scenario.meta.get("paper_reference") else ""
+    road = scenario.plant_tyre or cfg.tyre
+    tyre = replace(cfg.tyre, model=road.model, combined_slip=road.combined_slip,
+                   scale_grip_with_road=road.scale_grip_with_road, mu_dry=road.mu_dry)
+    ref, check, line = feasible_plan(scenario.reference, cfg.vehicle, tyre, cfg.lqr, scenario.friction,
+                                     strict=strict, exempt=exempt)
+    if ref is scenario.reference:
+        return scenario, line
+    meta = {**scenario.meta, "plan_capped": {"limit": check.limit, "ratio": round(check.ratio, 4),
+                                             "duration_s": [scenario.reference.duration, ref.duration]}}
+    return dc_replace(scenario, reference=ref, meta=meta), line
 
 
 def _commonroad_setup(name: str, vid: int, cfg: Config, scenario: Scenario) -> tuple[Config, Scenario]:

@@ -1,0 +1,134 @@
+"""A plan the vehicle cannot drive is capped (one line) or, with --strict-plan, refused before any
+work (issue 36 item 2; tsmpc.planning.feasibility)."""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from _paths import circle_window
+from tsmpc.cli import app
+from tsmpc.config import Config
+from tsmpc.errors import ConfigError
+from tsmpc.planning.feasibility import GRIP_MARGIN, check_plan, feasible_plan
+from tsmpc.planning.reference import Reference
+from tsmpc.planning.retime import force_budget_acceleration, path_curvature
+from tsmpc.scenarios import paper_friction_profile
+from tsmpc.sim import experiment
+
+runner = CliRunner()
+R, V = 20.0, 14.0  # a 20 m circle at 14 m/s: 9.8 m/s² lateral, above 0.75 x 0.9 g = 6.6 m/s²
+
+
+def _circle(n: int = 300) -> Reference:
+    w = circle_window(R, V, 0.1, n, tangent_convention=False)
+    return Reference(np.arange(n) * 0.1, w.x, w.y, w.theta, w.v, w.omega, w.kappa)
+
+
+def _feasible(ref: Reference, cfg: Config, **kw: object) -> tuple[Reference, object, str]:
+    return feasible_plan(ref, cfg.vehicle, cfg.tyre, cfg.lqr, paper_friction_profile(), **kw)  # type: ignore[arg-type]
+
+
+def test_lateral_grip_beyond_the_margin_is_capped_along_the_same_path(cfg: Config) -> None:
+    ref = _circle()
+    check = check_plan(ref, cfg.vehicle, cfg.tyre, cfg.lqr, paper_friction_profile())
+    a_lat = GRIP_MARGIN * cfg.tyre.mu_tyre * cfg.vehicle.g
+    assert check.limit == "lateral grip" and check.demand == pytest.approx(V * V / R)
+    assert check.allowed == pytest.approx(a_lat)
+    out, _, line = _feasible(ref, cfg)
+    assert "\n" not in line and line.startswith("plan capped") and "lateral grip" in line
+    lat = out.v * out.v * np.abs(path_curvature(out))
+    assert lat.max() <= a_lat * 1.01  # the resampling keeps peaks within a per cent (feasibility._TOL)
+    assert out.v.max() == pytest.approx(np.sqrt(a_lat * R), rel=1e-3)
+    # the same path: every capped sample lies on the circle, or on a chord between two of the
+    # original samples (linear resampling: the sagitta ds²/8R of a 1.4 m step)
+    assert np.abs(np.hypot(out.x, out.y - R) - R).max() <= (V * 0.1) ** 2 / (8 * R) * 1.01
+    assert check_plan(out, cfg.vehicle, cfg.tyre, cfg.lqr, paper_friction_profile()).ok
+
+
+def test_a_plan_within_the_limits_is_returned_unchanged_in_every_preset() -> None:
+    slow = _circle()
+    slow = Reference(slow.t, slow.x, slow.y, slow.theta, slow.v * 0.5, slow.omega * 0.5, slow.kappa)
+    for preset in ("default", "paper", "paper-as-run"):
+        c = Config.preset(preset)
+        out, check, line = _feasible(slow, c)
+        assert out is slow and check.ok and line == ""  # type: ignore[attr-defined]
+
+
+def test_strict_refuses_naming_the_limit(cfg: Config) -> None:
+    with pytest.raises(ConfigError, match=re.escape("lateral grip: lateral acceleration 9.80 m/s² > 6.62")):
+        _feasible(_circle(), cfg, strict=True)
+
+
+def test_acceleration_beyond_the_force_budget_is_capped(cfg: Config) -> None:
+    n = 200
+    v = np.minimum(1.0 + 6.0 * np.arange(n) * 0.1, 14.0)  # 6 m/s², the budget is 4.3
+    x = np.concatenate([[0.0], np.cumsum(v[1:] * 0.1)])
+    z = np.zeros(n)
+    ref = Reference(np.arange(n) * 0.1, x, z, z, v, z, z)
+    out, check, line = _feasible(ref, cfg)
+    assert check.limit == "force budget" and "force budget" in line  # type: ignore[attr-defined]
+    # at each speed at most the force budget on the run's highest mu(road) (the paper's 0.9 + 0.002)
+    a = force_budget_acceleration(cfg.vehicle, cfg.lqr, 0.902)
+    allowed = np.array([a(float(s)) for s in out.v[:-1]])
+    assert (np.diff(out.v) / out.dt <= allowed * 1.01).all()
+    assert out.v.max() == pytest.approx(14.0) and out.duration > ref.duration
+
+
+def test_the_published_reference_is_exempt(paper_reference_path: Path) -> None:
+    """Its single-sample speed jump (8 m/s² at 2.5 s) exceeds the force budget: tracked as published."""
+    exp = experiment.prepare(Config(), ["ref"], reference=paper_reference_path, duration=1.0)
+    assert "tracked as it is" in exp.plan_note and "force budget" in exp.plan_note
+    assert "plan_capped" not in exp.scenario.meta
+
+
+def _write(tmp_path: Path) -> Path:
+    path = tmp_path / "circle.csv"
+    _circle().to_csv(path)
+    return path
+
+
+def test_prepare_caps_and_records_it(tmp_path: Path) -> None:
+    exp = experiment.prepare(Config(), ["ref"], reference=_write(tmp_path))
+    assert exp.plan_note.startswith("plan capped") and "lateral grip" in exp.plan_note
+    assert exp.scenario.meta["plan_capped"]["limit"] == "lateral grip"
+    assert exp.scenario.reference.v.max() < V
+
+
+def test_run_strict_plan_refuses_before_any_work(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_work(*_a: object, **_k: object) -> None:
+        raise AssertionError("design or compile work before the plan check")
+
+    import tsmpc.cli.compare as cli_compare
+    from tsmpc import kernels
+
+    monkeypatch.setattr(cli_compare, "design_status", no_work)
+    monkeypatch.setattr(kernels, "warmup", no_work)
+    out = tmp_path / "out"
+    t0 = time.perf_counter()
+    res = runner.invoke(app, ["run", "--reference", str(_write(tmp_path)), "--strict-plan", "--no-plots",
+                              "--out", str(out)])
+    seconds = time.perf_counter() - t0
+    assert res.exit_code == 2, res.output
+    err = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(err) == 1 and "--strict-plan" in err[0] and "lateral grip" in err[0], res.output
+    assert not out.exists()
+    assert seconds < 10.0, seconds  # a refusal before the designs and kernels: no compile
+
+
+def test_plan_caps_with_one_line_or_refuses(tracks_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "zandvoort.csv"
+    args = ["plan", str(tracks_dir / "Zandvoort.csv"), "--out", str(out), "--v-max", "30", "--a-lat", "8"]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 0, res.output
+    capped = [ln for ln in res.output.splitlines() if "plan capped" in ln]
+    assert len(capped) == 1 and "lateral grip" in capped[0], res.output
+    ref = Reference.from_csv(out)
+    assert (ref.v**2 * np.abs(path_curvature(ref))).max() <= GRIP_MARGIN * 0.9 * 9.81 * 1.01
+    res = runner.invoke(app, [*args[:3], str(tmp_path / "strict.csv"), *args[4:], "--strict-plan"])
+    assert res.exit_code == 2 and "lateral grip" in res.output and not (tmp_path / "strict.csv").exists()
