@@ -994,6 +994,42 @@ class RecoverySettings(_Frozen):
         "takes them; within (0, 60]")
 
 
+class GripSource(StrEnum):
+    """Where the speed governor's grip comes from."""
+
+    ESTIMATE = "estimate"  #: the inner loop's friction estimate (and mass estimate)
+    ORACLE = "oracle"  #: the true mu(road) of the scenario (simulation only: the reference row)
+
+
+class GovernorSettings(_Frozen):
+    """The speed governor (issue 36; beyond the paper, off in the ``paper`` presets): the reference
+    is re-timed online so that the speed and curvature ahead need at most ``margin`` x the
+    estimated grip (tsmpc.control.governor)."""
+
+    enabled: _Flag = Field(False, description="re-time the reference online to the estimated grip")
+    margin: PositiveFloat = Field(
+        0.8, le=1.0, description="share of the estimated grip mu g the reference ahead may use "
+        "(lateral and driven-axle longitudinal acceleration combined) [-], (0, 1]")
+    traction_margin: PositiveFloat = Field(
+        0.5, le=1.0, description="share of the driven axle's grip the reference's own acceleration "
+        "may use [-], (0, 1]: the speed loop's transients ask about twice the reference's")
+    rate_down: PositiveFloat = Field(
+        0.15, le=10.0, description="fastest decrease of the governed rate dtau/dt [1/s], (0, 10]")
+    rate_up: PositiveFloat = Field(
+        0.05, le=10.0, description="fastest increase of the governed rate back to 1 [1/s], (0, 10]")
+    rate_min: PositiveFloat = Field(
+        0.3, le=1.0, description="the governed rate never goes below this [-], (0, 1]")
+    deadband: NonNegFloat = Field(
+        0.05, le=0.5, description="the governor acts only when the estimated grip is below "
+        "(1 - deadband) x tyre.mu_tyre, the grip the plan was made for [-], 0 to 0.5")
+    grip_time_constant_s: PositiveFloat = Field(
+        0.3, le=10.0, description="low-pass time constant of the grip estimate [s], (0, 10] "
+        "(falls at once below it: a lower estimate is taken within one MPC step)")
+    grip_source: GripSource = Field(
+        GripSource.ESTIMATE, description="'estimate' (the friction estimate of the inner loop) or "
+        "'oracle' (the scenario's true mu(road): the reference row, simulation only)")
+
+
 class Config(_Frozen):
     """Everything a run needs. ``Config()`` is the paper's setting."""
 
@@ -1014,6 +1050,7 @@ class Config(_Frozen):
     scenario: ScenarioSettings = ScenarioSettings()  # the conditions a run meets (issue 21)
     fusion: FusionSettings = FusionSettings()  # fusion and adaptation beyond the paper (issue 21)
     recovery: RecoverySettings = RecoverySettings()  # blind stop and recovery (issue 38)
+    governor: GovernorSettings = GovernorSettings()  # grip-aware speed governor (issue 36)
     seed: StrictInt = Field(0, ge=0, lt=2**63, description="seed of every random draw of a run, "
                             "0 to 2^63 - 1")
     divergence_bound_m: PositiveFloat = Field(

@@ -54,6 +54,7 @@ from tsmpc.control.gates import (
     plausible_speeds,
     pose_consistent,
 )
+from tsmpc.control.governor import Governor, GovernorParams, governed_window, grip_estimate, spin_grip
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep
@@ -263,6 +264,8 @@ class Cascade:
         # beyond the paper: the compensated friction may step within the MHE window
         self._friction_step = (FrictionStep(cfg.mhe.N, cfg.lqr.friction_step_threshold)
                                if cfg.lqr.friction_step else None)
+        self.governor = _build_governor(cfg) if cfg.governor.enabled else None  # issue 36
+        self.road_mu = math.nan  # governor.grip_source = "oracle": the true μ(road), set by the simulator
         self.reset(x0)
 
     # -------------------------------------------------------------------------- state
@@ -312,6 +315,9 @@ class Cascade:
         self._events["step_errors"] = 0
         self._events["repeated_rejected"] = 0  # fusion.reject_repeated_samples (issue 21)
         self._events["friction_steps"] = 0  # lqr.friction_step: steps of the friction detected
+        if self.governor is not None:  # the speed governor (governor.py): its actions
+            self.governor.reset()
+            self._events["governor_actions"] = self._events["governor_steps"] = 0
         self.last_error: str | None = None
 
     @property
@@ -578,8 +584,11 @@ class Cascade:
         if pose_ok:
             self._pose_held = self._pose.copy()
         p = self._pose if pose_ok or fs.predict_pose else self._pose_held
-        e_meas = self._outer_errors(p, min(k, len(self.reference) - 1))
-        window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
+        if self.governed:  # the reference at the governed time τ = t − offset (governor.py)
+            e_meas, window = self._governed(p, t)
+        else:
+            e_meas = self._outer_errors(p, min(k, len(self.reference) - 1))
+            window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
         t0 = time.perf_counter()
         try:
             plan = self.mpc.step(e_meas, self._u_prev, window)
@@ -592,24 +601,98 @@ class Cascade:
         ev["mpc_soft"] += plan.status == MPCStatus.SOFT
         ev["mpc_fallback"] += plan.status == MPCStatus.FALLBACK
         ev["mpc_scheduling_clipped"] += int(plan.n_clipped)
+        if self.governor is not None:
+            self._govern(t)
         return plan, e_meas, t_mpc
+
+    # ------------------------------------------------------------------ speed governor (issue 36)
+    @property
+    def governed(self) -> bool:
+        """True once the speed governor has slowed the reference (its time τ is then fractional)."""
+        g = self.governor
+        return g is not None and (g.actions > 0 or g.rate < 1.0)
+
+    def _govern(self, t: float) -> None:
+        """After an MPC step: the governor's rate for the next step from the grip estimate and the
+        reference ahead; the reference time offset advances by (1 − r) T_c (the offset the
+        recovery re-anchors, one clock)."""
+        gov, cfg, ref = self.governor, self.cfg, self.reference
+        assert gov is not None
+        veh = cfg.vehicle
+        mass = veh.mass
+        if cfg.fusion.mass_estimate:
+            mass += self._fusion.mass.delta_mass
+        grip_per_road = cfg.tyre.mu_tyre / cfg.tyre.mu_dry
+        if cfg.governor.grip_source == "oracle":
+            mu_road = self.road_mu
+        else:
+            last = self._last
+            # the friction estimate means nothing below the dynamic box's speeds (the resistance
+            # fades at standstill; the MHE starts up there) nor from a rejected or failed sample
+            usable = (last is not None and last.estimate.status == EstimatorStatus.OK
+                      and float(last.estimate.x[0]) >= cfg.dynamic_box.v[0])
+            F = float(last.estimate.F_fr) if usable and last is not None else math.nan
+            mu_road = grip_estimate(F, mass, veh.mu_nominal, veh.g, 1.0)
+        grip = mu_road * grip_per_road if math.isfinite(mu_road) else math.nan
+        last = self._last
+        if (mu_road > (1.0 + cfg.governor.deadband) * cfg.tyre.mu_dry and last is not None
+                and last.saturated):  # more resistance than any road under full drive: a spin
+            grip = spin_grip(float(self._u_applied[0]), mu_road, mass, veh.g, veh.a / veh.wheelbase)
+        f_max = self._force_limits[1]
+        mu_res = mu_road if math.isfinite(mu_road) else veh.mu_nominal
+        force_per_kg = (f_max - mu_res * mass * veh.g) / mass
+        k = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(ref) - 1)
+        w = ref.window(k, gov.preview + 1)
+        before = gov.actions
+        r = gov.step(grip, force_per_kg, np.asarray(w.v), np.asarray(w.omega))
+        self._events["governor_actions"] += int(gov.actions - before)
+        self._events["governor_steps"] += int(r < 1.0)
+        self._t_offset += (1.0 - r) * self.Tc
+
+    def reference_row(self, t: float) -> NDArray[np.float64]:
+        """[x_d, y_d, θ_d, v_d, ω_d] the cascade tracks at time ``t``: the reference at the governed
+        time (interpolated; v_d and ω_d times the governed rate) — the plan's sample when ungoverned."""
+        r = self.governor.rate if self.governor is not None else 1.0
+        w = governed_window(self.reference, t - self._t_offset, r, 1)
+        return np.array([w.x[0], w.y[0], w.theta[0], w.v[0], w.omega[0]])
+
+    def _governed(self, p: NDArray[np.float64], t: float) -> tuple[NDArray[np.float64], Reference]:
+        """The errors and the MPC's window at the governed time τ = t − offset, rate r."""
+        assert self.governor is not None
+        r, tau, N = self.governor.rate, t - self._t_offset, self.cfg.mpc.N
+        at = governed_window(self.reference, tau, r, 1)
+        x = tau / self.Tc
+        k0 = min(max(math.floor(x), 0), len(self.reference) - 2)
+        f = min(max(x - k0, 0.0), 1.0)
+        th_tan = (1.0 - f) * self._theta_tangent[k0] + f * self._theta_tangent[k0 + 1]
+        e = self._errors_against(p, float(at.x[0]), float(at.y[0]), float(at.theta[0]), float(th_tan),
+                                 float(at.v[0] * at.omega[0]))
+        return e, governed_window(self._mpc_reference, tau, r, N + 1)
 
     def _outer_errors(self, p: NDArray[np.float64], kk: int) -> NDArray[np.float64]:
         """The errors [e_x, e_y, e_θ] the MPC sees of pose ``p`` against reference sample ``kk``:
         body frame (the paper), or slip-aware against the tangent heading (slip_aware.py)."""
-        ref, mpc_cfg = self.reference, self.cfg.mpc
+        ref = self.reference
+        return self._errors_against(p, ref.x[kk], ref.y[kk], ref.theta[kk], self._theta_tangent[kk],
+                                    float(ref.v[kk] * ref.omega[kk]))
+
+    def _errors_against(self, p: NDArray[np.float64], x_d: float, y_d: float, th_d: float,
+                        th_tan: float, a_y: float) -> NDArray[np.float64]:
+        """:meth:`_outer_errors` against the reference pose (x_d, y_d, θ_d), its path's tangent
+        heading ``th_tan`` and its lateral acceleration ``a_y``."""
+        mpc_cfg = self.cfg.mpc
         if not (mpc_cfg.slip_aware or mpc_cfg.tangent_heading):
-            return np.array(pose_to_errors(p[0], p[1], p[2], ref.x[kk], ref.y[kk], ref.theta[kk]))
+            return np.array(pose_to_errors(p[0], p[1], p[2], x_d, y_d, th_d))
         last = self._last
         a_hat = float(last.estimate.x[1]) if mpc_cfg.slip_aware and last is not None else 0.0
         if mpc_cfg.slip_aware and last is not None:
             # the course-fitted model error at the reference's lateral acceleration (a
             # feed-forward: the measured one would close a fast loop through ω, fusion.py)
-            a_hat += self._fusion.slip_correction(float(ref.v[kk] * ref.omega[kk]))
+            a_hat += self._fusion.slip_correction(a_y)
         if mpc_cfg.slip_aware:  # α̂ bounded by the measured course over ground
             a_hat = self._slip_gate(p, a_hat)
-        th_d = self._theta_tangent[kk] if mpc_cfg.tangent_heading else ref.theta[kk]
-        return outer_loop_errors(p, np.array([ref.x[kk], ref.y[kk], th_d]), a_hat)
+        th = th_tan if mpc_cfg.tangent_heading else th_d
+        return outer_loop_errors(p, np.array([x_d, y_d, th]), a_hat)
 
     def _estimate(self, m: Measurement, v: float, om: float, speeds_ok: bool,
                   t1: float) -> tuple[Estimate, NDArray[np.float64]]:
@@ -667,6 +750,20 @@ class Cascade:
                               rc.stop_decel, *self._force_limits)
         self._events["blind_steps"] += 1
         return F, delta, False, 0.0
+
+
+def _build_governor(cfg: Config) -> Governor:
+    """The speed governor of ``cfg.governor`` for the config's vehicle (governor.py)."""
+    g, veh, Tc = cfg.governor, cfg.vehicle, cfg.rates.Tc
+    params = GovernorParams(
+        margin=g.margin, rate_down=g.rate_down, rate_up=g.rate_up, rate_min=g.rate_min,
+        mu_plan=cfg.tyre.mu_tyre, deadband=g.deadband,
+        traction_factor=veh.wheelbase / veh.a / g.traction_margin,
+        drag_per_kg=veh.drag_factor / veh.mass, g=veh.g, Tc=Tc,
+        grip_alpha=min(Tc / g.grip_time_constant_s, 1.0))
+    # the MPC's horizon, and the samples a slow-down from 1 to rate_min takes at rate_down
+    preview = cfg.mpc.N + math.ceil((1.0 - g.rate_min) / (g.rate_down * Tc))
+    return Governor(params, preview)
 
 
 def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> bool:

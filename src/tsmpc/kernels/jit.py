@@ -35,6 +35,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 #: tests/test_blocks.py checks the list is complete).
 BLOCK_MODULES = (
     "tsmpc.control.gates",
+    "tsmpc.control.governor",
     "tsmpc.control.slip_aware",
     "tsmpc.estimation.friction_step",
     "tsmpc.kernels.jit",

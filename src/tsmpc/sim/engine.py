@@ -111,6 +111,8 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
     why = _blinding_fault(cfg, scenario.sensor_fault)
     if why is not None:
         return why
+    if cfg.governor.enabled:
+        return "the speed governor (governor.enabled; it runs in the Python loop)"
     why = _changed_since_port()
     if why is not None:
         return why
@@ -123,20 +125,21 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
 #: steps aside (the Python loop runs) until kernels/engine.py follows the change and this table is
 #: refreshed (``python -m tsmpc.sim.engine`` prints it; tests/test_engine.py checks it).
 _PORTED: dict[str, str] = {
-    "tsmpc.sim.simulator:simulate": "dcb22cf7376a66bc",
+    "tsmpc.sim.simulator:simulate": "7ebb7f0efcd8580b",
     "tsmpc.sim.start:_start_state": "2e35ad3de46ce500",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
     "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
     "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
-    "tsmpc.control.cascade:Cascade.__init__": "7b538f709795a497",
-    "tsmpc.control.cascade:Cascade.reset": "785fc6ab4ab07772",
+    "tsmpc.control.cascade:Cascade.__init__": "fe5c7be0581f468c",
+    "tsmpc.control.cascade:Cascade.reset": "5add1caa7458313d",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
     "tsmpc.control.cascade:Cascade._step": "1b77b0acc6c113f8",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "748ed28374e52348",
-    "tsmpc.control.cascade:Cascade._outer": "2f5a808a1b314d1d",
-    "tsmpc.control.cascade:Cascade._outer_errors": "30f045ef5dfb210e",
+    "tsmpc.control.cascade:Cascade._outer": "87a416e6e939a09e",
+    "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
+    "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
     "tsmpc.control.cascade:Cascade._estimate": "6741a91ddeef6f00",
     "tsmpc.control.cascade:Cascade._compensated": "7bfaf70f34cf6d62",
     "tsmpc.control.cascade:Cascade._inner": "3a018d7e1029a195",

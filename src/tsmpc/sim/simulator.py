@@ -163,6 +163,10 @@ def simulate(
         t = m * Td
         y = np.array([x[0], x[1], x[2], x[3], x[5]]) + noise.sample()
         y = fault(k * Tc if j == 0 else t, y) if fault is not None else y
+        if cascade.governor is not None:  # the governed reference and the oracle's μ (governor.py)
+            cascade.road_mu = float(scenario.friction.mu(t, s_travel))
+            if j == 0 and cascade.governed:
+                rec.refs[k] = cascade.reference_row(t)
         e_y = rec.outer(k, x) if j == 0 else 0.0
         if bound is not None and abs(e_y) > bound:
             termination = f"diverged: |e_y| = {abs(e_y):.2f} m > {bound:g} m at t = {k * Tc:.1f} s"
@@ -189,4 +193,5 @@ def simulate(
     return rec.log(cascade.method.value, scenario.name, Tc, Td, done, rows,
                    wall_s=time.perf_counter() - t_start, termination=termination, events=cascade.events,
                    meta={"oracle": oracle, "seed": cfg.seed, **scenario.meta,
-                         "final_state": x.tolist()})
+                         "final_state": x.tolist(),
+                         **({} if cascade.governor is None else {"planned_v": ref.v[:done].tolist()})})

@@ -1,0 +1,259 @@
+"""Speed governor (beyond the paper; issue 36): re-time the reference online to the grip the road
+has now.
+
+The planner times the reference for the grip it was told (``tyre.mu_tyre``); a road that loses its
+grip mid-run (μ 0.9 → 0.5) leaves a plan whose corners and accelerations ask for more than the
+tyres can give, and nothing in the paper's cascade slows down. The governor samples the reference
+at a *governed* time τ instead of the run's time t, with rate r = dτ/dt ∈ [r_min, 1]: the path is
+unchanged, the car drives it at r times the planned speed (v_d(τ) r, ω_d(τ) r), so its lateral
+acceleration v_d ω_d and its acceleration along the path both scale with r². The cascade keeps τ
+as its reference-time offset (``t − τ``, the recovery's offset, :mod:`tsmpc.control.cascade`).
+
+Grip. The friction force the MHE-UIO estimates is F̂_fr = (μ(road) − μ_o) M g (SPEC §9), so
+μ̂(road) = μ_o + F̂_fr / (M̂ g) (M̂: the mass estimate of ``fusion.mass_estimate`` when on); the
+tyres' grip is taken to follow the road, μ̂_t = μ̂(road) μ_tyre / μ_dry (the plant's
+``tyre.scale_grip_with_road``). A wheel that spins breaks that reading: the acceleration the
+drive force does not produce looks like more resistance (μ 0.9 → 0.3 under full throttle: μ̂(road)
+1.36). A μ̂(road) above every road the tyre knows, (1 + deadband) μ_dry, while the inner loop
+saturates is read as such (a mass error alone also raises μ̂(road), without the saturation): the grip
+is then the traction the rear tyre delivers, |F_xR − μ̂(road) M̂ g| over its load
+(:func:`spin_grip`; 0.30 there). The estimate is low-passed (time constant
+``grip_time_constant_s``) but a lower value is taken at once: grip lost is believed at once,
+grip regained slowly.
+
+Demand of a reference sample (v_d, ω_d, a_d = dv_d/dτ) at rate 1, as an acceleration [m/s²]::
+
+    d = sqrt((v_d ω_d)² + (k a_t)²),   a_t = a_d + c_d v_d² / M,   k = (a + b) / (a η)
+
+a_t is the force per kg the rear tyre must transmit, driving or braking (acceleration plus the
+drag c_d v²; the plant's drive force and the paper's road resistance both act at the rear wheel,
+:mod:`tsmpc.vehicle.plant`); the rear axle carries a/(a+b) of the weight, so it reaches its grip
+(a+b)/a times sooner than the whole car, and the reference may use a share η
+(``traction_margin``, 0.5) of it: the speed loop's transients ask about twice the reference's own
+acceleration (measured on the μ drop below). At rate r the demand is r² d; the sample can be
+carried when
+r² d ≤ margin μ̂_t g, and its traction needs at most the force budget,
+r² (a_t) ≤ (F_max − μ̂(road) M̂ g) / M̂. The largest such rate r_j of each preview sample j is
+reachable from now if the governor can lower r by r_j within the time the car takes to get
+there: the target is r* = min_j (r_j + ρ_down j T_c) over the preview (the MPC's horizon N and
+the samples a braking from 1 to r_min at ρ_down needs), and r follows r* within −ρ_down T_c and
++ρ_up T_c per MPC step. So it slows before a stretch the grip cannot carry and returns to the plan
+smoothly (rate-limited) when the grip returns.
+
+It never acts while μ̂_t ≥ (1 − deadband) μ_tyre: a plan checked for the vehicle's grip and force
+budget before the run (:mod:`tsmpc.planning.retime`) needs nothing from it, and the nominal run is
+the cascade's without the governor, bit for bit.
+
+:func:`governor_update` is the block's one definition (:mod:`tsmpc.kernels.jit`);
+:class:`Governor` is its online wrapper, :func:`governed_window` the reference the MPC sees.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tsmpc.kernels.jit import jitable
+from tsmpc.planning.reference import Reference
+
+__all__ = [
+    "Governor",
+    "GovernorParams",
+    "GovernorState",
+    "governed_window",
+    "governor_update",
+    "grip_estimate",
+    "preview_rate",
+    "rate_limit",
+    "sample_demand",
+    "spin_grip",
+]
+
+
+class GovernorParams(NamedTuple):
+    """Parameters of the governor (from ``[governor]`` and the vehicle).
+
+    Attributes:
+        margin: share of μ̂ g the reference ahead may use [-].
+        rate_down: fastest decrease of r [1/s].
+        rate_up: fastest increase of r [1/s].
+        rate_min: lowest r [-].
+        mu_plan: the grip the plan was made for (tyre.mu_tyre) [-].
+        deadband: the governor acts only below (1 − deadband) mu_plan [-].
+        traction_factor: k = (a + b)/(a · traction_margin): the driven (rear) axle carries a/(a+b)
+            of the weight, and the reference may use ``traction_margin`` of its grip [-].
+        drag_per_kg: ½ρC_dA_r / M [1/m].
+        g: gravity [m/s²].
+        Tc: MPC step [s] (the governor's step, and the reference's sample period).
+        grip_alpha: low-pass gain per step of a rising grip estimate, T_c / τ clipped to 1 [-].
+    """
+
+    margin: float
+    rate_down: float
+    rate_up: float
+    rate_min: float
+    mu_plan: float
+    deadband: float
+    traction_factor: float
+    drag_per_kg: float
+    g: float
+    Tc: float
+    grip_alpha: float
+
+
+class GovernorState(NamedTuple):
+    """State of the governor.
+
+    Attributes:
+        rate: the governed rate r = dτ/dt [-].
+        grip: the filtered grip estimate μ̂_t (NaN before the first) [-].
+    """
+
+    rate: float = 1.0
+    grip: float = math.nan
+
+
+@jitable
+def grip_estimate(F_fr: float, mass: float, mu_nominal: float, g: float, grip_per_road: float) -> float:
+    """μ̂_t from the friction force estimate: (μ_o + F̂_fr / (M g)) μ_tyre / μ_dry
+    (``grip_per_road`` = μ_tyre / μ_dry); NaN for a non-finite estimate."""
+    if not (math.isfinite(F_fr) and mass > 0.0):
+        return math.nan
+    return max(mu_nominal + F_fr / (mass * g), 0.0) * grip_per_road
+
+
+@jitable
+def spin_grip(F_applied: float, mu_road: float, mass: float, g: float, rear_share: float) -> float:
+    """μ̂_t of a rear wheel that spins: the traction it delivers, F_xR − μ̂(road) M g (the force
+    the MHE's model sees accelerate the car), over its load ``rear_share`` M g."""
+    return abs(F_applied - mu_road * mass * g) / (rear_share * mass * g)
+
+
+@jitable
+def sample_demand(p: GovernorParams, v: float, omega: float, a_d: float) -> tuple[float, float]:
+    """(grip demand [m/s²], traction per kg [m/s²]) of a reference sample at rate 1."""
+    a_t = a_d + p.drag_per_kg * v * v
+    a_lat = v * omega
+    kt = p.traction_factor * a_t
+    return math.sqrt(a_lat * a_lat + kt * kt), a_t
+
+
+@jitable
+def preview_rate(p: GovernorParams, grip: float, force_per_kg: float, v: NDArray[np.float64],
+                 omega: NDArray[np.float64]) -> float:
+    """The target rate r* = min over the preview samples j of (r_j + ρ_down j T_c), r_j the
+    largest rate at which sample j needs at most margin·grip·g and its traction at most
+    ``force_per_kg`` (the force budget left after the road resistance, per kg); within
+    [rate_min, 1]. ``v``, ``omega``: the reference's samples from the governed time on."""
+    allowed = p.margin * grip * p.g
+    target = 1.0
+    n = v.size - 1
+    for j in range(n):
+        d, a_t = sample_demand(p, v[j], omega[j], (v[j + 1] - v[j]) / p.Tc)
+        r2 = 1.0
+        if d > allowed:
+            r2 = allowed / d if allowed > 0.0 else 0.0
+        if a_t > force_per_kg and a_t > 0.0:
+            r2 = min(r2, max(force_per_kg, 0.0) / a_t)
+        target = min(target, math.sqrt(r2) + p.rate_down * j * p.Tc)
+    return min(max(target, p.rate_min), 1.0)
+
+
+@jitable
+def governor_update(p: GovernorParams, s: GovernorState, grip_sample: float, force_per_kg: float,
+                    v: NDArray[np.float64], omega: NDArray[np.float64]) -> GovernorState:
+    """One MPC step: the new state (rate and filtered grip). ``grip_sample``: this step's μ̂_t
+    (NaN: the last one stands); ``v``, ``omega``: the preview (see :func:`preview_rate`)."""
+    grip = s.grip
+    if math.isfinite(grip_sample):
+        if not math.isfinite(grip) or grip_sample < grip:
+            grip = grip_sample  # grip lost: believed at once
+        else:
+            grip += p.grip_alpha * (grip_sample - grip)  # regained: slowly
+    target = 1.0
+    if math.isfinite(grip) and grip < (1.0 - p.deadband) * p.mu_plan:
+        target = preview_rate(p, grip, force_per_kg, v, omega)
+    r = s.rate
+    if target < r:
+        r = max(target, r - rate_limit(p, grip, r, v, omega, -1.0) * p.Tc)
+    elif target > r:
+        r = min(target, r + rate_limit(p, grip, r, v, omega, 1.0) * p.Tc)
+    return GovernorState(min(max(r, p.rate_min), 1.0), grip)
+
+
+@jitable
+def rate_limit(p: GovernorParams, grip: float, r: float, v: NDArray[np.float64],
+               omega: NDArray[np.float64], sign: float) -> float:
+    """How fast r may rise (``sign`` +1) or fall (−1) now [1/s]: at most ``rate_up`` /
+    ``rate_down``, and no faster than the traction left at the current sample allows — a changing
+    r accelerates the car by v_d dr/dt on top of r² a_t, and the rear tyre carries both:
+    k |r² a_t + v_d dr/dt| ≤ sqrt((margin μ̂ g)² − (r² v_d ω_d)²). (Without grip estimate: the
+    nominal limits.)"""
+    top = p.rate_up if sign > 0.0 else p.rate_down
+    if not math.isfinite(grip) or v.size < 2:
+        return top
+    _, a_t = sample_demand(p, v[0], omega[0], (v[1] - v[0]) / p.Tc)
+    allowed = p.margin * grip * p.g
+    a_lat = r * r * v[0] * omega[0]
+    room = math.sqrt(max(allowed * allowed - a_lat * a_lat, 0.0)) / p.traction_factor - sign * r * r * a_t
+    return min(top, max(room, 0.0) / max(v[0], 1.0))
+
+
+def governed_window(ref: Reference, tau: float, rate: float, n: int) -> Reference:
+    """``n`` samples of ``ref`` (period T) for the MPC's steps from governed time ``tau`` (in
+    reference time since its first sample) at rate ``rate``: positions and headings at
+    τ + i·rate·T, linearly interpolated, speeds and yaw rates times ``rate`` (curvature unchanged);
+    time t₀ + i T (the steps the car drives them in)."""
+    T = ref.dt
+    x = tau / T
+    k0 = max(math.floor(x + 1e-9), 0)
+    w = ref.window(k0, n + 2)
+    s = (x - k0) + np.arange(n) * rate
+    idx = np.arange(n + 2, dtype=float)
+
+    def at(a: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.interp(s, idx, np.asarray(a, dtype=float))
+
+    t = ref.t[0] + tau + np.arange(n) * T
+    return Reference._trusted({"t": t, "x": at(w.x), "y": at(w.y), "theta": at(w.theta),
+                               "v": at(w.v) * rate, "omega": at(w.omega) * rate, "kappa": at(w.kappa)})
+
+
+class Governor:
+    """The online wrapper of :func:`governor_update`: one call per MPC step.
+
+    Args:
+        params: the block's parameters.
+        preview: samples of the reference the governor looks ahead (≥ the MPC horizon).
+    """
+
+    def __init__(self, params: GovernorParams, preview: int) -> None:
+        self.params = params
+        self.preview = int(preview)
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the plan (r = 1), the grip forgotten, the counters zeroed."""
+        self.state = GovernorState()
+        self.actions = 0  #: slow-downs begun (r left 1)
+        self.steps = 0  #: MPC steps with r < 1
+
+    @property
+    def rate(self) -> float:
+        """The governed rate r = dτ/dt now."""
+        return self.state.rate
+
+    def step(self, grip_sample: float, force_per_kg: float, v: NDArray[np.float64],
+             omega: NDArray[np.float64]) -> float:
+        """The rate for the next MPC step (counted: an action when r leaves 1)."""
+        before = self.state.rate
+        self.state = governor_update(self.params, self.state, float(grip_sample), float(force_per_kg),
+                                     np.ascontiguousarray(v, dtype=float),
+                                     np.ascontiguousarray(omega, dtype=float))
+        r = self.state.rate
+        self.actions += before >= 1.0 and r < 1.0
+        self.steps += r < 1.0
+        return r
