@@ -22,7 +22,7 @@ from tsmpc.scenarios import paper_friction_profile
 from tsmpc.sim import experiment
 
 runner = CliRunner()
-R, V = 20.0, 14.0  # a 20 m circle at 14 m/s: 9.8 m/s² lateral, above 0.75 x 0.9 g = 6.6 m/s²
+R, V = 20.0, 14.0  # a 20 m circle at 14 m/s: 9.8 m/s² lateral, above 0.6 x 0.9 g = 5.3 m/s²
 
 
 def _circle(n: int = 300) -> Reference:
@@ -51,6 +51,29 @@ def test_lateral_grip_beyond_the_margin_is_capped_along_the_same_path(cfg: Confi
     assert check_plan(out, cfg.vehicle, cfg.tyre, cfg.lqr, paper_friction_profile()).ok
 
 
+def test_the_capped_plan_brakes_before_a_corner_no_harder_than_the_plan(cfg: Config) -> None:
+    """A straight braking at 2 m/s² from 17.8 to 14 m/s, then 14 m/s into the 20 m circle: the speed
+    comes down to the corner's cap on the straight, braking at most as hard as the plan itself
+    (2 m/s²), and the corner is within the cap."""
+    vs = np.concatenate([np.linspace(V + 3.8, V, 20), np.full(30, V)])  # 0.2 m/s per 0.1 s step
+    xs = np.concatenate([[0.0], np.cumsum(0.5 * (vs[1:] + vs[:-1]) * 0.1)])
+    xs -= xs[-1] + V * 0.1  # the straight ends one step before the circle's start at x = 0
+    c = _circle(300)
+    z = np.zeros(vs.size)
+    v = np.concatenate([vs, c.v])
+    k = np.concatenate([z, c.kappa])
+    ref = Reference(np.arange(v.size) * 0.1, np.concatenate([xs, c.x]), np.concatenate([z, c.y]),
+                    np.concatenate([z, c.theta]), v, v * k, k)
+    out, _, line = _feasible(ref, cfg)
+    assert line.startswith("plan capped")
+    dv = np.diff(out.v) / out.dt
+    assert dv.min() >= -2.0 * 1.01  # the plan's own hardest braking
+    cap = np.sqrt(GRIP_MARGIN * 0.9 * 9.81 * R)
+    on_circle = out.x > 0.0
+    assert (out.v[on_circle] <= cap * 1.01).all()
+    assert out.v[0] > cap + 3.0  # the straight starts fast: it brakes along it, not at the corner
+
+
 def test_a_plan_within_the_limits_is_returned_unchanged_in_every_preset() -> None:
     slow = _circle()
     slow = Reference(slow.t, slow.x, slow.y, slow.theta, slow.v * 0.5, slow.omega * 0.5, slow.kappa)
@@ -61,7 +84,7 @@ def test_a_plan_within_the_limits_is_returned_unchanged_in_every_preset() -> Non
 
 
 def test_strict_refuses_naming_the_limit(cfg: Config) -> None:
-    with pytest.raises(ConfigError, match=re.escape("lateral grip: lateral acceleration 9.80 m/s² > 6.62")):
+    with pytest.raises(ConfigError, match=re.escape("lateral grip: lateral acceleration 9.80 m/s² > 5.30")):
         _feasible(_circle(), cfg, strict=True)
 
 
@@ -130,5 +153,8 @@ def test_plan_caps_with_one_line_or_refuses(tracks_dir: Path, tmp_path: Path) ->
     assert len(capped) == 1 and "lateral grip" in capped[0], res.output
     ref = Reference.from_csv(out)
     assert (ref.v**2 * np.abs(path_curvature(ref))).max() <= GRIP_MARGIN * 0.9 * 9.81 * 1.01
+    # it slows down before a capped corner, no harder than the planner's limits (2.6, 3 m/s²)
+    dv = np.diff(ref.v) / ref.dt
+    assert dv.max() <= 2.6 * 1.01 and dv.min() >= -3.0 * 1.01
     res = runner.invoke(app, [*args[:3], str(tmp_path / "strict.csv"), *args[4:], "--strict-plan"])
     assert res.exit_code == 2 and "lateral grip" in res.output and not (tmp_path / "strict.csv").exists()
