@@ -37,12 +37,12 @@ import numpy as np
 from numba import njit
 from numba.core import cgutils
 from numba.core import types as nbtypes
-from numba.extending import intrinsic
 from numba.np.arrayobj import populate_array
 
 from tsmpc.kernels import engine as ke
 from tsmpc.kernels import mhe as kmhe
 from tsmpc.kernels import plant as kplant
+from tsmpc.kernels.engine import intrinsic
 
 __all__ = ["LANES", "advance", "atan2_v", "atan_v", "mhe_window_lanes", "rk4_lanes", "sincos_v",
            "tanh_v"]
@@ -50,7 +50,7 @@ __all__ = ["LANES", "advance", "atan2_v", "atan_v", "mhe_window_lanes", "rk4_lan
 #: Lanes per vectorised group (the workspaces' inner dimension; batches are padded to it).
 LANES = 32
 
-_NJ = {"cache": False, "fastmath": False, "error_model": "numpy"}
+_NJ: dict[str, Any] = {"cache": False, "fastmath": False, "error_model": "numpy"}
 _INL = {**_NJ, "inline": "always"}
 
 

@@ -27,12 +27,14 @@ values.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from llvmlite import ir
 from numba import njit
 from numba.core import cgutils, types
-from numba.extending import intrinsic
+from numba.extending import intrinsic as _numba_intrinsic
 
 from tsmpc.control.gates import GateParams, dead_reckon, jump_run, plausible_speeds, pose_consistent
 from tsmpc.control.slip_aware import slip_gate_update
@@ -141,6 +143,13 @@ FR_CONST, FR_PAPER, FR_PATCH = 0, 1, 2
 
 
 # ============================================================================ primitives
+def intrinsic(fn: Callable[..., Any]) -> Any:
+    """numba's ``@intrinsic``, typed for the type checkers: numba's decorator is unannotated, so
+    pyright takes the decorated function for the undecorated one and asks for the typing-context
+    argument that numba supplies (the intrinsic is called without it)."""
+    return _numba_intrinsic(fn)
+
+
 @intrinsic
 def _ticks(typingctx):
     """The CPU's cycle counter (rdtsc on x86): the block timings, converted to seconds by the

@@ -70,7 +70,7 @@ def jitable(fn: F) -> F:
         return fn
     from numba.extending import register_jitable
 
-    return register_jitable(fn)  # type: ignore[no-any-return]
+    return register_jitable(fn)
 
 
 _VELTKAMP = 134217729.0  # 2**27 + 1: splits a double into two halves with exact products
@@ -138,8 +138,8 @@ if _numba_ready():
     from numba.extending import overload
 
     @overload(exact_hypot)  # compiled into its callers (and their cache entries)
-    def _exact_hypot_compiled(a, b):  # type: ignore[no-untyped-def]  # numba matches the signatures
-        def impl(a, b):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    def _exact_hypot_compiled(a, b):  # numba matches the signatures
+        def impl(a, b):  # pragma: no cover - compiled
             return cpython_hypot(a, b)
 
         return impl
