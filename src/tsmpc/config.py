@@ -220,33 +220,34 @@ class MHEForm(StrEnum):
 class VehicleParams(_Frozen):
     """Vehicle parameters, paper Table 1."""
 
-    a: PositiveFloat = Field(0.758, ge=0.05, le=20.0, description="CoG to front axle [m], 0.05 to 20")
-    b: PositiveFloat = Field(1.036, ge=0.05, le=20.0, description="CoG to rear axle [m], 0.05 to 20")
-    mass: PositiveFloat = Field(683.0, ge=1.0, le=1e5,
+    a: PositiveFloat = Field(default=0.758, ge=0.05, le=20.0, description="CoG to front axle [m], 0.05 to 20")
+    b: PositiveFloat = Field(default=1.036, ge=0.05, le=20.0, description="CoG to rear axle [m], 0.05 to 20")
+    mass: PositiveFloat = Field(default=683.0, ge=1.0, le=1e5,
                                 description="vehicle mass M [kg], 1 (a model car) to 1e5 (a truck)")
     inertia: PositiveFloat = Field(
-        560.94, ge=0.01, le=1e7, description="yaw inertia I [kg m^2], 0.01 to 1e7; its radius of "
+        default=560.94, ge=0.01, le=1e7, description="yaw inertia I [kg m^2], 0.01 to 1e7; its radius of "
         "gyration sqrt(I/M) must lie in [0.05, 10] m")
     cornering_stiffness: PositiveFloat = Field(
-        25000.0, ge=1.0, le=1e7,
+        default=25000.0, ge=1.0, le=1e7,
         description="cornering stiffness C_x of each axle [N/rad] (paper: both axles), 1 to 1e7"
     )
     cornering_stiffness_front: PositiveFloat | None = Field(
-        None, ge=1.0, le=1e7,
+        default=None, ge=1.0, le=1e7,
         description="front-axle cornering stiffness C_f [N/rad], 1 to 1e7; None = cornering_stiffness"
     )
     cornering_stiffness_rear: PositiveFloat | None = Field(
-        None, ge=1.0, le=1e7,
+        default=None, ge=1.0, le=1e7,
         description="rear-axle cornering stiffness C_r [N/rad], 1 to 1e7; None = cornering_stiffness"
     )
-    frontal_area: PositiveFloat = Field(1.91, ge=0.01, le=100.0,
+    frontal_area: PositiveFloat = Field(default=1.91, ge=0.01, le=100.0,
                                         description="frontal area A_r [m^2], 0.01 to 100")
-    air_density: PositiveFloat = Field(1.184, ge=1e-3, le=5.0,
+    air_density: PositiveFloat = Field(default=1.184, ge=1e-3, le=5.0,
                                        description="air density rho [kg/m^3], 0.001 to 5")
-    drag_coefficient: NonNegFloat = Field(0.36, le=3.0, description="drag coefficient C_d [-], 0 to 3")
-    mu_nominal: NonNegFloat = Field(0.5, le=3.0, description="nominal friction mu_o of the models [-], "
-                                    "0 to 3")
-    g: PositiveFloat = Field(9.81, ge=1.0, le=30.0, description="gravity [m/s^2], 1 to 30")
+    drag_coefficient: NonNegFloat = Field(default=0.36, le=3.0,
+                                          description="drag coefficient C_d [-], 0 to 3")
+    mu_nominal: NonNegFloat = Field(default=0.5, le=3.0,
+                                    description="nominal friction mu_o of the models [-], 0 to 3")
+    g: PositiveFloat = Field(default=9.81, ge=1.0, le=30.0, description="gravity [m/s^2], 1 to 30")
 
     @model_validator(mode="after")
     def _gyration(self) -> VehicleParams:
@@ -317,20 +318,21 @@ class TyreParams(_Frozen):
     """Plant tyre model. Pacejka: f = D sin(C atan(Bα − E(Bα − atan Bα))),
     D = μ_tyre F_z and B = C_x / (C D) so that the small-slip stiffness equals C_x."""
 
-    model: TyreModel = Field(TyreModel.PACEJKA, description="lateral tyre model of the plant")
-    mu_tyre: PositiveFloat = Field(0.9, le=3.0, description="peak lateral grip coefficient [-], "
+    model: TyreModel = Field(default=TyreModel.PACEJKA, description="lateral tyre model of the plant")
+    mu_tyre: PositiveFloat = Field(default=0.9, le=3.0, description="peak lateral grip coefficient [-], "
                                    "(0, 3]")
-    shape_c: FiniteFloat = Field(1.3, gt=1.0, lt=2.0, description="Pacejka shape factor C [-], (1, 2)")
+    shape_c: FiniteFloat = Field(default=1.3, gt=1.0, lt=2.0,
+                                 description="Pacejka shape factor C [-], (1, 2)")
     curvature_e: FiniteFloat = Field(
-        -0.5, ge=-5.0, lt=1.0, description="Pacejka curvature factor E [-], [-5, 1)"
+        default=-0.5, ge=-5.0, lt=1.0, description="Pacejka curvature factor E [-], [-5, 1)"
     )
     scale_grip_with_road: StrictBool = Field(
-        False, description="beyond the paper: mu_tyre scales with mu(road)/mu_dry"
+        default=False, description="beyond the paper: mu_tyre scales with mu(road)/mu_dry"
     )
-    mu_dry: PositiveFloat = Field(0.9, le=3.0, description="road mu at which the tyre has mu_tyre "
+    mu_dry: PositiveFloat = Field(default=0.9, le=3.0, description="road mu at which the tyre has mu_tyre "
                                   "[-], (0, 3]")
     combined_slip: StrictBool = Field(
-        False, description="beyond the paper's plant (issue 21): the rear tyre's traction force and "
+        default=False, description="beyond the paper's plant (issue 21): the rear tyre's traction force and "
         "its lateral force share its grip D = mu F_zR (friction ellipse); the traction saturates at "
         "+-D and the lateral force shrinks by sqrt(1 - (F_t/D)^2). Pacejka tyres only "
         "(tsmpc.vehicle.plant)")
@@ -346,14 +348,14 @@ class TyreParams(_Frozen):
 class Rates(_Frozen):
     """Sample times (the paper's cascade). T_c / T_d and T_d / h must be integers."""
 
-    Tc: PositiveFloat = Field(0.1, ge=1e-3, le=1.0,
+    Tc: PositiveFloat = Field(default=0.1, ge=1e-3, le=1.0,
                               description="outer loop (MPC) sample time [s], 0.001 to 1")
-    Td: PositiveFloat = Field(0.01, ge=1e-4, le=0.1,
+    Td: PositiveFloat = Field(default=0.01, ge=1e-4, le=0.1,
                               description="inner loop (LQR, MHE) sample time [s], 1e-4 to 0.1, < Tc")
-    h: PositiveFloat = Field(0.001, ge=1e-5, le=0.01,
+    h: PositiveFloat = Field(default=0.001, ge=1e-5, le=0.01,
                              description="plant RK4 integration step [s], 1e-5 to 0.01, <= Td")
     inner_steps_per_outer: StrictInt | None = Field(
-        None, ge=1, le=100000,
+        default=None, ge=1, le=100000,
         description="inner steps run per outer step, 1 to 100000; None = T_c/T_d. A quirk of the "
         "published run, not a recommendation: it ran 101 steps of 1 ms per 0.1 s outer step (the "
         "plant advances 0.101 s while the reference advances 0.1 s: a 1 % time-base drift)")
@@ -391,11 +393,11 @@ class KinematicBox(_Frozen):
     """
 
     omega: tuple[FiniteFloat, FiniteFloat] = Field(
-        (-1.42, 1.42), description="ω range [rad/s], within [-20, 20]")
+        default=(-1.42, 1.42), description="ω range [rad/s], within [-20, 20]")
     v_d: tuple[PositiveFloat, PositiveFloat] = Field(
-        (1.0, 18.0), description="v_d range [m/s], within (0, 200]")
+        default=(1.0, 18.0), description="v_d range [m/s], within (0, 200]")
     e_theta: tuple[FiniteFloat, FiniteFloat] = Field(
-        (-math.radians(5.0), math.radians(5.0)), description="e_θ range [rad], within (-π, π)"
+        default=(-math.radians(5.0), math.radians(5.0)), description="e_θ range [rad], within (-π, π)"
     )
 
     @model_validator(mode="after")
@@ -419,13 +421,13 @@ class DynamicBox(_Frozen):
     """Scheduling box of the dynamic TS model (the paper's dynamic model): δ, v, α."""
 
     delta: tuple[FiniteFloat, FiniteFloat] = Field(
-        (-math.radians(25.0), math.radians(25.0)), description="steering δ range [rad], within "
+        default=(-math.radians(25.0), math.radians(25.0)), description="steering δ range [rad], within "
         "[-π/2, π/2]"
     )
     v: tuple[PositiveFloat, PositiveFloat] = Field(
-        (2.0, 20.0), description="speed range [m/s], within (0, 200]")
+        default=(2.0, 20.0), description="speed range [m/s], within (0, 200]")
     alpha: tuple[FiniteFloat, FiniteFloat] = Field(
-        (-0.1, 0.1), description="slip α range [rad], within [-1, 1]")
+        default=(-0.1, 0.1), description="slip α range [rad], within [-1, 1]")
 
     @model_validator(mode="after")
     def _check(self) -> DynamicBox:
@@ -441,10 +443,11 @@ class DynamicBox(_Frozen):
 class KinematicLMISettings(_Frozen):
     """Kinematic LQR-LMI and terminal set (the paper's LMI designs)."""
 
-    Q: tuple[FiniteFloat, ...] = Field((1.0, 1.5, 3.0), description="diag Q_TS, entries in [1e-8, 1e8]")
-    R: tuple[FiniteFloat, ...] = Field((1.0, 3.0), description="diag R_TS, entries in [1e-8, 1e8]")
+    Q: tuple[FiniteFloat, ...] = Field(default=(1.0, 1.5, 3.0),
+                                       description="diag Q_TS, entries in [1e-8, 1e8]")
+    R: tuple[FiniteFloat, ...] = Field(default=(1.0, 3.0), description="diag R_TS, entries in [1e-8, 1e8]")
     u_bar: tuple[PositiveFloat, PositiveFloat] = Field(
-        (18.0, 1.4), description="input bound of the terminal-set LMI [m/s, rad/s], "
+        default=(18.0, 1.4), description="input bound of the terminal-set LMI [m/s, rad/s], "
         "within (0, 200] and (0, 20]"
     )
 
@@ -461,21 +464,21 @@ class DynamicLMISettings(_Frozen):
     """Dynamic TS-LMI-LQR on the Apkarian-augmented model (the paper's LMI designs)."""
 
     Q: tuple[FiniteFloat, ...] = Field(
-        (2500.0, 0.1, 0.1, 0.1, 1e5, 9e4),
+        default=(2500.0, 0.1, 0.1, 0.1, 1e5, 9e4),
         description="diag Q on [v, α, ω, F_f, δ_f, ζ], entries in [1e-8, 1e8]"
     )
-    R: tuple[FiniteFloat, ...] = Field((0.001, 9.0), description="diag R on [F_xR, δ], entries in "
+    R: tuple[FiniteFloat, ...] = Field(default=(0.001, 9.0), description="diag R on [F_xR, δ], entries in "
                                        "[1e-8, 1e8]")
-    filter_bandwidth: PositiveFloat = Field(10.0, ge=0.1, le=1000.0,
+    filter_bandwidth: PositiveFloat = Field(default=10.0, ge=0.1, le=1000.0,
                                             description="Apkarian filter λ [rad/s], 0.1 to 1000")
-    grid_points: StrictInt = Field(15, ge=3, le=101, description="certificate grid points per axis, "
+    grid_points: StrictInt = Field(default=15, ge=3, le=101, description="certificate grid points per axis, "
                                    "3 to 101")
     formulation: DynamicLMIFormulation = Field(
-        DynamicLMIFormulation.GUARANTEED_COST,
+        default=DynamicLMIFormulation.GUARANTEED_COST,
         description="'guaranteed-cost' (ours) or 'feasibility-euler' (a quirk of the published run, "
         "not a recommendation: no objective, 8 vertex LMIs, Euler at T_d)")
     feasible_point: FeasiblePoint = Field(
-        FeasiblePoint.SOLVER, description="feasibility-euler only: which point of the solution "
+        default=FeasiblePoint.SOLVER, description="feasibility-euler only: which point of the solution "
         "set the design keeps: 'solver' (Clarabel's answer in the scaled coordinates) or "
         "'analytic-center' (the LMIs' analytic centre, the same in any units)")
 
@@ -493,35 +496,35 @@ class DynamicLMISettings(_Frozen):
 class MPCSettings(_Frozen):
     """Kinematic TS-MPC and NL-MPC (the paper's TS-MPC, paper Table 2)."""
 
-    N: StrictInt = Field(40, ge=2, le=400, description="prediction horizon [steps], 2 to 400 "
+    N: StrictInt = Field(default=40, ge=2, le=400, description="prediction horizon [steps], 2 to 400 "
                          "(N·Tc <= 60 s)")
-    Q: tuple[FiniteFloat, ...] = Field((1.133, 0.067, 13.333), description="diag state weight, "
+    Q: tuple[FiniteFloat, ...] = Field(default=(1.133, 0.067, 13.333), description="diag state weight, "
                                        "entries 0 or in [1e-8, 1e8]")
-    R: tuple[FiniteFloat, ...] = Field((0.000005, 5.5), description="diag input-rate weight, "
+    R: tuple[FiniteFloat, ...] = Field(default=(0.000005, 5.5), description="diag input-rate weight, "
                                        "entries in [1e-8, 1e8]")
     u_min: tuple[FiniteFloat, FiniteFloat] = Field(
-        (0.0, -1.4), description="[v, ω] lower, within [-200, 200] m/s and [-20, 20] rad/s")
+        default=(0.0, -1.4), description="[v, ω] lower, within [-200, 200] m/s and [-20, 20] rad/s")
     u_max: tuple[FiniteFloat, FiniteFloat] = Field(
-        (18.0, 1.4), description="[v, ω] upper, within [-200, 200] m/s and [-20, 20] rad/s")
+        default=(18.0, 1.4), description="[v, ω] upper, within [-200, 200] m/s and [-20, 20] rad/s")
     du_max: tuple[PositiveFloat, PositiveFloat] = Field(
-        (5.0, 0.3), description="|Δv|, |Δω| per step, within [0.001, 100] m/s and [1e-4, 20] rad/s"
+        default=(5.0, 0.3), description="|Δv|, |Δω| per step, within [0.001, 100] m/s and [1e-4, 20] rad/s"
     )
-    mode: Method = Field(Method.REF, description="TS-MPC scheduling mode: fzn, ref or iter")
-    iter_tol: PositiveFloat = Field(1e-3, le=1.0, description="ITER: schedule change tolerance, "
+    mode: Method = Field(default=Method.REF, description="TS-MPC scheduling mode: fzn, ref or iter")
+    iter_tol: PositiveFloat = Field(default=1e-3, le=1.0, description="ITER: schedule change tolerance, "
                                     "(0, 1]")
-    iter_max: StrictInt = Field(5, ge=1, le=50, description="ITER: maximum QPs per step, 1 to 50")
-    soft_penalty: PositiveFloat = Field(1e4, ge=1e-3, le=1e9,
+    iter_max: StrictInt = Field(default=5, ge=1, le=50, description="ITER: maximum QPs per step, 1 to 50")
+    soft_penalty: PositiveFloat = Field(default=1e4, ge=1e-3, le=1e9,
                                         description="exact penalty of soft constraints, 1e-3 to 1e9")
-    terminal_constraint: StrictBool = Field(True, description="impose x_N' S x_N <= 1")
+    terminal_constraint: StrictBool = Field(default=True, description="impose x_N' S x_N <= 1")
     slip_aware: StrictBool = Field(
-        True, description="beyond the paper: errors of the velocity pose θ + α̂ (MHE) feed the MPC"
+        default=True, description="beyond the paper: errors of the velocity pose θ + α̂ (MHE) feed the MPC"
     )
     tangent_heading: StrictBool = Field(
-        True, description="beyond the paper: the measured e_θ against the path's tangent at the "
+        default=True, description="beyond the paper: the measured e_θ against the path's tangent at the "
         "sample (θ_d moved forward by its measured lag, half the reference's own period)"
     )
     step_average_reference: StrictBool = Field(
-        True, description="beyond the paper: the reference inputs of each T_c step are that step's "
+        default=True, description="beyond the paper: the reference inputs of each T_c step are that step's "
         "averages from the path geometry, ω_d = Δθ_tangent / T_c and v_d = chord / T_c (the "
         "paper's are the planner's samples, which describe the step *into* the sample)"
     )
@@ -566,77 +569,79 @@ class LQRSettings(_Frozen):
     # paper's limits at its 683 kg, so a heavier car keeps the same acceleration margin); both:
     # they must agree at the vehicle's mass (Config refuses an inconsistent pair before the run).
     force_min: FiniteFloat | None = Field(
-        None, ge=-1e6, le=1e6,
+        default=None, ge=-1e6, le=1e6,
         description="F_xR lower saturation [N], within [-1e6, 1e6], absolute (does not follow the mass); "
         "None = force_min_per_kg x mass (the paper presets: the published -2000 N)")
     force_max: FiniteFloat | None = Field(
-        None, ge=-1e6, le=1e6,
+        default=None, ge=-1e6, le=1e6,
         description="F_xR upper saturation [N], within [-1e6, 1e6], absolute (does not follow the mass); "
         "None = force_max_per_kg x mass (the paper presets: the published 10000 N)")
-    delta_max: PositiveFloat = Field(math.radians(25.0), le=math.pi / 2,
+    delta_max: PositiveFloat = Field(default=math.radians(25.0), le=math.pi / 2,
                                      description="|δ| saturation [rad], (0, π/2]")
     force_min_per_kg: FiniteFloat | None = Field(
-        None, ge=-100.0, le=0.0,
+        default=None, ge=-100.0, le=0.0,
         description="F_xR lower saturation per kg of vehicle mass [N/kg = m/s^2], [-100, 0]; None "
         "(and no force_min) = -2000 N / 683 kg = -2.928 N/kg (the paper's limit at its mass, "
         "following the mass); with force_min too, both must agree at vehicle.mass")
     force_max_per_kg: FiniteFloat | None = Field(
-        None, gt=0.0, le=100.0,
+        default=None, gt=0.0, le=100.0,
         description="F_xR upper saturation per kg of vehicle mass [N/kg], (0, 100]; None (and no "
         "force_max) = 10000 N / 683 kg = 14.64 N/kg (the paper's limit at its mass, following the "
         "mass); with force_max too, both must agree at vehicle.mass")
-    friction_compensation: StrictBool = Field(True, description="add F̂_fr to the force command")
+    friction_compensation: StrictBool = Field(default=True, description="add F̂_fr to the force command")
     friction_estimate: FrictionEstimate = Field(
-        FrictionEstimate.WINDOW, description="compensated F̂_fr: MHE window fit or the paper's UIO formula"
+        default=FrictionEstimate.WINDOW,
+        description="compensated F̂_fr: MHE window fit or the paper's UIO formula"
     )
     oracle: StrictBool = Field(
-        False, description="deprecated (old config files): same as simulate(oracle=True), the "
+        default=False, description="deprecated (old config files): same as simulate(oracle=True), the "
         "simulation's ablation with the true state and no compensation"
     )
     # Beyond the paper: proportional *feedback* on the speed error, not a feed-forward.
     speed_feedback: StrictBool = Field(
-        True, description="speed-error feedback M (v_ref − v̂)/τ added to the force (beyond the paper)"
+        default=True, description="speed-error feedback M (v_ref − v̂)/τ added to the force (beyond the paper)"
     )
     speed_time_constant: PositiveFloat = Field(
-        0.3, ge=0.01, le=100.0,
+        default=0.3, ge=0.01, le=100.0,
         description="time constant τ [s] of the speed-error feedback M (v_ref − v̂)/τ, 0.01 to 100"
     )
     low_speed_resistance: StrictBool = Field(
-        True, description="below the dynamic box's speed floor, add the model's road resistance the "
+        default=True, description="below the dynamic box's speed floor, add the model's road resistance the "
         "clipped premise leaves out, mu_o M g (1 - v/v_min), to the force and remove it from the "
         "force the MHE sees (beyond the paper: a launch from rest)")
     friction_step: StrictBool = Field(
-        True, description="let the compensated friction follow a step of the road within the MHE window: "
+        default=True,
+        description="let the compensated friction follow a step of the road within the MHE window: "
         "a CUSUM test on the one-step UIO estimate's innovation against the window fit declares a "
         "step, and the one-step estimate is compensated until the window holds only later samples "
         "(beyond the paper: a sudden loss of grip; tsmpc.estimation.friction_step)")
     friction_step_threshold: FiniteFloat = Field(
-        5.0, ge=2.0, le=50.0,
+        default=5.0, ge=2.0, le=50.0,
         description="friction_step's CUSUM decision threshold, in standard deviations of the "
         "innovation, 2 to 50 (higher: fewer false alarms, later detection)")
     # Quirks of the published run, not recommendations: the ``paper-as-run`` preset.
     true_state_feedback: StrictBool = Field(
-        False, description="the inner law runs on the true plant state [v, α, ω] while the MHE is "
+        default=False, description="the inner law runs on the true plant state [v, α, ω] while the MHE is "
         "computed but unused; the compensation stays as configured (a quirk of the published run, "
         "not a recommendation; unlike the oracle ablation, which also drops the compensation)")
     law: InnerLaw = Field(
-        InnerLaw.STATIC_GAIN, description="inner law: 'static-gain' (ours) or 'as-run' (a quirk of "
+        default=InnerLaw.STATIC_GAIN, description="inner law: 'static-gain' (ours) or 'as-run' (a quirk of "
         "the published run, not a recommendation: Euler filter, previous clipped force fed back, "
         "no anti-windup)")
     steering_bias_rad: FiniteFloat = Field(
-        0.0, ge=-math.pi, le=math.pi,
+        default=0.0, ge=-math.pi, le=math.pi,
         description="as-run law: σ = δ + bias [rad] is fed back where the design expects δ, within "
         "[-π, π] (the published run: 30° = 0.5236 rad; a quirk, not a recommendation)")
     scheduling_speed_shift: FiniteFloat = Field(
-        0.0, ge=-50.0, le=50.0,
+        default=0.0, ge=-50.0, le=50.0,
         description="as-run law: the gains are scheduled on v + shift [m/s], within [-50, 50] (the "
         "published run: +2 m/s over the design interval [2, 18] m/s; a quirk, not a recommendation)")
     extrapolate_memberships: StrictBool = Field(
-        False, description="as-run law: memberships are not clipped into the box, so scheduling "
+        default=False, description="as-run law: memberships are not clipped into the box, so scheduling "
         "values outside it extrapolate the vertex gains (a quirk of the published run, not a "
         "recommendation)")
     initial_filter_state: tuple[FiniteFloat, FiniteFloat] | None = Field(
-        None, description="as-run law: Apkarian filter states (F₁(0) [N], σ₁(0) [rad]) at the "
+        default=None, description="as-run law: Apkarian filter states (F₁(0) [N], σ₁(0) [rad]) at the "
         "start, σ₁ in the fed-back coordinate δ + steering_bias_rad (the published run: "
         "(4355.15, 0.52466)), within [-1e6, 1e6] N and [-π, π] rad; None = bumpless start at the "
         "steady state of the first reference")
@@ -674,21 +679,21 @@ class LQRSettings(_Frozen):
 class MHESettings(_Frozen):
     """TS-MHE-UIO (the paper's TS-MHE-UIO)."""
 
-    N: StrictInt = Field(30, ge=2, le=300, description="estimation horizon [inner steps], 2 to 300 "
+    N: StrictInt = Field(default=30, ge=2, le=300, description="estimation horizon [inner steps], 2 to 300 "
                          "(N·Td <= 10 s)")
-    Q: tuple[FiniteFloat, ...] = Field((10.0, 10.0, 2.0), description="diag process weight, entries "
+    Q: tuple[FiniteFloat, ...] = Field(default=(10.0, 10.0, 2.0), description="diag process weight, entries "
                                        "in [1e-8, 1e8]")
-    R: tuple[FiniteFloat, ...] = Field((0.033, 0.033), description="diag measurement weight, "
+    R: tuple[FiniteFloat, ...] = Field(default=(0.033, 0.033), description="diag measurement weight, "
                                        "entries in [1e-8, 1e8]")
-    P: tuple[FiniteFloat, ...] = Field((2.0, 2.0, 2.0), description="diag arrival-cost weight, "
+    P: tuple[FiniteFloat, ...] = Field(default=(2.0, 2.0, 2.0), description="diag arrival-cost weight, "
                                        "entries in [1e-8, 1e8]")
     x_min: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(
-        (0.0, -0.1, -1.4), description="[v, α, ω] lower bounds, each within [-1000, 1000] (a "
+        default=(0.0, -0.1, -1.4), description="[v, α, ω] lower bounds, each within [-1000, 1000] (a "
         "bound that wide is no bound: allowed, unlike 1e300)")
     x_max: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(
-        (18.0, 0.1, 1.4), description="[v, α, ω] upper bounds, each within [-1000, 1000]")
+        default=(18.0, 0.1, 1.4), description="[v, α, ω] upper bounds, each within [-1000, 1000]")
     form: MHEForm = Field(
-        MHEForm.WINDOW, description="'window' (ours: window-constant friction force, compiled) or "
+        default=MHEForm.WINDOW, description="'window' (ours: window-constant friction force, compiled) or "
         "'uio' (the paper's form: friction eliminated through E_d; numpy path, slower)")
 
     @model_validator(mode="after")
@@ -706,12 +711,12 @@ class MHESettings(_Frozen):
 class NoiseSettings(_Frozen):
     """Zero-mean Gaussian sensor noise (the paper's scenario), standard deviations before ``scale``."""
 
-    v: NonNegFloat = Field(0.005, le=10.0, description="σ of v [m/s], 0 to 10 (also after scale)")
-    omega: NonNegFloat = Field(1e-4, le=1.0, description="σ of ω [rad/s], 0 to 1 (also after scale)")
-    position: NonNegFloat = Field(0.001, le=10.0, description="σ of X and Y [m], 0 to 10 (also "
+    v: NonNegFloat = Field(default=0.005, le=10.0, description="σ of v [m/s], 0 to 10 (also after scale)")
+    omega: NonNegFloat = Field(default=1e-4, le=1.0, description="σ of ω [rad/s], 0 to 1 (also after scale)")
+    position: NonNegFloat = Field(default=0.001, le=10.0, description="σ of X and Y [m], 0 to 10 (also "
                                   "after scale)")
-    theta: NonNegFloat = Field(1e-4, le=1.0, description="σ of θ [rad], 0 to 1 (also after scale)")
-    scale: NonNegFloat = Field(1.0, le=1e4, description="multiplies every σ, 0 to 1e4")
+    theta: NonNegFloat = Field(default=1e-4, le=1.0, description="σ of θ [rad], 0 to 1 (also after scale)")
+    scale: NonNegFloat = Field(default=1.0, le=1e4, description="multiplies every σ, 0 to 1e4")
 
     @model_validator(mode="after")
     def _scaled(self) -> NoiseSettings:
@@ -727,14 +732,14 @@ class NoiseSettings(_Frozen):
 class PlannerSettings(_Frozen):
     """Speed-profile limits of the planner (the paper's scenario)."""
 
-    v_max: PositiveFloat = Field(14.7, le=150.0, description="maximum speed [m/s], (0, 150]")
-    a_lat_max: PositiveFloat = Field(3.0, le=50.0, description="lateral acceleration limit [m/s^2], "
+    v_max: PositiveFloat = Field(default=14.7, le=150.0, description="maximum speed [m/s], (0, 150]")
+    a_lat_max: PositiveFloat = Field(default=3.0, le=50.0, description="lateral acceleration limit [m/s^2], "
                                      "(0, 50]")
-    a_lon_max: PositiveFloat = Field(2.6, le=50.0, description="longitudinal acceleration limit "
+    a_lon_max: PositiveFloat = Field(default=2.6, le=50.0, description="longitudinal acceleration limit "
                                      "[m/s^2], (0, 50]")
-    a_brake_max: PositiveFloat = Field(3.0, le=50.0, description="braking deceleration limit "
+    a_brake_max: PositiveFloat = Field(default=3.0, le=50.0, description="braking deceleration limit "
                                        "[m/s^2], (0, 50]")
-    v_start: NonNegFloat = Field(1.0, le=150.0, description="speed at the start of an open path "
+    v_start: NonNegFloat = Field(default=1.0, le=150.0, description="speed at the start of an open path "
                                  "[m/s], 0 to 150")
 
 
@@ -743,7 +748,7 @@ class MetricsSettings(_Frozen):
     conventions."""
 
     paper_run_rmse: StrictBool = Field(
-        False, description="also show each method's RMSE under the published run's convention "
+        default=False, description="also show each method's RMSE under the published run's convention "
         "(the published run: pose errors at the start of each outer step, first K − 10 steps; v, ω at its "
         "end, K + 20 entries with 20 zeros) beside ours in the tables")
 
@@ -753,11 +758,11 @@ class PurePursuitSettings(_Frozen):
     L_d = clip(lookahead_time_s · v, lookahead_min_m, lookahead_max_m) with v the commanded speed.
     Defaults from the documented search on the built-in circuit (examples/tune_baselines.py)."""
 
-    lookahead_time_s: NonNegFloat = Field(0.45, le=10.0, description="look-ahead time: L_d grows "
+    lookahead_time_s: NonNegFloat = Field(default=0.45, le=10.0, description="look-ahead time: L_d grows "
                                            "with the speed as lookahead_time_s · v [s], 0 to 10")
-    lookahead_min_m: PositiveFloat = Field(5.0, le=1000.0, description="shortest look-ahead "
+    lookahead_min_m: PositiveFloat = Field(default=5.0, le=1000.0, description="shortest look-ahead "
                                            "distance [m], above 0 to 1000")
-    lookahead_max_m: PositiveFloat = Field(40.0, le=1000.0, description="longest look-ahead "
+    lookahead_max_m: PositiveFloat = Field(default=40.0, le=1000.0, description="longest look-ahead "
                                            "distance [m], above 0 to 1000")
 
     @model_validator(mode="after")
@@ -772,14 +777,14 @@ class StanleySettings(_Frozen):
     Defaults from the documented search on the built-in circuit (examples/tune_baselines.py)."""
 
     heading_gain: PositiveFloat = Field(
-        0.3, le=2.0, description="k_ψ on the heading error, above 0 to 2 (1 = the classic law; at "
+        default=0.3, le=2.0, description="k_ψ on the heading error, above 0 to 2 (1 = the classic law; at "
         "T_c the heading term's per-step loop gain is k_ψ v T_c / L)")
 
-    gain: PositiveFloat = Field(2.0, le=100.0, description="cross-track gain k [1/s], above 0 to 100")
+    gain: PositiveFloat = Field(default=2.0, le=100.0, description="cross-track gain k [1/s], above 0 to 100")
     softening_speed: NonNegFloat = Field(
-        4.0, le=100.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s], 0 to 100")
+        default=4.0, le=100.0, description="k_soft added to v in atan(k e / (k_soft + v)) [m/s], 0 to 100")
     curvature_feedforward: StrictBool = Field(
-        True, description="feed-forward atan(L κ_d) − k_ψ atan(a κ_d): zero steady-state error on a "
+        default=True, description="feed-forward atan(L κ_d) − k_ψ atan(a κ_d): zero steady-state error on a "
         "circle for a CoG-referenced path (False = the classic law)")
 
 
@@ -791,7 +796,7 @@ class BaselineSettings(_Frozen):
     pure_pursuit: PurePursuitSettings = PurePursuitSettings()
     stanley: StanleySettings = StanleySettings()
     along_track_gain: NonNegFloat = Field(
-        8.0, le=20.0, description="speed channel of the geometric laws: v_ref = v_d cos e_θ + "
+        default=8.0, le=20.0, description="speed channel of the geometric laws: v_ref = v_d cos e_θ + "
         "gain · e_x, proportional feedback on the along-track error [1/s], 0 to 20")
 
 
@@ -807,26 +812,26 @@ class PlantScales(_Frozen):
     unless ``scenario.oracle_tuned``): 1 = as the controllers assume. Plausible ranges: a car
     loaded or emptied (mass ×0.5–2), tyres of another make or pressure (stiffness ×0.3–3)."""
 
-    mass_scale: _Num = Field(1.0, ge=0.5, le=2.0, allow_inf_nan=False,
+    mass_scale: _Num = Field(default=1.0, ge=0.5, le=2.0, allow_inf_nan=False,
                               description="plant mass = scale × vehicle.mass [-], 0.5 to 2")
-    inertia_scale: _Num = Field(1.0, ge=0.5, le=2.0, allow_inf_nan=False,
+    inertia_scale: _Num = Field(default=1.0, ge=0.5, le=2.0, allow_inf_nan=False,
                                  description="plant yaw inertia = scale × vehicle.inertia [-], 0.5 to 2")
     cornering_front_scale: _Num = Field(
-        1.0, ge=0.3, le=3.0, allow_inf_nan=False,
+        default=1.0, ge=0.3, le=3.0, allow_inf_nan=False,
         description="plant front cornering stiffness = scale × vehicle C_f [-], 0.3 to 3")
     cornering_rear_scale: _Num = Field(
-        1.0, ge=0.3, le=3.0, allow_inf_nan=False,
+        default=1.0, ge=0.3, le=3.0, allow_inf_nan=False,
         description="plant rear cornering stiffness = scale × vehicle C_r [-], 0.3 to 3")
     cog_to_front_scale: _Num = Field(
-        1.0, ge=0.5, le=1.5, allow_inf_nan=False,
+        default=1.0, ge=0.5, le=1.5, allow_inf_nan=False,
         description="plant CoG-to-front-axle distance a = scale × vehicle.a, the wheelbase kept "
         "(b = a + b − scale a: the CoG moves, e.g. with the load) [-], 0.5 to 1.5")
-    mu_tyre: _Num | None = Field(None, ge=0.1, le=2.0, allow_inf_nan=False,
+    mu_tyre: _Num | None = Field(default=None, ge=0.1, le=2.0, allow_inf_nan=False,
                                   description="peak grip of the plant's tyres [-], 0.1 to 2; None = "
                                   "tyre.mu_tyre")
-    combined_slip: _Flag = Field(False, description="the plant's rear tyre has a friction ellipse "
+    combined_slip: _Flag = Field(default=False, description="the plant's rear tyre has a friction ellipse "
                                 "(tyre.combined_slip)")
-    grip_scales_with_road: _Flag = Field(False, description="the plant's tyre grip scales with "
+    grip_scales_with_road: _Flag = Field(default=False, description="the plant's tyre grip scales with "
                                         "mu(road) (tyre.scale_grip_with_road)")
 
 
@@ -835,28 +840,28 @@ class SensorFaults(_Frozen):
     ``noise``. Biases and drifts add to [v, ω, θ]; drifts grow linearly from t = 0."""
 
     dropout_probability: _Num = Field(
-        0.0, ge=0.0, le=0.5, allow_inf_nan=False,
+        default=0.0, ge=0.0, le=0.5, allow_inf_nan=False,
         description="each T_d sample is lost with this probability (seeded from the run's seed) "
         "[-], 0 to 0.5: delivered as NaN, or as the previous sample with dropout_hold")
-    dropout_hold: _Flag = Field(False, description="a lost sample repeats the previous one (a "
+    dropout_hold: _Flag = Field(default=False, description="a lost sample repeats the previous one (a "
                                "stalled bus) instead of arriving as NaN")
-    v_bias: _Num = Field(0.0, ge=-2.0, le=2.0, allow_inf_nan=False,
+    v_bias: _Num = Field(default=0.0, ge=-2.0, le=2.0, allow_inf_nan=False,
                           description="speed-sensor offset [m/s], -2 to 2")
-    omega_bias: _Num = Field(0.0, ge=-0.2, le=0.2, allow_inf_nan=False,
+    omega_bias: _Num = Field(default=0.0, ge=-0.2, le=0.2, allow_inf_nan=False,
                               description="yaw-rate sensor offset [rad/s], -0.2 to 0.2")
-    theta_bias: _Num = Field(0.0, ge=-0.2, le=0.2, allow_inf_nan=False,
+    theta_bias: _Num = Field(default=0.0, ge=-0.2, le=0.2, allow_inf_nan=False,
                               description="heading sensor offset [rad], -0.2 to 0.2")
-    v_drift: _Num = Field(0.0, ge=-0.05, le=0.05, allow_inf_nan=False,
+    v_drift: _Num = Field(default=0.0, ge=-0.05, le=0.05, allow_inf_nan=False,
                            description="speed-offset growth [m/s per s], -0.05 to 0.05")
-    omega_drift: _Num = Field(0.0, ge=-0.005, le=0.005, allow_inf_nan=False,
+    omega_drift: _Num = Field(default=0.0, ge=-0.005, le=0.005, allow_inf_nan=False,
                                description="yaw-rate offset growth [rad/s per s], -0.005 to 0.005")
-    theta_drift: _Num = Field(0.0, ge=-0.005, le=0.005, allow_inf_nan=False,
+    theta_drift: _Num = Field(default=0.0, ge=-0.005, le=0.005, allow_inf_nan=False,
                                description="heading offset growth [rad per s], -0.005 to 0.005")
-    delay_s: _Num = Field(0.0, ge=0.0, le=0.5, allow_inf_nan=False,
+    delay_s: _Num = Field(default=0.0, ge=0.0, le=0.5, allow_inf_nan=False,
                            description="every sample arrives this late (rounded to whole T_d) [s], "
                            "0 to 0.5")
     gnss_noise_scale: _Num = Field(
-        1.0, ge=1.0, le=100.0, allow_inf_nan=False,
+        default=1.0, ge=1.0, le=100.0, allow_inf_nan=False,
         description="the position (X, Y) noise sigma is this multiple of noise.position × "
         "noise.scale [-], 1 to 100 (the controllers keep assuming the configured sigma)")
 
@@ -869,21 +874,21 @@ class FrictionEvent(_Frozen):
 
     mu: _Num = Field(ge=0.0, le=1.5, allow_inf_nan=False, description="mu(road) of the surface "
                       "[-], 0 to 1.5")
-    at_s: _Num | None = Field(None, ge=0.0, le=1e5, allow_inf_nan=False,
+    at_s: _Num | None = Field(default=None, ge=0.0, le=1e5, allow_inf_nan=False,
                                description="start time [s] since the run's start, 0 to 1e5")
-    at_m: _Num | None = Field(None, ge=0.0, le=1e7, allow_inf_nan=False,
+    at_m: _Num | None = Field(default=None, ge=0.0, le=1e7, allow_inf_nan=False,
                                description="start at this travelled distance [m], 0 to 1e7")
     at_corner: _Count | None = Field(
-        None, ge=1, le=1000, description="start at the apex of the k-th corner of the reference "
+        default=None, ge=1, le=1000, description="start at the apex of the k-th corner of the reference "
         "(1-based): the k-th run of samples with |omega_d| above half the reference's largest, at "
         "its largest |omega_d|")
-    ramp_s: _Num | None = Field(None, ge=0.0, le=600.0, allow_inf_nan=False,
+    ramp_s: _Num | None = Field(default=None, ge=0.0, le=600.0, allow_inf_nan=False,
                                  description="transition time [s] (time and corner triggers), 0 to 600")
-    duration_s: _Num | None = Field(None, gt=0.0, le=1e5, allow_inf_nan=False,
+    duration_s: _Num | None = Field(default=None, gt=0.0, le=1e5, allow_inf_nan=False,
                                      description="how long the surface lasts [s]; None = to the end")
-    ramp_m: _Num | None = Field(None, ge=0.0, le=1e4, allow_inf_nan=False,
+    ramp_m: _Num | None = Field(default=None, ge=0.0, le=1e4, allow_inf_nan=False,
                                  description="transition length [m] (distance trigger), 0 to 1e4")
-    length_m: _Num | None = Field(None, gt=0.0, le=1e7, allow_inf_nan=False,
+    length_m: _Num | None = Field(default=None, gt=0.0, le=1e7, allow_inf_nan=False,
                                    description="how long the surface lasts [m]; None = to the end")
 
     @model_validator(mode="after")
@@ -906,14 +911,14 @@ class ScenarioActuators(_Frozen):
     """Actuator dynamics between the controllers' command and the plant (issue 21;
     :mod:`tsmpc.vehicle.actuators`); all zero = ideal actuators."""
 
-    steering_time_constant_s: _Num = Field(0.0, ge=0.0, le=1.0, allow_inf_nan=False,
+    steering_time_constant_s: _Num = Field(default=0.0, ge=0.0, le=1.0, allow_inf_nan=False,
                                             description="steering servo lag [s], 0 to 1")
     steering_rate_limit: _Num | None = Field(
-        None, gt=0.0, le=20.0, allow_inf_nan=False,
+        default=None, gt=0.0, le=20.0, allow_inf_nan=False,
         description="steering rate limit [rad/s], above 0 to 20; None = none")
-    force_time_constant_s: _Num = Field(0.0, ge=0.0, le=2.0, allow_inf_nan=False,
+    force_time_constant_s: _Num = Field(default=0.0, ge=0.0, le=2.0, allow_inf_nan=False,
                                          description="drive-force lag [s], 0 to 2")
-    measured_steering: _Flag = Field(False, description="the platform measures the applied steering "
+    measured_steering: _Flag = Field(default=False, description="the platform measures the applied steering "
                                     "angle and gives it to the MHE")
 
     @property
@@ -931,18 +936,19 @@ class ScenarioSettings(_Frozen):
 
     plant: PlantScales = PlantScales()
     sensors: SensorFaults = SensorFaults()
-    friction: tuple[FrictionEvent, ...] = Field((), description="mu(road) events over the base profile")
-    base_mu: _Num | None = Field(None, ge=0.0, le=1.5, allow_inf_nan=False,
+    friction: tuple[FrictionEvent, ...] = Field(default=(),
+                                                description="mu(road) events over the base profile")
+    base_mu: _Num | None = Field(default=None, ge=0.0, le=1.5, allow_inf_nan=False,
                                   description="constant mu(road) instead of the scenario's profile "
                                   "(the paper's by time) [-], 0 to 1.5; None = the profile")
     actuators: ScenarioActuators = ScenarioActuators()
     oracle_tuned: _Flag = Field(
-        False, description="the controllers' vehicle is the plant's (scales applied): models and "
+        default=False, description="the controllers' vehicle is the plant's (scales applied): models and "
         "LMI designs built from the true parameters, and the sensors calibrated (biases and drifts "
         "removed); dropouts, delay and noise stay (the oracle-tuned comparison row, issue 21; "
         "never a deployable setting)")
     replan_for_force_budget: _Flag = Field(
-        False, description="the reference is re-timed along its path so that it never asks for "
+        default=False, description="the reference is re-timed along its path so that it never asks for "
         "more acceleration than the plant vehicle's force budget allows ((F_max - mu M g - drag)/M "
         "at the base mu, 90 %): the planner knows the real vehicle")
 
@@ -953,24 +959,24 @@ class FusionSettings(_Frozen):
     comes from: docs/mismatch.md."""
 
     reject_repeated_samples: _Flag = Field(
-        True, description="a sample bit-identical to the previous one (a stalled sensor bus "
+        default=True, description="a sample bit-identical to the previous one (a stalled sensor bus "
         "re-delivering it) is treated as missing, like NaN")
     predict_pose: _Flag = Field(
-        True, description="a missing pose (NaN, stale, repeated) is replaced by the last good pose "
+        default=True, description="a missing pose (NaN, stale, repeated) is replaced by the last good pose "
         "dead-reckoned with the estimate (v, alpha, omega), not held")
     course_slip: _Flag = Field(
-        True, description="the slip the outer loop uses is corrected by the course over ground: "
+        default=True, description="the slip the outer loop uses is corrected by the course over ground: "
         "alpha_hat + kappa a_y + beta, fitted online (least squares) to the measured course minus "
         "heading over a chord of the last MPC poses")
     course_speed: _Flag = Field(
-        True, description="the speed sensor's offset is estimated from the speed over ground "
+        default=True, description="the speed sensor's offset is estimated from the speed over ground "
         "(chord of the measured positions) and removed before the MHE and the inner loop")
     stiffness_estimate: _Flag = Field(
-        True, description="the axle cornering stiffnesses of the MHE's and the inner loop's models "
+        default=True, description="the axle cornering stiffnesses of the MHE's and the inner loop's models "
         "are fitted online (least squares F_y = C alpha per axle, the slip from the course over "
         "ground, the forces from the measured lateral and yaw accelerations); the LMI gains stay")
     mass_estimate: _Flag = Field(
-        True, description="the part of the friction estimate that follows the acceleration is the "
+        default=True, description="the part of the friction estimate that follows the acceleration is the "
         "inertia of a mass error: estimated online (high-passed least squares), removed from the "
         "compensation and given to the speed feedback's mass")
 
@@ -980,16 +986,16 @@ class RecoverySettings(_Frozen):
     how it recovers (issue 38; beyond the paper, off in the ``paper`` presets)."""
 
     enabled: _Flag = Field(
-        True, description="blind stop, recovery and the pose gate's re-initialisation (below)")
+        default=True, description="blind stop, recovery and the pose gate's re-initialisation (below)")
     blind_after_s: PositiveFloat = Field(
-        0.5, le=10.0, description="no speed / yaw-rate sample accepted for this long [s]: the "
+        default=0.5, le=10.0, description="no speed / yaw-rate sample accepted for this long [s]: the "
         "cascade is blind and brakes to a stop on its last steering (a minimal-risk manoeuvre) "
         "until a valid sample comes; within (0, 10]")
     stop_decel: PositiveFloat = Field(
-        3.0, le=10.0, description="deceleration of the blind stop [m/s^2], within (0, 10] (and "
+        default=3.0, le=10.0, description="deceleration of the blind stop [m/s^2], within (0, 10] (and "
         "the force limits)")
     pose_reinit_s: PositiveFloat = Field(
-        2.0, le=60.0, description="fresh poses rejected as jumps for this long [s], each "
+        default=2.0, le=60.0, description="fresh poses rejected as jumps for this long [s], each "
         "consistent with the one before: the dead-reckoned pose is wrong, not them; the gate "
         "takes them; within (0, 60]")
 
@@ -1006,27 +1012,27 @@ class GovernorSettings(_Frozen):
     is re-timed online so that the speed and curvature ahead need at most ``margin`` x the
     estimated grip (tsmpc.control.governor)."""
 
-    enabled: _Flag = Field(False, description="re-time the reference online to the estimated grip")
+    enabled: _Flag = Field(default=False, description="re-time the reference online to the estimated grip")
     margin: PositiveFloat = Field(
-        0.8, le=1.0, description="share of the estimated grip mu g the reference ahead may use "
+        default=0.8, le=1.0, description="share of the estimated grip mu g the reference ahead may use "
         "(lateral and driven-axle longitudinal acceleration combined) [-], (0, 1]")
     traction_margin: PositiveFloat = Field(
-        0.5, le=1.0, description="share of the driven axle's grip the reference's own acceleration "
+        default=0.5, le=1.0, description="share of the driven axle's grip the reference's own acceleration "
         "may use [-], (0, 1]: the speed loop's transients ask about twice the reference's")
     rate_down: PositiveFloat = Field(
-        0.15, le=10.0, description="fastest decrease of the governed rate dtau/dt [1/s], (0, 10]")
+        default=0.15, le=10.0, description="fastest decrease of the governed rate dtau/dt [1/s], (0, 10]")
     rate_up: PositiveFloat = Field(
-        0.05, le=10.0, description="fastest increase of the governed rate back to 1 [1/s], (0, 10]")
+        default=0.05, le=10.0, description="fastest increase of the governed rate back to 1 [1/s], (0, 10]")
     rate_min: PositiveFloat = Field(
-        0.3, le=1.0, description="the governed rate never goes below this [-], (0, 1]")
+        default=0.3, le=1.0, description="the governed rate never goes below this [-], (0, 1]")
     deadband: NonNegFloat = Field(
-        0.05, le=0.5, description="the governor acts only when the estimated grip is below "
+        default=0.05, le=0.5, description="the governor acts only when the estimated grip is below "
         "(1 - deadband) x tyre.mu_tyre, the grip the plan was made for [-], 0 to 0.5")
     grip_time_constant_s: PositiveFloat = Field(
-        0.3, le=10.0, description="low-pass time constant of the grip estimate [s], (0, 10] "
+        default=0.3, le=10.0, description="low-pass time constant of the grip estimate [s], (0, 10] "
         "(falls at once below it: a lower estimate is taken within one MPC step)")
     grip_source: GripSource = Field(
-        GripSource.ESTIMATE, description="'estimate' (the friction estimate of the inner loop) or "
+        default=GripSource.ESTIMATE, description="'estimate' (the friction estimate of the inner loop) or "
         "'oracle' (the scenario's true mu(road): the reference row, simulation only)")
 
 
@@ -1051,10 +1057,10 @@ class Config(_Frozen):
     fusion: FusionSettings = FusionSettings()  # fusion and adaptation beyond the paper (issue 21)
     recovery: RecoverySettings = RecoverySettings()  # blind stop and recovery (issue 38)
     governor: GovernorSettings = GovernorSettings()  # grip-aware speed governor (issue 36)
-    seed: StrictInt = Field(0, ge=0, lt=2**63, description="seed of every random draw of a run, "
+    seed: StrictInt = Field(default=0, ge=0, lt=2**63, description="seed of every random draw of a run, "
                             "0 to 2^63 - 1")
     divergence_bound_m: PositiveFloat = Field(
-        5.0, le=1000.0,
+        default=5.0, le=1000.0,
         description="|e_y| [m] beyond which a run is diverged (when the track width is unknown), "
         "(0, 1000]"
     )
@@ -1125,7 +1131,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio", "low_speed_resistance": False,
                       "friction_step": False, "force_min": -2000.0, "force_max": 10000.0},
               "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False},
-              "fusion": _FUSION_OFF, "recovery": {"enabled": False}},
+              "fusion": _FUSION_OFF, "recovery": {"enabled": False}, "governor": {"enabled": False}},
     # The paper as it was run (the published run): the ``paper`` preset plus every quirk of the published
     # simulation, each its own switch. Quirks of that run, not recommendations; never the default.
     "paper-as-run": {
@@ -1147,6 +1153,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "metrics": {"paper_run_rmse": True},
         "fusion": _FUSION_OFF,
         "recovery": {"enabled": False},
+        "governor": {"enabled": False},
     },
 }
 
