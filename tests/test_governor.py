@@ -18,6 +18,7 @@ from tsmpc.control.governor import (
     preview_rate,
     rate_limit,
     sample_demand,
+    spin_grip,
 )
 from tsmpc.planning.reference import Reference
 from tsmpc.sim.experiment import prepare
@@ -39,6 +40,28 @@ def test_grip_estimate_from_the_friction_force() -> None:
     assert grip_estimate(-1000.0, 1000.0, 0.5, 10.0, 1.5) == pytest.approx(0.6, abs=1e-15)
     assert grip_estimate(-1e6, 1000.0, 0.5, 10.0, 1.0) == 0.0  # never negative
     assert math.isnan(grip_estimate(math.nan, 1000.0, 0.5, 10.0, 1.0))
+
+
+def test_spin_grip_by_hand() -> None:
+    """A spinning rear wheel: F_xR = 10 kN against μ̂(road) 1.36 on 683 kg (9112.2 N) delivers
+    887.8 N on its load 0.4225 · 683 · 9.81 = 2830.8 N: μ̂_t = 0.3136."""
+    load = 0.4225 * 683.0 * 9.81
+    assert spin_grip(10000.0, 1.36, 683.0, 9.81, 0.4225) == pytest.approx(
+        (10000.0 - 1.36 * 683.0 * 9.81) / load, abs=1e-12)
+    assert spin_grip(10000.0, 1.36, 683.0, 9.81, 0.4225) == pytest.approx(0.3136, abs=1e-4)
+
+
+def test_a_spin_engages_the_governor_on_a_dry_road() -> None:
+    """A spin (the plan asks more traction than even the dry tyre has) engages it for SPIN_HOLD_S
+    whatever the grip: at μ̂ 0.9 the 10 m/s² step ahead (k a = 20 > 0.8 · 0.9 · 10) slows it."""
+    v, w = np.array([10.0, 11.0, 11.0]), np.zeros(3)
+    s = governor_update(P, GovernorState(), 0.9, 100.0, v, w)
+    assert s.rate == 1.0  # not engaged: the plan's business
+    s = governor_update(P, GovernorState(), 0.9, 100.0, v, w, True)
+    assert s.rate == pytest.approx(1.0 - 0.015) and s.spin_hold == 3.0
+    for _ in range(29):
+        s = governor_update(P, s, 0.9, 100.0, v, w)
+    assert s.spin_hold == pytest.approx(0.1, abs=1e-9) and s.rate < 1.0
 
 
 def test_sample_demand_by_hand() -> None:

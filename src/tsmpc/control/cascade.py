@@ -634,17 +634,21 @@ class Cascade:
             F = float(last.estimate.F_fr) if usable and last is not None else math.nan
             mu_road = grip_estimate(F, mass, veh.mu_nominal, veh.g, 1.0)
         grip = mu_road * grip_per_road if math.isfinite(mu_road) else math.nan
+        # more resistance than any road (at the model's mass) under saturated drive: a spin
         last = self._last
-        if (mu_road > (1.0 + cfg.governor.deadband) * cfg.tyre.mu_dry and last is not None
-                and last.saturated):  # more resistance than any road under full drive: a spin
-            grip = spin_grip(float(self._u_applied[0]), mu_road, mass, veh.g, veh.a / veh.wheelbase)
+        mu_model = grip_estimate(last.estimate.F_fr if last is not None else math.nan, veh.mass,
+                                 veh.mu_nominal, veh.g, 1.0)
+        spinning = (last is not None and last.saturated
+                    and mu_model > (1.0 + cfg.governor.deadband) * cfg.tyre.mu_dry)
+        if spinning and cfg.governor.grip_source != "oracle":  # (the oracle knows the grip)
+            grip = spin_grip(float(self._u_applied[0]), mu_model, veh.mass, veh.g, veh.a / veh.wheelbase)
         f_max = self._force_limits[1]
         mu_res = mu_road if math.isfinite(mu_road) else veh.mu_nominal
         force_per_kg = (f_max - mu_res * mass * veh.g) / mass
         k = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(ref) - 1)
         w = ref.window(k, gov.preview + 1)
         before = gov.actions
-        r = gov.step(grip, force_per_kg, np.asarray(w.v), np.asarray(w.omega))
+        r = gov.step(grip, force_per_kg, np.asarray(w.v), np.asarray(w.omega), spinning)
         self._events["governor_actions"] += int(gov.actions - before)
         self._events["governor_steps"] += int(r < 1.0)
         self._t_offset += (1.0 - r) * self.Tc

@@ -14,10 +14,12 @@ Grip. The friction force the MHE-UIO estimates is F̂_fr = (μ(road) − μ_o) M
 tyres' grip is taken to follow the road, μ̂_t = μ̂(road) μ_tyre / μ_dry (the plant's
 ``tyre.scale_grip_with_road``). A wheel that spins breaks that reading: the acceleration the
 drive force does not produce looks like more resistance (μ 0.9 → 0.3 under full throttle: μ̂(road)
-1.36). A μ̂(road) above every road the tyre knows, (1 + deadband) μ_dry, while the inner loop
-saturates is read as such (a mass error alone also raises μ̂(road), without the saturation): the grip
-is then the traction the rear tyre delivers, |F_xR − μ̂(road) M̂ g| over its load
-(:func:`spin_grip`; 0.30 there). The estimate is low-passed (time constant
+1.36). A μ̂(road) at the model's mass above every road the tyre knows, (1 + deadband) μ_dry, while
+the inner loop saturates is read as such (a mass error alone also raises μ̂(road), without the
+saturation): the grip is then the traction the rear tyre delivers, |F_xR − μ̂(road) M g| over its
+load (:func:`spin_grip`; 0.30 there), and the governor is engaged for ``SPIN_HOLD_S`` whatever the
+grip: a plan that asks more traction than the dry tyre has (the paper reference's start on the
+friction-ellipse tyre) spins the wheel too. The estimate is low-passed (time constant
 ``grip_time_constant_s``) but a lower value is taken at once: grip lost is believed at once,
 grip regained slowly.
 
@@ -73,6 +75,11 @@ __all__ = [
 ]
 
 
+#: After a spin of the rear wheel the governor stays engaged this long [s] (the plan asked for more
+#: traction than the tyre has, whatever the grip estimate says once the wheel grips again).
+SPIN_HOLD_S = 3.0
+
+
 class GovernorParams(NamedTuple):
     """Parameters of the governor (from ``[governor]`` and the vehicle).
 
@@ -110,10 +117,12 @@ class GovernorState(NamedTuple):
     Attributes:
         rate: the governed rate r = dτ/dt [-].
         grip: the filtered grip estimate μ̂_t (NaN before the first) [-].
+        spin_hold: time the governor stays engaged after the last spin [s].
     """
 
     rate: float = 1.0
     grip: float = math.nan
+    spin_hold: float = 0.0
 
 
 @jitable
@@ -164,9 +173,12 @@ def preview_rate(p: GovernorParams, grip: float, force_per_kg: float, v: NDArray
 
 @jitable
 def governor_update(p: GovernorParams, s: GovernorState, grip_sample: float, force_per_kg: float,
-                    v: NDArray[np.float64], omega: NDArray[np.float64]) -> GovernorState:
+                    v: NDArray[np.float64], omega: NDArray[np.float64],
+                    spinning: bool = False) -> GovernorState:
     """One MPC step: the new state (rate and filtered grip). ``grip_sample``: this step's μ̂_t
-    (NaN: the last one stands); ``v``, ``omega``: the preview (see :func:`preview_rate`)."""
+    (NaN: the last one stands); ``v``, ``omega``: the preview (see :func:`preview_rate`);
+    ``spinning``: the rear wheel spins now (engaged for ``SPIN_HOLD_S`` whatever the grip)."""
+    hold = SPIN_HOLD_S if spinning else max(s.spin_hold - p.Tc, 0.0)
     grip = s.grip
     if math.isfinite(grip_sample):
         if not math.isfinite(grip) or grip_sample < grip:
@@ -174,14 +186,14 @@ def governor_update(p: GovernorParams, s: GovernorState, grip_sample: float, for
         else:
             grip += p.grip_alpha * (grip_sample - grip)  # regained: slowly
     target = 1.0
-    if math.isfinite(grip) and grip < (1.0 - p.deadband) * p.mu_plan:
+    if math.isfinite(grip) and (grip < (1.0 - p.deadband) * p.mu_plan or hold > 0.0):
         target = preview_rate(p, grip, force_per_kg, v, omega)
     r = s.rate
     if target < r:
         r = max(target, r - rate_limit(p, grip, r, v, omega, -1.0) * p.Tc)
     elif target > r:
         r = min(target, r + rate_limit(p, grip, r, v, omega, 1.0) * p.Tc)
-    return GovernorState(min(max(r, p.rate_min), 1.0), grip)
+    return GovernorState(min(max(r, p.rate_min), 1.0), grip, hold)
 
 
 @jitable
@@ -247,12 +259,12 @@ class Governor:
         return self.state.rate
 
     def step(self, grip_sample: float, force_per_kg: float, v: NDArray[np.float64],
-             omega: NDArray[np.float64]) -> float:
+             omega: NDArray[np.float64], spinning: bool = False) -> float:
         """The rate for the next MPC step (counted: an action when r leaves 1)."""
         before = self.state.rate
         self.state = governor_update(self.params, self.state, float(grip_sample), float(force_per_kg),
                                      np.ascontiguousarray(v, dtype=float),
-                                     np.ascontiguousarray(omega, dtype=float))
+                                     np.ascontiguousarray(omega, dtype=float), bool(spinning))
         r = self.state.rate
         self.actions += before >= 1.0 and r < 1.0
         self.steps += r < 1.0

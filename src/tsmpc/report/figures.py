@@ -113,6 +113,7 @@ def velocity_figure(logs: dict[str, RunLog]) -> Figure:
     first = next(iter(logs.values()))
     axs[0].plot(first.t_outer, first.ref[:, 3], "k--", lw=1.2, label="v_d")
     axs[1].plot(first.t_outer, first.ref[:, 4], "k--", lw=1.2, label="ω_d")
+    _governor_lines(axs[0], logs)
     for name, log in logs.items():
         st = _style(name, log.t_inner.size)
         axs[0].plot(log.t_inner, log.state[:, 3], lw=0.9, label=f"v {name}", **st)
@@ -125,6 +126,22 @@ def velocity_figure(logs: dict[str, RunLog]) -> Figure:
         a.legend(fontsize=8, ncol=3)
     fig.tight_layout()
     return fig
+
+
+def _governor_lines(ax: Any, logs: dict[str, RunLog]) -> None:
+    """The speed governor's slow-down (tsmpc.control.governor): the planned speed, and each
+    governed run's own v_d (the reference it tracked) where it differs from the first's."""
+    governed = {n: g for n, g in logs.items() if "planned_v" in g.meta}
+    if not governed:
+        return
+    first = next(iter(governed.values()))
+    planned = np.asarray(first.meta["planned_v"], dtype=float)
+    n = min(planned.size, first.t_outer.size)
+    ax.plot(first.t_outer[:n], planned[:n], color="0.55", ls=":", lw=1.2, label="v_d planned")
+    for name, log in governed.items():
+        if log is not first:
+            ax.plot(log.t_outer, log.ref[:, 3], lw=0.8, label=f"v_d governed {name}", **_style(name))
+    ax.set_title("governor: v_d is the governed speed (the plan's: dotted)", fontsize=9)
 
 
 #: The errors figure zooms on the first seconds of a run at least this many times longer.
