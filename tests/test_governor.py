@@ -114,7 +114,7 @@ def test_governed_window_by_hand() -> None:
 def test_no_action_while_the_grip_suffices() -> None:
     """At μ̂ ≥ (1 − deadband) μ_plan = 0.855 the rate stays 1 whatever the reference asks."""
     v, w = _flat(6)
-    w[:] = 2.0  # 20 m/s² of lateral acceleration: the plan is the plan's business
+    w[2] = 2.0  # 20 m/s² of lateral acceleration ahead: the plan is the plan's business
     s = GovernorState()
     for _ in range(20):
         s = governor_update(P, s, 0.86, 100.0, v, w)
@@ -134,10 +134,12 @@ def test_slow_down_then_return_to_the_plan() -> None:
         s = governor_update(P, s, 0.5, 100.0, v, w)
     target = math.sqrt(0.8) + 0.03
     assert s.rate == pytest.approx(target, abs=1e-12)
-    rates = []
+    rates, grips = [], []
     for _ in range(40):
         s = governor_update(P, s, 0.9, 100.0, v, w)
         rates.append(s.rate)
+        grips.append(s.grip)
+    assert grips[:3] == pytest.approx([0.7, 0.8, 0.85], abs=1e-12)  # regained grip: low-passed
     assert rates[:3] == pytest.approx([target + 0.005 * i for i in (1, 2, 3)], abs=1e-12)
     assert s.grip == pytest.approx(0.9, abs=1e-9)
     assert rates[-1] == 1.0
