@@ -77,6 +77,8 @@ def test_a_degraded_run_exits_3_with_one_line(tmp_path: Path) -> None:
     res = runner.invoke(app, ["run", "--duration", "6", "--no-plots", "--out", str(out),
                               "--set", "lqr.force_max=6500.0"])
     assert res.exit_code == 3, res.output
+    plan = [ln for ln in res.output.splitlines() if ln.startswith("plan check:")]
+    assert len(plan) == 1 and plan[0].endswith("(expect saturation)"), res.output  # one unwrapped line
     lines = [ln for ln in res.output.splitlines() if ln.startswith("degraded:")]
     assert len(lines) == 1, res.output
     assert "drive force at its 6500 N limit" in lines[0] and "lqr.force_max = 6500 N is absolute" in lines[0]

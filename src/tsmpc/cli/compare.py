@@ -207,7 +207,7 @@ def _execute(
     if exp.envelope.widened:
         console.print(exp.envelope.message, markup=False, highlight=False)
     if exp.plan_note:  # the plan exceeded the vehicle's limits: capped (or the published one, exempt)
-        console.print(exp.plan_note, markup=False, highlight=False)
+        console.print(exp.plan_note, markup=False, highlight=False, soft_wrap=True)  # one line
 
     # Every ending that is not success is one line, a non-zero exit and PARTIAL saying why
     # (interrupted, no design for this config: exit 2, a failed write, an unexpected error).

@@ -18,10 +18,13 @@ The margins, and why: the lateral margin 0.6 keeps the tyres out of the last 40 
 grip. The controllers' models are linear in the tyre slip (constant C_x); the plant's Pacejka
 curve (C 1.3, E −0.5) still has 69 % of that local stiffness at 60 % of its peak force, under half
 (49 %) at 75 %, so beyond 60 % the feedback works on a plant that answers a slip correction with
-half the force its model expects. Measured: the five TUMFTM tracks planned at 30 m/s and 8 m/s²
-and capped at 0.75 μ g left the road in three cases (Monza, Spa, Zandvoort, after 3 minutes); at
-0.6 μ g they stay on it (figures: docs/planning.md, generated). The force headroom (90 %) is the
-one :mod:`~tsmpc.planning.retime` uses: the inner loop keeps 10 % of its force for its feedback.
+half the force its model expects — room the feedback needs for the errors it has to correct, on
+tracks nobody measured. The force headroom (90 %) is the one :mod:`~tsmpc.planning.retime` uses:
+the inner loop keeps 10 % of its force for its feedback. The re-timing also accelerates and brakes
+no harder than the plan itself does (:func:`_in_style`): the force budgets alone (the paper's road
+resistance brakes at up to 9 m/s²) made the capped TUMFTM tracks at 30 m/s alternate full drive and
+full braking between close corners, and three of five left the road; no harder than the planner's
+own limits, all five stay well within 0.5 m (docs/planning.md, generated).
 
 :func:`feasible_plan` acts on the result: a plan within the limits is returned unchanged; one
 beyond them is re-timed along the same path (:func:`tsmpc.planning.retime.retime`: the lateral cap
@@ -83,8 +86,11 @@ class PlanCheck:
         limit: the limit exceeded most (by the ratio demand / allowed): "lateral grip",
             "force budget" (acceleration) or "braking budget"; "" when none is.
         ratio: that largest demand / allowed (> 1: beyond the limit).
-        demand: the demand there [m/s²]; allowed: the limit there [m/s²]; t: its time [s].
-        mu_grip: the grip coefficient of the lateral check; a_lat_max: GRIP_MARGIN μ_grip g [m/s²].
+        demand: the demand there [m/s²].
+        allowed: the limit there [m/s²].
+        t: its time from the reference's start [s].
+        mu_grip: the grip coefficient of the lateral check.
+        a_lat_max: GRIP_MARGIN μ_grip g [m/s²].
     """
 
     limit: str
