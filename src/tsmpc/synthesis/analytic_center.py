@@ -88,7 +88,7 @@ def analytic_center(lmis: Sequence[AffineLMI], x0: NDArray[np.float64], *, tol: 
     when the barrier has no minimiser (an unbounded feasible set: a singular Hessian or a step
     without end) or when ``max_iter`` iterations do not converge.
     """
-    x = np.asarray(x0, dtype=float).copy()
+    x = np.asarray(x0, dtype=np.float64).copy()
     f = log_det_barrier(lmis, x)
     if not np.isfinite(f):
         raise SolverError("analytic centre: the start point is not strictly feasible")

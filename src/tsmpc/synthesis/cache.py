@@ -15,7 +15,7 @@ import json
 from dataclasses import asdict, fields
 from dataclasses import replace as dc_replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,6 +31,9 @@ from tsmpc.synthesis.paper_as_run import (
     design_feasibility,
     vertex_models,
 )
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 __all__ = [
     "cache_dir",
@@ -95,11 +98,13 @@ def design_to_dict(design: Any) -> dict[str, Any]:
     return out
 
 
-def design_from_dict(data: dict[str, Any], cls: type | None = None) -> Any:
+def design_from_dict(data: dict[str, Any], cls: type[DataclassInstance] | None = None) -> Any:
     """Inverse of :func:`design_to_dict` (``cls``: the design class the record must be; None:
     a kinematic or dynamic design, as the record says). Raises ValueError for another type."""
     if cls is None:
-        cls = {"KinematicDesign": KinematicDesign, "DynamicDesign": DynamicDesign}[data["type"]]
+        designs: dict[str, type[DataclassInstance]] = {"KinematicDesign": KinematicDesign,
+                                                       "DynamicDesign": DynamicDesign}
+        cls = designs[data["type"]]
     elif data.get("type") != cls.__name__:
         raise ValueError(f"not a {cls.__name__} record")
     kwargs: dict[str, Any] = {}

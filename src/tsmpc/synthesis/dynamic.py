@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,7 +46,10 @@ from tsmpc.errors import SolverError
 from tsmpc.models.dynamic import Discretization, augment_apkarian, continuous_matrices, discretize
 from tsmpc.models.polytope import SchedulingBox
 from tsmpc.synthesis.certificates import Certificate, definite_certificate, lmi_certificate
-from tsmpc.synthesis.sdp import LADDER_FLOOR, Infeasible, SDPSolver, solve, solve_with_margin
+from tsmpc.synthesis.sdp import LADDER_FLOOR, Infeasible, SDPSolver, solve, solve_with_margin, values
+
+if TYPE_CHECKING:  # cvxpy is imported where a design is solved
+    from cvxpy.constraints.constraint import Constraint
 
 __all__ = ["DynamicDesign", "augmented_models", "certify_dynamic", "certify_grid", "design_dynamic",
            "per_vertex_dare_gains"]
@@ -210,7 +214,7 @@ def _guaranteed_cost_lmi(
     W = {(lo_d, lo_v): cp.Variable((m, n)) for lo_d in (False, True) for lo_v in (False, True)}
     Wv = [W[(bool(b[0]), bool(b[1]))] for b in pb.vertex_bits]
     Zn, Znm = np.zeros((n, n)), np.zeros((n, m))
-    cons = [cp.bmat([[X, np.eye(n)], [np.eye(n), Y]]) >> 0]
+    cons: list[Constraint] = [cp.bmat([[X, np.eye(n)], [np.eye(n), Y]]) >> 0]
     for g in (range(As.shape[0]) if points is None else points):
         Wg = sum(float(mu[g, i]) * Wv[i] for i in range(len(Wv)) if mu[g, i] > 0.0)
         AY = As[g] @ Y + Bs[g] @ Wg
@@ -223,11 +227,12 @@ def _guaranteed_cost_lmi(
         cons.append(0.5 * (M + M.T) >> 0)
     prob = cp.Problem(cp.Minimize(cp.trace(X)), cons)
     status = solve(prob, solver, what)
-    if Y.value is None or any(w.value is None for w in Wv):
+    Wvals = values(Wv)
+    if Y.value is None or Wvals is None:
         raise Infeasible(status)
     Ys = 0.5 * (Y.value + Y.value.T)
     Ps = np.linalg.inv(Ys)
-    return Ys, np.array([w.value @ Ps for w in Wv]), status
+    return Ys, np.array([w @ Ps for w in Wvals]), status
 
 
 def _blocking_point(

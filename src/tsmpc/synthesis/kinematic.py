@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,7 +48,19 @@ from tsmpc.synthesis.certificates import (
     definite_certificate,
     lmi_certificate,
 )
-from tsmpc.synthesis.sdp import LADDER_DOWN, LADDER_UP, Infeasible, SDPSolver, solve, solve_with_margin
+from tsmpc.synthesis.sdp import (
+    LADDER_DOWN,
+    LADDER_UP,
+    Infeasible,
+    SDPSolver,
+    solve,
+    solve_with_margin,
+    values,
+)
+
+if TYPE_CHECKING:  # cvxpy is imported where a design is solved
+    from cvxpy.constraints.constraint import Constraint
+    from cvxpy.expressions.expression import Expression
 
 __all__ = ["KinematicDesign", "certify_kinematic", "design_kinematic"]
 
@@ -75,8 +88,10 @@ class KinematicDesign:
     solver: str = "CLARABEL"
 
 
-def _sym(M: object) -> object:
-    return 0.5 * (M + M.T)  # type: ignore[operator]
+def _sym(M: Expression) -> Expression:
+    return 0.5 * (M + M.T)
+
+
 
 
 
@@ -148,15 +163,15 @@ BACKOFF = 0.99
 
 def _lqr_block(
     A: NDArray[np.float64], B: NDArray[np.float64], Qh: NDArray[np.float64], Rh: NDArray[np.float64],
-    Y: object, W: object, t: object,
-) -> object:
+    Y: Expression | NDArray[np.float64], W: Expression, t: float,
+) -> Expression:
     import cvxpy as cp
 
     n, m = 3, 2
     Zn, Znm = np.zeros((n, n)), np.zeros((n, m))
-    AY = A @ Y + B @ W  # type: ignore[operator]
+    AY = A @ Y + B @ W
     M = cp.bmat([
-        [(1.0 - t) * Y, AY.T, (Qh @ Y).T, (Rh @ W).T],  # type: ignore[operator]
+        [(1.0 - t) * Y, AY.T, (Qh @ Y).T, (Rh @ W).T],
         [AY, Y, Zn, Znm],
         [Qh @ Y, Zn, np.eye(n), Znm],
         [Rh @ W, Znm.T, Znm.T, np.eye(m)],
@@ -182,21 +197,23 @@ def _lqr_lmi(
     Qh, Rh = np.sqrt(Q), np.sqrt(R)
     Y = cp.Variable((n, n), symmetric=True)
     W = [cp.Variable((m, n)) for _ in range(nv)]
-    cons = [Y[0, 1] == 0, Y[0, 2] == 0]
+    cons: list[Constraint] = [Y[0, 1] == 0, Y[0, 2] == 0]
     cons += [_lqr_block(A[i], B, Qh, Rh, Y, W[i], t) >> 0 for i in range(nv)]
     status = solve(cp.Problem(cp.Maximize(cp.log_det(Y)), cons), solver, "kinematic LQR-LMI")
-    if Y.value is None or any(w.value is None for w in W):
+    Wv = values(W)
+    if Y.value is None or Wv is None:
         raise Infeasible(status)
     Yv = BACKOFF * 0.5 * (Y.value + Y.value.T)
-    W1 = [BACKOFF * w.value for w in W]  # the stage-1 gains K_i = W_i Y⁻¹, unchanged by the back-off
+    W1 = [BACKOFF * w for w in Wv]  # the stage-1 gains K_i = W_i Y⁻¹, unchanged by the back-off
     W2 = [cp.Variable((m, n)) for _ in range(nv)]
-    cons2 = [_lqr_block(A[i], B, Qh, Rh, Yv, W2[i], t) >> 0 for i in range(nv)]
+    cons2: list[Constraint] = [_lqr_block(A[i], B, Qh, Rh, Yv, W2[i], t) >> 0 for i in range(nv)]
     obj = cp.Minimize(sum(cp.norm(W2[i] - W1[i], "fro") for i in range(nv)))
     status2 = solve(cp.Problem(obj, cons2), solver, "kinematic LQR-LMI (margin)")
-    if any(w.value is None for w in W2):
+    W2v = values(W2)
+    if W2v is None:
         raise Infeasible(f"{status}; margin stage {status2}")
     P = np.linalg.inv(Yv)
-    return Yv, np.array([w.value @ P for w in W2]), f"{status}+{status2}"
+    return Yv, np.array([w @ P for w in W2v]), f"{status}+{status2}"
 
 
 def _terminal_lmi(
@@ -219,7 +236,7 @@ def _terminal_lmi(
         d = np.sqrt(np.diag(Y) / np.max(np.diag(Y)))
         D, Di, ub = np.diag(d), np.diag(1.0 / d), np.sqrt(np.diag(ubar2))
         Zt = cp.Variable((n, n), symmetric=True)
-        cons = [Zt[0, 1] == 0, Zt[0, 2] == 0]  # D is diagonal: Z̃ has Z's structure
+        cons: list[Constraint] = [Zt[0, 1] == 0, Zt[0, 2] == 0]  # D is diagonal: Z̃ has Z's structure
         for i in range(A.shape[0]):
             Acl = Di @ (A[i] + B @ K[i]) @ D
             Kd = (K[i] @ D) / ub[:, None]

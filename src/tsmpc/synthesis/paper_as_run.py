@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,7 +52,10 @@ from tsmpc.models.polytope import SchedulingBox
 from tsmpc.synthesis.analytic_center import AffineLMI, analytic_center
 from tsmpc.synthesis.certificates import Certificate, check, definite_certificate, lmi_certificate
 from tsmpc.synthesis.dynamic import INPUT_SCALE, STATE_SCALE, check_grid
-from tsmpc.synthesis.sdp import LADDER_FLOOR, Infeasible, SDPSolver, solve, solve_with_margin
+from tsmpc.synthesis.sdp import LADDER_FLOOR, Infeasible, SDPSolver, solve, solve_with_margin, values
+
+if TYPE_CHECKING:  # cvxpy is imported where a design is solved
+    from cvxpy.constraints.constraint import Constraint
 
 __all__ = [
     "FeasibilityDesign",
@@ -168,7 +172,7 @@ def _solve_clarabel(As: NDArray[np.float64], Bs: NDArray[np.float64], Qh: NDArra
     Y = cp.Variable((n, n), symmetric=True)
     W = [cp.Variable((m, n)) for _ in range(As.shape[0])]
     Zn, Znm = np.zeros((n, n)), np.zeros((n, m))
-    cons = [Y >> 0] if y_constraint else []
+    cons: list[Constraint] = [Y >> 0] if y_constraint else []
     for i in range(As.shape[0]):
         AY = As[i] @ Y + Bs[i] @ W[i]
         M = cp.bmat([
@@ -179,9 +183,10 @@ def _solve_clarabel(As: NDArray[np.float64], Bs: NDArray[np.float64], Qh: NDArra
         ])
         cons.append(0.5 * (M + M.T) >> 0)
     status = solve(cp.Problem(cp.Minimize(0), cons), SDPSolver.CLARABEL, what, options)
-    if Y.value is None or any(w.value is None for w in W):
+    Wv = values(W)
+    if Y.value is None or Wv is None:
         raise Infeasible(status)
-    return 0.5 * (Y.value + Y.value.T), np.array([w.value for w in W]), status
+    return 0.5 * (Y.value + Y.value.T), np.array(Wv), status
 
 
 def _physical(Ys: NDArray[np.float64], Ws: NDArray[np.float64], state_scale: NDArray[np.float64],

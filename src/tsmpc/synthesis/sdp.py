@@ -15,12 +15,17 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 from enum import StrEnum
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from tsmpc.errors import SolverError
 from tsmpc.synthesis.certificates import TARGET_MARGIN, Certificate
 
-__all__ = ["LADDER_DOWN", "LADDER_UP", "Infeasible", "SDPSolver", "solve", "solve_with_margin"]
+if TYPE_CHECKING:  # cvxpy and numpy's types are imported where a problem is solved
+    import numpy as np
+    from cvxpy import Variable
+    from numpy.typing import NDArray
+
+__all__ = ["LADDER_DOWN", "LADDER_UP", "Infeasible", "SDPSolver", "solve", "solve_with_margin", "values"]
 
 #: Margins tried, in order, while the SDP is infeasible (relative; the certificate threshold is 1e-6).
 LADDER_DOWN = (TARGET_MARGIN, 1e-5, 3e-6)
@@ -59,13 +64,14 @@ def solve(prob: Any, solver: SDPSolver | str, what: str, options: dict[str, Any]
     data) becomes :class:`SolverError` naming ``what``; an infeasible or unsolved problem raises
     :class:`Infeasible`. ``options`` are added to the solver's defaults of this module."""
     import cvxpy as cp
+    from cvxpy import error as cp_error  # (not an attribute of cvxpy for a type checker)
 
     s = SDPSolver(str(solver).upper())
     try:
         with warnings.catch_warnings():  # the status is reported; certificates decide
             warnings.simplefilter("ignore", UserWarning)
             prob.solve(solver=getattr(cp, s.value), **{**_OPTIONS[s], **(options or {})})
-    except cp.error.SolverError as exc:
+    except cp_error.SolverError as exc:
         raise Infeasible(f"{s.value} failed ({exc})") from None
     except (ValueError, ArithmeticError, OverflowError) as exc:  # NaN/inf in the problem data
         raise SolverError(f"{what}: invalid problem data ({exc})") from None
@@ -114,3 +120,13 @@ def solve_with_margin(
         check(failed, what)  # raises, listing what failed at the first feasible margin
     assert last is not None
     raise last
+
+
+def values(xs: list[Variable]) -> list[NDArray[np.float64]] | None:
+    """The solved variables' values, None when the solver left one unset."""
+    out = []
+    for x in xs:
+        if x.value is None:
+            return None
+        out.append(x.value)
+    return out
