@@ -25,8 +25,8 @@ runner = CliRunner()
 R, V = 20.0, 14.0  # a 20 m circle at 14 m/s: 9.8 m/s² lateral, above 0.6 x 0.9 g = 5.3 m/s²
 
 
-def _circle(n: int = 300) -> Reference:
-    w = circle_window(R, V, 0.1, n, tangent_convention=False)
+def _circle(n: int = 300, v: float = V) -> Reference:
+    w = circle_window(R, v, 0.1, n, tangent_convention=False)
     return Reference(np.arange(n) * 0.1, w.x, w.y, w.theta, w.v, w.omega, w.kappa)
 
 
@@ -72,6 +72,33 @@ def test_the_capped_plan_brakes_before_a_corner_no_harder_than_the_plan(cfg: Con
     on_circle = out.x > 0.0
     assert (out.v[on_circle] <= cap * 1.01).all()
     assert out.v[0] > cap + 3.0  # the straight starts fast: it brakes along it, not at the corner
+
+
+class _Patch:
+    """μ(road) 0.9 with 0.3 on 60 m ≤ s < 100 m of the path (and 0.1 for 0.5 s at t = 5 s)."""
+
+    def mu(self, t: float, s: float = 0.0) -> float:
+        return 0.3 if 60.0 <= s < 100.0 else (0.1 if 5.0 <= t < 5.5 else 0.9)
+
+
+def test_grip_that_follows_the_road_caps_where_the_road_is_slippery_only(cfg: Config) -> None:
+    """A 40 m patch of μ 0.3 on a 20 m circle at 7 m/s (2.45 m/s², within 0.6 x 0.9 g but not
+    0.6 x 0.3 g): capped on the patch and on the way into it, not elsewhere; a 0.5 s dip (shorter
+    than SUSTAINED_S) changes nothing."""
+    slow = _circle(300, V / 2)
+    tyre = cfg.tyre.model_copy(update={"scale_grip_with_road": True})
+    out, check, line = feasible_plan(slow, cfg.vehicle, tyre, cfg.lqr, _Patch())  # type: ignore[arg-type]
+    assert check.limit == "lateral grip" and check.mu_grip == pytest.approx(0.3)
+    assert "(0.6 x mu 0.3 x g)" in line
+    s_out = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(out.x), np.diff(out.y)))])
+    # within one original step (0.7 m) of either edge a resampled sample interpolates across it
+    on = (s_out >= 60.7) & (s_out < 99.3)
+    assert (out.v[on] <= np.sqrt(GRIP_MARGIN * 0.3 * 9.81 * R) * 1.01).all()
+    assert out.v[s_out < 30.0].min() == pytest.approx(7.0)
+    assert out.v[s_out > 130.0].min() == pytest.approx(7.0)
+    dip_only = feasible_plan(slow, cfg.vehicle, tyre, cfg.lqr,
+                             type("Dip", (), {"mu": lambda self, t, s=0.0: 0.1 if 5.0 <= t < 5.5 else 0.9})())
+    assert dip_only[0] is slow and dip_only[1].ok  # type: ignore[attr-defined]
 
 
 def test_a_plan_within_the_limits_is_returned_unchanged_in_every_preset() -> None:

@@ -5,13 +5,16 @@ A reference planned for another car, or with limits the tyres do not have (a tra
 leaves the road minutes later. :func:`check_plan` compares the reference's demands with the
 vehicle's limits, sample by sample:
 
-* lateral acceleration ``v²|κ|`` against ``GRIP_MARGIN × μ g``, the plant tyre's peak μ_tyre
-  (scaled by μ(road)/μ_dry where the plant's grip follows the road, at the lowest μ(road) the run
-  holds for :data:`SUSTAINED_S` or longer);
+* lateral acceleration ``v²|κ|`` against ``GRIP_MARGIN × μ g``, the tyre's peak μ_tyre, scaled
+  by μ(road)/μ_dry where the plant's grip follows the road: sample by sample, μ(road) where (path
+  distance) and when (the plan's own time) the sample is driven, its dips shorter than
+  :data:`SUSTAINED_S` filled. A plan capped for a time-based drop arrives later than its own
+  timing says: the online speed governor covers what the plan cannot;
 * acceleration against the force budget ``(η F_max − μ M g − drag)/M`` and braking against
   ``(η |F_min| + μ M g + drag)/M`` (:mod:`tsmpc.planning.retime`, headroom
   η = :data:`~tsmpc.planning.retime.FORCE_HEADROOM`; the highest μ(road) of the run for the
-  resistance the drive must overcome, the lowest for the resistance that helps braking; the
+  resistance the drive must overcome, the lowest sustained one for the resistance that helps
+  braking; the
   driven tyre's grip too when it has a friction ellipse).
 
 The margins, and why: the lateral margin 0.6 keeps the tyres out of the last 40 % of their
@@ -67,8 +70,8 @@ __all__ = ["GRIP_MARGIN", "STYLE_FLOOR", "SUSTAINED_S", "PlanCheck", "check_plan
 #: Share of the tyre's peak grip μ g the plan's lateral acceleration may use (see the module text).
 GRIP_MARGIN = 0.6
 #: A μ(road) patch shorter than this [s] does not lower the grip the plan is checked against: the
-#: paper's profile has 0.1 s of ice (μ 0.1) at 70 s, crossed on momentum; capping a whole lap's
-#: corners to 10 % of the grip for it would make every plan a crawl.
+#: paper's profile has 0.1 s of ice (μ 0.1) at 70 s, crossed on momentum; capping the corners
+#: around it to 10 % of the grip for it would make them a crawl.
 SUSTAINED_S = 1.0
 #: A plan that accelerates (brakes) at least this much [m/s²] somewhere is re-timed no harder than
 #: that; below it (a constant-speed plan) the force budget alone bounds the re-timing.
@@ -89,8 +92,8 @@ class PlanCheck:
         demand: the demand there [m/s²].
         allowed: the limit there [m/s²].
         t: its time from the reference's start [s].
-        mu_grip: the grip coefficient of the lateral check.
-        a_lat_max: GRIP_MARGIN μ_grip g [m/s²].
+        mu_grip: the tyre's grip coefficient at the lateral check's worst sample.
+        a_lat_max: GRIP_MARGIN μ_grip g there [m/s²].
     """
 
     limit: str
@@ -124,36 +127,35 @@ def _run_mu(friction: FrictionProfile, ref: Reference) -> NDArray[np.float64]:
     return mu_array(friction, t, s)
 
 
-def _sustained(mu: NDArray[np.float64], dt: float, low: bool) -> float:
-    """The lowest (``low``) or highest μ the run holds for :data:`SUSTAINED_S` or longer: the
-    extreme over the run of the best (worst) value within each window of that length."""
+def _closed(mu: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
+    """μ per sample with the dips shorter than :data:`SUSTAINED_S` filled (a morphological closing:
+    the sliding max, then the sliding min, over windows of that length)."""
     n = max(1, round(SUSTAINED_S / dt))
-    if mu.size <= n:
-        return float(mu.max() if low else mu.min())
-    win = np.lib.stride_tricks.sliding_window_view(mu, n)
-    return float(win.max(axis=1).min()) if low else float(win.min(axis=1).max())
-
-
-def _grip_mu(tyre: TyreParams, mu_low: float) -> float:
-    """The plant tyre's peak μ on the run's lowest sustained μ(road)."""
-    return tyre.mu_tyre * mu_low / tyre.mu_dry if tyre.scale_grip_with_road else tyre.mu_tyre
+    if n <= 1 or mu.size <= n:
+        return mu.copy() if mu.size > n else np.full(mu.size, float(mu.max()) if mu.size else 0.0)
+    half = n // 2
+    pad = np.pad(mu, (half, n - 1 - half), mode="edge")
+    up = np.lib.stride_tricks.sliding_window_view(pad, n).max(axis=1)
+    pad = np.pad(up, (n - 1 - half, half), mode="edge")
+    return np.lib.stride_tricks.sliding_window_view(pad, n).min(axis=1)
 
 
 @dataclass(frozen=True)
 class _Limits:
-    mu_grip: float
-    a_lat: float  # allowed lateral acceleration [m/s²] (inf: a linear tyre has no peak)
+    mu_grip: NDArray[np.float64]  # the tyre's peak μ at each sample
+    a_lat: NDArray[np.float64]  # allowed lateral acceleration [m/s²] per sample (inf: linear tyre)
     acc: Callable[[float], float]  # a(v): allowed acceleration
     dec: Callable[[float], float]  # d(v): allowed deceleration
 
 
 def _limits(ref: Reference, vehicle: VehicleParams, tyre: TyreParams, lqr: LQRSettings,
             friction: FrictionProfile, limits_vehicle: VehicleParams | None) -> _Limits:
-    mu = _run_mu(friction, ref)
-    mu_low, mu_high = _sustained(mu, ref.dt, True), float(mu.max())
-    mu_grip = _grip_mu(tyre, mu_low)
+    mu = _closed(_run_mu(friction, ref), ref.dt)
+    mu_low, mu_high = float(mu.min()), float(mu.max())
+    # the tyre's grip at each sample: μ_tyre, scaled where the plant's grip follows the road
+    mu_grip = tyre.mu_tyre * mu / tyre.mu_dry if tyre.scale_grip_with_road else np.full(mu.size, tyre.mu_tyre)
     # the linear tyre (the control model's, a verification plant) has no grip limit
-    a_lat = GRIP_MARGIN * mu_grip * vehicle.g if tyre.model == TyreModel.PACEJKA else float("inf")
+    a_lat = GRIP_MARGIN * mu_grip * vehicle.g if tyre.model == TyreModel.PACEJKA else np.full(mu.size, np.inf)
     acc = force_budget_acceleration(vehicle, lqr, mu_high, tyre=tyre, limits_vehicle=limits_vehicle)
     dec = braking_budget_deceleration(vehicle, lqr, mu_low, tyre=tyre, limits_vehicle=limits_vehicle)
     return _Limits(mu_grip, a_lat, acc, dec)
@@ -197,7 +199,8 @@ def _measure(ref: Reference, lim: _Limits) -> PlanCheck:
     acc_allowed = np.array([lim.acc(float(x)) for x in v[:-1]])
     dec_allowed = np.array([lim.dec(float(x)) for x in v[1:]])
     worst = ("", 0.0, 0.0, 0.0, 0.0)
-    cases = (("lateral grip", lat, np.full(v.size, lim.a_lat), t),
+    kl = 0  # the lateral check's worst sample: its grip goes into the line
+    cases = (("lateral grip", lat, lim.a_lat, t),
              ("force budget", dv, acc_allowed, t[1:]),
              ("braking budget", -dv, dec_allowed, t[1:]))
     for name, demand, allowed, tt in cases:
@@ -207,9 +210,11 @@ def _measure(ref: Reference, lim: _Limits) -> PlanCheck:
             r = np.where(allowed > 0, demand / np.where(allowed > 0, allowed, 1.0),
                          np.where(demand > 0, np.inf, 0.0))
         k = int(np.argmax(r))
+        kl = k if name == "lateral grip" else kl
         if r[k] > 1.0 + _TOL and r[k] > worst[1]:
             worst = (name, float(r[k]), float(demand[k]), float(allowed[k]), float(tt[k]))
-    return PlanCheck(worst[0], worst[1], worst[2], worst[3], worst[4], lim.mu_grip, lim.a_lat)
+    return PlanCheck(worst[0], worst[1], worst[2], worst[3], worst[4], float(lim.mu_grip[kl]),
+                     float(lim.a_lat[kl]))
 
 
 def feasible_plan(ref: Reference, vehicle: VehicleParams, tyre: TyreParams, lqr: LQRSettings,
@@ -238,19 +243,12 @@ def feasible_plan(ref: Reference, vehicle: VehicleParams, tyre: TyreParams, lqr:
                           f"{check.describe()}; re-plan it within the limits, or drop --strict-plan "
                           "to cap its speed profile")
     acc, dec = _in_style(ref, lim)
-    capped = ref
-    for _ in range(3):  # the capped plan is longer: the μ(road) it meets may differ; settle it
-        cap = lateral_speed_cap(ref, lim.a_lat) if np.isfinite(lim.a_lat) else None
-        capped = retime(ref, acc, v_cap=cap, d_max=dec)
-        again = _limits(capped, vehicle, tyre, lqr, friction, limits_vehicle)
-        if again.a_lat == lim.a_lat:
-            break
-        lim = _Limits(min(lim.mu_grip, again.mu_grip), min(lim.a_lat, again.a_lat), lim.acc, lim.dec)
+    # each sample's cap from the grip where (and when, along the plan's own timing) it is driven
+    capped = retime(ref, acc, v_cap=lateral_speed_cap(ref, lim.a_lat), d_max=dec)
     v0, v1 = float(np.max(ref.v)), float(np.max(capped.v))
     return capped, check, (f"plan capped to the vehicle's limits: {check.describe()}; speed profile "
                            f"re-timed along the same path (max v {v0:.1f} -> {v1:.1f} m/s, duration "
                            f"{ref.duration:.1f} -> {capped.duration:.1f} s); --strict-plan refuses instead")
-
 
 
 def feasible_plan_for(cfg: Config, ref: Reference, *,
