@@ -806,7 +806,51 @@ def envelope(ctx: Context) -> Produced:
     grip = _experiment(ctx, "Monza a_lat 10 REF", Config(), ["ref"],
                        reference=_plan(ctx, "Monza", "--v-max", "25", "--a-lat", "10"))
     g = grip.metrics["methods"]["REF"]
-    p.add("envelope", "grip", f"`REF ({g['status']})`: {g['termination']}")
+    p.add("envelope", "grip", f"`REF ({g['status']})`: max |e_y| {_d(g['max_abs_lateral_m'], 2)} m, "
+          f"RMSE y {_d(g['rmse']['y'], 3)} m")
+    return p
+
+
+def plan_feasibility(ctx: Context) -> Produced:
+    """The public tracks planned at 30 m/s and 8 m/s², capped by the plan check and run
+    (docs/planning.md); the force limits per kg and a degraded run (docs/configuration.md,
+    docs/outputs.md)."""
+    from tsmpc.config import Config, PlannerSettings, apply_overrides
+    from tsmpc.planning.feasibility import feasible_plan_for
+    from tsmpc.planning.planner import plan_path
+    from tsmpc.planning.reference import Reference
+    from tsmpc.planning.tracks import load_tumftm
+
+    p = Produced()
+    rows = []
+    plan = ("--v-max", "30", "--a-lat", "8")
+    for track in (("Zandvoort",) if ctx.quick else TRACKS):
+        raw = plan_path(load_tumftm(ctx.track(track)).centre, PlannerSettings(v_max=30.0, a_lat_max=8.0),
+                        closed=True, dt=0.1)
+        _, check, _ = feasible_plan_for(Config(), raw)
+        capped = Reference.from_csv(_plan(ctx, track, *plan))
+        m = _track_run(ctx, track, plan=plan).metrics["methods"]["REF"]
+        rows.append([track, f"{check.limit}: {_d(check.demand, 2)} > {_d(check.allowed, 2)} m/s²",
+                     f"{_d(raw.duration, 1)} → {_d(capped.duration, 1)}", m["status"],
+                     _d(m["max_abs_lateral_m"], 3), _d(m["rmse"]["y"], 3)])
+    p.add("plan-feasibility", "tracks", _table(
+        ["track", "plan check", "lap [s]: planned → capped", "run", "max \\|e_y\\| [m]", "RMSE y [m]"],
+        rows), partial=ctx.quick)
+    if ctx.quick:
+        return p
+    cfg = Config()
+    nominal = _experiment(ctx, "builtin REF", cfg, ["ref"]).metrics["methods"]["REF"]
+    heavy = _experiment(ctx, "builtin REF mass 1000", apply_overrides(cfg, ["vehicle.mass=1000.0"]),
+                        ["ref"]).metrics["methods"]["REF"]
+    r0, r1 = nominal["rmse"], heavy["rmse"]
+    p.add("plan-feasibility", "mass",
+          f"RMSE x {_d(r1['x'], 3)} m, y {_d(r1['y'], 4)} m, max |e_y| "
+          f"{_d(heavy['max_abs_lateral_m'], 3)} m, "
+          f"{heavy['status']} (683 kg: RMSE x {_d(r0['x'], 3)} m, y {_d(r0['y'], 4)} m)")
+    weak = _experiment(ctx, "builtin REF force_max 6500 N, 6 s",
+                       apply_overrides(cfg, ["lqr.force_max=6500.0"]), ["ref"],
+                       duration=6.0).metrics["methods"]["REF"]
+    p.add("plan-feasibility", "degraded", f"`{weak.get('degraded', weak['status'])}`")
     return p
 
 
@@ -1176,6 +1220,8 @@ PRODUCERS: tuple[Producer, ...] = (
     Producer("commonroad", commonroad, "CommonRoad's vehicle models against tsmpc's plant", ci=True),
     Producer("race-tracks", race_tracks, "race tracks at the default plan", ci=True),
     Producer("envelope", envelope, "Monza beyond the default box"),
+    Producer("plan-feasibility", plan_feasibility, "the tracks at 30 m/s and 8 m/s² capped; force "
+             "limits per kg; a degraded run (7 runs)"),
     Producer("robustness", robustness, "the robustness scenarios (docs/sweeps.md)"),
     Producer("sweep-example", sweep_example, "the example sweep: figure and time"),
     Producer("paper-explained", paper_explained, "Table 5 explained (≈ 25 runs, 10–15 min)"),
