@@ -160,8 +160,8 @@ def apply_conditions(cfg: Config, scenario: Scenario) -> RobustnessCase:
         from tsmpc.planning.retime import retime_for_force_budget
 
         mu = _budget_mu(dc_replace(scenario, friction=friction), cfg, ref.duration)
-        ref = retime_for_force_budget(ref, veh, cfg.lqr, mu, tyre=tyre,  # the controllers' limits:
-                                      limits_vehicle=veh if sc.oracle_tuned else cfg.vehicle)
+        ref = retime_for_force_budget(ref, veh, cfg.lqr, mu, tyre=tyre,  # the actuators' limits
+                                      limits_vehicle=cfg.vehicle)
         changes["reference"] = ref
     if sc.friction:
         friction = EventFriction(friction, resolve_events(sc.friction, ref))
@@ -190,6 +190,10 @@ def apply_conditions(cfg: Config, scenario: Scenario) -> RobustnessCase:
     if sc.oracle_tuned:  # the scales are now in the vehicle: reset, so the config re-runs alike
         unit = {"mass_scale": 1.0, "inertia_scale": 1.0, "cornering_front_scale": 1.0,
                 "cornering_rear_scale": 1.0, "cog_to_front_scale": 1.0}
-        cfg = replace(cfg, vehicle=veh, scenario=replace(sc, plant=replace(sc.plant, **unit)))
+        # the actuators are the car's: knowing its true mass does not give it another engine, so
+        # the force limits stay those of the config's vehicle (absolute; per kg they would follow)
+        lo, hi = cfg.lqr.force_limits(cfg.vehicle)
+        lqr = replace(cfg.lqr, force_min=lo, force_max=hi, force_min_per_kg=None, force_max_per_kg=None)
+        cfg = replace(cfg, vehicle=veh, lqr=lqr, scenario=replace(sc, plant=replace(sc.plant, **unit)))
     meta = {**scenario.meta, "conditions": sc.model_dump(mode="json", exclude_defaults=True)}
     return RobustnessCase(cfg, dc_replace(scenario, meta=meta, **changes))  # type: ignore[arg-type]
