@@ -99,6 +99,21 @@ def test_force_limits_follow_the_mass_by_default() -> None:
         assert Config.preset(preset).lqr.force_limits(heavy) == (-2000.0, 10000.0)
 
 
+def test_the_oracle_tuned_controllers_keep_the_cars_actuators() -> None:
+    """Knowing the true mass (+20 %) gives the oracle-tuned controllers the true models, not
+    another engine: the limits stay the config's vehicle's, also in its saved config."""
+    from tsmpc.conditions import apply_conditions
+    from tsmpc.config import apply_overrides
+    from tsmpc.sim.compare import load_scenario
+
+    cfg = apply_overrides(Config(), ["scenario.oracle_tuned=true", "scenario.plant.mass_scale=1.2"])
+    oracle, _ = apply_conditions(cfg, load_scenario(cfg))
+    assert oracle.vehicle.mass == pytest.approx(1.2 * 683.0)
+    assert oracle.lqr.force_limits(oracle.vehicle) == (-2000.0, 10000.0)
+    again, _ = apply_conditions(oracle, load_scenario(oracle))  # the saved config re-runs alike
+    assert again.lqr.force_limits(again.vehicle) == (-2000.0, 10000.0)
+
+
 @pytest.mark.parametrize(("text", "needle"), [
     ("[lqr]\nforce_max = 12000.0\nforce_max_per_kg = 20.0\n",
      "lqr.force_max = 12000 N and lqr.force_max_per_kg = 20 N/kg disagree for a 683 kg vehicle"),
