@@ -92,8 +92,9 @@ def path_curvature(ref: Reference) -> np.ndarray:
     return np.where(v > 0.1, np.asarray(ref.omega) / np.maximum(v, 0.1), np.asarray(ref.kappa))
 
 
-def lateral_speed_cap(ref: Reference, a_lat: float) -> np.ndarray:
-    """The speed [m/s] at which each sample's curvature κ gives the lateral acceleration ``a_lat``:
+def lateral_speed_cap(ref: Reference, a_lat: float | np.ndarray) -> np.ndarray:
+    """The speed [m/s] at which each sample's curvature κ gives the lateral acceleration ``a_lat``
+    (one value, or one per sample):
     ``sqrt(a_lat / |κ|)`` (inf on a straight)."""
     k = np.abs(path_curvature(ref))
     with np.errstate(divide="ignore"):
