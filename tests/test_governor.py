@@ -66,12 +66,13 @@ def test_a_spin_engages_the_governor_on_a_dry_road() -> None:
 
 def test_sample_demand_by_hand() -> None:
     """v = 10, ω = 0.3, a_d = 1.5, k = 2: sqrt(3² + (2 · 1.5)²) = sqrt(18); with drag 0.001 /m the
-    traction is 1.5 + 0.1 = 1.6: sqrt(9 + 3.2²) = sqrt(19.24). Braking counts the same (rear tyre)."""
+    traction is 1.5 + 0.1 = 1.6: sqrt(9 + 3.2²) = sqrt(19.24). Braking counts for the whole car
+    (k = 1): sqrt(9 + 1.5²) = sqrt(11.25)."""
     d, a_t = sample_demand(P, 10.0, 0.3, 1.5)
     assert (d, a_t) == (pytest.approx(math.sqrt(18.0), abs=1e-12), 1.5)
     d, a_t = sample_demand(P._replace(drag_per_kg=0.001), 10.0, 0.3, 1.5)
     assert (d, a_t) == (pytest.approx(math.sqrt(19.24), abs=1e-12), pytest.approx(1.6, abs=1e-12))
-    assert sample_demand(P, 10.0, 0.3, -1.5)[0] == pytest.approx(math.sqrt(18.0), abs=1e-12)
+    assert sample_demand(P, 10.0, 0.3, -1.5)[0] == pytest.approx(math.sqrt(11.25), abs=1e-12)
 
 
 def test_preview_rate_by_hand() -> None:
@@ -180,9 +181,9 @@ def test_governor_on_changes_nothing_while_grip_suffices() -> None:
 def test_slows_down_on_a_mu_drop(drop_estimate) -> None:
     """μ 0.9 → 0.3 at 1 s while the plan accelerates at 2.6 m/s² (the rear tyre holds 1.2 m/s² on
     0.3): the governor slows the reference within 0.5 s of the drop (measured: the reference is
-    slowed from 1.4 s, read from the spinning wheel's traction), the governed speed ends below 70 %
-    of the planned one (measured 4.1 of 12.4 m/s), and the car stays on the governed path
-    (measured max |e_y| 0.003 m; without the governor it leaves the road at 7.3 s)."""
+    slowed from 1.3 s, read from the spinning wheel's traction), the governed speed ends below 70 %
+    of the planned one (measured 3.9 of 12.4 m/s), and the car stays on the governed path
+    (measured max |e_y| 0.002 m; without the governor it leaves the road at 7.3 s)."""
     log = drop_estimate
     assert log.termination == "completed"
     planned = np.asarray(log.meta["planned_v"])

@@ -25,15 +25,18 @@ grip regained slowly.
 
 Demand of a reference sample (v_d, ω_d, a_d = dv_d/dτ) at rate 1, as an acceleration [m/s²]::
 
-    d = sqrt((v_d ω_d)² + (k a_t)²),   a_t = a_d + c_d v_d² / M,   k = (a + b) / (a η)
+    d = sqrt((v_d ω_d)² + (k a_t)²),   a_t = a_d + c_d v_d² / M,   k = (a + b) / (a η) if a_t > 0 else 1
 
-a_t is the force per kg the rear tyre must transmit, driving or braking (acceleration plus the
-drag c_d v²; the plant's drive force and the paper's road resistance both act at the rear wheel,
+a_t is the force per kg the driven rear tyre must transmit (acceleration plus the drag c_d v²;
 :mod:`tsmpc.vehicle.plant`); the rear axle carries a/(a+b) of the weight, so it reaches its grip
 (a+b)/a times sooner than the whole car, and the reference may use a share η
 (``traction_margin``, 0.5) of it: the speed loop's transients ask about twice the reference's own
-acceleration (measured on the μ drop below). At rate r the demand is r² d; the sample can be
-carried when
+acceleration (the μ drop on the paper reference: at 0.8 of the axle's grip the car spun as the
+governed speed rose again). Braking counts for the whole car (k = 1): the plan's braking is the
+plan check's (:mod:`tsmpc.planning.feasibility`), and counting it at the rear axle made the
+governor want slow-downs it could not make inside a braking zone (a μ 0.3 patch in a corner
+before one: the run left the road with it, not without). At rate r the demand is r² d; the
+sample can be carried when
 r² d ≤ margin μ̂_t g, and its traction needs at most the force budget,
 r² (a_t) ≤ (F_max − μ̂(road) M̂ g) / M̂. The largest such rate r_j of each preview sample j is
 reachable from now if the governor can lower r by r_j within the time the car takes to get
@@ -146,7 +149,7 @@ def sample_demand(p: GovernorParams, v: float, omega: float, a_d: float) -> tupl
     """(grip demand [m/s²], traction per kg [m/s²]) of a reference sample at rate 1."""
     a_t = a_d + p.drag_per_kg * v * v
     a_lat = v * omega
-    kt = p.traction_factor * a_t
+    kt = p.traction_factor * a_t if a_t > 0.0 else a_t
     return math.sqrt(a_lat * a_lat + kt * kt), a_t
 
 
