@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -62,10 +62,15 @@ from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.planning.reference import Reference
 
+if TYPE_CHECKING:
+    from tsmpc.control.paper_as_run import AsRunLQR
+    from tsmpc.control.ts_lqr import TSLQR
+    from tsmpc.estimation.mhe_uio import MHEUIO
+
 __all__ = ["EVENT_NAMES", "Cascade", "Command", "Measurement", "Method", "build_outer_controller"]
 
 #: Counters of :attr:`Cascade.events` (also the ``events`` of a run's metrics).
-EVENT_NAMES = (
+EVENT_NAMES: tuple[str, ...] = (
     "mpc_soft",  # the MPC solved the softened problem
     "mpc_fallback",  # the MPC returned its shifted previous plan
     "mpc_scheduling_clipped",  # scheduling values clipped into the kinematic box (summed)
@@ -200,6 +205,9 @@ class Cascade:
         max_time_jump_s: a call time more than this after the previous one is rejected (the
             cascade's own clock is used) [s] (default: T_c).
     """
+
+    lqr: TSLQR | AsRunLQR  #: the inner loop (cfg.lqr.law)
+    mhe: MHEUIO  #: the estimator (MHEUIO or its paper form PaperUIOMHE, cfg.mhe.form)
 
     def __init__(
         self, cfg: Config, method: Method | str, reference: Reference, *,
@@ -507,7 +515,9 @@ class Cascade:
         t_mpc = 0.0
         if self._calls % self.n_inner == 0:
             plan, e_meas, t_mpc = self._outer(t, X, Y, th, v, om, fresh, speeds_ok, pose_ok)
-        v_ref, w_ref = float(self._u_prev[0]), float(self._u_prev[1])
+        # (_u_prev and _pose are set by _start_from above; ignores, not asserts: the syntax tree
+        # of these methods is fingerprinted for the run engine, tsmpc.sim.engine._PORTED)
+        v_ref, w_ref = float(self._u_prev[0]), float(self._u_prev[1])  # type: ignore[index]
         t1 = time.perf_counter()
         est, u_model = self._estimate(m, v, om, fresh and speeds_ok, t1)
         t2 = time.perf_counter()
@@ -582,19 +592,19 @@ class Cascade:
         # fusion.predict_pose: a missing pose is dead-reckoned on the estimate; off (the
         # paper), the MPC sees the pose of its last step, held
         if pose_ok:
-            self._pose_held = self._pose.copy()
+            self._pose_held = self._pose.copy()  # type: ignore[union-attr]
         p = self._pose if pose_ok or fs.predict_pose else self._pose_held
         if self.governed:  # the reference at the governed time τ = t − offset (governor.py)
-            e_meas, window = self._governed(p, t)
+            e_meas, window = self._governed(p, t)  # type: ignore[arg-type]
         else:
-            e_meas = self._outer_errors(p, min(k, len(self.reference) - 1))
+            e_meas = self._outer_errors(p, min(k, len(self.reference) - 1))  # type: ignore[arg-type]
             window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
         t0 = time.perf_counter()
         try:
             plan = self.mpc.step(e_meas, self._u_prev, window)
         except Exception as err:  # a solver bug must not stop the car: shifted plan
             self._caught(err)
-            plan = shifted_plan(self._plan, e_meas, self._u_prev, self.cfg.mpc.N, t0, 0, 0, 0)
+            plan = shifted_plan(self._plan, e_meas, self._u_prev, self.cfg.mpc.N, t0, 0, 0, 0)  # type: ignore[arg-type]
         t_mpc = time.perf_counter() - t0
         self._u_prev = np.asarray(plan.u, dtype=float)
         self._plan = plan

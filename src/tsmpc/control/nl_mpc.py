@@ -24,7 +24,7 @@ from tsmpc.models.kinematic import KinematicTS
 
 __all__ = ["NLMPC"]
 
-_IPOPT_OPTIONS = {
+_IPOPT_OPTIONS: dict[str, bool | int | float | str] = {
     "ipopt.print_level": 0,
     "ipopt.sb": "yes",
     "print_time": False,

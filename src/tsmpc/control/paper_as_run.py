@@ -70,7 +70,7 @@ def as_run_reference_gain(A5: NDArray[np.float64], B5: NDArray[np.float64], K: N
                           ) -> NDArray[np.float64]:
     """N̄ = [C (I − A₅ − B₅ K₁:₅)⁻¹ B₅]⁻¹ (2 × 2) of the discrete 5-state model (C: v and ω)."""
     X = np.linalg.solve(np.eye(5) - A5 - B5 @ K[:, :5], B5)
-    return np.linalg.inv(_C @ X)
+    return np.linalg.inv(_C @ X).astype(np.float64, copy=False)
 
 
 class AsRunLQR:

@@ -94,7 +94,7 @@ def solve_qcqp_clarabel(
     Pm[:n, :n] = H
     q = np.zeros(nz)
     q[:n] = f
-    if soft:
+    if soft_penalty is not None:  # (soft)
         q[n] = float(soft_penalty)
 
     rows: list[NDArray[np.float64]] = []
@@ -128,14 +128,16 @@ def solve_qcqp_clarabel(
         A_soc[0, n] = -1.0
     Aall = sparse.csc_matrix(np.vstack([A_nn, A_soc]))
     ball = np.concatenate([b_nn, b_soc])
-    settings = clarabel.DefaultSettings()
+    # (defined in clarabel's compiled module, which has no type information)
+    settings = clarabel.DefaultSettings()  # pyright: ignore[reportAttributeAccessIssue]
     settings.verbose = False
     settings.tol_gap_abs = settings.tol_gap_rel = 1e-9
     settings.tol_feas = 1e-9
-    cones = [clarabel.NonnegativeConeT(A_nn.shape[0]), clarabel.SecondOrderConeT(m + 1)]
+    cones = [clarabel.NonnegativeConeT(A_nn.shape[0]),  # pyright: ignore[reportAttributeAccessIssue]
+             clarabel.SecondOrderConeT(m + 1)]  # pyright: ignore[reportAttributeAccessIssue]
     try:
-        solver = clarabel.DefaultSolver(sparse.triu(sparse.csc_matrix(Pm)).tocsc(), q, Aall, ball, cones,
-                                        settings)
+        solver = clarabel.DefaultSolver(  # pyright: ignore[reportAttributeAccessIssue]
+            sparse.triu(sparse.csc_matrix(Pm)).tocsc(), q, Aall, ball, cones, settings)
         sol = solver.solve()
     except Exception:
         return QPResult(np.full(n, np.nan), QPStatus.FAILED, 0)

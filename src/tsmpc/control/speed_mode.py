@@ -55,7 +55,7 @@ def _reference_gain(
     A5: NDArray[np.float64], B5: NDArray[np.float64], K: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     X = np.linalg.solve(A5 + B5 @ K[:, :5], B5)
-    return -np.linalg.inv(X[[0, 2], :])
+    return -np.linalg.inv(X[[0, 2], :]).astype(np.float64, copy=False)
 
 
 def _nbar_r(

@@ -234,7 +234,7 @@ class TSLQR:
         steady state of the nominal loop has C x = r and ζ = 0 (the paper's inner loop)."""
         Aa, Ba = self._plant_filter(delta, v)
         X = np.linalg.solve(Aa + Ba @ K[:, :5], Ba)  # (A + B K₅)⁻¹ B
-        return -np.linalg.inv(X[[0, 2], :])
+        return -np.linalg.inv(X[[0, 2], :]).astype(np.float64, copy=False)
 
     def _plant_filter(self, delta: float, v: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Continuous plant + Apkarian filter (5 × 5, 5 × 2) at (δ, v) clipped into the box."""
@@ -323,7 +323,7 @@ class TSLQR:
         Nbar = self.reference_gain(delta, v, K)
         Aa, Ba = self._plant_filter(delta, v)
         xss = -np.linalg.solve(Aa + Ba @ K[:, :5], Ba @ (Nbar @ r))
-        return xss[3:5]
+        return xss[3:5].astype(np.float64, copy=False)
 
     def _memberships(self, *z: float) -> list[float]:
         """μ_i(ϑ) of the dynamic box (same as ``SchedulingBox.memberships``, on floats)."""

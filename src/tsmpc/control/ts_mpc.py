@@ -35,8 +35,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dpotrf as _potrf
-from scipy.linalg.lapack import dpotrs as _potrs
+
+# (generated from the Fortran module: scipy's stubs do not list them)
+from scipy.linalg.lapack import dpotrf as _potrf  # pyright: ignore[reportAttributeAccessIssue]
+from scipy.linalg.lapack import dpotrs as _potrs  # pyright: ignore[reportAttributeAccessIssue]
 
 from tsmpc.config import MPCSettings, SchedulingMode
 from tsmpc.control.qp import QPStatus, solve_daqp, solve_qcqp_clarabel
@@ -258,7 +260,7 @@ class TSMPC:
         self._dlb, self._dub = np.repeat(-du, N), np.repeat(du, N)
         self._dlb2, self._dub2 = -du[:, None], du[:, None]  # the same, broadcast on (2, N)
         self._umin2, self._umax2 = self._umin[:, None], self._umax[:, None]
-        self._L = np.kron(np.eye(2), np.tri(N))  # U = u_prev + L ΔU
+        self._L = np.kron(np.eye(2), np.tri(N)).astype(np.float64, copy=False)  # U = u_prev + L ΔU
         self._term = np.array([N - 1, 2 * N - 1, 3 * N - 1])
         # Writable copies of the (read-only) box: numba compiles a separate specialisation for
         # read-only arrays, which would otherwise happen inside the first timed step.
@@ -321,9 +323,9 @@ class TSMPC:
         z[:, 0], z[:, 1], z[:, 2] = om, vd, sinc(eth)
         n_clip = 0
         if (z < self._lo).any() or (z > self._hi).any():  # rare: count, then clip
-            zc = np.clip(z, self._lo, self._hi)
-            n_clip = int(np.count_nonzero(np.any(zc != z, axis=-1)))
-            z = zc
+            zclip = np.clip(z, self._lo, self._hi)
+            n_clip = int(np.count_nonzero(np.any(zclip != z, axis=-1)))
+            z = zclip
         c = z[:, 0] * Tc
         s = z[:, 1] * z[:, 2] * Tc
         r[:, 0], r[:, 1] = v_d * np.cos(eth), w_d
@@ -371,7 +373,7 @@ class TSMPC:
                 return z, MPCStatus.OPTIMAL, n_qp, n_it
             # Supporting hyperplane of the ellipsoid at the radial projection x̂ of x_N.
             a = (S @ xN) / np.sqrt(lvl)
-            A = np.vstack([A, a @ GN])
+            A = np.vstack([A, a @ GN]).astype(np.float64, copy=False)
             lo = np.append(lo, -1e30)
             hi = np.append(hi, 1.0 - a @ cN)
             sense = np.append(res.active, 0).astype(np.int32) if res.active is not None else None
@@ -481,13 +483,15 @@ class TSMPC:
             if converged:
                 break
 
-        du = z.reshape(2, N).T
+        # (ignores: the loop runs at least once, and z is not None after it; this method's syntax
+        # tree is fingerprinted for the run engine, tsmpc.sim.engine._PORTED, so no assert here)
+        du = z.reshape(2, N).T  # type: ignore[union-attr]
         U = up + np.cumsum(du, axis=0)
         X = np.empty((N + 1, 3))
         X[0] = x0
-        X[1:] = (qp.x_aff + qp.G @ z).reshape(3, N).T
-        cost = float(z @ qp.H @ z + 2.0 * qp.f @ z + qp.c0)
-        res = MPCResult(u=U[0].copy(), x_pred=X, u_pred=U, du=du, cost=cost, status=status,
+        X[1:] = (qp.x_aff + qp.G @ z).reshape(3, N).T  # type: ignore[operator]
+        cost = float(z @ qp.H @ z + 2.0 * qp.f @ z + qp.c0)  # type: ignore[operator]
+        res = MPCResult(u=U[0].copy(), x_pred=X, u_pred=U, du=du, cost=cost, status=status,  # pyright: ignore[reportPossiblyUnboundVariable]
                         iterations=n_qp, qp_iterations=n_it,
                         solve_time_s=time.perf_counter() - t0, n_clipped=n_clip)
         self._prev = res
