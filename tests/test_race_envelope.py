@@ -57,13 +57,17 @@ def test_monza_at_25_m_s_widens_the_boxes_and_tracks(tmp_path: Path, tracks_dir:
 
 
 def test_a_plan_beyond_the_tyres_grip_is_reported_diverged(tmp_path: Path) -> None:
+    """A ring planned at 10 m/s² lateral: the plan check caps it to the config's tyre (issue 36);
+    a plant whose tyres grip less than the config says (μ_tyre 0.45: 4.4 m/s², below the cap's
+    5.3) leaves the road — reported diverged, never completed."""
     t = np.linspace(0, 2 * np.pi, 24, endpoint=False)
     ref = plan_path(40 * np.stack([np.cos(t), np.sin(t)], axis=1),
                     PlannerSettings(v_max=25.0, a_lat_max=10.0), closed=True, dt=0.1)
     f = tmp_path / "ring.csv"
     ref.to_csv(f)
-    res = CliRunner().invoke(app, ["run", "--reference", str(f), "--duration", "30",
-                                   "--no-plots", "--out", str(tmp_path / "o")])
+    res = CliRunner().invoke(app, ["run", "--reference", str(f), "--duration", "30", "--no-plots",
+                                   "--out", str(tmp_path / "o"), "--set", "scenario.plant.mu_tyre=0.45"])
+    assert "plan capped to the vehicle's limits: lateral grip" in res.output
     assert res.exit_code == 1, res.output
     assert "REF (diverged)" in res.output and "completed" not in res.output
     m = _metrics(tmp_path / "o")
