@@ -597,10 +597,10 @@ def run_batch(tasks: list[RunTask]) -> list[dict[str, Any]]:
     share = (time.perf_counter() - t0) / max(1, len(tasks))  # a batched run's share of the batch
     for i in batched:
         out[i]["elapsed_s"] = share  # type: ignore[index]
-    key = batch_key(tasks)
+    bkey = batch_key(tasks)
     recs = [rec for rec in out if rec is not None]
     for rec in recs:
-        rec["batch"] = key  # the Dask task that ran it
+        rec["batch"] = bkey  # the Dask task that ran it
     return recs
 
 
@@ -1190,7 +1190,7 @@ def connect(scheduler: str | None, workers: int, timeout: float = 5.0) -> tuple[
                                f"{' '.join(str(err).split())[:200]})") from None
     if not math.isfinite(timeout) or timeout <= 0:
         raise ConfigError(f"--connect-timeout = {timeout}: must be a finite number > 0")
-    from distributed.comm import parse_address
+    from distributed.comm import parse_address  # pyright: ignore[reportPrivateImportUsage]  # (no __all__)
 
     try:
         proto, loc = parse_address(scheduler)
@@ -1217,7 +1217,7 @@ def _probe(address: str, timeout: float) -> None:
     that accepts but never speaks held it for a minute (issue 24)."""
     import asyncio
 
-    from distributed.comm import connect as comm_connect
+    from distributed.comm import connect as comm_connect  # pyright: ignore[reportPrivateImportUsage]
 
     async def go() -> None:
         comm = await asyncio.wait_for(comm_connect(address, timeout=timeout), timeout)
@@ -1288,7 +1288,9 @@ def write_outputs(table: Any, out: Path, *, plots: bool = True, plotter: PlotFn 
         atomic_write_bytes(made[1], buf.getvalue())
         if plots and len(table):
             if plotter is None:
-                from tsmpc.report.sweep_plots import save_sweep_plots as plotter
+                from tsmpc.report.sweep_plots import save_sweep_plots
+
+                plotter = save_sweep_plots
             made += [Path(f) for f in plotter(table, stage, AXES)]
         names = {f.name for f in made}
         try:

@@ -321,7 +321,7 @@ class CourseFusion:
             if good and len(self._iv) == BASELINE and all(i.ok for i in self._iv):
                 assert pose is not None
                 self._chord(np.asarray(pose, dtype=float))
-        self._cur = _Interval(start=tuple(float(c) for c in pose), ay_ref=ay) if good else None  # type: ignore[arg-type]
+        self._cur = _Interval(start=tuple(float(c) for c in pose), ay_ref=ay) if good else None  # type: ignore[arg-type, union-attr]
 
     def _chord(self, end: NDArray[np.float64]) -> None:
         first = self._iv[0].start
@@ -353,8 +353,8 @@ class CourseFusion:
         innov = z - phi @ self._theta
         if not cornering:
             g_n = 1.0 - self.Tc / NOISE_MEMORY_S
-            r = innov / sig0
-            self._n2 = g_n * self._n2 + r * r
+            r = innov / sig0  # (a scalar: 1-D @ 1-D, which numpy's stubs type as an array)
+            self._n2 = g_n * self._n2 + r * r  # type: ignore[assignment]
             self._n1 = g_n * self._n1 + 1.0
         sig = sig0 * self.noise_scale
         lam = 1.0 - self.Tc / SLIP_MEMORY_S

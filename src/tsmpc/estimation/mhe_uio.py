@@ -35,8 +35,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dpotrf as _potrf
-from scipy.linalg.lapack import dpotrs as _potrs
+
+# (generated from the Fortran module: scipy's stubs do not list them)
+from scipy.linalg.lapack import dpotrf as _potrf  # pyright: ignore[reportAttributeAccessIssue]
+from scipy.linalg.lapack import dpotrs as _potrs  # pyright: ignore[reportAttributeAccessIssue]
 
 from tsmpc.config import MHESettings, VehicleParams
 from tsmpc.control.qp import QPStatus, solve_daqp
@@ -125,7 +127,7 @@ class MHEUIO:
         self._xmax = np.asarray(settings.x_max, dtype=float)
         self._sqrt_r = np.sqrt(self._r)
         self._tiles: dict[tuple[str, int], Any] = {}
-        self._kern = None
+        self._kern: Any = None  # the compiled block (tsmpc.kernels.load("mhe")), or None
         if jit is None or jit:
             from tsmpc import kernels
 
@@ -141,7 +143,7 @@ class MHEUIO:
                 euler = getattr(model, "method", None) == Discretization.EULER
             except (AttributeError, TypeError):
                 phys, euler = (1.0,) * 8, False
-            self._kargs = (
+            self._kargs: tuple[Any, ...] = (
                 self._q, self._r, self._p, F_PRIOR_WEIGHT, self._xmin, self._xmax,
                 # Writable copies: numba types read-only arrays apart, and the kernels are compiled
                 # ahead of time for writable ones (a read-only box would compile inside a timed step).

@@ -85,8 +85,8 @@ def discretize(
     A: ArrayLike, B: ArrayLike, T: float, method: Discretization = Discretization.EULER
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Discretise (A (..., n, n), B (..., n, m)) at sample time T; batched."""
-    A = np.asarray(A, float)
-    B = np.asarray(B, float)
+    A = np.asarray(A, np.float64)
+    B = np.asarray(B, np.float64)
     n, m = A.shape[-1], B.shape[-1]
     if method == Discretization.EULER:
         return np.eye(n) + T * A, T * B
@@ -95,7 +95,7 @@ def discretize(
     big = np.zeros((*A.shape[:-2], n + m, n + m))
     big[..., :n, :n] = A * T
     big[..., :n, n:] = B * T
-    E = scipy.linalg.expm(big)
+    E = np.asarray(scipy.linalg.expm(big), dtype=np.float64)  # (float64 already: no copy)
     return E[..., :n, :n], E[..., :n, n:]
 
 

@@ -66,12 +66,13 @@ def continuous_error_dynamics(
     x: ArrayLike, u: ArrayLike, v_d: ArrayLike, omega_d: ArrayLike
 ) -> NDArray[np.float64]:
     """ė = [ω e_y − v + v_d cos e_θ, −ω e_x + v_d sin e_θ, ω_d − ω] for x (..., 3), u (..., 2)."""
-    x = np.asarray(x, dtype=float)
-    u = np.asarray(u, dtype=float)
+    x = np.asarray(x, dtype=np.float64)
+    u = np.asarray(u, dtype=np.float64)
     ex, ey, et = x[..., 0], x[..., 1], x[..., 2]
     v, w = u[..., 0], u[..., 1]
+    vd, wd = np.asarray(v_d, dtype=np.float64), np.asarray(omega_d, dtype=np.float64)
     return np.stack(
-        [w * ey - v + v_d * np.cos(et), -w * ex + v_d * np.sin(et), omega_d - w], axis=-1
+        [w * ey - v + vd * np.cos(et), -w * ex + vd * np.sin(et), wd - w], axis=-1
     )
 
 

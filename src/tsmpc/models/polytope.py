@@ -97,8 +97,8 @@ class SchedulingBox:
         Values outside the box are clipped first (use :meth:`clip` to count them), so μ ≥ 0 and
         Σ μ = 1 always hold.
         """
-        z = np.clip(np.asarray(z, dtype=float), self.lower, self.upper)
-        eta1 = (z - self.lower) / (self.upper - self.lower)  # (..., r)
+        zc = np.clip(np.asarray(z, dtype=float), self.lower, self.upper)
+        eta1 = (zc - self.lower) / (self.upper - self.lower)  # (..., r)
         eta0 = 1.0 - eta1
         # (..., 2^r, r): pick η1 where the vertex bit is set, then multiply over premises.
         w = np.where(self._bits, eta1[..., None, :], eta0[..., None, :])

@@ -161,12 +161,13 @@ def load_reference(
         st = os.stat(p)
         key: tuple[Any, ...] | None = (str(p.resolve()), st.st_ino, st.st_size, st.st_mtime_ns,
                                        window, dt)
+        regular = stat.S_ISREG(st.st_mode)
     except OSError:
-        key = None  # read_text names the problem
+        key, regular = None, False  # read_text names the problem
     if key is not None and key in _MEMO:
         return _MEMO[key]
     ref = _load_reference(p, window, dt)
-    if key is not None and stat.S_ISREG(st.st_mode):
+    if key is not None and regular:
         for a in vars(ref).values():  # shared from now on: nobody may write into it
             if isinstance(a, np.ndarray):
                 a.flags.writeable = False

@@ -290,7 +290,7 @@ def speed_profile(
     closed = geo.closed
     nc = m if closed else m + 2
     # Control point i acts on [s_{i−2}, s_{i+1}]: centre (i − ½)h, half-width 1.5h.
-    centres = (np.arange(nc) - 0.5) * h
+    centres = (np.arange(nc, dtype=np.float64) - 0.5) * h
     k = np.maximum(_window_max(geo.s, np.abs(geo.kappa), np.mod(centres, L) if closed
                                else np.clip(centres, 0, L), 1.5 * h, closed), 1e-9)
     ub = np.minimum(settings.v_max**2, settings.a_lat_max / k)
@@ -303,16 +303,17 @@ def speed_profile(
     a_lon, a_brk = settings.a_lon_max, settings.a_brake_max
     b0 = None if closed else min(settings.v_start**2, ub[0], ub[1])
     upper = _passes(ub, h, a_lon, a_brk, closed, b0)
+    # (pyright: scipy annotates diags' offsets as an int; its documented API takes a sequence)
     if closed:
-        d1 = diags([-np.ones(nc), np.ones(nc - 1), [1.0]], [0, 1, -(nc - 1)], shape=(nc, nc))
+        d1 = diags([-np.ones(nc), np.ones(nc - 1), [1.0]], [0, 1, -(nc - 1)], shape=(nc, nc))  # pyright: ignore[reportArgumentType]
         d2 = diags([np.ones(nc), -2 * np.ones(nc - 1), [-2.0], np.ones(nc - 2), [1.0, 1.0]],
-                   [0, 1, -(nc - 1), 2, -(nc - 2)], shape=(nc, nc))
+                   [0, 1, -(nc - 1), 2, -(nc - 2)], shape=(nc, nc))  # pyright: ignore[reportArgumentType]
         vseg = np.sqrt(np.maximum.reduce([upper, np.roll(upper, -1), np.roll(upper, -2)]))
     else:
-        d1 = diags([-np.ones(nc - 1), np.ones(nc - 1)], [0, 1], shape=(nc - 1, nc))
-        d2 = diags([np.ones(nc - 2), -2 * np.ones(nc - 2), np.ones(nc - 2)], [0, 1, 2], shape=(nc - 2, nc))
+        d1 = diags([-np.ones(nc - 1), np.ones(nc - 1)], [0, 1], shape=(nc - 1, nc))  # pyright: ignore[reportArgumentType]
+        d2 = diags([np.ones(nc - 2), -2 * np.ones(nc - 2), np.ones(nc - 2)], [0, 1, 2], shape=(nc - 2, nc))  # pyright: ignore[reportArgumentType]
         vseg = np.sqrt(np.maximum.reduce([upper[:-2], upper[1:-1], upper[2:]]))
-    m1, m2 = d1.shape[0], d2.shape[0]
+    m1, m2 = d1.shape[0], d2.shape[0]  # pyright: ignore[reportOptionalSubscript]  # (scipy: shape Optional)
     # The pass profile bounds v from above, so jerk/upper is a conservative bound on da/ds.
     jrow = 2 * h * h * jerk_max / np.maximum(vseg, 1e-3)
     z1 = np.zeros((m1, m2))
@@ -413,6 +414,7 @@ def plan_path(
     s_n, v_n = prof.s, prof.v
     T_lap = float(np.sum(2 * np.diff(s_n) / np.maximum(v_n[1:] + v_n[:-1], 1e-12)))
     b = v_n**2
+    n_lap = 0  # (closed paths: samples per lap)
     if closed:
         n_lap = int(np.ceil(T_lap / dt - 1e-9))
         b = b * (T_lap / (n_lap * dt)) ** 2  # slower by < one sample per lap: limits still hold
@@ -421,7 +423,7 @@ def plan_path(
         n_main = int(np.floor(T_lap / dt)) + 1
     _check_samples(n_main + tail_s / dt, f"a lap time of {T_lap:.4g} s every dt = {dt:g} s")
     n = n_main + int(np.ceil(tail_s / dt - 1e-9))
-    t = np.arange(n) * dt
+    t = np.arange(n, dtype=np.float64) * dt
     if closed:
         reps = int(np.ceil(t[-1] / (n_lap * dt))) + 1
         s_ext = np.concatenate([s_n[:-1] + r * L for r in range(reps)] + [[reps * L]])

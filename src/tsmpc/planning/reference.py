@@ -129,7 +129,7 @@ class Reference:
             return self._trusted({s: getattr(self, s)[k:k + n] for s in _SIGNALS})
         idx = np.arange(k, k + n)
         if idx[-1] < L:
-            return Reference(*(getattr(self, s)[idx] for s in _SIGNALS), closed=False)
+            return Reference(**{s: getattr(self, s)[idx] for s in _SIGNALS}, closed=False)
         dt = self.dt
         t = self.t[0] + idx * dt
         if self.closed:
@@ -230,7 +230,7 @@ class Reference:
             raise DataFormatError(f"dt must be positive, got {dt}")
         n = int(np.floor(self.duration / dt + 1e-9)) + 1
         t = self.t[0] + np.arange(n) * dt
-        return Reference(t, *(np.interp(t, self.t, getattr(self, s)) for s in _SIGNALS[1:]),
+        return Reference(t=t, **{s: np.interp(t, self.t, getattr(self, s)) for s in _SIGNALS[1:]},
                          closed=self.closed)
 
     def to_csv(self, path: str | Path, meta: dict[str, object] | None = None) -> None:
@@ -289,7 +289,7 @@ class Reference:
         if closed is None:
             closed = meta.get("closed", "false").strip().lower() == "true"
         try:
-            ref = cls(*data.T, closed=closed)
+            ref = cls(**dict(zip(_SIGNALS, data.T, strict=True)), closed=closed)
         except DataFormatError as err:
             raise DataFormatError(f"{p}: {err}") from None
         check_consistency(ref, str(p), first_sample=first, what="line")

@@ -170,7 +170,7 @@ def off_track(track: Track, x: ArrayLike, y: ArrayLike, margin: float = 0.0) -> 
 
 
 def _project(track: Track, x: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.float64], ...]:
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]  # (not in scipy's stubs)
 
     q = np.stack([np.asarray(x, dtype=float).reshape(-1), np.asarray(y, dtype=float).reshape(-1)], axis=1)
     c = track.centre

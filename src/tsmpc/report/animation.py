@@ -23,13 +23,14 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.patches import Polygon
 from numpy.typing import NDArray
 from PIL import Image, ImageDraw, ImageFont
@@ -287,12 +288,12 @@ def _render(
     box_xy = (int(ax.bbox.x0) + 6, int(h - ax.bbox.y1) + 6)
     ax.legend(handles=[ref_line, trail, pred], loc="upper right", fontsize=7)
     dot, = ov.plot([], [], "o", color="tab:red", ms=5, animated=True)
-    cur_e = ae.axvline(t[steps[0]], color="tab:red", lw=1.0, animated=True)
-    cur_v = av.axvline(t[steps[0]], color="tab:red", lw=1.0, animated=True)
+    cur_e = ae.axvline(float(t[steps[0]]), color="tab:red", lw=1.0, animated=True)
+    cur_v = av.axvline(float(t[steps[0]]), color="tab:red", lw=1.0, animated=True)
     moving = [*border_lines, ref_line, trail, pred, car, dot, cur_e, cur_v]
 
     fig.canvas.draw()
-    canvas = fig.canvas
+    canvas = cast(FigureCanvasAgg, fig.canvas)  # (the Agg backend, selected above: stubs can't know)
     background = canvas.copy_from_bbox(fig.bbox)
     pad = max(half_w, half_h) * 1.5
     for i, k in enumerate(steps):
@@ -315,11 +316,14 @@ def _render(
         cur_e.set_xdata([t[k], t[k]])
         cur_v.set_xdata([t[k], t[k]])
         for a in moving:
-            a.axes.draw_artist(a)
+            if a.axes is not None:  # (every one was drawn on an axes)
+                a.axes.draw_artist(a)
         if progress is not None:
             progress(i + 1, steps.size)
-        img = Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba(), "raw", "RGBA", 0,
-                              1).convert("RGB")  # a copy: the canvas buffer is reused by the next frame
+        # a copy: the canvas buffer is reused by the next frame (Pillow's stubs omit memoryview,
+        # a buffer frombuffer takes)
+        img = Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba(),  # pyright: ignore[reportArgumentType]
+                               "raw", "RGBA", 0, 1).convert("RGB")
         draw = ImageDraw.Draw(img)
         text = f"t   = {t[k]:6.1f} s\nv   = {st[k, 3]:6.2f} m/s\ne_y = {e_y[k]:+6.3f} m"
         x0, y0, x1, y1 = draw.multiline_textbbox(box_xy, text, font=font)

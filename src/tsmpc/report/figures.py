@@ -18,6 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
 
 from tsmpc.config import Config
 from tsmpc.io import atomic_savefig
@@ -98,7 +99,7 @@ def circuit_figure(logs: dict[str, RunLog]) -> Figure:
     axz.set_xlim(cx - r, cx + r)
     axz.set_ylim(cy - r, cy + r)
     axz.set_title(f"zoom at t = {first.t_outer[k]:.1f} s (largest |e_y| of {first.method})")
-    ax.add_patch(plt.Rectangle((cx - r, cy - r), 2 * r, 2 * r, fill=False, ec="0.4", lw=0.8))
+    ax.add_patch(Rectangle((cx - r, cy - r), 2 * r, 2 * r, fill=False, ec="0.4", lw=0.8))
     ax.set_title(f"circuit: {first.scenario}")
     ax.legend(loc="best", fontsize=8)
     ax.grid(alpha=0.3)

@@ -56,7 +56,7 @@ def _load_kernel() -> Any:
     from tsmpc import kernels
     from tsmpc.sim import engine as eng
 
-    mod = None
+    mod: Any = None  # the kernel module, once loaded (numba's dispatchers: untyped)
     if eng._load_kernel() is not None:  # the engine and the blocks (and NUMBA_CACHE_DIR) first
         folder = kernels._tree_folder(kernels.numba_cache_dir())
         # its machine code holds the engine's step and the block kernels: stale when one changes
@@ -90,7 +90,9 @@ def _rebuilt(err: BaseException | None) -> Any:
     _KERNEL["rebuilt"] = True
     folder = kernels._tree_folder(kernels.numba_cache_dir())
     try:
-        removed = [p.unlink() for p in folder.glob("batch.*.nb[ic]")]
+        removed = list(folder.glob("batch.*.nb[ic]"))
+        for p in removed:
+            p.unlink()
     except OSError:
         removed = []
     if not removed:
@@ -133,7 +135,7 @@ def _set_up(index: int, cfg: Config, method: Method, scenario: Scenario, designs
 
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=designs[0],
                       dynamic_design=designs[1])
-    mhe, lqr, mpc = cascade.mhe, cascade.lqr, cascade.mpc
+    mhe, lqr, mpc = cascade.mhe, eng._static_lqr(cascade), cascade.mpc
     if mpc._kern is None or mhe._kern is None or not mhe._kargs[-1] or lqr._kern is None:
         return "a block's compiled kernel is off"
     ref, N, Td = cascade.reference, cfg.mpc.N, cfg.rates.Td
@@ -141,7 +143,7 @@ def _set_up(index: int, cfg: Config, method: Method, scenario: Scenario, designs
     if K < 1:
         return "the reference is shorter than the horizon"
     K = K if max_steps is None else min(K, int(max_steps))
-    plant = default_plant(cfg, scenario)
+    plant: Any = default_plant(cfg, scenario)  # a VehiclePlant, or the ActuatedPlant around one
     vp = plant if scenario.actuators is None else plant.plant
     n_sub = round(Td / vp.model.h)
     if vp.model._kern is None or abs(n_sub * vp.model.h - Td) > 1e-9 * max(1.0, Td):
@@ -189,7 +191,7 @@ def simulate_batch(cfg: Config, method: Method | str, scenarios: Scenario | Sequ
         n = len(scs)
     if seeds is not None and len(seeds) != n:
         raise ValueError(f"simulate_batch: {len(seeds)} seeds for {n} scenarios")
-    cfgs = [cfg if seeds is None else replace(cfg, seed=int(s)) for s in (seeds or [None] * n)]
+    cfgs = [cfg] * n if seeds is None else [replace(cfg, seed=int(s)) for s in seeds]
     if kinematic_design is None or dynamic_design is None:
         from tsmpc.synthesis.cache import load_or_design_dynamic, load_or_design_kinematic
 
@@ -216,7 +218,7 @@ def simulate_batch(cfg: Config, method: Method | str, scenarios: Scenario | Sequ
                       calls=0, loop_s=0.0, mhe_lanes=0, plant_lanes=0)
     for lanes in groups.values():
         try:
-            group_logs = _run_group(kb, ke, m, lanes, exact_plant)
+            group_logs: list[RunLog | None] | None = _run_group(kb, ke, m, lanes, exact_plant)
         except _KernelUnavailable as err:
             kb = _rebuilt(err.__cause__)
             try:
@@ -224,11 +226,11 @@ def simulate_batch(cfg: Config, method: Method | str, scenarios: Scenario | Sequ
             except _KernelUnavailable as again:
                 _give_up(again.__cause__)
                 group_logs = None
-            if group_logs is None:  # these runs (and any later batch) by simulate()
-                kb = None
-                for lane in lanes:
-                    single[lane.index] = "the batch kernel is unavailable"
-                continue
+        if group_logs is None:  # these runs (and any later batch) by simulate()
+            kb = None
+            for lane in lanes:
+                single[lane.index] = "the batch kernel is unavailable"
+            continue
         for lane, log in zip(lanes, group_logs, strict=True):
             if log is None:
                 single[lane.index] = f"fell back: {lane.fallback}"
@@ -255,8 +257,8 @@ def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant
             st[f] = np.zeros((B, *first.shape), dtype=first.dtype)
         else:
             st[f] = np.empty((B, *first.shape), dtype=first.dtype)
-            for b, ln in enumerate(lanes):
-                st[f][b] = getattr(ln.run.a, f)
+            for j, ln in enumerate(lanes):
+                st[f][j] = getattr(ln.run.a, f)
     n_in = lanes[0].run.n_in
     M = lanes[0].K * n_in
     nw = lanes[0].cfg.mhe.N
@@ -320,16 +322,16 @@ def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant
         LAST_BATCH["plant_s"] = LAST_BATCH.get("plant_s", 0.0) + float(tally[3]) / ticks_per_s
     t_logs = time.perf_counter()
     out: list[RunLog | None] = []
-    for b, lane in enumerate(lanes):
+    for j, lane in enumerate(lanes):
         if lane.fallback is not None:
             out.append(None)
             continue
         r = lane.run
         for f in sync:
-            getattr(r.a, f)[...] = st[f][b]
+            getattr(r.a, f)[...] = st[f][j]
         for f in _LOGS:  # the batch's log rows become the lane's logs (views, no copy)
-            setattr(r.a, f, st[f][b])
-        termination, done, rows, n_calls = _termination(lane, int(need[b]), ke)
+            setattr(r.a, f, st[f][j])
+        termination, done, rows, n_calls = _termination(lane, int(need[j]), ke)
         m_last = n_calls - 1
         k_last, j_last = divmod(m_last, n_in)
         Tc, Td = r.cascade.Tc, r.cascade.Td

@@ -36,6 +36,7 @@ both sampled every T_d (:class:`~tsmpc.sim.log.RunLog`):
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -70,7 +71,9 @@ def lowpass(x: ArrayLike, dt: float, cutoff_hz: float = CUTOFF_HZ) -> NDArray[np
     wn = 2.0 * cutoff_hz * dt  # cut-off relative to Nyquist
     if not 0.0 < wn < 1.0:
         return a.copy()
-    b, den = butter(_ORDER, wn)
+    # (scipy's butter is unannotated: pyright infers its return over every output= and finds None)
+    ba: Any = butter(_ORDER, wn)
+    b, den = ba
     pad = 3 * max(len(b), len(den))
     if a.size <= pad:
         return a.copy()

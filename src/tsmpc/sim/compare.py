@@ -294,7 +294,9 @@ def write_outputs(
         files.append(out / "timeseries.mat")
     if plots:
         if figures is None:
-            from tsmpc.report.figures import save_all as figures
+            from tsmpc.report.figures import save_all
+
+            figures = save_all
         files += figures(logs, out, cfg)
     from tsmpc.report.html import write_report
 

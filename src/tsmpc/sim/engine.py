@@ -40,7 +40,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -53,6 +53,9 @@ from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.scenarios import Scenario
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.start import _start_state, default_plant, tracked_steps
+
+if TYPE_CHECKING:
+    from tsmpc.control.ts_lqr import TSLQR
 
 __all__ = ["LAST_RUN", "EngineFallback", "applicability", "enabled", "exact", "run", "warmup"]
 
@@ -526,7 +529,7 @@ def _load_kernel() -> Any:
         return _KERNEL["mod"]
     from tsmpc import kernels
 
-    mod = None
+    mod: Any = None  # the kernel module, once loaded (numba's dispatchers: untyped)
     if kernels.load("mpc") is not None:  # sets NUMBA_CACHE_DIR before numba is imported
         folder = kernels._tree_folder(kernels.numba_cache_dir())
         for attempt in range(2):  # a cache entry numba cannot load: deleted, compiled again, once
@@ -696,12 +699,23 @@ def _f64(a: Any) -> NDArray[np.float64]:
     return np.array(a, dtype=np.float64, order="C")
 
 
+def _static_lqr(cascade: Cascade) -> TSLQR:
+    """The cascade's TS-LQR: the engine reproduces the static-gain law only (:func:`applicability`
+    sends lqr.law = as-run to the Python loop)."""
+    from tsmpc.control.ts_lqr import TSLQR
+
+    lqr = cascade.lqr
+    if not isinstance(lqr, TSLQR):
+        raise TypeError(f"the run engine reproduces TSLQR, not {type(lqr).__name__}")
+    return lqr
+
+
 def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
                 ke: Any) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """The kernel's float and integer parameters (``fp``, ``ip``) of a reset cascade."""
     fp, ip = np.zeros(ke.N_FP), np.zeros(ke.N_IP, dtype=np.int64)
     ref, n_in, N = cascade.reference, cascade.n_inner, cfg.mpc.N
-    mhe, lqr, fu = cascade.mhe, cascade.lqr, cascade._fusion
+    mhe, lqr, fu = cascade.mhe, _static_lqr(cascade), cascade._fusion
     veh, fs = cfg.vehicle, cfg.fusion
     fp[ke.FP_TD], fp[ke.FP_TC], fp[ke.FP_H] = cascade.Td, cascade.Tc, plant.model.h
     fp[ke.FP_MU_NOM], fp[ke.FP_MG] = plant.vehicle.mu_nominal, plant._mg
@@ -787,7 +801,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     plant = plant if scenario.actuators is None else plant.plant
     ref, n_in, N = cascade.reference, cascade.n_inner, cfg.mpc.N
     M = K * n_in
-    mpc, mhe, lqr = cascade.mpc, cascade.mhe, cascade.lqr
+    mpc, mhe, lqr = cascade.mpc, cascade.mhe, _static_lqr(cascade)
     fp, ip = _parameters(cfg, cascade, scenario, plant, ke)
     sf, si = _state(cascade, ke)
     (Kv, zlo, zhi, bits, prm) = lqr._kargs[:5]
@@ -894,7 +908,7 @@ class _Run:
 
     def _lqr(self) -> None:
         """TSLQR's numpy law (the compiled one found N̄ singular)."""
-        a, ke, lqr = self.a, self.ke, self.cascade.lqr
+        a, ke, lqr = self.a, self.ke, _static_lqr(self.cascade)
         if a.si[ke.SI_HASAPPLIED]:  # the numpy law reads the stiffnesses from its vehicle
             lqr.set_cornering_stiffness(float(a.prm[2]), float(a.prm[3]))
         inner = Estimate(a.sc[ke.SC_EST:ke.SC_EST + 3].copy(), float(a.sc[ke.SC_INF]),
@@ -996,7 +1010,7 @@ def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_desi
         return None
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=kinematic_design,
                       dynamic_design=dynamic_design)
-    mhe, lqr, mpc = cascade.mhe, cascade.lqr, cascade.mpc
+    mhe, lqr, mpc = cascade.mhe, _static_lqr(cascade), cascade.mpc
     if mpc._kern is None or mhe._kern is None or not mhe._kargs[-1] or lqr._kern is None:
         return None
     ref, N, Tc, Td, n_in = cascade.reference, cfg.mpc.N, cfg.rates.Tc, cfg.rates.Td, cascade.n_inner
@@ -1004,7 +1018,7 @@ def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_desi
     if K < 1:
         return None  # simulate raises the ConfigError
     K = K if max_steps is None else min(K, int(max_steps))
-    plant = default_plant(cfg, scenario)
+    plant: Any = default_plant(cfg, scenario)  # a VehiclePlant, or the ActuatedPlant around one
     vp = plant if scenario.actuators is None else plant.plant  # the VehiclePlant
     n_sub = round(Td / vp.model.h)
     if vp.model._kern is None or abs(n_sub * vp.model.h - Td) > 1e-9 * max(1.0, Td):
@@ -1056,7 +1070,7 @@ def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termina
     x = a.x
     return RunLog(
         method=method, scenario=scenario.name, Tc=Tc, Td=Td,
-        t_outer=(np.arange(K) * Tc + t0)[o], ref=refs[o],
+        t_outer=(np.arange(K, dtype=np.float64) * Tc + t0)[o], ref=refs[o],
         state_outer=np.ascontiguousarray(lo[:, ke.LO_X:ke.LO_X + 6]),
         errors=np.ascontiguousarray(lo[:, ke.LO_ERR:ke.LO_ERR + 3]),
         errors_measured=np.ascontiguousarray(lo[:, ke.LO_EMEAS:ke.LO_EMEAS + 3]),
@@ -1064,7 +1078,7 @@ def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termina
         mpc_time_s=np.ascontiguousarray(mpc_t), mpc_status=_MPC_TEXT[a.loi[o, ke.LOI_STATUS]].astype("<U16"),
         mpc_iterations=a.loi[o, ke.LOI_IT].copy(), mpc_qp_iterations=a.loi[o, ke.LOI_QPIT].copy(),
         mpc_clipped=a.loi[o, ke.LOI_CLIP].copy(),
-        t_inner=(np.arange(K * n_in) * Td + t0)[i],
+        t_inner=(np.arange(K * n_in, dtype=np.float64) * Td + t0)[i],
         state=np.ascontiguousarray(li[:, ke.LI_X:ke.LI_X + 6]),
         estimate=np.ascontiguousarray(li[:, ke.LI_EST:ke.LI_EST + 3]),
         measurement=np.ascontiguousarray(li[:, ke.LI_MEAS:ke.LI_MEAS + 2]),

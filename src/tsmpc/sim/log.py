@@ -86,7 +86,8 @@ class RunLog:
     def to_npz_bytes(self) -> bytes:
         """Compressed NPZ of every array."""
         buf = io.BytesIO()
-        np.savez_compressed(buf, **self.arrays())
+        arrays: dict[str, Any] = self.arrays()  # (mypy matches **dict[str, NDArray] to allow_pickle)
+        np.savez_compressed(buf, **arrays)
         return buf.getvalue()
 
     def save_npz(self, path: str | Path) -> None:

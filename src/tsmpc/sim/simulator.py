@@ -88,12 +88,14 @@ class _Recorder:
         o, i = slice(0, done), slice(0, m)
         return RunLog(
             method=method, scenario=scenario, Tc=Tc, Td=Td,
-            t_outer=self.t_outer[o], ref=self.refs[o], state_outer=self.state_outer[o],
+            # (float64 in fact: numpy's stubs type int array × float as floating[Any]; this class's
+            # syntax tree is fingerprinted for the run engine, tsmpc.sim.engine._PORTED)
+            t_outer=self.t_outer[o], ref=self.refs[o], state_outer=self.state_outer[o],  # type: ignore[arg-type]
             errors=self.errors[o], errors_measured=self.errors_meas[o], u_c=self.u_c[o],
             x_pred=self.x_pred[o], mpc_time_s=self.mpc_time[o], mpc_status=self.mpc_status[o],
             mpc_iterations=self.mpc_it[o], mpc_qp_iterations=self.mpc_qpit[o],
             mpc_clipped=self.mpc_clip[o],
-            t_inner=self.t_inner[i], state=self.state[i], estimate=self.est[i],
+            t_inner=self.t_inner[i], state=self.state[i], estimate=self.est[i],  # type: ignore[arg-type]
             measurement=self.meas[i], F_fr_hat=self.f_hat[i], F_fr_raw=self.f_raw[i],
             F_fr_true=self.f_true[i], mu_road=self.mu[i], command=self.cmd[i],
             saturated=self.sat[i], mhe_time_s=self.mhe_time[i], lqr_time_s=self.lqr_time[i],

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -93,7 +94,7 @@ class Plant:
         self._fz = (fzf, fzr)
         self._linear = tyre.model == TyreModel.LINEAR
         self._rhs = self._make_rhs()
-        self._kern = None
+        self._kern: Any = None  # the compiled block (tsmpc.kernels.load("plant")), or None
         if jit is None or jit:
             from tsmpc import kernels
 
@@ -201,8 +202,9 @@ class Plant:
         """
         if self._kern is not None and type(x) is np.ndarray and x.shape == (6,) and x.dtype == np.float64:
             try:
-                F, d = u
-                F, d, mu = float(F), float(d), float(mu_road)
+                # (u: any array-like of two numbers; anything else is caught below)
+                F, d = u  # type: ignore[misc, str-unpack]
+                F, d, mu = float(F), float(d), float(mu_road)  # type: ignore[arg-type]
             except (TypeError, ValueError):
                 pass  # the checked path below names the problem
             else:
