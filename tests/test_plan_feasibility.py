@@ -150,6 +150,16 @@ def test_prepare_caps_and_records_it(tmp_path: Path) -> None:
     assert exp.scenario.reference.v.max() < V
 
 
+def test_run_caps_with_one_unwrapped_line(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    res = runner.invoke(app, ["run", "--reference", str(_write(tmp_path)), "--duration", "1", "--no-plots",
+                              "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    capped = [ln for ln in res.output.splitlines() if "plan capped" in ln]
+    assert len(capped) == 1 and capped[0].startswith("plan capped to the vehicle's limits: lateral grip")
+    assert capped[0].endswith("--strict-plan refuses instead"), res.output  # one line, not wrapped
+
+
 def test_run_strict_plan_refuses_before_any_work(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     def no_work(*_a: object, **_k: object) -> None:
         raise AssertionError("design or compile work before the plan check")

@@ -847,9 +847,9 @@ def plan_feasibility(ctx: Context) -> Produced:
           f"RMSE x {_d(r1['x'], 3)} m, y {_d(r1['y'], 4)} m, max |e_y| "
           f"{_d(heavy['max_abs_lateral_m'], 3)} m, "
           f"{heavy['status']} (683 kg: RMSE x {_d(r0['x'], 3)} m, y {_d(r0['y'], 4)} m)")
-    weak = _experiment(ctx, "builtin REF force_max 6500 N, 6 s",
-                       apply_overrides(cfg, ["lqr.force_max=6500.0"]), ["ref"],
-                       duration=6.0).metrics["methods"]["REF"]
+    weak = _experiment(ctx, "builtin REF plant mass +45 %, 20 s",
+                       apply_overrides(cfg, ["scenario.plant.mass_scale=1.45"]), ["ref"],
+                       duration=20.0).metrics["methods"]["REF"]
     p.add("plan-feasibility", "degraded", f"`{weak.get('degraded', weak['status'])}`")
     return p
 
