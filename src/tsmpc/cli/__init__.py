@@ -35,7 +35,7 @@ def main() -> None:
         with contextlib.suppress(Exception):
             sys.stderr.write(f"error: {problem}\n")
         sys.exit(2)
-    code: object = 0
+    code: str | int | None = 0
     try:
         try:
             app()
@@ -85,7 +85,8 @@ def main() -> None:
     except (OSError, ValueError):
         with contextlib.suppress(Exception):
             fd = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(fd, sys.stdout.fileno())
+            if sys.stdout is not None:
+                os.dup2(fd, sys.stdout.fileno())
         if code in (0, None):
             with contextlib.suppress(Exception):
                 sys.stderr.write("error: cannot write to stdout (closed or full)\n")

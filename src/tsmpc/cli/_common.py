@@ -34,7 +34,7 @@ import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import typer
 
@@ -100,7 +100,7 @@ def _bounded(text: str, limit: int = MAX_MESSAGE_CHARS) -> str:
     return f"{text[:limit - tail]} … ({len(text) - limit} characters left out) … {text[-tail:]}"
 
 
-def fail(err: Exception | str, code: int = EXIT_INVALID) -> None:
+def fail(err: Exception | str, code: int = EXIT_INVALID) -> NoReturn:
     """Print one error line (at most :data:`MAX_MESSAGE_CHARS`) on stderr and exit with ``code``."""
     text = _bounded(" ".join(str(err).split("\n")))
     with contextlib.suppress(OSError, ValueError):  # a closed stderr must not hide the exit code
@@ -134,7 +134,7 @@ def safe_stdio() -> None:
         enc = (getattr(stream, "encoding", None) or "").lower().replace("-", "")
         if enc != "utf8" and hasattr(stream, "reconfigure"):
             with contextlib.suppress(Exception):
-                stream.reconfigure(errors="replace")
+                stream.reconfigure(errors="replace")  # pyright: ignore[reportAttributeAccessIssue]
 
 
 def check_environment(*, kernels: bool = True) -> None:
@@ -185,11 +185,13 @@ def check_scenario_options(scenario: Any, *, reference: Path | None, laps: int, 
 
 def _click_context() -> Any:
     """The running command's click context (typer >= 0.26 runs its own copy of click)."""
-    try:
-        from typer._click.globals import get_current_context  # type: ignore[import-not-found]
+    import importlib
+
+    try:  # (by name: which of the two modules exists depends on typer's version)
+        globals_ = importlib.import_module("typer._click.globals")
     except ImportError:  # an older typer on the public click
-        from click import get_current_context
-    return get_current_context(silent=True)
+        globals_ = importlib.import_module("click")
+    return globals_.get_current_context(silent=True)
 
 
 def refuse_ineffective(rules: dict[str, tuple[bool, str]]) -> None:
@@ -554,10 +556,10 @@ def guarded_run(out: Path, *, what: str = "run", on_interrupt: str | None = None
                 fail(f"{msg} ({out} is incomplete, see {out / PARTIAL_MARKER})", EXIT_FAILED)
             if not isinstance(err, Exception):  # GeneratorExit, SystemExit(0): not ours to map
                 raise
-            hint = _extra_hint(err)
-            if hint is not None:  # an optional dependency is missing: the extra that brings it
-                mark_partial(out, "failed", reason=hint)
-                fail(hint, EXIT_INVALID)
+            extra = _extra_hint(err)
+            if extra is not None:  # an optional dependency is missing: the extra that brings it
+                mark_partial(out, "failed", reason=extra)
+                fail(extra, EXIT_INVALID)
             if isinstance(err, DesignError):
                 mark_partial(out, "failed", reason=str(err))
                 fail(err, EXIT_INVALID)

@@ -20,6 +20,7 @@ def warmup_cmd() -> None:
     try:
         with handle_interrupts(), deferred_interrupts():  # never raise inside numba/LLVM callbacks
             ok, seconds = kernels.warmup()
+            engine_ok = False
             if ok:  # the whole-run engine too (tsmpc.sim.engine): its first compile takes longest
                 import time
 
