@@ -182,7 +182,10 @@ def test_a_corrupt_kernel_cache_is_rebuilt_once_and_then_loads(tmp_path: Path) -
     else:  # no cache yet on this machine: make one
         subprocess.run(cmd, env=env, capture_output=True, timeout=500, check=True)
     folder = kernels._tree_folder(tmp_path / "c")
-    entries = sorted(folder.glob("*.nb[ic]"))
+    # The kernels' entries: the process rebuilds them (seconds). The run engine's and the batch
+    # kernel's repair (sim.engine._compiled, minutes of compiling) has its own test below, on a
+    # stand-in kernel.
+    entries = sorted(p for p in folder.glob("*.nb[ic]") if p.name.split(".")[0] in kernels._MODULES)
     assert entries
     for i, p in enumerate(entries):
         p.write_bytes(b"" if i % 3 == 0 else b"\x80garbage" * 10)
@@ -192,3 +195,42 @@ def test_a_corrupt_kernel_cache_is_rebuilt_once_and_then_loads(tmp_path: Path) -
     second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=500)
     assert second.returncode == 0 and "could not be loaded" not in second.stderr
     assert "compiling" not in second.stderr
+
+
+class _StandInKernel:
+    """A kernel whose cached machine code cannot be loaded ``failures`` times."""
+
+    def __init__(self, failures: int) -> None:
+        self.failures, self.calls = failures, 0
+
+    def run(self, *args: object) -> None:
+        self.calls += 1
+        if self.calls <= self.failures:
+            raise EOFError("Ran out of input")  # what numba raises on a truncated entry
+
+
+@pytest.mark.parametrize("failures", [1, 2])
+def test_the_engine_rebuilds_an_unloadable_cache_once(failures: int, tmp_path: Path, monkeypatch,
+                                                      capsys) -> None:
+    """sim.engine._compiled (the engine's and the batch kernel's first call): an entry that
+    cannot be loaded is deleted with the engine's other entries and compiled again, once; a
+    second failure leaves the Python loop running (False), never an exception."""
+    from tsmpc import kernels
+    from tsmpc.sim import engine
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    folder = kernels._tree_folder(tmp_path)
+    folder.mkdir(parents=True)
+    for name in ("engine.run-1.py311.nbi", "engine.run-1.py311.1.nbc", "mpc.riccati-1.py311.nbi"):
+        (folder / name).write_bytes(b"\x80garbage")
+    ke = _StandInKernel(failures)
+    saved = dict(engine._KERNEL)
+    try:
+        ok = engine._compiled(ke, ())
+    finally:
+        engine._KERNEL.clear()
+        engine._KERNEL.update(saved)
+    err = capsys.readouterr().err
+    assert ok is (failures == 1) and ke.calls == 2
+    assert "could not be loaded (EOFError); compiling it again" in err
+    assert sorted(p.name for p in folder.iterdir()) == ["mpc.riccati-1.py311.nbi"]  # engine's only
