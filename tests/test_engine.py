@@ -14,12 +14,13 @@ import numpy as np
 import pytest
 
 from tsmpc.conditions import EventFriction, ResolvedEvent, apply_conditions
-from tsmpc.config import Config, replace
+from tsmpc.config import Config, apply_overrides, replace
 from tsmpc.planning.reference import Reference
 from tsmpc.robustness import apply_robustness
 from tsmpc.scenarios import ConstantFriction
 from tsmpc.sim import engine as eng
 from tsmpc.sim.compare import load_scenario
+from tsmpc.sim.experiment import prepare
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.simulator import Scenario, default_plant, simulate
 
@@ -159,6 +160,55 @@ def test_a_non_finite_plant_step_ends_alike(cfg: Config) -> None:
     assert lp.termination.startswith("plant diverged at t = 2.00 s: plant: non-finite input")
     assert eng.LAST_RUN["slow_paths"]["plant"] == 1
     _assert_same(le, lp)
+
+
+#: Paper reference, μ 0.9 → 0.5 at 30 s, the combined-slip tyre whose grip follows the road: the
+#: speed governor's acceptance case (issue 36). It acts there: the start's spin, the drop.
+_MU_DROP = ["scenario.plant.combined_slip=true", "scenario.plant.grip_scales_with_road=true",
+            "scenario.base_mu=0.9", "scenario.friction=[{at_s = 30.0, mu = 0.5}]", "governor.enabled=true"]
+
+
+@pytest.mark.parametrize(("source", "car"), [("estimate", []), ("oracle", []), (
+    "estimate", ["scenario.plant.mass_scale=1.15", "scenario.plant.cornering_front_scale=0.75",
+                 "scenario.plant.cornering_rear_scale=0.85"])])
+def test_the_speed_governor_runs_alike(source: str, car: list[str], paper_reference_path: Path) -> None:
+    """The speed governor in the engine (its block functions compiled in: governor_update,
+    grip_estimate, spin_grip, the governed window's interpolation): the grip from the inner
+    loop's estimate (nominal and mismatched car) or the scenario's μ(t) (the oracle row, the
+    engine's friction program); a governed run — the reference sampled at the governed time,
+    the errors logged against it, the MPC's window re-timed — equal to the Python loop's bit for
+    bit, counters and meta included."""
+    cfg = apply_overrides(Config(), [*_MU_DROP, *car, f'governor.grip_source="{source}"'])
+    exp = prepare(cfg, ["ref"], reference=paper_reference_path)
+    assert eng.applicability(exp.config, "REF", exp.scenario) is None
+    le, lp = _both(exp.config, "REF", exp.scenario, max_steps=exp.max_steps)
+    assert lp.termination == "completed"
+    assert lp.events["governor_actions"] >= 1 and lp.events["governor_steps"] > 100, lp.events
+    _assert_same(le, lp)
+    for name in ("state", "ref", "errors", "errors_measured", "command"):  # bit for bit
+        np.testing.assert_array_equal(getattr(le, name), getattr(lp, name), err_msg=name)
+    assert np.any(lp.ref[:, 3] < np.asarray(lp.meta["planned_v"]) - 1e-6)  # it was governed
+
+
+def test_governed_windows_on_the_qp_path_run_alike(paper_reference_path: Path, monkeypatch) -> None:
+    """The paper preset with the governor on (the drop road): the start's spin governs the
+    reference and its start-up reaches the MPC's QP path (the caller's slow path) with governed
+    windows, the MHE's dense QP too, until the car leaves the road: equal, to the same step."""
+    windows: list[int] = []
+    mpc = eng._Run._mpc
+
+    def recorded(self) -> None:
+        windows.append(int(self.a.si[self.ke.SI_GWIN]))
+        mpc(self)
+
+    monkeypatch.setattr(eng._Run, "_mpc", recorded)
+    c = apply_overrides(Config.preset("paper"), _MU_DROP)
+    exp = prepare(c, ["ref"], reference=paper_reference_path, duration=12.0)
+    le, lp = _both(exp.config, "REF", exp.scenario, max_steps=exp.max_steps)
+    assert sum(windows) > 10 and eng.LAST_RUN["slow_paths"]["mhe"] > 0, windows
+    assert lp.events["governor_actions"] >= 1 and lp.termination.startswith("diverged")
+    _assert_same(le, lp)
+    np.testing.assert_array_equal(le.state, lp.state)
 
 
 def test_a_block_that_raises_runs_in_python(paper_reference_path: Path, monkeypatch) -> None:

@@ -209,10 +209,26 @@ def test_oracle_row_knows_the_drop_at_once(drop_oracle, drop_estimate) -> None:
     assert ey_e <= 1.5 * max(ey_o, 0.01)
 
 
-def test_the_engine_steps_aside_for_the_governor() -> None:
-    """A run with the governor on runs in the Python loop (the engine does not port it)."""
-    from tsmpc.sim import engine
+def test_the_engine_and_the_batch_run_the_governor() -> None:
+    """With the governor on, the compiled engine runs (it compiles the block functions above in;
+    tests/test_engine.py compares it with this Python loop bit for bit), and so does the batch,
+    whose lanes are the engine's steps: a governed run's lanes (three seeds, the scalar plant)
+    are the engine's runs bit for bit, counters and governed reference included."""
+    from dataclasses import replace as dc_replace
 
-    cfg = apply_overrides(Config(), ["governor.enabled=true"])
-    exp = prepare(cfg, ["ref"], duration=1.0)
-    assert "governor" in (engine.applicability(exp.config, "ref", exp.scenario) or "")
+    from tsmpc.config import replace
+    from tsmpc.sim import batch, engine
+
+    cfg = apply_overrides(Config(), [*_DROP, "governor.enabled=true"])
+    exp = prepare(cfg, ["ref"], duration=9.0)
+    assert engine.applicability(exp.config, "ref", exp.scenario) is None
+    seeds = [0, 1, 2]
+    logs = batch.simulate_batch(exp.config, "ref", exp.scenario, seeds=seeds, max_steps=exp.max_steps,
+                                exact_plant=True)
+    assert batch.LAST_BATCH["batched"] == len(seeds) and not batch.LAST_BATCH["single"]
+    for s, lb in zip(seeds, logs, strict=True):
+        le = simulate(replace(exp.config, seed=s), "ref", dc_replace(exp.scenario), max_steps=exp.max_steps)
+        assert engine.LAST_RUN and lb.events == le.events and lb.events["governor_actions"] >= 1
+        assert lb.meta == le.meta and lb.termination == le.termination
+        for name in ("state", "ref", "errors", "errors_measured", "command", "estimate"):
+            np.testing.assert_array_equal(getattr(lb, name), getattr(le, name), err_msg=name)

@@ -68,9 +68,12 @@ __all__ = [
     "Governor",
     "GovernorParams",
     "GovernorState",
+    "governed_fill",
+    "governed_index",
     "governed_window",
     "governor_update",
     "grip_estimate",
+    "interp_unit",
     "preview_rate",
     "rate_limit",
     "sample_demand",
@@ -217,24 +220,64 @@ def rate_limit(p: GovernorParams, grip: float, r: float, v: NDArray[np.float64],
     return min(top, max(room, 0.0) / max(v[0], 1.0))
 
 
+@jitable
+def interp_unit(a: NDArray[np.float64], s: float) -> float:
+    """``np.interp(s, arange(a.size), a)`` for one ``s``, numpy's formula bit for bit (slope of
+    the bracketing samples times the distance from the lower one, the other end's form when that
+    is NaN; the end values outside): the one definition the Python window and the run engine use."""
+    n = a.size
+    if s != s:
+        return s
+    if s < 0.0:
+        return a[0]
+    if s >= n - 1:
+        return a[n - 1]
+    j = math.floor(s)
+    if s == j:
+        return a[j]
+    slope = a[j + 1] - a[j]
+    out = slope * (s - j) + a[j]
+    if out != out:
+        out = slope * (s - (j + 1)) + a[j + 1]
+        if out != out and a[j] == a[j + 1]:
+            out = a[j]
+    return out
+
+
+@jitable
+def governed_index(tau: float, T: float) -> tuple[int, float]:
+    """(k₀, s₀): the reference sample at or before governed time ``tau`` (sample period ``T``) and
+    the fraction of a sample past it."""
+    x = tau / T
+    k0 = max(math.floor(x + 1e-9), 0)
+    return k0, x - k0
+
+
+@jitable
+def governed_fill(a: NDArray[np.float64], s0: float, rate: float, scale: float,
+                  out: NDArray[np.float64]) -> None:
+    """``out[i]`` = the samples ``a`` (from k₀ on) at s₀ + i·rate samples, times ``scale``."""
+    for i in range(out.size):
+        out[i] = interp_unit(a, s0 + i * rate) * scale
+
+
 def governed_window(ref: Reference, tau: float, rate: float, n: int) -> Reference:
     """``n`` samples of ``ref`` (period T) for the MPC's steps from governed time ``tau`` (in
     reference time since its first sample) at rate ``rate``: positions and headings at
     τ + i·rate·T, linearly interpolated, speeds and yaw rates times ``rate`` (curvature unchanged);
     time t₀ + i T (the steps the car drives them in)."""
     T = ref.dt
-    x = tau / T
-    k0 = max(math.floor(x + 1e-9), 0)
+    k0, s0 = governed_index(tau, T)
     w = ref.window(k0, n + 2)
-    s = (x - k0) + np.arange(n) * rate
-    idx = np.arange(n + 2, dtype=float)
 
-    def at(a: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.interp(s, idx, np.asarray(a, dtype=float))
+    def at(a: NDArray[np.float64], scale: float = 1.0) -> NDArray[np.float64]:
+        out = np.empty(n)
+        governed_fill(np.ascontiguousarray(a, dtype=float), s0, rate, scale, out)
+        return out
 
     t = ref.t[0] + tau + np.arange(n) * T
     return Reference._trusted({"t": t, "x": at(w.x), "y": at(w.y), "theta": at(w.theta),
-                               "v": at(w.v) * rate, "omega": at(w.omega) * rate, "kappa": at(w.kappa)})
+                               "v": at(w.v, rate), "omega": at(w.omega, rate), "kappa": at(w.kappa)})
 
 
 class Governor:

@@ -37,6 +37,16 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic as _numba_intrinsic
 
 from tsmpc.control.gates import GateParams, dead_reckon, jump_run, plausible_speeds, pose_consistent
+from tsmpc.control.governor import (
+    GovernorParams,
+    GovernorState,
+    governed_fill,
+    governed_index,
+    governor_update,
+    grip_estimate,
+    interp_unit,
+    spin_grip,
+)
 from tsmpc.control.slip_aware import slip_gate_update
 from tsmpc.estimation.friction_step import (
     FrictionStepParams,
@@ -72,15 +82,19 @@ N_EVENTS = 19
  FP_F_THB, FP_F_THD, FP_F_VB, FP_F_VD, FP_F_WB, FP_F_WD, FP_F_ESIG, FP_F_PDROP,
  FP_I_PERIOD, FP_I_DUR, FP_I_START,
  FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU, FP_VG,
- FP_A_GF, FP_A_GD, FP_A_RMAX, FP_FS_H, FP_REINIT) = range(46)
-N_FP = 46
+ FP_A_GF, FP_A_GD, FP_A_RMAX, FP_FS_H, FP_REINIT,
+ FP_G_MARGIN, FP_G_RDOWN, FP_G_RUP, FP_G_RMIN, FP_G_MUPLAN, FP_G_DEADBAND, FP_G_KT, FP_G_DRAG,
+ FP_G_G, FP_G_TC, FP_G_ALPHA, FP_G_VMIN, FP_G_MUNOM, FP_G_MUDRY, FP_G_GPR, FP_G_REAR, FP_G_FMAX,
+ FP_G_DT, FP_G_MDT) = range(65)
+N_FP = 65
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
  IP_FMA, IP_F_MODEL, IP_F_DELAY, IP_F_HOLD, IP_F_INNER, IP_F_GNSS, IP_F_DROP,
- IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV) = range(34)
-N_IP = 34
+ IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV,
+ IP_GOV, IP_G_ORACLE, IP_G_PREVIEW) = range(37)
+N_IP = 37
 # inner sensor faults (robustness scenarios), IP_F_INNER
 FAULT_NONE, FAULT_HOLD_BURST, FAULT_NAN_BURST = 0, 1, 2
 # ---------------------------------------------------------------------------- MHE parameters
@@ -96,15 +110,17 @@ N_MP = 30
  SF_LF, SF_LA, SF_SXY, SF_SXX, SF_ACCEL, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2, SF_FHELD, _FH1, _FH2, _FH3, _FH4, SF_FLAST, _FL1, _FL2, _FL3, _FL4,
  SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM, SF_PRIORD, _RD1, SF_N2,
- SF_N1, SF_JUMP, _J1, _J2, _J3, SF_JT0) = range(76)
-N_SF = 76
+ SF_N1, SF_JUMP, _J1, _J2, _J3, SF_JT0,
+ SF_TOFF, SF_GRATE, SF_GGRIP, SF_GHOLD) = range(80)
+N_SF = 80
 # ---------------------------------------------------------------------------- integer state
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_HASCUR, SI_NCHORDS,
  SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
  SI_FIFON, SI_FLASTHAS, SI_FHELDHAS,
  SI_FRESH, SI_SPOK, SI_POSEOK, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
- SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, SI_FSN, SI_FSSINCE) = range(37)
-N_SI = 37
+ SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, SI_FSN, SI_FSSINCE,
+ SI_GACT, SI_GSTEPS, SI_GWIN) = range(40)
+N_SI = 40
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
@@ -120,8 +136,8 @@ N_IV = 17
 N_LI = 19
 # outer log columns
 (LO_X, _OX1, _OX2, _OX3, _OX4, _OX5, LO_ERR, _OE1, _OE2, LO_EMEAS, _OM1, _OM2, LO_UC, _OU1,
- LO_TMPC) = range(15)
-N_LO = 15
+ LO_TMPC, LO_REF, _OR1, _OR2, _OR3, _OR4) = range(20)
+N_LO = 20
 # integer outer log columns
 LOI_STATUS, LOI_IT, LOI_QPIT, LOI_CLIP = range(4)
 
@@ -567,17 +583,75 @@ def _mass_terms(v_hat, F_hat, v_ref, mv, sf, si, fp, ip):
             sf[SF_SXY] = lam * sf[SF_SXY] + xx * yy
             sf[SF_SXX] = lam * sf[SF_SXX] + xx * xx
         a = sf[SF_ACCEL]
-    mass = fp[FP_VM]
-    if sf[SF_SXX] < MASS_EXCITATION:
-        dm = 0.0
-    else:
-        dm = _pmin(_pmax(sf[SF_SXY] / sf[SF_SXX], MASS_RANGE_LO * mass), MASS_RANGE_HI * mass)
+    dm = _delta_mass(sf, fp)
     if dm == 0.0 or not (math.isfinite(v_hat) and math.isfinite(v_ref)):
         return 0.0
     out = -dm * a
     if ip[IP_SPEEDFB] != 0:
         out += dm * (v_ref - v_hat) / fp[FP_TAU]
     return out
+
+
+@njit(cache=True, fastmath=False)
+def _delta_mass(sf, fp):
+    """``MassEstimator.delta_mass``: ΔM̂ (0 until the fit is excited), within the mass range."""
+    mass = fp[FP_VM]
+    if sf[SF_SXX] < MASS_EXCITATION:
+        return 0.0
+    return _pmin(_pmax(sf[SF_SXY] / sf[SF_SXX], MASS_RANGE_LO * mass), MASS_RANGE_HI * mass)
+
+
+# ============================================================================ speed governor
+@njit(cache=True, fastmath=False)
+def _governed_row(t, fp, ip, sf, ref_x, ref_y, ref_th, ref_v, ref_w, row):
+    """``Cascade.reference_row``: [x_d, y_d, θ_d, v_d, ω_d] at the governed time t − offset
+    (:func:`~tsmpc.control.governor.governed_window`'s samples, its one definition)."""
+    r = sf[SF_GRATE]
+    k0, s0 = governed_index(t - sf[SF_TOFF], fp[FP_G_DT])
+    row[0] = interp_unit(ref_x[k0:k0 + 3], s0)
+    row[1] = interp_unit(ref_y[k0:k0 + 3], s0)
+    row[2] = interp_unit(ref_th[k0:k0 + 3], s0)
+    row[3] = interp_unit(ref_v[k0:k0 + 3], s0) * r
+    row[4] = interp_unit(ref_w[k0:k0 + 3], s0) * r
+
+
+@njit(cache=True, fastmath=False)
+def _govern(t, fp, ip, sf, si, sc, frb, patches, events, ref_v, ref_w):
+    """``Cascade._govern`` after an MPC step: the grip seen (the inner loop's last estimate, or
+    the scenario's μ for the oracle row), the governor's step (:func:`governor_update`, its one
+    definition), its counters and the reference time offset."""
+    p = GovernorParams(fp[FP_G_MARGIN], fp[FP_G_RDOWN], fp[FP_G_RUP], fp[FP_G_RMIN], fp[FP_G_MUPLAN],
+                       fp[FP_G_DEADBAND], fp[FP_G_KT], fp[FP_G_DRAG], fp[FP_G_G], fp[FP_G_TC],
+                       fp[FP_G_ALPHA])
+    g = p.g
+    mass = fp[FP_VM]
+    if ip[IP_MASSEST] != 0:
+        mass += _delta_mass(sf, fp)
+    has_last = si[SI_HASLAST] != 0
+    F_last = sc[SC_ESTF] if has_last else math.nan
+    if ip[IP_G_ORACLE] != 0:
+        mu_road = friction_mu(t, sf[SF_STRAVEL], frb, patches, events)
+    else:
+        usable = has_last and si[SI_ESTSTAT] == ST_OK and sc[SC_EST] >= fp[FP_G_VMIN]
+        mu_road = grip_estimate(F_last if usable else math.nan, mass, fp[FP_G_MUNOM], g, 1.0)
+    grip = mu_road * fp[FP_G_GPR] if math.isfinite(mu_road) else math.nan
+    mu_model = grip_estimate(F_last, fp[FP_VM], fp[FP_G_MUNOM], g, 1.0)
+    spinning = has_last and si[SI_SAT] != 0 and mu_model > (1.0 + p.deadband) * fp[FP_G_MUDRY]
+    if spinning and ip[IP_G_ORACLE] == 0:
+        grip = spin_grip(sf[SF_UAPP], mu_model, fp[FP_VM], g, fp[FP_G_REAR])
+    mu_res = mu_road if math.isfinite(mu_road) else fp[FP_G_MUNOM]
+    force_per_kg = (fp[FP_G_FMAX] - mu_res * mass * g) / mass
+    Tc = fp[FP_TC]
+    k = min(max(math.floor((t - sf[SF_TOFF]) / Tc + 1e-6), 0), ip[IP_REFLEN] - 1)
+    n = ip[IP_G_PREVIEW] + 1
+    before = sf[SF_GRATE]
+    st = governor_update(p, GovernorState(before, sf[SF_GGRIP], sf[SF_GHOLD]), grip, force_per_kg,
+                         ref_v[k:k + n], ref_w[k:k + n], spinning)
+    r = st.rate
+    sf[SF_GRATE], sf[SF_GGRIP], sf[SF_GHOLD] = r, st.grip, st.spin_hold
+    si[SI_GACT] += 1 if before >= 1.0 and r < 1.0 else 0
+    si[SI_GSTEPS] += 1 if r < 1.0 else 0
+    sf[SF_TOFF] += (1.0 - r) * Tc
 
 
 # ============================================================================ MHE wrapper
@@ -745,6 +819,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     tmp3 = np.empty(3)
     noX = np.zeros((0, 3))  # "no previous plan" for guarded_step
     noU = np.zeros((0, 2))
+    grow = np.empty(5)  # the governed reference sample, and the MPC's governed window
+    gmv = np.empty(N + 1)
+    gmw = np.empty(N + 1)
     gates = GateParams(fp[FP_V_LO], fp[FP_V_HI], fp[FP_W_LIM], fp[FP_POSE_NOISE], fp[FP_HEAD_NOISE], Td)
     mhe_views = (mp[MP_Q:MP_Q + 3], mp[MP_R:MP_R + 2], mp[MP_P:MP_P + 3], mp[MP_XMIN:MP_XMIN + 3],
                  mp[MP_XMAX:MP_XMAX + 3], mp[MP_LO:MP_LO + 3], mp[MP_HI:MP_HI + 3],
@@ -761,7 +838,15 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             if j == 0:
                 for i in range(6):
                     lo[k, LO_X + i] = x[i]
-                _pose_errors(x[0], x[1], x[2], ref_x[k], ref_y[k], ref_th[k], tmp3)
+                rx, ry, rth = ref_x[k], ref_y[k], ref_th[k]
+                if ip[IP_GOV] != 0:  # the reference the simulator logs: the governed one
+                    row = lo[k, LO_REF:LO_REF + 5]
+                    if si[SI_GACT] > 0 or sf[SF_GRATE] < 1.0:
+                        _governed_row(t, fp, ip, sf, ref_x, ref_y, ref_th, ref_v, ref_w, row)
+                    else:
+                        row[0], row[1], row[2], row[3], row[4] = rx, ry, rth, ref_v[k], ref_w[k]
+                    rx, ry, rth = row[0], row[1], row[2]
+                _pose_errors(x[0], x[1], x[2], rx, ry, rth, tmp3)
                 for i in range(3):
                     lo[k, LO_ERR + i] = tmp3[i]
                 if ip[IP_HASBOUND] != 0 and abs(tmp3[1]) > fp[FP_BOUND]:
@@ -812,7 +897,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             if mpc_step:
                 if not pose_ok:
                     ev[EV_POSE_REJ] += 1
-                kr = math.floor(t / Tc + 1e-6)
+                kr = math.floor((t - sf[SF_TOFF]) / Tc + 1e-6)
                 kw = kr if kr > 0 else 0
                 kc = kw if kw < ip[IP_REFLEN] - 1 else ip[IP_REFLEN] - 1
                 if ip[IP_ANYCOURSE] != 0:
@@ -827,6 +912,23 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                         sf[SF_HELD + i] = sf[SF_POSE + i]
                 src = SF_POSE if pose_ok or ip[IP_PREDICT] != 0 else SF_HELD
                 px, py, pth = sf[src], sf[src + 1], sf[src + 2]
+                # the reference the errors are taken against: sample kc, or (the speed governor
+                # has acted) the governed time's (Cascade._governed)
+                governed = ip[IP_GOV] != 0 and (si[SI_GACT] > 0 or sf[SF_GRATE] < 1.0)
+                si[SI_GWIN] = 1 if governed else 0
+                if governed:
+                    _governed_row(t, fp, ip, sf, ref_x, ref_y, ref_th, ref_v, ref_w, grow)
+                    xd, yd, thd, ay = grow[0], grow[1], grow[2], grow[3] * grow[4]
+                    xt = (t - sf[SF_TOFF]) / Tc
+                    kt = min(max(math.floor(xt), 0), ip[IP_REFLEN] - 2)
+                    ft = min(max(xt - kt, 0.0), 1.0)
+                    ttan = (1.0 - ft) * th_tan[kt] + ft * th_tan[kt + 1]
+                    k0m, s0m = governed_index(t - sf[SF_TOFF], fp[FP_G_MDT])
+                    governed_fill(mv[k0m:k0m + N + 3], s0m, sf[SF_GRATE], sf[SF_GRATE], gmv)
+                    governed_fill(mw[k0m:k0m + N + 3], s0m, sf[SF_GRATE], sf[SF_GRATE], gmw)
+                else:
+                    xd, yd, thd, ttan = ref_x[kc], ref_y[kc], ref_th[kc], th_tan[kc]
+                    ay = ref_v[kc] * ref_w[kc]
                 if ip[IP_SLIP] != 0 or ip[IP_TANGENT] != 0:
                     slip = ip[IP_SLIP] != 0
                     has_last = si[SI_HASLAST] != 0
@@ -834,7 +936,6 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                     if slip and has_last:
                         corr = 0.0
                         if ip[IP_CSLIP] != 0:  # CourseFusion.slip_correction
-                            ay = ref_v[kc] * ref_w[kc]
                             if not math.isfinite(ay):
                                 ay = 0.0
                             corr = _pmin(_pmax(sf[SF_THETA] * ay + sf[SF_THETA + 1],
@@ -843,21 +944,22 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                     if slip:
                         a_hat, si[SI_GATEN] = slip_gate_update(fp[FP_GATE_SIGMA], gate, si[SI_GATEN],
                                                                px, py, pth, a_hat)
-                    th_d = th_tan[kc] if ip[IP_TANGENT] != 0 else ref_th[kc]
+                    th_d = ttan if ip[IP_TANGENT] != 0 else thd
                     a = a_hat if math.isfinite(a_hat) else 0.0
-                    _pose_errors(px, py, pth + a, ref_x[kc], ref_y[kc], th_d + 0.5 * 0.0, e_meas)
+                    _pose_errors(px, py, pth + a, xd, yd, th_d + 0.5 * 0.0, e_meas)
                 else:
-                    _pose_errors(px, py, pth, ref_x[kc], ref_y[kc], ref_th[kc], e_meas)
+                    _pose_errors(px, py, pth, xd, yd, thd, e_meas)
                 # ---- TSMPC.step: its compiled step (checks, schedule, Riccati fast path); a
                 # declined step (a constraint active, a non-finite input) is the caller's
                 tick = _ticks()
                 si[SI_KW] = kw
                 code = 1
-                if kw + N + 1 <= mv.size:
+                if governed or kw + N + 1 <= mv.size:
                     has_prev = si[SI_HASPREV] != 0
                     code, U, _du, Xp, _cost, n_clip, _up = guarded_step(
-                        mints, mprm, mPS, e_meas, sf[SF_UPREV:SF_UPREV + 2], mv[kw:kw + N + 1],
-                        mw[kw:kw + N + 1], prevX if has_prev else noX, prevU if has_prev else noU)
+                        mints, mprm, mPS, e_meas, sf[SF_UPREV:SF_UPREV + 2],
+                        gmv if governed else mv[kw:kw + N + 1], gmw if governed else mw[kw:kw + N + 1],
+                        prevX if has_prev else noX, prevU if has_prev else noU)
                     if code == 0:
                         for i in range(N):
                             pU[i, 0], pU[i, 1] = U[i, 0], U[i, 1]
@@ -889,6 +991,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 lxp[k, i, 0], lxp[k, i, 1], lxp[k, i, 2] = pX[i, 0], pX[i, 1], pX[i, 2]
             loi[k, LOI_STATUS], loi[k, LOI_IT] = st, si[SI_PIT]
             loi[k, LOI_QPIT], loi[k, LOI_CLIP] = si[SI_PQPIT], si[SI_PCLIP]
+            if ip[IP_GOV] != 0:  # the speed governor's rate for the next MPC step
+                _govern(t, fp, ip, sf, si, sc, frb, patches, events, ref_v, ref_w)
             phase = PH_MHE
         if phase == PH_MHE:
             fresh, speeds_ok = si[SI_FRESH] != 0, si[SI_SPOK] != 0

@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
 from tsmpc.control.cascade import EVENT_NAMES, Cascade
+from tsmpc.control.governor import governed_window
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
@@ -114,8 +115,6 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
     why = _blinding_fault(cfg, scenario.sensor_fault)
     if why is not None:
         return why
-    if cfg.governor.enabled:
-        return "the speed governor (governor.enabled; it runs in the Python loop)"
     why = _changed_since_port()
     if why is not None:
         return why
@@ -143,6 +142,11 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade._outer": "87a416e6e939a09e",
     "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
     "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
+    "tsmpc.control.cascade:Cascade._govern": "7db84fbd67992ceb",
+    "tsmpc.control.cascade:Cascade._governed": "b1b952c55d88d9b3",
+    "tsmpc.control.cascade:Cascade.reference_row": "257f90494b63c8c2",
+    "tsmpc.control.governor:governed_window": "cadafab2efb735cb",
+    "tsmpc.control.governor:Governor.step": "12200cfb7c1bc640",
     "tsmpc.control.cascade:Cascade._estimate": "6741a91ddeef6f00",
     "tsmpc.control.cascade:Cascade._compensated": "7bfaf70f34cf6d62",
     "tsmpc.control.cascade:Cascade._inner": "3a018d7e1029a195",
@@ -757,6 +761,21 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     rc = cascade._recovery
     ip[ke.IP_RECOV] = rc is not None
     fp[ke.FP_REINIT] = 0.0 if rc is None else rc.pose_reinit_s
+    gov = cascade.governor
+    ip[ke.IP_GOV] = gov is not None
+    if gov is not None:  # the speed governor's parameters (Cascade._govern's inputs)
+        p = gov.params
+        (fp[ke.FP_G_MARGIN], fp[ke.FP_G_RDOWN], fp[ke.FP_G_RUP], fp[ke.FP_G_RMIN], fp[ke.FP_G_MUPLAN],
+         fp[ke.FP_G_DEADBAND], fp[ke.FP_G_KT], fp[ke.FP_G_DRAG], fp[ke.FP_G_G], fp[ke.FP_G_TC],
+         fp[ke.FP_G_ALPHA]) = p
+        fp[ke.FP_G_VMIN] = cfg.dynamic_box.v[0]
+        fp[ke.FP_G_MUNOM], fp[ke.FP_G_MUDRY] = veh.mu_nominal, cfg.tyre.mu_dry
+        fp[ke.FP_G_GPR] = cfg.tyre.mu_tyre / cfg.tyre.mu_dry
+        fp[ke.FP_G_REAR] = veh.a / veh.wheelbase
+        fp[ke.FP_G_FMAX] = cascade._force_limits[1]
+        fp[ke.FP_G_DT], fp[ke.FP_G_MDT] = ref.dt, cascade._mpc_reference.dt
+        ip[ke.IP_G_ORACLE] = cfg.governor.grip_source == "oracle"
+        ip[ke.IP_G_PREVIEW] = gov.preview
     return fp, ip
 
 
@@ -791,6 +810,11 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
     sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival
+    sf[ke.SF_TOFF] = cascade._t_offset
+    gov = cascade.governor
+    if gov is not None:
+        sf[ke.SF_GRATE], sf[ke.SF_GGRIP], sf[ke.SF_GHOLD] = gov.state
+        si[ke.SI_GACT], si[ke.SI_GSTEPS] = gov.actions, gov.steps
     return sf, si
 
 
@@ -815,15 +839,20 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     # open reference holds its last sample)
     mref = cascade._mpc_reference
     L = len(mref)
-    idx = np.arange(K + N + 1)
+    idx = np.arange(K + N + 3)  # (+2: the governed window's interpolation, governed_window)
     idx = idx % L if mref.closed else np.minimum(idx, L - 1)
     mv, mw = _f64(mref.v[idx]), _f64(mref.omega[idx])
+    # the speed governor's preview: Reference.window's v, ω of the reference past its end
+    gov = cascade.governor
+    n_ref = len(ref) + (0 if gov is None else gov.preview + 1)
+    ridx = np.arange(n_ref)
+    ridx = ridx % len(ref) if ref.closed else np.minimum(ridx, len(ref) - 1)
     return _Arrays(
         x=_f64(x0), fp=fp, ip=ip, sf=sf, si=si, sc=np.zeros(ke.N_SC),
         ev=np.zeros(ke.N_EVENTS, dtype=np.int64), noise=_noise(cfg, M), u_drop=_f64(u_drop),
         gnss=_f64(gnss), fifo=fifo, frb=frb, patches=_f64(patches), events=_f64(events),
-        ref_x=_f64(ref.x), ref_y=_f64(ref.y), ref_th=_f64(ref.theta), ref_v=_f64(ref.v),
-        ref_w=_f64(ref.omega), th_tan=_f64(cascade._theta_tangent), mv=mv, mw=mw,
+        ref_x=_f64(ref.x), ref_y=_f64(ref.y), ref_th=_f64(ref.theta), ref_v=_f64(ref.v[ridx]),
+        ref_w=_f64(ref.omega[ridx]), th_tan=_f64(cascade._theta_tangent), mv=mv, mw=mw,
         gate=cascade._slip_gate.poses.copy(), cur=np.zeros(ke.N_IV),
         ivs=np.zeros((ke.BASELINE, ke.N_IV)), mass_v=np.zeros(cfg.mhe.N + 1),
         mY=mhe._Y, mW=mhe._W, mU=mhe._U, mXS=mhe._XS, mA=mhe._Ab, mB=mhe._Bb, mX=mhe._Xb, mp=mp,
@@ -860,7 +889,12 @@ class _Run:
                                   iterations=0, qp_iterations=0, solve_time_s=0.0, n_clipped=0)
         else:
             mpc._prev = None
-        window = self.cascade._mpc_reference.window(int(a.si[ke.SI_KW]), N + 1)
+        if a.si[ke.SI_GWIN]:  # the speed governor has acted: the window at the governed time
+            m = int(a.si[ke.SI_M])
+            window = governed_window(self.cascade._mpc_reference, m * self.cascade.Td - a.sf[ke.SF_TOFF],
+                                     float(a.sf[ke.SF_GRATE]), N + 1)
+        else:
+            window = self.cascade._mpc_reference.window(int(a.si[ke.SI_KW]), N + 1)
         e = a.sc[ke.SC_EMEAS:ke.SC_EMEAS + 3].copy()
         t0 = time.perf_counter()
         try:
@@ -1064,9 +1098,16 @@ def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termina
         for idx, sec in d.items():
             if idx < arr.size:
                 arr[idx] = sec
-    refs = np.stack([ref.x[:K], ref.y[:K], ref.theta[:K], ref.v[:K], ref.omega[:K]], axis=1)
+    gov = r.cascade.governor is not None
+    if gov:  # the reference as logged: the governed one (Cascade.reference_row)
+        refs = np.ascontiguousarray(a.lo[:, ke.LO_REF:ke.LO_REF + 5])
+    else:
+        refs = np.stack([ref.x[:K], ref.y[:K], ref.theta[:K], ref.v[:K], ref.omega[:K]], axis=1)
     f_true = np.ascontiguousarray(li[:, ke.LI_FTRUE])
     events = {name: int(a.ev[n]) for n, name in enumerate(_EVENTS)}
+    if gov:
+        events["governor_actions"] = int(a.si[ke.SI_GACT])
+        events["governor_steps"] = int(a.si[ke.SI_GSTEPS])
     x = a.x
     return RunLog(
         method=method, scenario=scenario.name, Tc=Tc, Td=Td,
@@ -1088,7 +1129,8 @@ def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termina
         mhe_time_s=np.ascontiguousarray(mhe_t), lqr_time_s=np.ascontiguousarray(lqr_t),
         mhe_status=_MHE_TEXT[a.lstat[i]].astype("<U16"),
         wall_s=wall_s, termination=termination, events=events,
-        meta={"oracle": False, "seed": cfg.seed, **scenario.meta, "final_state": x.tolist()})
+        meta={"oracle": False, "seed": cfg.seed, **scenario.meta, "final_state": x.tolist(),
+              **({"planned_v": ref.v[:done].tolist()} if gov else {})})
 
 
 def warmup() -> bool:
