@@ -45,10 +45,17 @@ def test_paper_preset_is_the_published_cascade() -> None:
     assert paper.lqr.low_speed_resistance is False and default.lqr.low_speed_resistance is True
     assert paper.lqr.friction_step is False and default.lqr.friction_step is True
     assert paper.recovery.enabled is False and default.recovery.enabled is True  # issue 38
-    beyond = {"lqr": {"speed_feedback", "friction_estimate", "low_speed_resistance", "friction_step"},
+    # the force limits: the published absolute [-2000, 10000] N in the paper presets, per kg in
+    # ours (issue 36: they follow the mass) — the same limits at the paper's vehicle
+    assert paper.lqr.force_limits(paper.vehicle) == default.lqr.force_limits(default.vehicle) == \
+        (-2000.0, 10000.0)
+    assert default.lqr.force_max is None and paper.lqr.force_max == 10000.0
+    beyond = {"lqr": {"speed_feedback", "friction_estimate", "low_speed_resistance", "friction_step",
+                      "force_min", "force_max", "force_min_per_kg", "force_max_per_kg"},
               "mpc": set(outer),
               "fusion": fusion,
-              "recovery": {"enabled"}}
+              "recovery": {"enabled"},
+              "governor": {"enabled"}}  # issue 36: beyond the paper
     assert paper.model_dump(exclude=beyond) == default.model_dump(exclude=beyond)
     assert Config.preset("default") == default
 
