@@ -9,9 +9,9 @@ unchanged, the car drives it at r times the planned speed (v_d(τ) r, ω_d(τ) r
 acceleration v_d ω_d and its acceleration along the path both scale with r². The cascade keeps τ
 as its reference-time offset (``t − τ``, the recovery's offset, :mod:`tsmpc.control.cascade`).
 
-Grip. The friction force the MHE-UIO estimates is F̂_fr = (μ(road) − μ_o) M g (the MHE-UIO's unknown input, :mod:`tsmpc.estimation.mhe_uio`), so
-μ̂(road) = μ_o + F̂_fr / (M̂ g) (M̂: the mass estimate of ``fusion.mass_estimate`` when on); the
-tyres' grip is taken to follow the road, μ̂_t = μ̂(road) μ_tyre / μ_dry (the plant's
+Grip. The friction force the MHE-UIO estimates (its unknown input, :mod:`tsmpc.estimation.mhe_uio`)
+is F̂_fr = (μ(road) − μ_o) M g, so μ̂(road) = μ_o + F̂_fr / (M̂ g) (M̂: the mass estimate of
+``fusion.mass_estimate`` when on); the tyres' grip is taken to follow the road, μ̂_t = μ̂(road) μ_tyre / μ_dry (the plant's
 ``tyre.scale_grip_with_road``). A wheel that spins breaks that reading: the acceleration the
 drive force does not produce looks like more resistance (μ 0.9 → 0.3 under full throttle: μ̂(road)
 1.36). A μ̂(road) at the model's mass above every road the tyre knows, (1 + deadband) μ_dry, while
