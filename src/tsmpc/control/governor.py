@@ -11,17 +11,17 @@ as its reference-time offset (``t − τ``, the recovery's offset, :mod:`tsmpc.c
 
 Grip. The friction force the MHE-UIO estimates (its unknown input, :mod:`tsmpc.estimation.mhe_uio`)
 is F̂_fr = (μ(road) − μ_o) M g, so μ̂(road) = μ_o + F̂_fr / (M̂ g) (M̂: the mass estimate of
-``fusion.mass_estimate`` when on); the tyres' grip is taken to follow the road, μ̂_t = μ̂(road) μ_tyre / μ_dry (the plant's
-``tyre.scale_grip_with_road``). A wheel that spins breaks that reading: the acceleration the
-drive force does not produce looks like more resistance (μ 0.9 → 0.3 under full throttle: μ̂(road)
-1.36). A μ̂(road) at the model's mass above every road the tyre knows, (1 + deadband) μ_dry, while
-the inner loop saturates is read as such (a mass error alone also raises μ̂(road), without the
-saturation): the grip is then the traction the rear tyre delivers, |F_xR − μ̂(road) M g| over its
-load (:func:`spin_grip`; 0.30 there), and the governor is engaged for ``SPIN_HOLD_S`` whatever the
-grip: a plan that asks more traction than the dry tyre has (the paper reference's start on the
-friction-ellipse tyre) spins the wheel too. The estimate is low-passed (time constant
-``grip_time_constant_s``) but a lower value is taken at once: grip lost is believed at once,
-grip regained slowly.
+``fusion.mass_estimate`` when on); the tyres' grip is taken to follow the road, μ̂_t = μ̂(road)
+μ_tyre / μ_dry (the plant's ``tyre.scale_grip_with_road``). A wheel that spins breaks that reading:
+the acceleration the drive force does not produce looks like more resistance (μ 0.9 → 0.3 under full
+throttle: μ̂(road) 1.36). A μ̂(road) at the model's mass above every road the tyre knows, (1 +
+deadband) μ_dry, while the inner loop saturates is read as such (a mass error alone also raises
+μ̂(road), without the saturation): the grip is then the traction the rear tyre delivers, |F_xR −
+μ̂(road) M g| over its load (:func:`spin_grip`; 0.30 there), and the governor is engaged for
+``SPIN_HOLD_S`` whatever the grip: a plan that asks more traction than the dry tyre has (the paper
+reference's start on the friction-ellipse tyre) spins the wheel too. The estimate is low-passed
+(time constant ``grip_time_constant_s``) but a lower value is taken at once: grip lost is believed
+at once, grip regained slowly.
 
 Demand of a reference sample (v_d, ω_d, a_d = dv_d/dτ) at rate 1, as an acceleration [m/s²]::
 
