@@ -12,9 +12,11 @@ from tsmpc.config import Config, apply_overrides
 from tsmpc.control.governor import (
     GovernorParams,
     GovernorState,
+    governed_fill,
     governed_window,
     governor_update,
     grip_estimate,
+    interp_unit,
     preview_rate,
     rate_limit,
     sample_demand,
@@ -109,6 +111,33 @@ def test_governed_window_by_hand() -> None:
     np.testing.assert_allclose(w.x, [2.5, 3.0, 3.5], atol=1e-12)
     np.testing.assert_allclose(w.v, [5.0, 5.0, 5.0], atol=1e-12)
     np.testing.assert_allclose(np.diff(w.t), [0.1, 0.1], atol=1e-12)
+
+
+def test_the_window_interpolation_is_numpys_bit_for_bit() -> None:
+    """The governed window's interpolation (interp_unit, one definition for the Python window and
+    the run engine) is np.interp's formula bit for bit — as Python and compiled — on random
+    samples, fractions (a hair below 0, exact samples, the last sample) and rates, NaN included."""
+    from numba import njit
+
+    @njit(cache=False)
+    def compiled(a, s0, rate, scale, out):
+        governed_fill(a, s0, rate, scale, out)
+
+    rng = np.random.default_rng(7)
+    for trial in range(3000):
+        n = int(rng.integers(1, 33))
+        a = rng.normal(size=n + 2) * 10.0 ** rng.integers(-3, 4)
+        if trial % 50 == 0:
+            a[rng.integers(0, n + 2)] = math.nan
+        s0 = float(rng.choice([rng.uniform(-1e-9, 1.0), 0.0, -1e-10, 0.5, 1.0]))
+        rate = float(rng.choice([rng.uniform(0.3, 1.0), 1.0]))
+        want = np.interp(s0 + np.arange(n) * rate, np.arange(n + 2, dtype=float), a) * rate
+        for fill in (governed_fill, compiled):
+            got = np.empty(n)
+            fill(a, s0, rate, rate, got)
+            np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
+    assert interp_unit(np.array([1.0, 2.0, 4.0]), 2.0) == 4.0
+    assert interp_unit(np.array([1.0, 2.0]), -1e-12) == 1.0
 
 
 # ------------------------------------------------------------------------------ the block
