@@ -15,4 +15,6 @@ for i in range(500):  # 5 s at T_d = 10 ms
     X, Y, theta, v, _, omega = car.state  # your sensors: pose, speed, yaw rate
     cmd = cascade.step(i * cfg.rates.Td, Measurement((X, Y, theta), v, omega))
     car.step([cmd.F_xR, cmd.delta], cfg.rates.Td, mu_road=0.9)  # your actuators
-print(cascade.events, cascade.last_plan.status, cascade.last_estimate.x)
+plan, estimate = cascade.last_plan, cascade.last_estimate  # None before the first step
+assert plan is not None and estimate is not None
+print(cascade.events, plan.status, estimate.x)
