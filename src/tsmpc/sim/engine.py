@@ -891,8 +891,8 @@ class _Run:
             mpc._prev = None
         if a.si[ke.SI_GWIN]:  # the speed governor has acted: the window at the governed time
             m = int(a.si[ke.SI_M])
-            window = governed_window(self.cascade._mpc_reference, m * self.cascade.Td - a.sf[ke.SF_TOFF],
-                                     float(a.sf[ke.SF_GRATE]), N + 1)
+            tau = float(m * self.cascade.Td - a.sf[ke.SF_TOFF])
+            window = governed_window(self.cascade._mpc_reference, tau, float(a.sf[ke.SF_GRATE]), N + 1)
         else:
             window = self.cascade._mpc_reference.window(int(a.si[ke.SI_KW]), N + 1)
         e = a.sc[ke.SC_EMEAS:ke.SC_EMEAS + 3].copy()
