@@ -190,6 +190,19 @@ def test_the_speed_governor_runs_alike(source: str, car: list[str], paper_refere
     assert np.any(lp.ref[:, 3] < np.asarray(lp.meta["planned_v"]) - 1e-6)  # it was governed
 
 
+def test_the_oracle_governor_reads_the_road_of_its_step(cfg: Config) -> None:
+    """The oracle row reads μ(t) of the MPC step's own time from the engine's friction program:
+    a drop 5 ms after an MPC step (built-in circuit, 0.9 → 0.3 at 1.005 s, the governor still at
+    rate 1) is seen one MPC step later, in the engine as in the Python loop."""
+    c = apply_overrides(cfg, [*_MU_DROP, "scenario.friction=[{at_s = 1.005, mu = 0.3}]",
+                              'governor.grip_source="oracle"'])
+    exp = prepare(c, ["ref"], duration=4.0)
+    le, lp = _both(exp.config, "REF", exp.scenario, max_steps=exp.max_steps)
+    slowed = np.flatnonzero(lp.ref[:, 3] < np.asarray(lp.meta["planned_v"]) - 1e-9)
+    assert lp.t_outer[slowed[0]] == pytest.approx(1.2, abs=1e-9)
+    _assert_same(le, lp)
+
+
 def test_governed_windows_on_the_qp_path_run_alike(paper_reference_path: Path, monkeypatch) -> None:
     """The paper preset with the governor on (the drop road): the start's spin governs the
     reference and its start-up reaches the MPC's QP path (the caller's slow path) with governed
