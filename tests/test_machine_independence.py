@@ -61,10 +61,11 @@ def _wide_config() -> Config:
     return fit.config
 
 
-def _start(env: dict[str, str], solver: str = "CLARABEL") -> subprocess.Popen[str]:
-    """A fresh process solving the default and the widened designs under ``env``."""
-    configs = {"default": Config().model_dump(mode="json"),
-               "wide": _wide_config().model_dump(mode="json")}
+def _start(env: dict[str, str], solver: str = "CLARABEL", wide: bool = True) -> subprocess.Popen[str]:
+    """A fresh process solving the default (and the widened) designs under ``env``."""
+    configs = {"default": Config().model_dump(mode="json")}
+    if wide:
+        configs["wide"] = _wide_config().model_dump(mode="json")
     base = {k: v for k, v in os.environ.items() if not k.startswith(("OPENBLAS", "OMP", "MKL"))}
     return subprocess.Popen([sys.executable, "-c", _PROBE, json.dumps(configs), solver],
                             env={**base, **env}, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -87,16 +88,18 @@ def _coretypes() -> list[str]:
 def test_designs_certify_alike_under_three_blas_kernels_and_two_thread_counts() -> None:
     kernels = _coretypes()
     # one thread each, two at a time (CI has two cores), then the two-thread run alone
-    procs = {f"{c}/1": _start({"OPENBLAS_CORETYPE": c, "OPENBLAS_NUM_THREADS": "1"})
+    # (the widened design under the first kernel and with two threads: solving it under all four
+    # took a minute more of the suite, and its agreement is the default's)
+    procs = {f"{c}/1": _start({"OPENBLAS_CORETYPE": c, "OPENBLAS_NUM_THREADS": "1"}, wide=c == kernels[0])
              for c in kernels[:2]}
     runs = {name: _result(p) for name, p in procs.items()}
     runs[f"{kernels[2]}/1"] = _result(_start({"OPENBLAS_CORETYPE": kernels[2],
-                                              "OPENBLAS_NUM_THREADS": "1"}))
+                                              "OPENBLAS_NUM_THREADS": "1"}, wide=False))
     runs[f"{kernels[-1]}/2"] = _result(_start({"OPENBLAS_CORETYPE": kernels[-1],
                                                "OPENBLAS_NUM_THREADS": "2", "OMP_NUM_THREADS": "2"}))
     ref = runs[f"{kernels[0]}/1"]
     for name, out in runs.items():
-        for case in ("default", "wide"):
+        for case in out:
             d = out[case]
             assert d["holds"], (name, case)
             # every certificate holds by far more than the solver's tolerance: >= 1000x
