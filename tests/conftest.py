@@ -85,3 +85,16 @@ def paper_reference_path() -> Path:
 @pytest.fixture(scope="session")
 def tracks_dir() -> Path:
     return need_data("tracks")
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    """Print the ``terminal_summary`` properties tests recorded (``record_property``; e.g. the
+    blocks' branch coverage, tests/test_block_coverage.py) in the session's summary, so CI's log
+    shows them: pytest captures a test's output, and pytest-xdist carries user properties from its
+    workers to the controller with each report."""
+    for key in ("passed", "failed"):
+        for rep in terminalreporter.stats.get(key, ()):
+            for name, text in getattr(rep, "user_properties", ()):
+                if name == "terminal_summary" and getattr(rep, "when", "call") == "call":
+                    terminalreporter.write_sep("-", rep.nodeid)
+                    terminalreporter.write_line(str(text))
