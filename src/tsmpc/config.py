@@ -998,6 +998,12 @@ class RecoverySettings(_Frozen):
         default=2.0, le=60.0, description="fresh poses rejected as jumps for this long [s], each "
         "consistent with the one before: the dead-reckoned pose is wrong, not them; the gate "
         "takes them; within (0, 60]")
+    yaw_rate_bound: _Flag = Field(
+        default=True, description="on the restart after a blind stop (until the car has the reference's "
+        "speed again) the yaw-rate reference the outer loop hands the TS-LQR is bounded by what the car's "
+        "speed allows, |omega| <= max(v, 0) tan(lqr.delta_max) / (a + b) [rad/s] (the kinematic "
+        "bicycle's tightest turn; v the accepted measured speed [m/s], else the last estimate): a car "
+        "at rest is not asked to turn in place; acts with enabled only")
 
 
 class GripSource(StrEnum):

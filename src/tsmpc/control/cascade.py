@@ -53,6 +53,7 @@ from tsmpc.control.gates import (
     nearest_sample,
     plausible_speeds,
     pose_consistent,
+    speed_bounded_yaw_rate,
 )
 from tsmpc.control.governor import Governor, GovernorParams, governed_window, grip_estimate, spin_grip
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
@@ -266,6 +267,10 @@ class Cascade:
         # beyond the paper: blind stop and recovery (gates.py)
         self._recovery = cfg.recovery if cfg.recovery.enabled else None
         self._force_limits = cfg.lqr.force_limits(cfg.vehicle)
+        # recovery.yaw_rate_bound: the kinematic bicycle's tightest path curvature tan(δ_max)/L [1/m]
+        rc = cfg.recovery
+        self._curvature_max = (math.tan(cfg.lqr.delta_max) / cfg.vehicle.wheelbase
+                               if rc.enabled and rc.yaw_rate_bound else None)
         from tsmpc.estimation.fusion import Fusion
 
         self._fusion = Fusion(cfg)  # beyond the paper: cfg.fusion's switches (issue 21)
@@ -607,6 +612,8 @@ class Cascade:
             plan = shifted_plan(self._plan, e_meas, self._u_prev, self.cfg.mpc.N, t0, 0, 0, 0)  # type: ignore[arg-type]
         t_mpc = time.perf_counter() - t0
         self._u_prev = np.asarray(plan.u, dtype=float)
+        if self._curvature_max is not None and (self._reanchor or self._catch_up):
+            self._bound_yaw_rate(v if fresh and speeds_ok else math.nan)  # restarting from rest
         self._plan = plan
         ev["mpc_soft"] += plan.status == MPCStatus.SOFT
         ev["mpc_fallback"] += plan.status == MPCStatus.FALLBACK
@@ -614,6 +621,21 @@ class Cascade:
         if self.governor is not None:
             self._govern(t)
         return plan, e_meas, t_mpc
+
+    def _bound_yaw_rate(self, v: float) -> None:
+        """recovery.yaw_rate_bound, from the end of a blind stop until the car has the reference's
+        speed again: the yaw rate the TS-LQR gets until the next MPC step (and the MPC's previous
+        input, so its next step starts from what was applied) within what the car can turn at its
+        speed — the accepted measured speed ``v``, else the last estimate's
+        (gates.speed_bounded_yaw_rate). The plan itself is left as the MPC made it. Like the blind
+        stop, the run engine never reaches it (applicability: runs that can blind the cascade run
+        in the Python loop)."""
+        if not math.isfinite(v):
+            last = self._last
+            v = float(last.estimate.x[0]) if last is not None else math.nan
+        w = speed_bounded_yaw_rate(float(self._u_prev[1]), v, self._curvature_max)  # type: ignore[arg-type]
+        if w != self._u_prev[1]:  # a new array: the plan's own u is not changed
+            self._u_prev = np.array([self._u_prev[0], w])  # type: ignore[index]
 
     # ------------------------------------------------------------------ speed governor (issue 36)
     @property

@@ -25,7 +25,17 @@ back —
   re-anchored at the reference sample nearest to the car, so the car resumes the plan from where it
   stands instead of chasing a reference that went on without it. The gates and the MHE-UIO take
   the new samples at once (the pose gate accepts the first finite pose; the window fills in
-  N T_d).
+  N T_d);
+* :func:`speed_bounded_yaw_rate`: on the restart from rest (from the end of the blind stop until the
+  car has the reference's speed), the yaw-rate reference the outer loop hands the TS-LQR is bounded
+  by the car's speed, |ω| ≤ v tan(δ_max)/L (``yaw_rate_bound``). The kinematic error model of the
+  outer loop (paper eq. "kinematic model") treats v and ω as independent inputs, so at rest it can
+  turn in place; a car cannot, and a TS-LQR asked to swings the steering to its limit before the car
+  rolls, and the car starts off with that heading error. Only on the restart: a moving car asked
+  for more than the bound saturates its steering, which is what a large error needs — bounded
+  always, the robustness case "initial offset" (2 m, 0.2 rad at 1 m/s) measured max |e_y| 0.34 m
+  after its first 5 s, against 0.06 m unbounded (paper reference). Above ω_max L / tan(δ_max)
+  (5.4 m/s with the default car) it never binds.
 """
 
 from __future__ import annotations
@@ -50,6 +60,7 @@ __all__ = [
     "nearest_sample",
     "plausible_speeds",
     "pose_consistent",
+    "speed_bounded_yaw_rate",
 ]
 
 #: Drift allowed between the dead-reckoned and a measured pose: metres plus metres per second
@@ -150,3 +161,15 @@ def nearest_sample(ref_x: NDArray[np.float64], ref_y: NDArray[np.float64], k_lo:
         if d < best:
             best, kb = d, k
     return kb
+
+
+@jitable
+def speed_bounded_yaw_rate(omega: float, v: float, curvature_max: float) -> float:
+    """The yaw rate ``omega`` [rad/s] within what a car at speed ``v`` [m/s] can turn,
+    |ω| ≤ max(v, 0) κ_max with κ_max = tan(δ_max)/L [1/m] the kinematic bicycle's tightest path
+    curvature (ω = v tan δ / L); ``omega`` itself (the same float) when it is within, or when
+    ``v`` is not finite (no speed to bound it by)."""
+    if not math.isfinite(v):
+        return omega
+    lim = max(v, 0.0) * curvature_max
+    return min(max(omega, -lim), lim)

@@ -58,7 +58,7 @@ from tsmpc.sim.start import _start_state, default_plant, tracked_steps
 if TYPE_CHECKING:
     from tsmpc.control.ts_lqr import TSLQR
 
-__all__ = ["LAST_RUN", "EngineFallback", "applicability", "enabled", "exact", "run", "warmup"]
+__all__ = ["LAST_RUN", "EngineFallback", "applicability", "cached", "enabled", "exact", "run", "warmup"]
 
 #: Event names in the order of :attr:`Cascade.events` (the kernel's counter array).
 _EVENTS = (*EVENT_NAMES, "stale_rejected", "step_errors", "repeated_rejected", "friction_steps")
@@ -133,13 +133,13 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
     "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
-    "tsmpc.control.cascade:Cascade.__init__": "fe5c7be0581f468c",
+    "tsmpc.control.cascade:Cascade.__init__": "0824875cc4d52255",
     "tsmpc.control.cascade:Cascade.reset": "5add1caa7458313d",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
     "tsmpc.control.cascade:Cascade._step": "1b77b0acc6c113f8",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "748ed28374e52348",
-    "tsmpc.control.cascade:Cascade._outer": "87a416e6e939a09e",
+    "tsmpc.control.cascade:Cascade._outer": "53f0252f7b4bac32",
     "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
     "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
     "tsmpc.control.cascade:Cascade._govern": "7db84fbd67992ceb",
@@ -1131,6 +1131,17 @@ def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termina
         wall_s=wall_s, termination=termination, events=events,
         meta={"oracle": False, "seed": cfg.seed, **scenario.meta, "final_state": x.tolist(),
               **({"planned_v": ref.v[:done].tolist()} if gov else {})})
+
+
+def cached() -> bool | None:
+    """Whether the engine's machine code is in numba's cache (a run loads it rather than compiles
+    it); None when the engine is unavailable (off, or no compiled kernels). Loads the engine's
+    kernel module, which says "compiling the run engine (first run only)…" on a cold cache."""
+    from tsmpc import kernels
+
+    if not enabled() or _load_kernel() is None:
+        return None
+    return any(kernels._tree_folder(kernels.numba_cache_dir()).glob("engine.run-*.nbi"))
 
 
 def warmup() -> bool:
