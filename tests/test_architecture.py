@@ -236,3 +236,54 @@ def test_core_modules_do_not_import_matplotlib() -> None:
                          env={"PYTHONPATH": str(SRC.parent), "PATH": ""})
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "False"
+
+
+#: No function in src/ is longer than this many lines (its ``def`` to its last line; issue 34).
+MAX_FUNCTION_LINES = 100
+
+#: The numeric kernels allowed past it: numba nopython arithmetic over flat arrays, where a split
+#: costs a call per inner step or per lane and the operations' order is the bit-identity contract.
+#: Each entry must still be over the limit (a stale entry fails the test).
+LONG_KERNELS = {
+    "kernels/engine.py::run",  # the whole-run engine's step loop (issue 34 replaces it by the blocks)
+    "kernels/engine.py::_chord",  # CourseFusion._chord's three fits, the engine's form
+    "kernels/batch.py::_forward",  # banded_solve's forward elimination, one row for every lane
+    "kernels/batch.py::advance",  # the batch's lane scheduler around the engine's steps
+    "kernels/mhe.py::banded_solve",  # the MHE window's block-tridiagonal Cholesky solve
+    "kernels/mpc.py::riccati",  # the MPC's unconstrained Riccati recursion for one schedule
+}
+
+
+def _function_lengths(root: Path) -> dict[str, int]:
+    """``path::qualname`` -> lines from ``def`` to the last line, for every function (methods and
+    nested functions included) of every module under ``root``."""
+    out: dict[str, int] = {}
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        todo: list[tuple[ast.AST, str]] = [(ast.parse(path.read_text(encoding="utf-8")), "")]
+        while todo:
+            node, prefix = todo.pop()
+            for child in ast.iter_child_nodes(node):
+                if isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+                    name = prefix + child.name
+                    if not isinstance(child, ast.ClassDef):
+                        out[f"{rel}::{name}"] = (child.end_lineno or child.lineno) - child.lineno + 1
+                    todo.append((child, name + "."))
+                else:
+                    todo.append((child, prefix))
+    return out
+
+
+def test_function_length_finder(tmp_path: Path) -> None:
+    (tmp_path / "m.py").write_text("class C:\n    def f(self):\n        def g():\n            pass\n"
+                                   "        return 1\n\n\nif True:\n    async def h():\n        x = 1\n"
+                                   "        return x\n")
+    assert _function_lengths(tmp_path) == {"m.py::C.f": 4, "m.py::C.f.g": 2, "m.py::h": 3}
+
+
+def test_no_function_over_100_lines_outside_the_numeric_kernels() -> None:
+    lengths = _function_lengths(SRC)
+    long = {name: n for name, n in lengths.items() if n > MAX_FUNCTION_LINES}
+    assert set(long) <= LONG_KERNELS, {n: long[n] for n in sorted(set(long) - LONG_KERNELS)}
+    stale = sorted(LONG_KERNELS - set(long))  # gone, or within the limit now: drop it from the list
+    assert not stale, {n: lengths.get(n, "no such function") for n in stale}

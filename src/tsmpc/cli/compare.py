@@ -110,19 +110,164 @@ def _compile_engine(say: Any, warm: Any = None) -> None:
     costs nothing here."""
     import time
 
-    from tsmpc import kernels
     from tsmpc.sim import engine
 
-    if not engine.enabled() or engine._load_kernel() is None:  # prints the "compiling" line if cold
-        return
-    folder = kernels._tree_folder(kernels.numba_cache_dir())
-    if any(folder.glob("engine.run-*.nbi")):  # compiled before: loaded on the first run
+    if engine.cached() is not False:  # unavailable, or compiled before: loaded on the first run
         return
     t0 = time.perf_counter()
     ok = (warm or engine.warmup)()
     seconds = time.perf_counter() - t0
     say(f"tsmpc: run engine compiled … done in {seconds:.0f} s (later runs load it from the cache)"
         if ok else f"tsmpc: the run engine could not be compiled ({seconds:.0f} s): the Python loop runs")
+
+
+def _consoles() -> tuple[Any, Any]:
+    """(stdout console, stderr console); 140 columns when stdout is piped to a file or CI log.
+    User strings are escaped where printed (markup)."""
+    from rich.console import Console
+
+    console = Console(emoji=False)
+    if not console.is_terminal and "COLUMNS" not in os.environ:
+        console = Console(width=140, emoji=False)
+    return console, Console(stderr=True, highlight=False, soft_wrap=True)
+
+
+def _load_config(config: Path | None, preset: str | None, sets: list[str] | None, *,
+                 duration: float | None, dt: float | None, seed: int | None) -> Any:
+    """The numeric options checked, then the config (``--config``/``--preset``, ``--set`` over it)."""
+    finite("--duration", duration, lo=0.1)
+    finite("--dt", dt, lo=1e-4)
+    if seed is not None and seed < 0:
+        fail(ConfigError(f"--seed = {seed}: must be an integer >= 0"))
+    cfg = load_config_or_exit(config, preset)
+    if sets:  # --set KEY=VALUE over the config (issue 21: the scenario vocabulary on the CLI)
+        from tsmpc.config import apply_overrides
+
+        try:
+            cfg = apply_overrides(cfg, list(sets))
+        except TsmpcError as err:
+            fail(err)
+    return cfg
+
+
+def _prepare(cfg: Any, methods_text: str, *, reference: Path | None, window: str | None, laps: int,
+             no_plots: bool, **options: Any) -> Any:
+    """The methods, the reference, the memory bound and the experiment (``options``: the rest of
+    :func:`tsmpc.sim.experiment.prepare`'s), every one checked before any work."""
+    import tsmpc.cli._memory as _memory  # memory bound (issue 38): the file's size and samples, then the run
+    from tsmpc.sim import experiment
+
+    methods = [m for m in methods_text.split(",") if m.strip()]
+    if not methods:
+        fail(ConfigError("--methods is empty"))
+    check_laps(laps)
+    reference = data_path(reference, "--reference")  # `--reference paper`: a downloaded dataset
+    problem = _memory.reference_problem(
+        reference, methods=methods, duration=options["duration"], window=_parse_window(window), laps=laps,
+        Tc=cfg.rates.Tc, Td=cfg.rates.Td, horizon=cfg.mpc.N)
+    if problem is not None:
+        fail(ConfigError(problem))
+    try:
+        exp = experiment.prepare(cfg, methods, reference=reference, window=_parse_window(window), laps=laps,
+                                 **options)
+    except (TsmpcError, OSError) as err:
+        fail(err)
+    check_scenario_options(exp.scenario, reference=reference, laps=laps, plant=options["plant"])
+    problem = _memory.experiment_problem(exp)
+    if problem is not None:
+        fail(ConfigError(problem))
+    _check_extras(exp, plots=not no_plots)
+    return exp
+
+
+def _claim_out(out: Path | None, *, overwrite: bool, command: str, err_console: Any) -> Path:
+    """The output folder: a new one by default (never another run's, issue 23); an earlier complete
+    result in ``out`` moved aside (the quick start, run again: docs/outputs.md); then checked."""
+    if out is None:
+        from tsmpc.cli._outdir import claim_default_out
+
+        out = claim_default_out(command)
+        err_console.print(f"output folder: {out}", markup=False)
+    elif not overwrite and _holds_previous_result(out):
+        from tsmpc.cli._outdir import move_aside
+
+        try:
+            moved = move_aside(out)
+        except OSError as err:
+            fail(ConfigError(f"--out {out}: holds an earlier result that cannot be moved aside "
+                             f"({err.strerror or err}); choose another folder or pass --overwrite"))
+        err_console.print(f"the earlier result in {out} was moved to {moved}", markup=False)
+    check_out_dir(out, overwrite=overwrite)
+    return out
+
+
+def _compile_first(exp: Any, designs: tuple[Any, Any], err_console: Any) -> dict[str, str]:
+    """Load (or, on a cold cache, compile) the kernels and the run engine before the progress
+    bars, the first run saying so; where each method is timed (:func:`_timed_in`)."""
+    from tsmpc import kernels
+
+    with deferred_interrupts():  # numba/LLVM call back into Python: never raise in there
+        timed_in = _timed_in(exp)  # may load (or, on a cold cache, compile) the kernels
+        kernels.warmup()
+        if "engine" in timed_in.values():  # and the run engine, saying when it is done
+            _compile_engine(lambda text: err_console.print(text, markup=False),
+                            lambda: _one_engine_step(exp, timed_in, designs))
+    return timed_in
+
+
+def _run_with_progress(console: Any, exp: Any, out: Path, designs: tuple[Any, Any], *, no_plots: bool,
+                       mat: bool) -> Any:
+    """Run the experiment into ``out`` under one progress bar per method."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from tsmpc.sim import experiment
+
+    with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
+                  TextColumn("{task.completed}/{task.total} MPC steps"),
+                  TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
+
+        def factory(name: str, total: int) -> Any:
+            task = progress.add_task(name, total=total)
+
+            def update(k: int, _k_total: int) -> None:
+                check_interrupted()  # a solver may have swallowed the signal
+                progress.update(task, completed=k)
+            return update
+
+        # The loop's blocks call compiled code: a signal only sets a flag there, checked
+        # after every MPC step (check_interrupted in the progress callback).
+        with deferred_interrupts():
+            return experiment.run(exp, out, plots=not no_plots, progress_factory=factory,
+                                  designs=designs, mat=mat)
+
+
+def _report(console: Any, out: Path, result: Any, timed_in: dict[str, str]) -> None:
+    """The tables and the files written; a method whose controller did not work marks the folder
+    failed (exit 1); else the PARTIAL marker goes (unless interrupted meanwhile)."""
+    from rich.markup import escape
+
+    _print_tables(console, result.metrics, timed_in)
+    console.print(f"wrote {len(result.files)} files to [bold]{escape(str(out))}[/bold]")
+    sick = _unhealthy(result.metrics)
+    if sick:
+        mark_partial(out, "failed", reason="; ".join(sick))
+        fail("; ".join(sick), code=1)
+    check_interrupted()
+    (out / PARTIAL_MARKER).unlink(missing_ok=True)
+
+
+def _exit_status(metrics: dict[str, Any]) -> None:
+    """Exit 1 when a method did not complete; exit 3 (one line) when the results are written but
+    the car could not do what the plan asked."""
+    bad = [n for n, m in metrics["methods"].items() if m["termination"] != "completed"]
+    if bad:
+        raise typer.Exit(1)
+    degraded = [f"{n}: {m['degraded']}" if len(metrics["methods"]) > 1 else m["degraded"]
+                for n, m in metrics["methods"].items() if m.get("status") == "degraded"]
+    if degraded:
+        with contextlib.suppress(OSError, ValueError):
+            typer.secho("; ".join(degraded), err=True, fg=typer.colors.YELLOW)
+        raise typer.Exit(EXIT_DEGRADED)
 
 
 def _execute(
@@ -138,72 +283,17 @@ def _execute(
     (``prepare`` validates every input before any work, ``run`` solves the designs and runs).
     The options arrive by name (the commands pass their parameters, which carry the same names),
     so adding an option cannot shift the others."""
-    from rich.console import Console
-    from rich.markup import escape
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
     from tsmpc.blas import limit_blas_threads
-    from tsmpc.sim import experiment
 
     check_environment()  # cache folders, BLAS threads: before any work
     limit_blas_threads()
-    console = Console(emoji=False)  # user strings are escaped where printed (markup)
-    if not console.is_terminal and "COLUMNS" not in os.environ:  # piped to a file or CI log
-        console = Console(width=140, emoji=False)
+    console, err_console = _consoles()
     # Every input is checked before any work: options, config, reference, envelope, output folder.
-    finite("--duration", duration, lo=0.1)
-    finite("--dt", dt, lo=1e-4)
-    if seed is not None and seed < 0:
-        fail(ConfigError(f"--seed = {seed}: must be an integer >= 0"))
-    cfg = load_config_or_exit(config, preset)
-    if sets:  # --set KEY=VALUE over the config (issue 21: the scenario vocabulary on the CLI)
-        from tsmpc.config import apply_overrides
-
-        try:
-            cfg = apply_overrides(cfg, list(sets))
-        except TsmpcError as err:
-            fail(err)
-    methods = [m for m in methods_text.split(",") if m.strip()]
-    if not methods:
-        fail(ConfigError("--methods is empty"))
-    check_laps(laps)
-    reference = data_path(reference, "--reference")  # `--reference paper`: a downloaded dataset
-    import tsmpc.cli._memory as _memory  # memory bound (issue 38): the file's size and samples, then the run
-
-    problem = _memory.reference_problem(
-        reference, methods=methods, duration=duration, window=_parse_window(window), laps=laps,
-        Tc=cfg.rates.Tc, Td=cfg.rates.Td, horizon=cfg.mpc.N)
-    if problem is not None:
-        fail(ConfigError(problem))
-    try:
-        exp = experiment.prepare(
-            cfg, methods, reference=reference,
-            window=_parse_window(window), laps=laps, dt=dt, robustness=robustness, duration=duration,
-            seed=seed, plant=plant, cr_vehicle=cr_vehicle, strict_box=strict_box, oracle=oracle,
-            strict_plan=strict_plan)
-    except (TsmpcError, OSError) as err:
-        fail(err)
-    check_scenario_options(exp.scenario, reference=reference, laps=laps, plant=plant)
-    problem = _memory.experiment_problem(exp)
-    if problem is not None:
-        fail(ConfigError(problem))
-    _check_extras(exp, plots=not no_plots)
-    err_console = Console(stderr=True, highlight=False, soft_wrap=True)
-    if out is None:  # a new folder: never another run's (issue 23)
-        from tsmpc.cli._outdir import claim_default_out
-
-        out = claim_default_out(command)
-        err_console.print(f"output folder: {out}", markup=False)
-    elif not overwrite and _holds_previous_result(out):  # the quick start, run again (docs/outputs.md)
-        from tsmpc.cli._outdir import move_aside
-
-        try:
-            moved = move_aside(out)
-        except OSError as err:
-            fail(ConfigError(f"--out {out}: holds an earlier result that cannot be moved aside "
-                             f"({err.strerror or err}); choose another folder or pass --overwrite"))
-        err_console.print(f"the earlier result in {out} was moved to {moved}", markup=False)
-    check_out_dir(out, overwrite=overwrite)
+    cfg = _load_config(config, preset, sets, duration=duration, dt=dt, seed=seed)
+    exp = _prepare(cfg, methods_text, reference=reference, window=window, laps=laps, no_plots=no_plots,
+                   dt=dt, robustness=robustness, duration=duration, seed=seed, plant=plant,
+                   cr_vehicle=cr_vehicle, strict_box=strict_box, oracle=oracle, strict_plan=strict_plan)
+    out = _claim_out(out, overwrite=overwrite, command=command, err_console=err_console)
     if exp.envelope.widened:
         console.print(exp.envelope.message, markup=False, highlight=False)
     if exp.plan_note:  # the plan exceeded the vehicle's limits: capped (or the published one, exempt)
@@ -217,48 +307,10 @@ def _execute(
             _remove_previous_outputs(out)
         mark_partial(out, "running", methods=[m.value for m in exp.methods])
         designs = design_status(exp.config)  # no design for this config: DesignError (exit 2)
-        from tsmpc import kernels
-
-        with deferred_interrupts():  # numba/LLVM call back into Python: never raise in there
-            timed_in = _timed_in(exp)  # may load (or, on a cold cache, compile) the kernels
-            kernels.warmup()  # compile/load before the progress bars (the first run says so)
-            if "engine" in timed_in.values():  # and the run engine, saying when it is done
-                _compile_engine(lambda text: err_console.print(text, markup=False),
-                                lambda: _one_engine_step(exp, timed_in, designs))
-        with Progress(TextColumn("[bold]{task.description:>5}"), BarColumn(),
-                      TextColumn("{task.completed}/{task.total} MPC steps"),
-                      TimeElapsedColumn(), TimeRemainingColumn(), console=console) as progress:
-
-            def factory(name: str, total: int) -> Any:
-                task = progress.add_task(name, total=total)
-
-                def update(k: int, _k_total: int) -> None:
-                    check_interrupted()  # a solver may have swallowed the signal
-                    progress.update(task, completed=k)
-                return update
-
-            # The loop's blocks call compiled code: a signal only sets a flag there, checked
-            # after every MPC step (check_interrupted in the progress callback).
-            with deferred_interrupts():
-                result = experiment.run(exp, out, plots=not no_plots, progress_factory=factory,
-                                        designs=designs, mat=mat)
-        _print_tables(console, result.metrics, timed_in)
-        console.print(f"wrote {len(result.files)} files to [bold]{escape(str(out))}[/bold]")
-        sick = _unhealthy(result.metrics)
-        if sick:
-            mark_partial(out, "failed", reason="; ".join(sick))
-            fail("; ".join(sick), code=1)
-        check_interrupted()
-        (out / PARTIAL_MARKER).unlink(missing_ok=True)
-    bad = [n for n, m in result.metrics["methods"].items() if m["termination"] != "completed"]
-    if bad:
-        raise typer.Exit(1)
-    degraded = [f"{n}: {m['degraded']}" if len(result.metrics["methods"]) > 1 else m["degraded"]
-                for n, m in result.metrics["methods"].items() if m.get("status") == "degraded"]
-    if degraded:  # results written; the car could not do what the plan asked (one line, exit 3)
-        with contextlib.suppress(OSError, ValueError):
-            typer.secho("; ".join(degraded), err=True, fg=typer.colors.YELLOW)
-        raise typer.Exit(EXIT_DEGRADED)
+        timed_in = _compile_first(exp, designs, err_console)
+        result = _run_with_progress(console, exp, out, designs, no_plots=no_plots, mat=mat)
+        _report(console, out, result, timed_in)
+    _exit_status(result.metrics)
 
 
 def _unhealthy(metrics: dict[str, Any]) -> list[str]:
