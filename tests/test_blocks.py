@@ -289,3 +289,14 @@ def test_ramp_plateau_and_a_missing_grip_sample() -> None:
     out = governor_update(p, s, math.nan, 100.0, v, w)
     assert out.grip == 0.5 and out == governor_update(p, s, 0.5, 100.0, v, w)
     assert out.rate == pytest.approx(1.0 - 0.15 * 0.1)  # slowing down at rate_down
+
+
+def test_speed_bounded_yaw_rate_by_hand() -> None:
+    """|ω| ≤ max(v, 0) κ_max: 2 m/s · 0.2 /m = 0.4 rad/s either way; within it ω itself; none at a
+    negative speed; ω unchanged for a non-finite speed (−inf would clip to 0 without the check)."""
+    assert gates.speed_bounded_yaw_rate(0.5, 2.0, 0.2) == pytest.approx(0.4)
+    assert gates.speed_bounded_yaw_rate(-0.5, 2.0, 0.2) == pytest.approx(-0.4)
+    assert gates.speed_bounded_yaw_rate(0.3, 2.0, 0.2) == 0.3
+    assert gates.speed_bounded_yaw_rate(0.3, -1.0, 0.2) == 0.0
+    assert gates.speed_bounded_yaw_rate(0.5, -math.inf, 0.2) == 0.5
+    assert gates.speed_bounded_yaw_rate(-0.5, math.nan, 0.2) == -0.5
