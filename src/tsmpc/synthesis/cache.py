@@ -135,6 +135,22 @@ def _recheck(design: KinematicDesign | DynamicDesign, cfg: Config) -> tuple[Cert
     return tuple(certs)
 
 
+#: Certificates recomputed in this process, by the exact text of the cache entry they were
+#: recomputed from (its SHA-256; the entry's key hashes every input of the design). Rechecking
+#: once per process is what a recheck guards against (another machine's or version's numbers;
+#: a tampered file changes the text), and a sweep or ablation loads the same entries hundreds
+#: of times: the dynamic grid costs ≈ 0.2 s each time.
+_RECHECKED: dict[str, tuple[Certificate, ...]] = {}
+
+
+def _rechecked(design: KinematicDesign | DynamicDesign, cfg: Config, text: str) -> tuple[Certificate, ...]:
+    """:func:`_recheck`, once per process for each entry text."""
+    digest = hashlib.sha256(text.encode()).hexdigest()
+    if digest not in _RECHECKED:
+        _RECHECKED[digest] = _recheck(design, cfg)  # (raises: nothing is remembered)
+    return _RECHECKED[digest]
+
+
 def _load_or_design(cfg: Config, kind: str, directory: Path | None, use_cache: bool) -> Any:
     key = kinematic_key(cfg) if kind == "kinematic" else dynamic_key(cfg)
     path = (directory or cache_dir()) / f"{kind}-{key[:32]}.json"
@@ -142,11 +158,11 @@ def _load_or_design(cfg: Config, kind: str, directory: Path | None, use_cache: b
         try:  # a regular file of bounded size only (a folder, a FIFO: re-solved, never blocks)
             from tsmpc.textfile import read_text
 
-            design = design_from_dict(json.loads(read_text(path, "design cache entry",
-                                                           limit=64 * 1024 * 1024)))
+            text = read_text(path, "design cache entry", limit=64 * 1024 * 1024)
+            design = design_from_dict(json.loads(text))
             if design.inputs_hash == key:
                 # the certificates reported are the ones recomputed here, not the stored ones
-                return dc_replace(design, certificates=_recheck(design, cfg))
+                return dc_replace(design, certificates=_rechecked(design, cfg, text))
         except (TsmpcError, KeyError, ValueError, TypeError, AttributeError, RecursionError,
                 OSError):
             pass  # unreadable or stale entry: re-solve and overwrite it
