@@ -630,12 +630,15 @@ class Cascade:
         (gates.speed_bounded_yaw_rate). The plan itself is left as the MPC made it. Like the blind
         stop, the run engine never reaches it (applicability: runs that can blind the cascade run
         in the Python loop)."""
+        u, k_max = self._u_prev, self._curvature_max
+        if u is None or k_max is None:  # (both set when the MPC ran with the bound on)
+            return
         if not math.isfinite(v):
             last = self._last
             v = float(last.estimate.x[0]) if last is not None else math.nan
-        w = speed_bounded_yaw_rate(float(self._u_prev[1]), v, self._curvature_max)  # type: ignore[arg-type]
-        if w != self._u_prev[1]:  # a new array: the plan's own u is not changed
-            self._u_prev = np.array([self._u_prev[0], w])  # type: ignore[index]
+        w = speed_bounded_yaw_rate(float(u[1]), v, k_max)
+        if w != u[1]:  # a new array: the plan's own u is not changed
+            self._u_prev = np.array([u[0], w])
 
     # ------------------------------------------------------------------ speed governor (issue 36)
     @property
