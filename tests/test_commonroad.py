@@ -141,14 +141,19 @@ def test_vehicles_1_to_3_certify_on_the_full_steering_box(vid: int) -> None:
 
 
 @pytest.mark.slow
-def test_multibody_van_drives_the_whole_circuit() -> None:
+def test_multibody_van_drives_the_circuit_past_where_it_left_the_road() -> None:
     """CommonRoad's multi-body VW Vanagon (vehicle 3: 1.5 t, C/M three times the paper car's) on
-    the whole built-in circuit with the default cascade. It left the road at 74 s while the online
-    stiffness fit took chords under hard acceleration (combined slip, load transfer: its front/rear
-    balance went 10 % off); with the steady-speed gate max |e_y| is 0.027 m."""
+    the built-in circuit with the default cascade, to 75 s. It left the road at 74 s while the
+    online stiffness fit took chords under hard acceleration (combined slip, load transfer: its
+    front/rear balance went 10 % off); with the fusion's steady-speed gate (STIFF_MAX_ACCEL)
+    max |e_y| is 0.023 m over these 75 s (0.027 m over the whole 134 s circuit). Measured with the
+    gate removed (every other fix since in place): 0.072 m, above 0.05 m from 65.6 s — so the
+    bound is 0.05 m (2x the gated run's) and the run stops at 75 s, past both; the whole circuit
+    cost ~41 s of CPU (the Python loop at 1 kHz), these 75 s ~22 s."""
     cfg = commonroad_config(Config(), 3)
     sc = dc_replace(load_scenario(cfg), measured_steering=True)
-    log = simulate(cfg, Method.REF, sc, plant=CommonRoadPlant(3, model="mb", h=cfg.rates.h))
+    log = simulate(cfg, Method.REF, sc, plant=CommonRoadPlant(3, model="mb", h=cfg.rates.h),
+                   max_steps=750)
     m = compute_metrics(log)
-    assert m["termination"] == "completed", m["termination"]
-    assert m["max_abs_lateral_m"] < 0.1
+    assert m["termination"] == "completed" and log.n_outer == 750, m["termination"]
+    assert m["max_abs_lateral_m"] < 0.05
