@@ -66,19 +66,43 @@ def test_prepare_validates_before_any_work(tmp_path: Path) -> None:
 
 def test_a_config_without_a_certified_design_is_a_design_error(tmp_path: Path, monkeypatch) -> None:
     """A box no common Lyapunov matrix covers: DesignError (an input error: exit 2) naming the
-    LMI, where it fails and the settings that would help; the CLI says so in one line."""
+    LMI, where it fails and the settings that would help; the CLI says so in one line.
+
+    The infeasible SDP is solved once (~8 s of CPU): the CLI, given the same box in a TOML file,
+    gets the solver's answer replayed for that design key (any other key is solved for real), so
+    its own path — the file, the config, solve_designs, the diagnosis, exit 2 — is the real one.
+    tests/test_design_failures.py runs real infeasible designs through the CLI."""
     from tsmpc.config import replace
+    from tsmpc.synthesis import cache
 
     monkeypatch.setenv("TSMPC_CACHE_DIR", str(tmp_path / "cache"))
     cfg = Config()
     # down to 0.2 m/s the 1/v terms leave no common Lyapunov matrix (SPEC §5's low-speed floor)
     bad = replace(cfg, dynamic_box=replace(cfg.dynamic_box, v=(0.2, 20.0)))
+    solve = cache.load_or_design_dynamic
+    raised: dict[str, Exception] = {}
+    replayed: list[str] = []
+
+    def once(c: Config, *args, **kwargs):
+        key = cache.dynamic_key(c)
+        if key in raised:
+            replayed.append(key)
+            raise raised[key]
+        try:
+            return solve(c, *args, **kwargs)
+        except Exception as err:
+            raised[key] = err
+            raise
+
+    monkeypatch.setattr(cache, "load_or_design_dynamic", once)
     with pytest.raises(DesignError, match=r"no certified dynamic LMI design .*dynamic_box.*"
                        r"v = 0\.20 m/s is added.*narrow dynamic_box\.v"):
         experiment.solve_designs(bad)
+    assert list(raised) == [cache.dynamic_key(bad)]
     f = tmp_path / "bad.toml"
     f.write_text("[dynamic_box]\nv = [0.2, 20.0]\n", encoding="utf-8")
     res = CliRunner().invoke(app, ["run", "--config", str(f), "--duration", "1", "--out",
                                    str(tmp_path / "o")])
     assert res.exit_code == 2 and "no certified dynamic LMI design" in res.output
     assert "Traceback" not in res.output
+    assert replayed == [cache.dynamic_key(bad)]  # the CLI's config is the library's
