@@ -81,3 +81,18 @@ def test_plan_warns_beyond_the_default_box(tmp_path: Path, tracks_dir: Path) -> 
     ok = CliRunner().invoke(app, ["plan", str(tracks_dir / "Monza.csv"), "--out",
                                   str(tmp_path / "d.csv")])
     assert "warning" not in ok.output
+
+
+def test_steady_states_at_once_equal_the_scalar_equilibrium_bit_for_bit() -> None:
+    """The vectorised steady states the envelope uses are :func:`equilibrium` at each point (the
+    same iteration, the 2×2 systems solved together): equal to the bit on random (v, ω), including
+    the speed floor, and on a heavier car."""
+    from tsmpc.control.ts_lqr import equilibrium, steady_states
+
+    rng = np.random.default_rng(3)
+    v, w = rng.uniform(0.0, 40.0, 300), rng.uniform(-1.5, 1.5, 300)
+    for p in (Config().vehicle, Config().vehicle.model_copy(update={"mass": 1000.0, "a": 1.2})):
+        alpha, delta = steady_states(v, w, p)
+        one = np.array([equilibrium(float(a), float(b), p) for a, b in zip(v, w, strict=True)])
+        np.testing.assert_array_equal(alpha, one[:, 0])
+        np.testing.assert_array_equal(delta, one[:, 2])

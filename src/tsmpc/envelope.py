@@ -27,13 +27,12 @@ widened: the low-speed floors of the boxes are the documented low-speed behaviou
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from tsmpc.config import Config, VehicleParams, replace
+from tsmpc.config import Config, replace
 from tsmpc.errors import TsmpcError
 from tsmpc.planning.reference import Reference
 
@@ -94,27 +93,16 @@ class EnvelopeFit:
                 f"{fields}; their designs are solved and certified next (cached)")
 
 
-@functools.lru_cache(maxsize=64)
-def _steady_extremes(pairs: bytes, vehicle: VehicleParams) -> tuple[float, float]:
-    """(max |δ_eq|, max |α_eq|) over the (v, |ω|) grid points ``pairs`` (float64 pairs, as bytes).
-    Memoised: a sweep, a compare or an ablation prepares many runs on one reference and one car,
-    and ≈ 800 steady states cost ≈ 0.4 s of CPU each time (the answer is a pure function of both)."""
-    from tsmpc.control.ts_lqr import equilibrium
-
-    d_max = a_max = 0.0
-    for vi, wi in np.frombuffer(pairs, dtype=float).reshape(-1, 2):
-        al, _, de = equilibrium(float(vi), float(wi), vehicle)
-        d_max, a_max = max(d_max, abs(de)), max(a_max, abs(al))
-    return d_max, a_max
-
-
 def reference_ranges(ref: Reference, cfg: Config) -> ReferenceRanges:
     """Ranges of ``ref`` and the steady-state δ, α of the nominal model along it."""
+    from tsmpc.control.ts_lqr import steady_states
+
     v = np.asarray(ref.v, dtype=float)
     w = np.asarray(ref.omega, dtype=float)
     # Steady states on a coarse grid of the (v, |ω|) pairs met (symmetry in ω): cheap and tight.
     pairs = np.unique(np.round(np.stack([np.maximum(v, 0.5), np.abs(w)], axis=1), 2), axis=0)
-    d_max, a_max = _steady_extremes(pairs.tobytes(), cfg.vehicle)
+    alpha, delta = steady_states(pairs[:, 0], pairs[:, 1], cfg.vehicle)
+    d_max, a_max = float(np.abs(delta).max(initial=0.0)), float(np.abs(alpha).max(initial=0.0))
     return ReferenceRanges(
         v_max=float(v.max()), omega_max=float(np.abs(w).max()),
         kappa_max=float(np.abs(ref.kappa).max()), a_lat_max=float(np.abs(v * w).max()),

@@ -52,7 +52,7 @@ from tsmpc.config import FrictionEstimate, LQRSettings, VehicleParams
 from tsmpc.errors import ConfigError
 from tsmpc.models.dynamic import DynamicTS, continuous_matrices
 
-__all__ = ["TSLQR", "InnerCommand", "equilibrium"]
+__all__ = ["TSLQR", "InnerCommand", "equilibrium", "steady_states"]
 
 
 @dataclass(frozen=True)
@@ -86,6 +86,25 @@ def equilibrium(v: float, omega: float, p: VehicleParams, iters: int = 4) -> tup
     A, B = continuous_matrices(v, delta, p)
     F = -(A[0, 0] * v + A[0, 1] * alpha + A[0, 2] * omega + B[0, 1] * delta) / B[0, 0]
     return float(alpha), float(F), float(delta)
+
+
+def steady_states(v: NDArray[np.float64], omega: NDArray[np.float64], p: VehicleParams,
+                  iters: int = 4) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(α_eq, δ_eq) of :func:`equilibrium` at many (v, ω) points at once (the same fixed-point
+    iteration, the 2×2 systems solved together): a reference's ≈ 1000 grid points in
+    milliseconds instead of a third of a second (:func:`tsmpc.envelope.reference_ranges`)."""
+    v = np.maximum(np.asarray(v, dtype=float), 0.5)
+    omega = np.asarray(omega, dtype=float)
+    delta = (p.a + p.b) * omega / v
+    alpha = np.zeros_like(v)
+    for _ in range(iters):
+        A, B = continuous_matrices(v, delta, p)
+        m = np.stack([np.stack([A[:, 1, 1], B[:, 1, 1]], axis=-1),
+                      np.stack([A[:, 2, 1], B[:, 2, 1]], axis=-1)], axis=-2)
+        rhs = -np.stack([A[:, 1, 2], A[:, 2, 2]], axis=-1) * omega[:, None]
+        sol = np.linalg.solve(m, rhs[..., None])[..., 0]
+        alpha, delta = sol[:, 0], sol[:, 1]
+    return alpha, delta
 
 
 class TSLQR:
