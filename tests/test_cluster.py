@@ -34,21 +34,23 @@ import pytest
 from _paths import console_script
 from tsmpc.sweep import expand, load_sweep, read_record
 
-# 24 runs of 15 simulated seconds in batches of 4 (tsmpc.sim.batch): ~0.2–0.6 s a run once a
-# worker has loaded its kernels, so the sweep lasts seconds and a kill after the first records
-# lands while most batches are pending.
+# 12 runs of 15 simulated seconds in 6 batches of 2 (tsmpc.sim.batch; every method has 4 runs,
+# two batches): ~0.2–0.6 s a run once a worker has loaded its kernels, so the sweep lasts seconds
+# and a kill after the first batch's records lands while most batches are pending (each of the 3
+# workers has a batch in hand and 2 more wait). Half the runs of the first version (24 in 6
+# batches of 4: ~55 s of CPU with the local reference sweep) with the same story.
 SWEEP = """
 name = "cluster"
 duration_s = 15.0
-batch = 4
+batch = 2
 [grid]
 method = ["ref", "fzn", "iter"]
 scenario = ["nominal", "noise_x10"]
-seed = [1, 2, 3, 4]
+seed = [1, 2]
 """
-N_RUNS = 24
+N_RUNS = 12
 N_WORKERS = 3
-KILL_AFTER = 3  # records on disk before a worker is killed
+KILL_AFTER = 2  # records on disk before a worker is killed: one batch
 #: Metrics that measure the machine, not the run (they differ between any two executions).
 TIMING_METRICS = frozenset({"mpc_ms", "mhe_ms", "lqr_ms", "wall_s", "realtime_factor"})
 
@@ -191,9 +193,11 @@ def test_a_worker_killed_mid_sweep_on_a_separate_cluster_loses_and_recomputes_no
     tsmpc = _exe("tsmpc")
 
     # The reference: the same sweep on a LocalCluster (it also fills this machine's kernel cache,
-    # which the workers below share through TSMPC_CACHE_DIR, while they start up).
+    # which the workers below share through TSMPC_CACHE_DIR, while they start up). One worker
+    # process: one fewer to start and load the kernels in; a run's record does not depend on the
+    # number of workers (tsmpc.sweep.batches).
     local = subprocess.run([tsmpc, "sweep", str(sweep), "--out", str(tmp_path / "local"),
-                            "--workers", "2", "--no-plots"], env=dask_cluster.env, cwd=tmp_path,
+                            "--workers", "1", "--no-plots"], env=dask_cluster.env, cwd=tmp_path,
                            capture_output=True, text=True, timeout=150)
     assert local.returncode == 0, local.stdout + local.stderr
     expected = _records(tmp_path / "local" / "runs")
