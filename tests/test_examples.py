@@ -46,7 +46,7 @@ def test_example_script_runs(script: Path, tmp_path: Path) -> None:
         pytest.skip("the [commonroad] extra is not installed")
     for name in NEEDS.get(script.name, ()):
         need_data(name)
-    env = {**os.environ, "TSMPC_EXAMPLE_STEPS": "30",
+    env = {**os.environ, "TSMPC_EXAMPLE_STEPS": "10",
            "PYTHONPATH": os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")])}
     # from another folder: the examples find their data relative to themselves, not the cwd
     res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env,
