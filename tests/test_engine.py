@@ -111,13 +111,15 @@ def test_sensor_dropouts_bursts_biases_and_delay(cfg: Config, paper_reference_pa
 def test_slow_paths_friction_events_and_mismatch(cfg: Config, paper_reference_path: Path) -> None:
     """The offset start needs the MPC's QP path and the MHE's dense QP (a state bound active):
     resumed in the kernel, equal; so are friction events over the paper profile and a plant
-    with other mass and tyres (the stiffness and mass fits at work)."""
+    with other mass and tyres (the stiffness and mass fits at work). The offset start's slow
+    paths are all in its first 100 steps (measured: 11 MPC QPs and 133 MHE dense QPs, the whole
+    run's), so it runs 150, not the whole reference (the matrix above runs whole references)."""
     base = load_scenario(cfg, paper_reference_path)
     c, s = apply_robustness("offset_start", cfg, base)
-    le, lp = _both(c, "REF", s)
+    le, lp = _both(c, "REF", s, max_steps=150)
     _assert_same(le, lp)
     slow = eng.LAST_RUN["slow_paths"]
-    assert slow["mpc"] > 0 and slow["mhe"] > 0, slow
+    assert slow["mpc"] >= 10 and slow["mhe"] >= 100, slow
     c = replace(cfg, scenario=replace(cfg.scenario, plant=replace(
         cfg.scenario.plant, mass_scale=1.15, cornering_front_scale=0.85), friction=(
         {"at_s": 20.0, "mu": 0.4, "ramp_s": 1.0, "duration_s": 5.0},
