@@ -468,10 +468,12 @@ def test_design_points_and_divergence_onset(paper_reference_path: Path) -> None:
 
 
 def test_the_transient_grows_as_the_steering_zeta_gain_shrinks(paper_reference_path: Path) -> None:
-    """SPEC §14: the transient's size depends on the steering row's δ_f / ζ ratio (8 s runs)."""
+    """SPEC §14: the transient's size depends on the steering row's δ_f / ζ ratio. 5 s runs: the
+    e_y peaks of the 8 s window are at 2.4 s (0.72 m) and 3.0 s (1.69 m), so the 5 s runs have
+    the same peaks at 5/8 of the CPU."""
     from generator.paper_explained_runs import gain_sensitivity
 
-    res = gain_sensitivity(paper_reference_path, (1.0, 0.5), max_steps=80)
+    res = gain_sensitivity(paper_reference_path, (1.0, 0.5), max_steps=50)
     peaks = [abs(r.transient.ey_peak_m) for r in res]
     assert peaks[1] > 1.5 * peaks[0] > 0.0
 
