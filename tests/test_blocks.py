@@ -256,10 +256,18 @@ def test_cpython_hypot_special_values() -> None:
     assert cpython_hypot(-3.0, 4.0) == 5.0 and cpython_hypot(1e300, 1e300) == math.hypot(1e300, 1e300)
 
 
-@pytest.mark.xfail(strict=True, reason="cpython_hypot's subnormal branch squares numbers that underflow "
-                   "(0.0 for 3e-310, 4e-310); CPython scales them by DBL_MIN first")
 def test_cpython_hypot_subnormal() -> None:
-    assert cpython_hypot(3e-310, 4e-310) == math.hypot(3e-310, 4e-310)
+    """Subnormal and near-subnormal arguments: CPython makes them normal (÷ DBL_MIN) first; plain
+    squares underflow (0.0 for 3e-310, 4e-310). Both as Python and compiled."""
+    rng = np.random.default_rng(11)
+    cases = [(3e-310, 4e-310), (5e-324, 0.0), (5e-324, 5e-324), (1e-308, 3e-308), (2.3e-308, 1e-320),
+             *zip(rng.uniform(0, 1, 200) * 10.0 ** rng.uniform(-323, -300, 200),
+                  rng.uniform(-1, 1, 200) * 10.0 ** rng.uniform(-323, -300, 200), strict=True)]
+    fn = None if kernels.load("mpc") is None else _compiled(cpython_hypot)
+    for a, b in cases:
+        assert cpython_hypot(a, b) == math.hypot(a, b), (a, b)
+        if fn is not None:
+            assert fn(a, b) == math.hypot(a, b), (a, b)
 
 
 def test_friction_programs_outside_their_surfaces() -> None:

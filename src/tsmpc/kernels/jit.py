@@ -74,6 +74,7 @@ def jitable(fn: F) -> F:
 
 
 _VELTKAMP = 134217729.0  # 2**27 + 1: splits a double into two halves with exact products
+_DBL_MIN = 2.2250738585072014e-308  # the smallest normal double (sys.float_info.min)
 
 
 @jitable
@@ -90,8 +91,11 @@ def cpython_hypot(a: float, b: float) -> float:
     if mx == 0.0:
         return mx
     e = math.frexp(mx)[1]
-    if e < -1021:  # subnormal range: never met by positions in metres
-        return math.sqrt(x0 * x0 + x1 * x1)
+    post = 1.0
+    if e < -1023:  # ldexp(1, -e) would overflow: the subnormals made normal first, as CPython
+        x0, x1, mx = x0 / _DBL_MIN, x1 / _DBL_MIN, mx / _DBL_MIN
+        e = math.frexp(mx)[1]
+        post = _DBL_MIN
     scale = math.ldexp(1.0, -e)
     csum, f1, f2, f3 = 1.0, 0.0, 0.0, 0.0
     for i in range(2):
@@ -125,7 +129,7 @@ def cpython_hypot(a: float, b: float) -> float:
     csum += x
     f3 += (old - csum) + x
     x = csum - 1.0 + (f1 + f2 + f3)
-    return (h + x / (2.0 * h)) / scale
+    return post * ((h + x / (2.0 * h)) / scale)
 
 
 def exact_hypot(a: float, b: float) -> float:
