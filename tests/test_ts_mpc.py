@@ -151,9 +151,12 @@ def test_qp_matches_cvxpy_on_a_few_instances(cfg: Config, design) -> None:
 
 
 @pytest.mark.slow
-def test_qp_matches_cvxpy_on_500_random_instances(cfg: Config, design) -> None:
-    kinds = [_check_instance(cfg, design, *inst) for inst in _instances(500, seed=7)]
-    assert kinds.count("soft") > 20 and kinds.count("optimal") > 300 and kinds.count("undecided") <= 15
+def test_qp_matches_cvxpy_on_200_random_instances(cfg: Config, design) -> None:
+    """200 instances (500 cost 21 s of CPU of the suite for the same spread of cases: a quarter at
+    each scale, inactive to infeasible)."""
+    kinds = [_check_instance(cfg, design, *inst) for inst in _instances(200, seed=7)]
+    # measured: 187 optimal, 9 soft, 4 undecided
+    assert kinds.count("soft") > 4 and kinds.count("optimal") > 150 and kinds.count("undecided") <= 6
 
 
 def test_terminal_cuts_make_the_ellipsoid_exact(cfg: Config, design) -> None:
