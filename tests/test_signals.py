@@ -73,3 +73,35 @@ def test_the_handler_only_records_inside_a_deferred_region() -> None:
             time.sleep(0.5)  # outside a region: raised here, at once
         with pytest.raises(Interrupted):
             check_interrupted()  # and still seen by the loop's check
+
+
+_SLOW_IMPORT = """
+import sys, time
+class Slow:
+    def find_spec(self, name, path=None, target=None):
+        if name == "tsmpc.cli":
+            print("importing the CLI", flush=True)
+            time.sleep(20)
+        return None
+sys.meta_path.insert(0, Slow())
+from tsmpc._entry import main
+main()
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_during_the_console_scripts_imports_ends_128_plus_signal(sig: int) -> None:
+    """The ``tsmpc`` console script (``tsmpc._entry:main``) before the CLI installed its handlers:
+    the CLI's import made slow, the signal sent while it runs. Exit 128 + signal, no traceback
+    (a SIGINT there printed a KeyboardInterrupt traceback; a SIGTERM killed it without a word)."""
+    import os
+    import subprocess
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")])}
+    p = subprocess.Popen([sys.executable, "-c", _SLOW_IMPORT], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=env)
+    assert p.stdout is not None
+    assert p.stdout.readline().strip() == "importing the CLI"
+    p.send_signal(sig)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 128 + sig and "Traceback" not in err, (p.returncode, err[-2000:])
