@@ -49,3 +49,50 @@ def test_warmup_command_and_the_switch(monkeypatch) -> None:
     assert not kernels.enabled() and kernels.load("mhe") is None
     res = CliRunner().invoke(app, ["warmup"])
     assert res.exit_code == 0 and "switched off" in res.output
+
+
+_TAKE = "from tsmpc import kernels\nwith kernels.compile_lock('{}'): pass"
+_HOLDER = """
+import sys, time
+from tsmpc import kernels
+with kernels.compile_lock("batch"):
+    print("holding", flush=True)
+    time.sleep(float(sys.argv[1]))
+"""
+
+
+def test_a_second_process_waits_for_the_one_compiling(tmp_path: Path) -> None:
+    """``compile_lock``: while one process holds a kernel's lock (compiling it), another that
+    needs the same kernel waits for it, then goes on (loading what the first cached); a
+    different kernel's lock does not wait; a process that dies releases it."""
+    import time
+
+    env = {**os.environ, "PYTHONPATH": SRC, "NUMBA_CACHE_DIR": str(tmp_path)}
+    holder = subprocess.Popen([sys.executable, "-c", _HOLDER, "8"], env=env, stdout=subprocess.PIPE,
+                              text=True)
+    assert holder.stdout is not None and holder.stdout.readline().strip() == "holding"
+    t0 = time.perf_counter()
+    _run(_TAKE.format("engine"), NUMBA_CACHE_DIR=str(tmp_path))
+    other = time.perf_counter() - t0
+    _run(_TAKE.format("batch"), NUMBA_CACHE_DIR=str(tmp_path))
+    waited = time.perf_counter() - t0
+    holder.wait(timeout=30)
+    assert other < 6.0 and waited > 7.0, (other, waited)  # (held 8 s from "holding" on)
+    killed = subprocess.Popen([sys.executable, "-c", _HOLDER, "60"], env=env, stdout=subprocess.PIPE,
+                              text=True)
+    assert killed.stdout is not None and killed.stdout.readline().strip() == "holding"
+    killed.kill()
+    killed.wait(timeout=30)
+    t0 = time.perf_counter()
+    _run(_TAKE.format("batch"), NUMBA_CACHE_DIR=str(tmp_path))
+    assert time.perf_counter() - t0 < 5.0
+
+
+def test_the_compile_lock_is_no_lock_where_the_cache_cannot_hold_one(tmp_path: Path, monkeypatch) -> None:
+    """A cache folder that cannot be created (a file in the way): the lock is a no-op, not an error
+    (the kernels then compile in each process, as numba alone does)."""
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(blocker / "sub"))
+    with kernels.compile_lock("batch"):
+        pass

@@ -21,15 +21,17 @@ it, which stays the tests' oracle and is used whenever the kernels are off.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-__all__ = ["cache_problem", "enabled", "failure", "load", "numba_cache_dir", "warmup"]
+__all__ = ["cache_problem", "compile_lock", "enabled", "failure", "load", "numba_cache_dir", "warmup"]
 
 _MODULES = ("mpc", "mhe", "plant", "lqr")
 _LOADED: dict[str, ModuleType] | None = None
@@ -78,6 +80,36 @@ def _tree_folder(cache: Path) -> Path:
     """numba's user-provided cache keeps each source folder in ``<name>_<sha1 of its path>``."""
     here = os.path.dirname(os.path.abspath(__file__))
     return cache / f"{os.path.basename(here)}_{hashlib.sha1(here.encode()).hexdigest()}"
+
+
+@contextlib.contextmanager
+def compile_lock(name: str) -> Iterator[None]:
+    """Hold the cache's lock ``name`` (an exclusive ``flock`` on ``<cache folder>/<name>.lock``)
+    while this process compiles or loads a kernel. A second process that needs the same machine
+    code meanwhile — a sweep's worker, a test beside the one compiling — waits and then loads it
+    from the cache instead of compiling it again (numba would: minutes of CPU each for the batch
+    kernel). The lock is the kernel's; a process that dies releases it. Without ``fcntl``
+    (Windows) or a writable cache folder there is no lock: each process compiles for itself."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        fcntl = None  # type: ignore[assignment]
+    fd = -1
+    if fcntl is not None:
+        try:
+            folder = _tree_folder(numba_cache_dir())
+            folder.mkdir(parents=True, exist_ok=True)
+            fd = os.open(folder / f"{name}.lock", os.O_RDWR | os.O_CREAT, 0o644)
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:
+            if fd >= 0:
+                os.close(fd)
+            fd = -1
+    try:
+        yield
+    finally:
+        if fd >= 0:
+            os.close(fd)  # (closing releases the flock)
 
 
 def _cold(cache: Path) -> bool:
@@ -143,6 +175,11 @@ def _import_all() -> dict[str, ModuleType]:
     if "NUMBA_CACHE_DIR" not in os.environ:
         # Must be set before numba is imported: numba reads it once.
         os.environ["NUMBA_CACHE_DIR"] = str(cache)
+    with compile_lock("kernels"):  # another process compiling them: wait, then load
+        return _import_locked(cache)
+
+
+def _import_locked(cache: Path) -> dict[str, ModuleType]:
     cold = _cold(cache)
     if cold:
         print("tsmpc: compiling kernels (first run only)…", file=sys.stderr, flush=True)

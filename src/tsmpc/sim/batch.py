@@ -23,6 +23,7 @@ one by one, so the answer is always complete.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from collections.abc import Sequence
@@ -62,9 +63,6 @@ def _load_kernel() -> Any:
         # its machine code holds the engine's step and the block kernels: stale when one changes
         eng._forget_stale_machine_code(folder, "batch", ("engine", "mpc", "mhe", "lqr", "plant",
                                                          "batch"), "batch.sources-sha256")
-        if not any(folder.glob("batch.advance-*.nbi")):
-            print("tsmpc: compiling the batched-run kernel (first run only, about a minute)…",
-                  file=sys.stderr, flush=True)
         try:
             from tsmpc.kernels import batch as mod
         except Exception as err:  # a broken compiler: every run goes to simulate()
@@ -72,6 +70,16 @@ def _load_kernel() -> Any:
             mod = None
     _KERNEL["mod"] = mod
     return mod
+
+
+def _cached() -> bool:
+    """Whether the batch kernel's machine code is in numba's cache (its first call loads it)."""
+    from tsmpc import kernels
+
+    try:
+        return any(kernels._tree_folder(kernels.numba_cache_dir()).glob("batch.advance-*.nbi"))
+    except OSError:
+        return False
 
 
 class _KernelUnavailable(Exception):
@@ -246,6 +254,7 @@ def simulate_batch(cfg: Config, method: Method | str, scenarios: Scenario | Sequ
 def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant: bool
                ) -> list[RunLog | None]:
     """Step one group of lanes (equal signatures) to the end; their logs (None: fell back)."""
+    from tsmpc import kernels
     from tsmpc.sim import engine as eng
 
     fields = list(lanes[0].run.a.__dataclass_fields__)
@@ -278,8 +287,13 @@ def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant
     while True:
         LAST_BATCH["calls"] += 1
         try:
-            waiting = kb.advance(M, exact_plant, state, need, tally, pw, mws, akey, asin, acos,
-                                 scratch, *args)
+            # the first call compiles or loads the machine code: one process at a time
+            with kernels.compile_lock("batch") if first else contextlib.nullcontext():
+                if first and not _cached():
+                    print("tsmpc: compiling the batched-run kernel (first run only, about a "
+                          "minute)…", file=sys.stderr, flush=True)
+                waiting = kb.advance(M, exact_plant, state, need, tally, pw, mws, akey, asin, acos,
+                                     scratch, *args)
         except Exception as err:
             if first:  # numba could not load or compile the kernel: nothing has run yet
                 raise _KernelUnavailable(err) from err

@@ -615,7 +615,8 @@ def _compiled(ke: Any, args: tuple[Any, ...]) -> bool:
 
     for attempt in range(2):
         try:
-            ke.run(0, *args)
+            with kernels.compile_lock("engine"):  # another process compiling it: wait, then load
+                ke.run(0, *args)
             return True
         except NumbaError:  # a typing or lowering error is a bug of the kernel: say so loudly
             raise
