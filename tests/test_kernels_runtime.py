@@ -96,3 +96,16 @@ def test_the_compile_lock_is_no_lock_where_the_cache_cannot_hold_one(tmp_path: P
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(blocker / "sub"))
     with kernels.compile_lock("batch"):
         pass
+
+
+def test_a_fifo_or_a_link_in_place_of_the_lock_file_is_no_lock(tmp_path: Path, monkeypatch) -> None:
+    """The lock file is a regular file of the cache or nothing: a FIFO at its path neither blocks
+    nor is used, a symbolic link is not followed (its target is not created)."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    folder = kernels._tree_folder(tmp_path)
+    folder.mkdir(parents=True)
+    os.mkfifo(folder / "batch.lock")
+    (folder / "engine.lock").symlink_to(tmp_path / "elsewhere")
+    with kernels.compile_lock("batch"), kernels.compile_lock("engine"):
+        pass
+    assert not (tmp_path / "elsewhere").exists()

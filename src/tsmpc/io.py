@@ -8,7 +8,8 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_savefig", "atomic_write_bytes", "atomic_write_text", "overwrite_in_place"]
+__all__ = ["atomic_savefig", "atomic_write_bytes", "atomic_write_text", "open_lock_file",
+           "overwrite_in_place"]
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
@@ -67,3 +68,18 @@ def overwrite_in_place(path: str | Path, data: bytes) -> None:
         os.ftruncate(fd, len(data))
     finally:
         os.close(fd)
+
+
+def open_lock_file(path: Path) -> int:
+    """A descriptor of the lock file ``path`` for ``fcntl.flock`` (created empty when missing,
+    never written): a regular file only, not followed through a symbolic link, and a FIFO at the
+    path never blocks the open. Raises OSError (the caller then works without the lock)."""
+    import errno
+    import stat
+
+    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+    fd = os.open(path, flags, 0o644)
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise OSError(errno.EINVAL, "not a regular file", str(path))
+    return fd

@@ -90,6 +90,8 @@ def compile_lock(name: str) -> Iterator[None]:
     from the cache instead of compiling it again (numba would: minutes of CPU each for the batch
     kernel). The lock is the kernel's; a process that dies releases it. Without ``fcntl``
     (Windows) or a writable cache folder there is no lock: each process compiles for itself."""
+    from tsmpc.io import open_lock_file
+
     try:
         import fcntl
     except ImportError:  # pragma: no cover - not POSIX
@@ -99,7 +101,7 @@ def compile_lock(name: str) -> Iterator[None]:
         try:
             folder = _tree_folder(numba_cache_dir())
             folder.mkdir(parents=True, exist_ok=True)
-            fd = os.open(folder / f"{name}.lock", os.O_RDWR | os.O_CREAT, 0o644)
+            fd = open_lock_file(folder / f"{name}.lock")
             fcntl.flock(fd, fcntl.LOCK_EX)
         except OSError:
             if fd >= 0:

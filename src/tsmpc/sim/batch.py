@@ -23,7 +23,6 @@ one by one, so the answer is always complete.
 
 from __future__ import annotations
 
-import contextlib
 import sys
 import time
 from collections.abc import Sequence
@@ -80,6 +79,24 @@ def _cached() -> bool:
         return any(kernels._tree_folder(kernels.numba_cache_dir()).glob("batch.advance-*.nbi"))
     except OSError:
         return False
+
+
+def _advance(kb: Any, first: bool, *args: Any) -> int:
+    """One call of the batch kernel. The first compiles or loads its machine code, under the
+    kernel's compile lock (one process at a time), and raises :class:`_KernelUnavailable` when
+    numba cannot (nothing has run yet)."""
+    if not first:
+        return int(kb.advance(*args))
+    from tsmpc import kernels
+
+    try:
+        with kernels.compile_lock("batch"):
+            if not _cached():
+                print("tsmpc: compiling the batched-run kernel (first run only, about a minute)…",
+                      file=sys.stderr, flush=True)
+            return int(kb.advance(*args))
+    except Exception as err:
+        raise _KernelUnavailable(err) from err
 
 
 class _KernelUnavailable(Exception):
@@ -254,7 +271,6 @@ def simulate_batch(cfg: Config, method: Method | str, scenarios: Scenario | Sequ
 def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant: bool
                ) -> list[RunLog | None]:
     """Step one group of lanes (equal signatures) to the end; their logs (None: fell back)."""
-    from tsmpc import kernels
     from tsmpc.sim import engine as eng
 
     fields = list(lanes[0].run.a.__dataclass_fields__)
@@ -286,18 +302,8 @@ def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant
     first = True
     while True:
         LAST_BATCH["calls"] += 1
-        try:
-            # the first call compiles or loads the machine code: one process at a time
-            with kernels.compile_lock("batch") if first else contextlib.nullcontext():
-                if first and not _cached():
-                    print("tsmpc: compiling the batched-run kernel (first run only, about a "
-                          "minute)…", file=sys.stderr, flush=True)
-                waiting = kb.advance(M, exact_plant, state, need, tally, pw, mws, akey, asin, acos,
-                                     scratch, *args)
-        except Exception as err:
-            if first:  # numba could not load or compile the kernel: nothing has run yet
-                raise _KernelUnavailable(err) from err
-            raise
+        waiting = _advance(kb, first, M, exact_plant, state, need, tally, pw, mws, akey, asin, acos,
+                           scratch, *args)
         first = False
         if waiting == 0:
             break
