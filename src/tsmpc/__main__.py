@@ -8,7 +8,9 @@ _early: list[int] = []
 
 def _early_handler(signum: int, _frame: object) -> None:
     # Until the CLI's own handlers are installed (a fraction of a second of imports): an
-    # interrupt still ends with 128 + signal, not a traceback.
+    # interrupt still ends with 128 + signal, not a traceback. tsmpc._entry.main has the same
+    # guard for the console script; this one is here too because it must be in place before
+    # `import tsmpc` (≈ 0.3 s), which importing tsmpc._entry runs first.
     _early.append(signum)
     raise KeyboardInterrupt
 

@@ -31,7 +31,8 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-__all__ = ["cache_problem", "compile_lock", "enabled", "failure", "load", "numba_cache_dir", "warmup"]
+__all__ = ["cache_problem", "compile_lock", "enabled", "failure", "in_cache", "load", "numba_cache_dir",
+           "warmup"]
 
 _MODULES = ("mpc", "mhe", "plant", "lqr")
 _LOADED: dict[str, ModuleType] | None = None
@@ -112,6 +113,15 @@ def compile_lock(name: str) -> Iterator[None]:
     finally:
         if fd >= 0:
             os.close(fd)  # (closing releases the flock)
+
+
+def in_cache(function: str) -> bool:
+    """Whether numba's cache holds machine code of ``function`` (``"<module>.<name>"`` of this
+    package's kernels, e.g. ``"engine.run"``): its first call then loads rather than compiles."""
+    try:
+        return any(_tree_folder(numba_cache_dir()).glob(f"{function}-*.nbi"))
+    except OSError:
+        return False
 
 
 def _cold(cache: Path) -> bool:

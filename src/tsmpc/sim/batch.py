@@ -71,16 +71,6 @@ def _load_kernel() -> Any:
     return mod
 
 
-def _cached() -> bool:
-    """Whether the batch kernel's machine code is in numba's cache (its first call loads it)."""
-    from tsmpc import kernels
-
-    try:
-        return any(kernels._tree_folder(kernels.numba_cache_dir()).glob("batch.advance-*.nbi"))
-    except OSError:
-        return False
-
-
 def _advance(kb: Any, first: bool, *args: Any) -> int:
     """One call of the batch kernel. The first compiles or loads its machine code, under the
     kernel's compile lock (one process at a time), and raises :class:`_KernelUnavailable` when
@@ -91,7 +81,7 @@ def _advance(kb: Any, first: bool, *args: Any) -> int:
 
     try:
         with kernels.compile_lock("batch"):
-            if not _cached():
+            if not kernels.in_cache("batch.advance"):
                 print("tsmpc: compiling the batched-run kernel (first run only, about a minute)…",
                       file=sys.stderr, flush=True)
             return int(kb.advance(*args))

@@ -539,7 +539,7 @@ def _load_kernel() -> Any:
         for attempt in range(2):  # a cache entry numba cannot load: deleted, compiled again, once
             try:
                 _forget_stale_machine_code(folder)
-                if not any(folder.glob("engine.run-*.nbi")):
+                if not kernels.in_cache("engine.run"):
                     print("tsmpc: compiling the run engine (first run only)…", file=sys.stderr,
                           flush=True)
                 from tsmpc.kernels import engine as mod
@@ -1142,7 +1142,7 @@ def cached() -> bool | None:
 
     if not enabled() or _load_kernel() is None:
         return None
-    return any(kernels._tree_folder(kernels.numba_cache_dir()).glob("engine.run-*.nbi"))
+    return kernels.in_cache("engine.run")
 
 
 def warmup() -> bool:
