@@ -170,13 +170,16 @@ def apply_conditions(cfg: Config, scenario: Scenario) -> RobustnessCase:
     faults = sc.sensors
     if sc.oracle_tuned:  # the oracle's sensors are calibrated: known offsets and drifts removed
         faults = replace(faults, v_bias=0.0, omega_bias=0.0, theta_bias=0.0, v_drift=0.0,
-                         omega_drift=0.0, theta_drift=0.0)
+                         omega_drift=0.0, theta_drift=0.0, x_bias=0.0, y_bias=0.0, position_scale=1.0,
+                         v_scale=1.0, omega_scale=1.0)
     if faults != SensorFaults():
         changes["sensor_fault"] = SensorModel(faults, cfg.rates.Td,
                                               cfg.noise.position * cfg.noise.scale, cfg.seed,
                                               inner=scenario.sensor_fault)
     act = sc.actuators
-    if act.active:
+    # the oracle's steering is calibrated: it commands the offset away (the wheels steer as commanded)
+    offset = 0.0 if sc.oracle_tuned else sc.plant.steering_offset_rad
+    if act.active or offset != 0.0:
         from tsmpc.vehicle.actuators import Actuators, ForceLag, SteeringServo
 
         steer = None
@@ -184,7 +187,7 @@ def apply_conditions(cfg: Config, scenario: Scenario) -> RobustnessCase:
             steer = SteeringServo(act.steering_time_constant_s,
                                   math.inf if act.steering_rate_limit is None else act.steering_rate_limit)
         force = ForceLag(act.force_time_constant_s) if act.force_time_constant_s > 0 else None
-        changes["actuators"] = Actuators(steer, force)
+        changes["actuators"] = Actuators(steer, force, steering_offset_rad=offset)
     if act.measured_steering:
         changes["measured_steering"] = True
     if sc.oracle_tuned:  # the scales are now in the vehicle: reset, so the config re-runs alike

@@ -833,6 +833,11 @@ class PlantScales(_Frozen):
                                 "(tyre.combined_slip)")
     grip_scales_with_road: _Flag = Field(default=False, description="the plant's tyre grip scales with "
                                         "mu(road) (tyre.scale_grip_with_road)")
+    steering_offset_rad: _Num = Field(
+        default=0.0, ge=-0.05, le=0.05, allow_inf_nan=False,
+        description="the plant's wheels steer this much more than commanded (a misaligned steering; the "
+        "steering the plant applies = commanded + offset; a measured steering angle does not include it) "
+        "[rad], -0.05 to 0.05")
 
 
 class SensorFaults(_Frozen):
@@ -864,6 +869,42 @@ class SensorFaults(_Frozen):
         default=1.0, ge=1.0, le=100.0, allow_inf_nan=False,
         description="the position (X, Y) noise sigma is this multiple of noise.position × "
         "noise.scale [-], 1 to 100 (the controllers keep assuming the configured sigma)")
+    # the sensor class of issue 35 (tsmpc.sensors): measured = scale · (true + noise) + bias
+    # + drift · t + random walk, per sensor; each sensor at its own rate
+    x_bias: _Num = Field(default=0.0, ge=-10.0, le=10.0, allow_inf_nan=False,
+                          description="pose sensor's X offset [m], -10 to 10")
+    y_bias: _Num = Field(default=0.0, ge=-10.0, le=10.0, allow_inf_nan=False,
+                          description="pose sensor's Y offset [m], -10 to 10")
+    position_scale: _Num = Field(default=1.0, ge=0.8, le=1.2, allow_inf_nan=False,
+                                  description="pose sensor's X and Y are this multiple of the true "
+                                  "position (a map scale error about the origin) [-], 0.8 to 1.2")
+    v_scale: _Num = Field(default=1.0, ge=0.8, le=1.2, allow_inf_nan=False,
+                           description="speed sensor's scale factor (e.g. a wrong wheel radius) [-], "
+                           "0.8 to 1.2")
+    omega_scale: _Num = Field(default=1.0, ge=0.8, le=1.2, allow_inf_nan=False,
+                               description="yaw-rate sensor's scale factor [-], 0.8 to 1.2")
+    position_walk: _Num = Field(default=0.0, ge=0.0, le=1.0, allow_inf_nan=False,
+                                 description="random-walk drift of X and Y (each): the offset's "
+                                 "standard deviation grows as position_walk · sqrt(t) [m/sqrt(s)], 0 to 1")
+    theta_walk: _Num = Field(default=0.0, ge=0.0, le=0.01, allow_inf_nan=False,
+                              description="random-walk drift of the heading [rad/sqrt(s)], 0 to 0.01")
+    v_walk: _Num = Field(default=0.0, ge=0.0, le=0.1, allow_inf_nan=False,
+                          description="random-walk drift of the speed offset [m/s/sqrt(s)], 0 to 0.1")
+    omega_walk: _Num = Field(default=0.0, ge=0.0, le=0.01, allow_inf_nan=False,
+                              description="random-walk drift of the yaw-rate offset (a gyro's bias "
+                              "instability) [rad/s/sqrt(s)], 0 to 0.01")
+    pose_heading: _Flag = Field(default=True, description="the pose sensor delivers the heading with X "
+                               "and Y (false: a position-only fix, theta always missing)")
+    pose_rate_hz: _Num | None = Field(
+        default=None, gt=0.0, allow_inf_nan=False,
+        description="sample rate of the pose sensor (X, Y, theta) [Hz], above 0 to 1/rates.Td; a sample "
+        "that is not due is missing, as a dropout is; None = every T_d")
+    v_rate_hz: _Num | None = Field(default=None, gt=0.0, allow_inf_nan=False,
+                                    description="sample rate of the speed sensor [Hz], above 0 to "
+                                    "1/rates.Td; None = every T_d")
+    omega_rate_hz: _Num | None = Field(default=None, gt=0.0, allow_inf_nan=False,
+                                        description="sample rate of the yaw-rate sensor [Hz], above 0 to "
+                                        "1/rates.Td; None = every T_d")
 
 
 class FrictionEvent(_Frozen):
@@ -1080,6 +1121,17 @@ class Config(_Frozen):
         t_mhe = self.mhe.N * self.rates.Td
         if t_mhe > 10.0 + 1e-9:
             raise ConfigError(f"mhe.N * rates.Td = {t_mhe:g} s: the MHE window must be <= 10 s")
+        return self
+
+    @model_validator(mode="after")
+    def _sensor_rates(self) -> Config:
+        # Cross-field: a sensor samples at most once per controller call (its base rate 1/T_d).
+        base = 1.0 / self.rates.Td
+        for name in ("pose_rate_hz", "v_rate_hz", "omega_rate_hz"):
+            hz = getattr(self.scenario.sensors, name)
+            if hz is not None and hz > base * (1.0 + 1e-9):
+                raise ConfigError(f"scenario.sensors.{name} = {hz:g} Hz: above the sensors' base rate "
+                                  f"1/rates.Td = {base:g} Hz")
         return self
 
     @model_validator(mode="after")

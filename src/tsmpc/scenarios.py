@@ -10,7 +10,6 @@ its compiled engine read them, the builders fill them in.
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
@@ -18,10 +17,18 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tsmpc.config import NoiseSettings, SensorFaults, TyreParams, VehicleParams
+from tsmpc.config import TyreParams, VehicleParams
 from tsmpc.errors import ConfigError
 from tsmpc.kernels.jit import jitable
 from tsmpc.planning.reference import Reference
+from tsmpc.sensors import (  # the sensors' data types, importable from here as before
+    DropoutFault,
+    NaNBurstFault,
+    SensorFault,
+    SensorModel,
+    SensorNoise,
+    _in_burst,  # noqa: F401 (importable from here as before)
+)
 from tsmpc.vehicle.actuators import Actuators
 
 __all__ = [
@@ -196,64 +203,6 @@ class PatchFriction:
         return patch_mu(s, self.base, self.lap_length_m, _table_of(self))
 
 
-class SensorNoise:
-    """Zero-mean Gaussian noise of [X, Y, θ, v, ω], seeded (the paper's scenario defaults × scale)."""
-
-    def __init__(self, settings: NoiseSettings, seed: int) -> None:
-        s = settings
-        self.sigma = s.scale * np.array([s.position, s.position, s.theta, s.v, s.omega])
-        self._rng = np.random.default_rng(seed)
-        self._buf = np.empty((0, 5))
-        self._i = 0
-
-    def sample(self) -> NDArray[np.float64]:
-        """One draw (5,) = noise of [X, Y, θ, v, ω]. Drawn in blocks for speed; the sequence
-        depends only on the seed."""
-        if self._i >= self._buf.shape[0]:
-            self._buf = self._rng.standard_normal((4096, 5)) * self.sigma
-            self._i = 0
-        out = self._buf[self._i]
-        self._i += 1
-        return out
-
-
-@dataclass
-class DropoutFault:
-    """Measurements frozen at their last value for ``duration_s`` every ``period_s`` (from
-    ``start_s``): a stalled sensor bus. Stateful: one instance per run."""
-
-    period_s: float = 5.0
-    duration_s: float = 0.2
-    start_s: float = 2.0
-    _held: NDArray[np.float64] | None = field(default=None, repr=False)
-
-    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
-        if _in_burst(t, self.start_s, self.period_s, self.duration_s) and self._held is not None:
-            return self._held.copy()
-        self._held = np.array(y, dtype=float)
-        return y
-
-
-@dataclass(frozen=True)
-class NaNBurstFault:
-    """All measurements NaN for ``duration_s`` every ``period_s`` (from ``start_s``)."""
-
-    period_s: float = 7.0
-    duration_s: float = 0.05
-    start_s: float = 3.0
-
-    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
-        if _in_burst(t, self.start_s, self.period_s, self.duration_s):
-            return np.full_like(y, np.nan)
-        return y
-
-
-@jitable
-def _in_burst(t: float, start: float, period: float, duration: float) -> bool:
-    # A tiny tolerance so that sample instants k·T_d on a burst edge are classified consistently.
-    return t >= start - 1e-9 and bool(np.fmod(t - start + 1e-9, period) < duration)
-
-
 @dataclass(frozen=True)
 class ResolvedEvent:
     """A friction event on one axis: time [s] (``by_time``) or travelled distance [m]."""
@@ -294,66 +243,6 @@ def _table_of(profile: Any) -> NDArray[np.float64]:
         cached = profile.table
         object.__setattr__(profile, "_table_cache", cached)
     return cached
-
-
-class SensorModel:
-    """Sensor faults of ``[scenario.sensors]`` on the noisy sample [X, Y, θ, v, ω] (a
-    :class:`SensorFault`), after an optional ``inner`` fault. In order:
-    biases and drifts, extra GNSS noise, delay, dropouts. Seeded; restarts when time goes back
-    (the next method of a comparison starts its run at t = 0 with the same draws).
-
-    Args:
-        faults: the settings.
-        Td: sample period of the calls [s] (the delay is rounded to whole samples).
-        position_sigma: σ of the configured position noise [m] (the GNSS scale multiplies it).
-        seed: the run's seed.
-        inner: a fault applied first (e.g. a named robustness scenario's).
-    """
-
-    def __init__(self, faults: SensorFaults, Td: float, position_sigma: float, seed: int,
-                 inner: SensorFault | None = None) -> None:
-        self.faults = faults
-        self.Td = float(Td)
-        self.delay_n = round(faults.delay_s / self.Td)
-        s = faults.gnss_noise_scale
-        self.extra_sigma = position_sigma * math.sqrt(max(s * s - 1.0, 0.0))
-        self.seed = int(seed)
-        self.inner = inner
-        self._reset()
-
-    def _reset(self) -> None:
-        self._drop = np.random.default_rng([self.seed, 21, 1])
-        self._gnss = np.random.default_rng([self.seed, 21, 2])
-        self._fifo: deque[NDArray[np.float64]] = deque(maxlen=self.delay_n + 1)
-        self._last: NDArray[np.float64] | None = None
-        self._t: float | None = None
-
-    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
-        if self._t is not None and t < self._t - 1e-12:
-            self._reset()
-        self._t = t
-        if self.inner is not None:
-            y = self.inner(t, y)
-        f = self.faults
-        out = np.array(y, dtype=float)
-        out[2] += f.theta_bias + f.theta_drift * t
-        out[3] += f.v_bias + f.v_drift * t
-        out[4] += f.omega_bias + f.omega_drift * t
-        if self.extra_sigma > 0.0:
-            out[0:2] += self.extra_sigma * self._gnss.standard_normal(2)
-        self._fifo.append(out)
-        out = self._fifo[0].copy()  # delay_n samples ago (the oldest until the FIFO is full)
-        if f.dropout_probability > 0.0 and self._drop.random() < f.dropout_probability:
-            out = self._last.copy() if f.dropout_hold and self._last is not None else np.full(5, np.nan)
-        self._last = out
-        return out
-
-
-class SensorFault(Protocol):
-    """Corrupts measurements: called every T_d with the time and the noisy measurement
-    ``[X, Y, θ, v, ω]``; returns what the sensors deliver (may hold values or return NaN)."""
-
-    def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]: ...
 
 
 @dataclass(frozen=True)

@@ -58,7 +58,9 @@ from tsmpc.kernels.lqr import lqr_step
 from tsmpc.kernels.mhe import window_step
 from tsmpc.kernels.mpc import guarded_step
 from tsmpc.kernels.plant import rk4_block
-from tsmpc.scenarios import _in_burst, apply_events, paper_mu, patch_mu
+from tsmpc.scenarios import apply_events, paper_mu, patch_mu
+from tsmpc.sensors import N_SP, N_SS, burst_sample, sensor_sample, store_state, unpack_params, unpack_state
+from tsmpc.vehicle.actuators import wheel_steering
 
 __all__ = ["friction_mu", "hypot_py", "run", "ticks", "warm"]
 
@@ -79,24 +81,21 @@ N_EVENTS = 19
 (FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_V_LO, FP_V_HI, FP_W_LIM, FP_POSE_NOISE, FP_HEAD_NOISE,
  FP_GATE_SIGMA, FP_COURSE_SIGMA, FP_CF0, FP_CR0, FP_VM, FP_VI, FP_VA, FP_VB, FP_TAU, FP_MHE_MASS,
  FP_BOUND,
- FP_F_THB, FP_F_THD, FP_F_VB, FP_F_VD, FP_F_WB, FP_F_WD, FP_F_ESIG, FP_F_PDROP,
- FP_I_PERIOD, FP_I_DUR, FP_I_START,
  FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU, FP_VG,
- FP_A_GF, FP_A_GD, FP_A_RMAX, FP_FS_H, FP_REINIT,
+ FP_A_GF, FP_A_GD, FP_A_RMAX, FP_A_DOFF, FP_FS_H, FP_REINIT,
  FP_G_MARGIN, FP_G_RDOWN, FP_G_RUP, FP_G_RMIN, FP_G_MUPLAN, FP_G_DEADBAND, FP_G_KT, FP_G_DRAG,
  FP_G_G, FP_G_TC, FP_G_ALPHA, FP_G_VMIN, FP_G_MUNOM, FP_G_MUDRY, FP_G_GPR, FP_G_REAR, FP_G_FMAX,
- FP_G_DT, FP_G_MDT) = range(65)
-N_FP = 65
+ FP_G_DT, FP_G_MDT) = range(55)
+FP_SENS = 55  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
+N_FP = FP_SENS + N_SP
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
- IP_FMA, IP_F_MODEL, IP_F_DELAY, IP_F_HOLD, IP_F_INNER, IP_F_GNSS, IP_F_DROP,
+ IP_FMA,
  IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV,
- IP_GOV, IP_G_ORACLE, IP_G_PREVIEW) = range(37)
-N_IP = 37
-# inner sensor faults (robustness scenarios), IP_F_INNER
-FAULT_NONE, FAULT_HOLD_BURST, FAULT_NAN_BURST = 0, 1, 2
+ IP_GOV, IP_G_ORACLE, IP_G_PREVIEW) = range(31)
+N_IP = 31
 # ---------------------------------------------------------------------------- MHE parameters
 # mp = [q(3), r(2), p(3), p_F, x_min(3), x_max(3), box lo(3), box hi(3), M, I, C_f, C_r, a, b, μ_o g,
 #       drag, T_d]: MHEUIO's kernel arguments in its order (C_f, C_r change with the stiffness fit)
@@ -108,19 +107,19 @@ N_MP = 30
  SF_PLANTU, _PU1, SF_LASTA, SF_GUARD, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
  SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_PRIOR, _R1, SF_AHPREV,
  SF_LF, SF_LA, SF_SXY, SF_SXX, SF_ACCEL, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
- SF_ARR, _AR1, _AR2, SF_FHELD, _FH1, _FH2, _FH3, _FH4, SF_FLAST, _FL1, _FL2, _FL3, _FL4,
+ SF_ARR, _AR1, _AR2,
  SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM, SF_PRIORD, _RD1, SF_N2,
  SF_N1, SF_JUMP, _J1, _J2, _J3, SF_JT0,
- SF_TOFF, SF_GRATE, SF_GGRIP, SF_GHOLD) = range(80)
-N_SF = 80
+ SF_TOFF, SF_GRATE, SF_GGRIP, SF_GHOLD) = range(70)
+SF_SENS = 70  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
+N_SF = SF_SENS + N_SS
 # ---------------------------------------------------------------------------- integer state
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_HASCUR, SI_NCHORDS,
  SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
- SI_FIFON, SI_FLASTHAS, SI_FHELDHAS,
  SI_FRESH, SI_SPOK, SI_POSEOK, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
  SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, SI_FSN, SI_FSSINCE,
- SI_GACT, SI_GSTEPS, SI_GWIN) = range(40)
-N_SI = 40
+ SI_GACT, SI_GSTEPS, SI_GWIN) = range(37)
+N_SI = 37
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
@@ -254,58 +253,23 @@ def friction_mu(t, s, frb, patches, events):
 
 
 @njit(cache=True, fastmath=False)
-def _sensor(m, tf, x, noise, u_drop, gnss, fp, ip, sf, si, fifo, y):
-    """The sample the sensors deliver at step m (``simulate``: state + noise, then the fault at
-    time ``tf``): inner fault (DropoutFault / NaNBurstFault), then SensorModel (biases, drifts,
-    extra GNSS noise, delay, dropouts). ``y`` (5,) in place."""
-    y[0] = x[0] + noise[m, 0]
-    y[1] = x[1] + noise[m, 1]
-    y[2] = x[2] + noise[m, 2]
-    y[3] = x[3] + noise[m, 3]
-    y[4] = x[5] + noise[m, 4]
-    inner = ip[IP_F_INNER]
-    if inner != FAULT_NONE:
-        burst = _in_burst(tf, fp[FP_I_START], fp[FP_I_PERIOD], fp[FP_I_DUR])
-        if inner == FAULT_NAN_BURST:
-            if burst:
-                for i in range(5):
-                    y[i] = math.nan
-        elif burst and si[SI_FHELDHAS] != 0:
-            for i in range(5):
-                y[i] = sf[SF_FHELD + i]
-        else:
-            for i in range(5):
-                sf[SF_FHELD + i] = y[i]
-            si[SI_FHELDHAS] = 1
-    if ip[IP_F_MODEL] == 0:
-        return
-    y[2] += fp[FP_F_THB] + fp[FP_F_THD] * tf
-    y[3] += fp[FP_F_VB] + fp[FP_F_VD] * tf
-    y[4] += fp[FP_F_WB] + fp[FP_F_WD] * tf
-    if ip[IP_F_GNSS] != 0:
-        es = fp[FP_F_ESIG]
-        y[0] += es * gnss[m, 0]
-        y[1] += es * gnss[m, 1]
-    # delay: a FIFO of delay_n + 1 samples, the oldest delivered
-    cap = ip[IP_F_DELAY] + 1
-    n = si[SI_FIFON]
-    if n == cap:
-        for r in range(cap - 1):
-            for i in range(5):
-                fifo[r, i] = fifo[r + 1, i]
-        n -= 1
-    for i in range(5):
-        fifo[n, i] = y[i]
-    si[SI_FIFON] = n + 1
-    for i in range(5):
-        y[i] = fifo[0, i]
-    if ip[IP_F_DROP] != 0 and u_drop[m] < fp[FP_F_PDROP]:
-        hold = ip[IP_F_HOLD] != 0 and si[SI_FLASTHAS] != 0
-        for i in range(5):
-            y[i] = sf[SF_FLAST + i] if hold else math.nan
-    for i in range(5):
-        sf[SF_FLAST + i] = y[i]
-    si[SI_FLASTHAS] = 1
+def _sensor(m, tf, x, noise, u_drop, draws, sp, ss, fifo, y):
+    """The sample the sensors deliver at step m (``simulate``: state + noise, then the scenario's
+    sensor fault at time ``tf``): the blocks of :mod:`tsmpc.sensors` (one definition), a burst
+    fault then the sensor model, on the pre-drawn random numbers ``u_drop`` (M,) and ``draws``
+    (M, 7) (:func:`tsmpc.sensors.model_draws`). ``sp``: the records as :func:`unpack_params`
+    returns them; ``ss`` the state's scalars (:func:`tsmpc.sensors.pack_state`), ``fifo`` the
+    delay's rows. ``y`` (5,) in place."""
+    burst, has_model, p = sp
+    s = (x[0] + noise[m, 0], x[1] + noise[m, 1], x[2] + noise[m, 2], x[3] + noise[m, 3],
+         x[5] + noise[m, 4])
+    bs, ms = unpack_state(ss, fifo)
+    s, bs = burst_sample(burst, bs, tf, s)
+    if has_model:
+        d = draws[m]
+        s, ms = sensor_sample(p, ms, tf, s, u_drop[m], d[0], d[1], (d[2], d[3], d[4], d[5], d[6]))
+    store_state(ss, bs, ms)
+    y[0], y[1], y[2], y[3], y[4] = s
 
 
 # ============================================================================ cascade glue
@@ -787,7 +751,7 @@ def _actuated(x, Fc, dc, mu, fp, ip, sf, si, cst):
     for _ in range(n):
         F += gf * (Fc - F)
         d += _pmin(_pmax(gd * (dc - d), -rmax), rmax)
-        xn, ok = rk4_block(xn, F, d, mu, ip[IP_ACT_NRK], fp[FP_H], cst)
+        xn, ok = rk4_block(xn, F, wheel_steering(d, fp[FP_A_DOFF]), mu, ip[IP_ACT_NRK], fp[FP_H], cst)
         if not ok:
             return xn, False
         acc0 += F
@@ -823,6 +787,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     gmv = np.empty(N + 1)
     gmw = np.empty(N + 1)
     gates = GateParams(fp[FP_V_LO], fp[FP_V_HI], fp[FP_W_LIM], fp[FP_POSE_NOISE], fp[FP_HEAD_NOISE], Td)
+    sens = unpack_params(fp[FP_SENS:FP_SENS + N_SP])
+    sens_state = sf[SF_SENS:SF_SENS + N_SS]
     mhe_views = (mp[MP_Q:MP_Q + 3], mp[MP_R:MP_R + 2], mp[MP_P:MP_P + 3], mp[MP_XMIN:MP_XMIN + 3],
                  mp[MP_XMAX:MP_XMAX + 3], mp[MP_LO:MP_LO + 3], mp[MP_HI:MP_HI + 3],
                  sf[SF_MX:SF_MX + 3], sf[SF_ARR:SF_ARR + 3], sc[SC_UK:SC_UK + 2])
@@ -834,7 +800,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
         phase = si[SI_PHASE]
         if phase == PH_START:
             # ---- sensors and the outer-step log (simulate)
-            _sensor(m, k * Tc if j == 0 else t, x, noise, u_drop, gnss, fp, ip, sf, si, fifo, y)
+            _sensor(m, k * Tc if j == 0 else t, x, noise, u_drop, gnss, sens, sens_state, fifo, y)
             if j == 0:
                 for i in range(6):
                     lo[k, LO_X + i] = x[i]

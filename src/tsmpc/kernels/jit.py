@@ -40,6 +40,8 @@ BLOCK_MODULES = (
     "tsmpc.estimation.friction_step",
     "tsmpc.kernels.jit",
     "tsmpc.scenarios",
+    "tsmpc.sensors",
+    "tsmpc.vehicle.actuators",
 )
 
 

@@ -35,7 +35,6 @@ import math
 import os
 import sys
 import time
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
@@ -182,13 +181,9 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
     "tsmpc.vehicle.plant:VehiclePlant": "0b52c004a843c73b",
-    "tsmpc.scenarios:SensorNoise": "1ba1c9047847d421",
-    "tsmpc.scenarios:SensorModel": "c74cbfe146a3669c",
-    "tsmpc.scenarios:DropoutFault": "7308cac71f886cf1",
-    "tsmpc.scenarios:NaNBurstFault": "b02fcedb0d1277fb",
-    "tsmpc.vehicle.actuators:Actuators": "2a6874a58d3e14a2",
+    "tsmpc.vehicle.actuators:Actuators": "2d96613999792a06",
     "tsmpc.vehicle.actuators:_gain": "8f043d71c729db22",
-    "tsmpc.vehicle.actuators:ActuatedPlant": "7e59609bd713f2c4",
+    "tsmpc.vehicle.actuators:ActuatedPlant": "cc05ddc1d367181b",
 }
 #: Constants of the ported modules that the kernel holds as its own (name in the kernel module).
 _CONSTANTS = (
@@ -254,13 +249,13 @@ _PORTED_CLASSES = (
     ("tsmpc.control.cascade", "Cascade"), ("tsmpc.control.ts_mpc", "TSMPC"),
     ("tsmpc.estimation.mhe_uio", "MHEUIO"), ("tsmpc.control.ts_lqr", "TSLQR"),
     ("tsmpc.vehicle.plant", "VehiclePlant"), ("tsmpc.vehicle.plant", "Plant"),
-    ("tsmpc.scenarios", "SensorNoise"), ("tsmpc.scenarios", "PaperFriction"),
+    ("tsmpc.sensors", "SensorNoise"), ("tsmpc.scenarios", "PaperFriction"),
     ("tsmpc.scenarios", "PatchFriction"), ("tsmpc.scenarios", "ConstantFriction"),
     ("tsmpc.estimation.fusion", "Fusion"), ("tsmpc.estimation.fusion", "CourseFusion"),
     ("tsmpc.estimation.fusion", "MassEstimator"), ("tsmpc.estimation.fusion", "RepeatGuard"),
-    ("tsmpc.control.slip_aware", "SlipGate"), ("tsmpc.scenarios", "SensorModel"),
+    ("tsmpc.control.slip_aware", "SlipGate"), ("tsmpc.sensors", "SensorModel"),
     ("tsmpc.scenarios", "EventFriction"), ("tsmpc.scenarios", "ResolvedEvent"),
-    ("tsmpc.scenarios", "DropoutFault"), ("tsmpc.scenarios", "NaNBurstFault"),
+    ("tsmpc.sensors", "DropoutFault"), ("tsmpc.sensors", "NaNBurstFault"),
     ("tsmpc.vehicle.actuators", "ActuatedPlant"), ("tsmpc.vehicle.actuators", "Actuators"),
     ("tsmpc.estimation.friction_step", "FrictionStep"),
 )
@@ -276,7 +271,6 @@ _PORTED_FUNCTIONS = (
     ("tsmpc.control.cascade", "_apply_stiffness_to", "tsmpc.control.cascade"),
     ("tsmpc.control.slip_aware", "velocity_frame_errors", "tsmpc.control.slip_aware"),
     ("tsmpc.control.slip_aware", "pose_to_errors", "tsmpc.models.kinematic"),
-    ("tsmpc.scenarios", "_in_burst", "tsmpc.scenarios"),
     ("tsmpc.vehicle.actuators", "_gain", "tsmpc.vehicle.actuators"),
 )
 
@@ -358,6 +352,7 @@ def _actuator_data(plant: Any, Td: float, fp: NDArray[np.float64], ip: NDArray[n
     fp[ke.FP_A_GD] = _gain(sv.time_constant_s, h) if sv else 1.0
     fp[ke.FP_A_RMAX] = sv.rate_limit * h if sv else math.inf
     fp[ke.FP_A_GF] = _gain(fl.time_constant_s, h) if fl else 1.0
+    fp[ke.FP_A_DOFF] = plant.steering_offset
     h_rk = plant.plant.model.h
     n_rk = round(h / h_rk)  # VehiclePlant.step's RK4 steps per sub-step
     ip[ke.IP_ACT_NRK] = n_rk
@@ -403,74 +398,61 @@ def _blinding_fault(cfg: Config, fault: Any) -> str | None:
                 "(recovery.blind_after_s; the blind stop runs in the Python loop)")
     if type(model) is SensorModel and model.faults.dropout_probability > 0.5:
         return "dropouts with probability > 0.5 can blind the cascade (the Python loop runs)"
+    if type(model) is SensorModel:  # a slow speed or yaw-rate sensor: no sample for that long
+        for name, rate in (("v", model.params.rate_v), ("omega", model.params.rate_omega)):
+            if cfg.rates.Td / rate + 2.0 * cfg.rates.Td > rc.blind_after_s:
+                return (f"scenario.sensors.{name}_rate_hz = {rate / cfg.rates.Td:g} Hz can blind the "
+                        "cascade (recovery.blind_after_s; the blind stop runs in the Python loop)")
     return None
 
 
 def _fault_data(fault: Any, M: int, fp: NDArray[np.float64], ip: NDArray[np.int64],
                 sf: NDArray[np.float64], si: NDArray[np.int64]) -> tuple[Any, ...]:
-    """Parameters and pre-drawn samples of the scenario's sensor fault: (u_drop (M,), gnss (M, 2),
-    fifo) with the fields of fp/ip/sf/si filled."""
+    """The scenario's sensor fault as data (:mod:`tsmpc.sensors`' records packed into fp's and
+    sf's sensor slots) and its pre-drawn random numbers: (u_drop (M,), draws (M, 7), fifo)."""
+    from tsmpc import sensors
     from tsmpc.kernels import engine as ke
-    from tsmpc.scenarios import DropoutFault
 
     model, inner = _split_fault(fault)
-    u_drop, gnss, fifo = np.zeros(1), np.zeros((1, 2)), np.zeros((1, 5))
+    u_drop, draws, fifo = np.zeros(1), np.zeros((1, 7)), np.zeros((1, 5))
+    burst, burst_state = sensors.BurstParams(), sensors.BurstState()
     if inner is not None:
-        ip[ke.IP_F_INNER] = ke.FAULT_HOLD_BURST if type(inner) is DropoutFault else ke.FAULT_NAN_BURST
-        fp[ke.FP_I_PERIOD], fp[ke.FP_I_DUR] = inner.period_s, inner.duration_s
-        fp[ke.FP_I_START] = inner.start_s
+        burst = inner.params
         held = getattr(inner, "_held", None)
         if held is not None:  # a DropoutFault keeps its last sample from a previous run
-            sf[ke.SF_FHELD:ke.SF_FHELD + 5] = held
-            si[ke.SI_FHELDHAS] = 1
+            burst_state = sensors.BurstState(tuple(float(v) for v in held), True)  # type: ignore[arg-type]
+    params = None
     if model is not None:
-        f = model.faults
-        ip[ke.IP_F_MODEL] = 1
-        fp[ke.FP_F_THB], fp[ke.FP_F_THD] = f.theta_bias, f.theta_drift
-        fp[ke.FP_F_VB], fp[ke.FP_F_VD] = f.v_bias, f.v_drift
-        fp[ke.FP_F_WB], fp[ke.FP_F_WD] = f.omega_bias, f.omega_drift
-        fp[ke.FP_F_ESIG], fp[ke.FP_F_PDROP] = model.extra_sigma, f.dropout_probability
-        ip[ke.IP_F_DELAY], ip[ke.IP_F_HOLD] = model.delay_n, int(f.dropout_hold)
-        seed = model.seed
-        # the draws SensorModel makes, one call per sample, drawn at once (the same stream)
-        if model.extra_sigma > 0.0:
-            ip[ke.IP_F_GNSS] = 1
-            gnss = np.random.default_rng([seed, 21, 2]).standard_normal((M, 2))
-        if f.dropout_probability > 0.0:
-            ip[ke.IP_F_DROP] = 1
-            u_drop = np.random.default_rng([seed, 21, 1]).random(M)
+        params = model.params
+        u_drop, draws = sensors.model_draws(model, M)
         fifo = np.zeros((model.delay_n + 1, 5))
-    return u_drop, gnss, fifo
+    fp[ke.FP_SENS:ke.FP_SENS + sensors.N_SP] = sensors.pack_params(burst, params)
+    sf[ke.SF_SENS:ke.SF_SENS + sensors.N_SS] = sensors.pack_state(burst_state, None)
+    return u_drop, draws, fifo
 
 
 def _restore_fault(fault: Any, n_calls: int, t_last: float, fifo: NDArray[np.float64],
                    sf: NDArray[np.float64], si: NDArray[np.int64]) -> None:
     """Leave the scenario's fault objects as the Python loop would have left them (a comparison
     runs its next method on the same objects)."""
+    from tsmpc import sensors
     from tsmpc.kernels import engine as ke
 
     model, inner = _split_fault(fault)
-    if inner is not None and hasattr(inner, "_held"):
-        inner._held = sf[ke.SF_FHELD:ke.SF_FHELD + 5].copy() if si[ke.SI_FHELDHAS] else None
+    burst_state, model_state = sensors.unpack_state(sf[ke.SF_SENS:ke.SF_SENS + sensors.N_SS], fifo.copy())
+    if isinstance(inner, sensors.DropoutFault):
+        inner._held = np.array(burst_state.held) if burst_state.has_held else None
     if model is not None and n_calls > 0:
-        model._reset()
-        if model.faults.dropout_probability > 0.0:
-            model._drop.random(n_calls)
-        if model.extra_sigma > 0.0:
-            model._gnss.standard_normal((n_calls, 2))
-        model._fifo = deque((fifo[i].copy() for i in range(int(si[ke.SI_FIFON]))),
-                            maxlen=model.delay_n + 1)
-        model._last = sf[ke.SF_FLAST:ke.SF_FLAST + 5].copy() if si[ke.SI_FLASTHAS] else None
+        sensors.advance_streams(model, n_calls)
+        model.state = model_state
         model._t = t_last
 
 
 def _noise(cfg: Config, M: int) -> NDArray[np.float64]:
-    """The M samples :class:`~tsmpc.scenarios.SensorNoise` draws (blocks of 4096 × 5, scaled)."""
-    s = cfg.noise
-    sigma = s.scale * np.array([s.position, s.position, s.theta, s.v, s.omega])
-    rng = np.random.default_rng(cfg.seed)
-    blocks = [rng.standard_normal((4096, 5)) * sigma for _ in range(max(-(-M // 4096), 1))]
-    return np.concatenate(blocks)
+    """The M samples :class:`~tsmpc.sensors.SensorNoise` draws (:func:`~tsmpc.sensors.noise_draws`)."""
+    from tsmpc.sensors import noise_draws
+
+    return noise_draws(cfg.noise, cfg.seed, M)
 
 
 # ------------------------------------------------------------------------------ exactness probes

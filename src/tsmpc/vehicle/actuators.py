@@ -22,9 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tsmpc.kernels.jit import jitable
 from tsmpc.sim.plant import Plant
 
-__all__ = ["ActuatedPlant", "Actuators", "ForceLag", "SteeringServo"]
+__all__ = ["ActuatedPlant", "Actuators", "ForceLag", "SteeringServo", "wheel_steering"]
 
 
 @dataclass(frozen=True)
@@ -68,18 +69,30 @@ class Actuators:
     Attributes:
         steering: steering servo, None = ideal steering.
         force: drive-force lag, None = ideal force.
+        steering_offset_rad: the wheels stand this far off the steering the servo delivers [rad]
+            (a misaligned steering; :func:`wheel_steering`).
     """
 
     steering: SteeringServo | None = SteeringServo()
     force: ForceLag | None = None
+    steering_offset_rad: float = 0.0
 
     def wrap(self, plant: Plant, substeps: int = 10) -> ActuatedPlant:
         """``plant`` behind these actuators."""
-        return ActuatedPlant(plant, self.steering, self.force, substeps)
+        return ActuatedPlant(plant, self.steering, self.force, substeps,
+                             steering_offset=self.steering_offset_rad)
 
 
 def _gain(tau: float, h: float) -> float:
     return 1.0 if tau <= 0.0 else 1.0 - math.exp(-h / tau)
+
+
+@jitable
+def wheel_steering(delta: float, offset: float) -> float:
+    """The steering angle the wheels apply [rad] for the servo's ``delta`` [rad]: plus the
+    steering offset (a misalignment the steering sensor does not see); ``delta`` itself (the same
+    float) without one."""
+    return delta if offset == 0.0 else delta + offset
 
 
 class ActuatedPlant:
@@ -91,19 +104,22 @@ class ActuatedPlant:
         force: the drive-force lag (None = ideal force).
         substeps: actuator sub-steps per ``step`` call (the wrapped plant is stepped with each
             sub-step's actuator output; its own ``step`` must accept ``dt / substeps``).
+        steering_offset: the wheels' offset from the servo's angle [rad] (:func:`wheel_steering`);
+            ``applied_input`` is the servo's angle (what a steering sensor measures).
 
     The actuators start at the first command (a servo already holding the wheel where the
     controller first asks for it), so a run does not begin with an artificial step.
     """
 
     def __init__(self, plant: Plant, steering: SteeringServo | None = SteeringServo(),
-                 force: ForceLag | None = None, substeps: int = 10) -> None:
+                 force: ForceLag | None = None, substeps: int = 10, steering_offset: float = 0.0) -> None:
         if substeps < 1:
             raise ValueError(f"ActuatedPlant.substeps must be >= 1, got {substeps}")
         self.plant = plant
         self.steering = steering
         self.force = force
         self.substeps = int(substeps)
+        self.steering_offset = float(steering_offset)
         self._a: NDArray[np.float64] | None = None
         self._mean = np.zeros(2)
 
@@ -136,7 +152,7 @@ class ActuatedPlant:
         for _ in range(n):
             F += gf * (Fc - F)
             d += min(max(gd * (dc - d), -rmax), rmax)
-            x = self.plant.step((F, d), h, mu_road)
+            x = self.plant.step((F, wheel_steering(d, self.steering_offset)), h, mu_road)
             acc += (F, d)
         self._a = np.array([F, d])
         self._mean = acc / n
