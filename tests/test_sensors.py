@@ -1,0 +1,230 @@
+"""The sensor blocks (tsmpc.sensors, one definition for the Python loop and the engine) and the
+sensor class of ``[scenario.sensors]`` (issue 35): each field changes what the controller sees as
+it should, in both loops; bad values end the CLI with one line and exit 2."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tsmpc import kernels
+from tsmpc.conditions import apply_conditions
+from tsmpc.config import Config, SensorFaults, replace
+from tsmpc.sensors import (
+    FAULT_HOLD_BURST,
+    BurstParams,
+    BurstState,
+    SensorModel,
+    SensorParams,
+    SensorState,
+    burst_sample,
+    sensor_sample,
+)
+from tsmpc.sim import engine as eng
+from tsmpc.sim.compare import load_scenario
+from tsmpc.sim.simulator import simulate
+from tsmpc.vehicle.actuators import ActuatedPlant
+from tsmpc.vehicle.plant import VehiclePlant
+
+TD = 0.01
+
+
+def _model(**faults) -> SensorModel:
+    return SensorModel(SensorFaults(**faults), TD, 0.001, seed=3)
+
+
+def _feed(model: SensorModel, y, n: int) -> np.ndarray:
+    """``n`` calls at t = m T_d with the constant sample ``y``."""
+    return np.array([model(m * TD, np.array(y, dtype=float)) for m in range(n)])
+
+
+def test_bias_drift_scale_by_hand() -> None:
+    y = (10.0, -4.0, 0.5, 8.0, 0.2)
+    out = _feed(_model(x_bias=0.3, y_bias=-0.2, theta_bias=0.01, theta_drift=0.002, v_bias=-0.3,
+                       v_drift=0.01, omega_bias=0.02, omega_drift=-0.001, position_scale=1.01,
+                       v_scale=0.97, omega_scale=1.1), y, 201)
+    t = np.arange(201) * TD
+    np.testing.assert_allclose(out[:, 0], 1.01 * 10.0 + 0.3, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out[:, 1], 1.01 * -4.0 - 0.2, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out[:, 2], 0.5 + 0.01 + 0.002 * t, rtol=0, atol=1e-12)  # no scale
+    np.testing.assert_allclose(out[:, 3], 0.97 * 8.0 - 0.3 + 0.01 * t, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out[:, 4], 1.1 * 0.2 + 0.02 - 0.001 * t, rtol=0, atol=1e-12)
+
+
+def test_delay_and_dropouts_by_hand() -> None:
+    ramp = [np.array([m, m, m, m, m], dtype=float) for m in range(300)]
+    model = _model(delay_s=0.05)
+    out = np.array([model(m * TD, y) for m, y in enumerate(ramp)])
+    np.testing.assert_array_equal(out[5:, 3], np.arange(295))  # 5 samples late
+    np.testing.assert_array_equal(out[:5, 3], 0.0)  # the oldest until the FIFO is full
+    for hold in (False, True):
+        model = _model(dropout_probability=0.3, dropout_hold=hold)
+        out = np.array([model(m * TD, y) for m, y in enumerate(ramp)])
+        u = np.random.default_rng([3, 21, 1]).random(300)  # the model's own stream
+        lost = u < 0.3
+        assert 60 < lost.sum() < 120
+        if hold:  # a lost sample repeats the one delivered before it
+            assert np.all(np.isfinite(out[1:])) and np.all(out[1:][lost[1:], 3] == out[:-1][lost[1:], 3])
+        else:
+            np.testing.assert_array_equal(np.isnan(out[:, 3]), lost)
+        np.testing.assert_array_equal(out[~lost, 3], np.arange(300)[~lost])
+
+
+def test_random_walk_grows_as_sqrt_t() -> None:
+    """omega_walk σ: the offset after t seconds has σ·sqrt(t) spread (200 seeds, 4 s); it starts at
+    0 at the first sample."""
+    ends = []
+    for seed in range(200):
+        m = SensorModel(SensorFaults(omega_walk=0.002), TD, 0.0, seed)
+        out = np.array([m(k * TD, np.zeros(5)) for k in range(401)])
+        assert out[0, 4] == 0.0 and np.all(out[:, :4] == 0.0)
+        ends.append(out[-1, 4])
+    sd = float(np.std(ends))
+    assert 0.8 * 0.002 * 2.0 < sd < 1.2 * 0.002 * 2.0, sd  # σ √4 s; 200 draws: ±10 % (2σ)
+
+
+def test_sample_rates_and_heading() -> None:
+    """A 2 Hz pose delivers 2 poses per second (the others missing, NaN), the speed and yaw rate at
+    their own rates; a pose without heading never has θ."""
+    out = _feed(_model(pose_rate_hz=2.0, v_rate_hz=25.0), (1.0, 2.0, 0.3, 5.0, 0.1), 1000)  # 10 s
+    poses = np.isfinite(out[:, 0])
+    assert poses.sum() == 20 and np.array_equal(np.flatnonzero(poses), np.arange(0, 1000, 50))
+    assert np.array_equal(np.isfinite(out[:, 1]), poses) and np.array_equal(np.isfinite(out[:, 2]), poses)
+    assert np.isfinite(out[:, 3]).sum() == 250 and np.isfinite(out[:, 4]).all()
+    out = _feed(_model(pose_heading=False), (1.0, 2.0, 0.3, 5.0, 0.1), 50)
+    assert np.isnan(out[:, 2]).all() and np.isfinite(out[:, [0, 1, 3, 4]]).all()
+
+
+def test_burst_block_by_hand() -> None:
+    p = BurstParams(FAULT_HOLD_BURST, 5.0, 0.2, 2.0)
+    s = BurstState()
+    y1, s = burst_sample(p, s, 1.99, (1.0, 2.0, 3.0, 4.0, 5.0))
+    y2, s = burst_sample(p, s, 2.05, (9.0, 9.0, 9.0, 9.0, 9.0))
+    assert y1 == (1.0, 2.0, 3.0, 4.0, 5.0) and y2 == y1  # held through the burst
+    y3, s = burst_sample(p, s, 2.21, (7.0, 7.0, 7.0, 7.0, 7.0))
+    assert y3 == (7.0,) * 5
+
+
+def test_blocks_compiled_equal_python() -> None:
+    if kernels.load("mpc") is None:
+        pytest.skip("compiled kernels unavailable")
+    from numba import njit
+
+    nb = njit(cache=False)(sensor_sample)
+    p = SensorParams(scale=(1.01, 0.99, 1.0, 1.03, 0.95), bias=(0.1, -0.2, 0.01, 0.3, -0.02),
+                     drift=(0.0, 0.0, 1e-3, -2e-3, 1e-4), walk=(1e-3, 1e-3, 1e-4, 1e-3, 1e-4),
+                     extra_sigma=0.02, p_drop=0.1, hold=True, delay_n=3, heading=True, rate_pose=0.07,
+                     rate_v=0.5, rate_omega=1.0)
+    rng = np.random.default_rng(11)
+    a = SensorState(np.zeros((4, 5)))
+    b = SensorState(np.zeros((4, 5)))
+    for m in range(500):
+        y = tuple(float(v) for v in rng.normal(0, 10, 5))
+        w = tuple(float(v) for v in rng.normal(0, 1, 5))
+        u, gx, gy = float(rng.random()), float(rng.normal()), float(rng.normal())
+        oa, a = sensor_sample(p, a, m * TD, y, u, gx, gy, w)
+        ob, b = nb(p, b, m * TD, y, u, gx, gy, w)
+        assert np.array_equal(np.array(oa), np.array(ob), equal_nan=True)
+        assert (a.head, a.n, a.calls, a.walk) == (b.head, b.n, b.calls, b.walk)
+        b = SensorState(*b)
+
+
+def _run_cfg(sensors: dict, **plant) -> tuple[Config, object]:
+    cfg = Config()
+    cfg = replace(cfg, noise=replace(cfg.noise, scale=0.0), scenario=replace(
+        cfg.scenario, sensors=replace(cfg.scenario.sensors, **sensors),
+        plant=replace(cfg.scenario.plant, **plant)))
+    case = apply_conditions(cfg, load_scenario(cfg))
+    return case.config, case.scenario
+
+
+@pytest.mark.parametrize("engine", [False, True])
+def test_the_controller_sees_each_field(engine: bool) -> None:
+    """What the cascade is given, in each loop (noise off): 1.1 x the yaw rate, the speed with its
+    bias and drift, 5 samples late; a 2 Hz pose is 2 poses per second (the cascade counts the
+    others as missing poses)."""
+    cfg, sc = _run_cfg({"omega_scale": 1.1, "v_bias": -0.3, "v_drift": 0.01, "delay_s": 0.05,
+                        "pose_rate_hz": 2.0})
+    assert eng.applicability(cfg, "REF", sc) is None
+    eng.LAST_RUN.clear()
+    log = simulate(cfg, "REF", sc, engine=engine, max_steps=400)  # 40 s
+    assert bool(eng.LAST_RUN) == engine
+    x, meas, t = log.state, log.measurement, log.t_inner
+    M = len(t)
+    tf = np.where(np.arange(M) % 10 == 0, np.round(t / 0.1) * 0.1, t)  # the fault's time (k T_c)
+    np.testing.assert_allclose(meas[5:, 1], 1.1 * x[:-5, 5], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(meas[5:, 0], x[:-5, 3] - 0.3 + 0.01 * tf[:-5], rtol=0, atol=1e-12)
+    # 2 poses per second: 80 in 40 s, at m = 5 + 50 k (5 samples late), and sample 0 repeated while
+    # the delay's FIFO fills (m = 0 ... 4); every other sample's pose is missing
+    assert log.events["pose_nan"] == M - (80 + 5)
+
+
+def test_both_loops_agree_on_the_sensor_class() -> None:
+    """Every new field at once (rates, walks, scales, biases, the steering offset): the engine runs
+    it and equals the Python loop."""
+    cfg, sc = _run_cfg({"omega_scale": 1.05, "v_scale": 0.98, "x_bias": 0.2, "y_bias": -0.1,
+                        "position_scale": 1.001, "position_walk": 0.01, "theta_walk": 1e-3,
+                        "v_walk": 0.01, "omega_walk": 1e-3, "pose_rate_hz": 5.0, "v_rate_hz": 50.0,
+                        "gnss_noise_scale": 2.0, "dropout_probability": 0.02}, steering_offset_rad=0.01)
+    cfg = replace(cfg, noise=replace(cfg.noise, scale=1.0))
+    assert eng.applicability(cfg, "REF", sc) is None
+    eng.LAST_RUN.clear()
+    le = simulate(cfg, "REF", sc, engine=True, max_steps=300)
+    assert eng.LAST_RUN
+    lp = simulate(cfg, "REF", sc, engine=False, max_steps=300)
+    assert le.events == lp.events
+    for name, a in le.arrays().items():
+        if a.dtype.kind == "f" and not name.endswith("time_s"):
+            np.testing.assert_allclose(a, lp.arrays()[name], rtol=0, atol=1e-8, equal_nan=True, err_msg=name)
+
+
+def test_a_slow_speed_sensor_makes_the_engine_step_aside() -> None:
+    cfg, sc = _run_cfg({"v_rate_hz": 1.0})
+    assert "v_rate_hz" in (eng.applicability(cfg, "REF", sc) or "")
+
+
+def test_steering_offset_moves_the_steady_state_yaw_rate() -> None:
+    """The plant steers commanded + offset: its steady-state yaw rate is the one of the larger
+    command, and clearly not the one without offset (a constant command from 10 m/s; 6 kN about
+    holds the speed against the plant's friction: 9.6 m/s after 3 s)."""
+    cfg = Config()
+
+    def omega_ss(cmd: float, offset: float) -> float:
+        p = ActuatedPlant(VehiclePlant(cfg.vehicle, cfg.tyre, cfg.rates.h), None, None,
+                          cfg.rates.plant_per_inner, steering_offset=offset)
+        p.reset(np.array([0.0, 0.0, 0.0, 10.0, 0.0, 0.0]))
+        for _ in range(300):  # 3 s: the yaw rate settles in well under 1 s
+            x = p.step((6000.0, cmd), TD, 0.9)
+        return float(x[5])
+
+    w0, w1 = omega_ss(0.02, 0.0), omega_ss(0.02, 0.01)
+    assert w1 == pytest.approx(omega_ss(0.03, 0.0), rel=1e-9)
+    assert 1.3 < w1 / w0 < 1.6  # 0.03 / 0.02 rad, slightly understeering
+    assert omega_ss(0.0, -0.01) < -0.04 and omega_ss(0.0, 0.0) == 0.0
+
+
+@pytest.mark.parametrize(("setting", "field"), [
+    ("scenario.sensors.pose_rate_hz=-1", "pose_rate_hz"),
+    ("scenario.sensors.v_rate_hz=200", "v_rate_hz"),
+    ("scenario.sensors.omega_scale=nan", "omega_scale"),
+    ("scenario.sensors.gyro_bias=0.1", "gyro_bias"),
+    ("scenario.plant.steering_offset_rad=0.2", "steering_offset_rad"),
+])
+def test_bad_values_exit_2_naming_the_field(setting: str, field: str, tmp_path: Path) -> None:
+    r = subprocess.run([sys.executable, "-m", "tsmpc", "run", "--set", setting, "--out", str(tmp_path / "o")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    lines = [ln for ln in r.stderr.strip().splitlines() if ln]
+    assert len(lines) == 1 and field in lines[0] and "Traceback" not in r.stderr, r.stderr
+
+
+def test_defaults_change_nothing() -> None:
+    assert SensorFaults() == SensorFaults(x_bias=0.0, v_scale=1.0, pose_rate_hz=None, pose_heading=True)
+    cfg = Config()
+    assert apply_conditions(cfg, load_scenario(cfg)).scenario.sensor_fault is None
+    assert math.isfinite(cfg.scenario.plant.steering_offset_rad)
