@@ -146,10 +146,10 @@ def _run_cfg(sensors: dict, **plant) -> tuple[Config, object]:
 @pytest.mark.parametrize("engine", [False, True])
 def test_the_controller_sees_each_field(engine: bool) -> None:
     """What the cascade is given, in each loop (noise off): 1.1 x the yaw rate, the speed with its
-    bias and drift, 5 samples late; a 2 Hz pose is 2 poses per second (the cascade counts the
-    others as missing poses)."""
+    bias and drift, 5 samples late, lost where the dropout stream says; a 2 Hz pose is 2 poses per
+    second (the cascade counts the others as missing poses)."""
     cfg, sc = _run_cfg({"omega_scale": 1.1, "v_bias": -0.3, "v_drift": 0.01, "delay_s": 0.05,
-                        "pose_rate_hz": 2.0})
+                        "pose_rate_hz": 2.0, "dropout_probability": 0.1})
     assert eng.applicability(cfg, "REF", sc) is None
     eng.LAST_RUN.clear()
     log = simulate(cfg, "REF", sc, engine=engine, max_steps=400)  # 40 s
@@ -157,11 +157,19 @@ def test_the_controller_sees_each_field(engine: bool) -> None:
     x, meas, t = log.state, log.measurement, log.t_inner
     M = len(t)
     tf = np.where(np.arange(M) % 10 == 0, np.round(t / 0.1) * 0.1, t)  # the fault's time (k T_c)
-    np.testing.assert_allclose(meas[5:, 1], 1.1 * x[:-5, 5], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(meas[5:, 0], x[:-5, 3] - 0.3 + 0.01 * tf[:-5], rtol=0, atol=1e-12)
+    lost = np.random.default_rng([cfg.seed, 21, 1]).random(M) < 0.1  # the dropouts' own stream
+    assert 300 < lost.sum() < 500
+    np.testing.assert_array_equal(np.isnan(meas[:, 0]), lost)
+    np.testing.assert_array_equal(np.isnan(meas[:, 1]), lost)
+    ok = ~lost[5:]
+    np.testing.assert_allclose(meas[5:, 1][ok], 1.1 * x[:-5, 5][ok], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(meas[5:, 0][ok], (x[:-5, 3] - 0.3 + 0.01 * tf[:-5])[ok], rtol=0, atol=1e-12)
     # 2 poses per second: 80 in 40 s, at m = 5 + 50 k (5 samples late), and sample 0 repeated while
-    # the delay's FIFO fills (m = 0 ... 4); every other sample's pose is missing
-    assert log.events["pose_nan"] == M - (80 + 5)
+    # the delay's FIFO fills (m = 0 ... 4); every other sample's pose is missing, as is every lost one
+    m = np.arange(M)
+    due = (m < 5) | ((m - 5) % 50 == 0)
+    assert due.sum() == 80 + 5
+    assert log.events["pose_nan"] == int(np.sum(lost | ~due))
 
 
 def test_both_loops_agree_on_the_sensor_class() -> None:
