@@ -96,24 +96,37 @@ def solve_with_margin(
     """
     from tsmpc.synthesis.certificates import check
 
+    # Each margin is solved and certified at most once: the stricter margins of LADDER_UP are the
+    # same after every step down, and a solver's answer to the same problem does not change (a
+    # design that fails everywhere otherwise solved them again for each step: 9 SDPs, not 5).
+    tried: dict[float, tuple[T, list[Certificate]] | Infeasible] = {}
+
+    def outcome(t: float) -> tuple[T, list[Certificate]] | Infeasible:
+        if t not in tried:
+            try:
+                design = attempt(t)
+            except Infeasible as exc:
+                tried[t] = exc
+            else:
+                tried[t] = (design, certify(design))
+        return tried[t]
+
     last: Infeasible | None = None
     failed: list[Certificate] | None = None  # certificates of the first feasible, failing answer
     for t in ladder:
-        try:
-            design = attempt(t)
-        except Infeasible as exc:
-            last = exc
+        res = outcome(t)
+        if isinstance(res, Infeasible):
+            last = res
             continue
-        certs = certify(design)
+        design, certs = res
         if all(c.holds for c in certs):
             return design, certs, t
         failed = failed or certs
         for t_up in (u for u in LADDER_UP if u > t):  # inaccurate answer: a stricter margin
-            try:
-                design_up = attempt(t_up)
-            except Infeasible:
+            res_up = outcome(t_up)
+            if isinstance(res_up, Infeasible):
                 break
-            certs_up = certify(design_up)
+            design_up, certs_up = res_up
             if all(c.holds for c in certs_up):
                 return design_up, certs_up, t_up
     if failed is not None:
