@@ -246,7 +246,6 @@ MAX_FUNCTION_LINES = 100
 #: Each entry must still be over the limit (a stale entry fails the test).
 LONG_KERNELS = {
     "kernels/engine.py::run",  # the whole-run engine's step loop (issue 34 replaces it by the blocks)
-    "kernels/engine.py::_chord",  # CourseFusion._chord's three fits, the engine's form
     "kernels/batch.py::_forward",  # banded_solve's forward elimination, one row for every lane
     "kernels/batch.py::advance",  # the batch's lane scheduler around the engine's steps
     "kernels/mhe.py::banded_solve",  # the MHE window's block-tridiagonal Cholesky solve

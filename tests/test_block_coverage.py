@@ -34,6 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: arithmetic and block tests (its other tests compile, or simulate whole runs).
 BLOCK_TESTS = (
     "tests/test_blocks.py",
+    "tests/test_fusion_blocks.py",
     "tests/test_mutation_guards.py",
     *(f"tests/test_governor.py::{t}" for t in (
         "test_grip_estimate_from_the_friction_force", "test_spin_grip_by_hand",

@@ -400,14 +400,14 @@ class Cascade:
         self._t_last = tt
         return tt
 
-    def _apply_stiffness(self, C: tuple[float, float] | None) -> None:
-        """fusion.stiffness_estimate: the fitted axle stiffnesses reach the MHE and the TS-LQR;
-        when they replace earlier ones, the slip fit's gain κ restarts (fusion.py: it explained
-        what the previous model left unexplained)."""
+    def _apply_stiffness(self) -> None:
+        """fusion.stiffness_estimate: the fitted axle stiffnesses reach the MHE and the TS-LQR when
+        they moved by over 1 %; when they replace earlier ones, the slip fit's gain κ restarts
+        (the fusion's block decides both, fusion.stiffness_update: κ explained what the previous
+        model left unexplained)."""
+        C = self._fusion.course.stiffness_update(self._stiffness_applied)
         if C is not None:
-            before = bool(self._stiffness_applied)
-            if _apply_stiffness_to((self.mhe, self.lqr), C, self._stiffness_applied) and before:
-                self._fusion.course.model_changed()
+            _apply_stiffness_to((self.mhe, self.lqr), C, self._stiffness_applied)
 
     def _fresh(self, t: float, m: Measurement) -> bool:
         if m.stamp is None:
@@ -585,7 +585,7 @@ class Cascade:
                             om if fresh and speeds_ok else math.nan,
                             float(self.reference.v[kc] * self.reference.omega[kc]))
             if fs.stiffness_estimate:
-                self._apply_stiffness(fu.course.stiffness)
+                self._apply_stiffness()
         if self._reanchor and pose_ok:
             self._reanchored(t, X, Y, v, om)
         elif self._catch_up:
@@ -805,17 +805,13 @@ def _build_governor(cfg: Config) -> Governor:
     return Governor(params, preview)
 
 
-def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> bool:
-    """Give the fitted (C_f, C_r) to the blocks that take them, when they moved by over 1 %
-    (True: they were given)."""
-    if applied and all(abs(c - a) <= 0.01 * abs(a) for c, a in zip(C, applied, strict=True)):
-        return False
+def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> None:
+    """Give (C_f, C_r) to the blocks that take them; ``applied`` becomes C."""
     for b in blocks:
         setter = getattr(b, "set_cornering_stiffness", None)
         if setter is not None:
             setter(*C)
     applied[:] = list(C)
-    return True
 
 
 def _oracle_estimate(state: ArrayLike) -> Estimate:

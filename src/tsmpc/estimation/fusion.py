@@ -64,20 +64,36 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
   changes slowly and drops out; forgetting over ``MASS_MEMORY_S``), above ``MASS_MIN_SPEED``
   (below, the model's low-speed clipping makes F̂ meaningless). The compensation then gets
   F̂ − ΔM̂ ā and the speed feedback (M + ΔM̂)(v_ref − v̂)/τ.
+
+Each estimator's per-step logic is a block's one definition (:mod:`tsmpc.kernels.jit`): pure
+``@jitable`` functions over ``NamedTuple`` records, the new state returned — :func:`repeat_check`;
+:func:`course_sample`, :func:`course_close` (with :func:`course_chord`'s fits) and the outputs
+:func:`slip_correction`, :func:`speed_offset`, :func:`noise_scale`, :func:`stiffness`,
+:func:`stiffness_update`; :func:`mass_update`, :func:`delta_mass`, :func:`inertia_force`. The
+classes below hold the records for :class:`~tsmpc.control.cascade.Cascade` and call them as
+Python; the run engine (:mod:`tsmpc.kernels.engine`) and the batch compile the same functions. The
+arithmetic is scalar (no numpy), so both run the same operations in the same order on any machine
+(the slip fit's 2×2 products no longer depend on the BLAS).
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import Config, FusionSettings, VehicleParams
+from tsmpc.kernels.jit import exact_hypot, jitable
 
-__all__ = ["BASELINE", "CourseFusion", "Fusion", "MassEstimator", "RepeatGuard"]
+__all__ = [
+    "BASELINE", "MASS_START", "NO_INTERVAL", "REPEAT_START", "CourseFusion", "CourseParams", "CourseState",
+    "Fusion", "Interval", "MassEstimator", "MassParams", "MassState", "RepeatGuard", "RepeatState",
+    "SlipFit", "SpeedFit", "StiffFit", "course_chord", "course_close", "course_params", "course_sample",
+    "course_start", "delta_mass", "inertia_force", "mass_update", "model_changed", "noise_scale",
+    "repeat_check", "slip_correction", "speed_offset", "stiffness", "stiffness_update",
+]
 
 #: MPC steps spanned by the chord of the course fusion.
 BASELINE = 5
@@ -138,332 +154,681 @@ CORNER_ACCEL = 0.2
 STIFF_MAX_ACCEL = 0.1
 
 
+@jitable
 def _wrap(a: float) -> float:
+    """Angle to [−π, π) (the expression of :func:`tsmpc.models.kinematic.wrap_angle`)."""
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+# ============================================================================ repeat guard
+class RepeatState(NamedTuple):
+    """The previous finite sample (``has`` False: none yet), stamp included (−inf without one)."""
+
+    has: bool
+    X: float
+    Y: float
+    theta: float
+    v: float
+    omega: float
+    stamp: float
+
+
+#: No previous sample.
+REPEAT_START = RepeatState(False, 0.0, 0.0, 0.0, 0.0, 0.0, -math.inf)
+
+
+@jitable
+def repeat_check(s: RepeatState, X: float, Y: float, theta: float, v: float, omega: float,
+                 stamp: float) -> tuple[bool, RepeatState]:
+    """(the sample equals the previous finite one in all six numbers, the new state). A sample
+    with a NaN is never a repeat and is not remembered; an infinite entry (a missing stamp as
+    −inf) counts as a number."""
+    if (math.isnan(X) or math.isnan(Y) or math.isnan(theta) or math.isnan(v) or math.isnan(omega)
+            or math.isnan(stamp)):
+        return False, s
+    same = (s.has and X == s.X and Y == s.Y and theta == s.theta and v == s.v and omega == s.omega
+            and stamp == s.stamp)
+    return same, RepeatState(True, X, Y, theta, v, omega, stamp)
+
+
 class RepeatGuard:
-    """Is a sample [X, Y, θ, v, ω] bit-identical to the previous finite one?"""
+    """Is a sample [X, Y, θ, v, ω] (optionally with its stamp) bit-identical to the previous
+    finite one? (The online wrapper of :func:`repeat_check`.)"""
 
     def __init__(self) -> None:
         self.reset()
 
     def reset(self) -> None:
         """Forget the previous sample."""
-        self._last: tuple[float, ...] | None = None
+        self.state = REPEAT_START
         self.n_repeated = 0
 
     def repeated(self, sample: tuple[float, ...]) -> bool:
-        """True (counted) when ``sample`` equals the previous finite sample in every number (an
-        infinite entry, e.g. a missing stamp as −inf, counts as finite here)."""
-        if any(math.isnan(c) for c in sample):
-            return False
-        same = self._last is not None and sample == self._last
-        self._last = sample
+        """True (counted) when ``sample`` (X, Y, θ, v, ω[, stamp]) equals the previous finite
+        sample in every number (no stamp: −inf)."""
+        X, Y, th, v, om = sample[:5]
+        stamp = sample[5] if len(sample) > 5 else -math.inf
+        same, self.state = repeat_check(self.state, float(X), float(Y), float(th), float(v), float(om),
+                                        float(stamp))
         self.n_repeated += same
         return same
 
 
-@dataclass
-class _Interval:
+# ============================================================================ course fusion
+class Interval(NamedTuple):
     """Sums of one MPC interval (speed-weighted where the course needs it)."""
 
-    start: tuple[float, float, float]  #: measured pose at the interval's start
-    ok: bool = True  #: every sample measured and finite
-    n: int = 0
-    sv: float = 0.0  #: Σ v
-    sv_dth: float = 0.0  #: Σ v (θ − θ_start), trapezoid (the closing sample counts half)
-    sv_alpha: float = 0.0  #: Σ v α̂
-    sv_ay: float = 0.0  #: Σ v â_y
-    sv_full: float = 0.0  #: Σ v, every sample in full (the weights of α̂ and â_y)
-    s_delta: float = 0.0  #: Σ δ (applied steering)
-    s_w_v: float = 0.0  #: Σ ω / v
-    s_vw: float = 0.0  #: Σ v ω (measured lateral acceleration, α̇ aside)
-    s_F: float = 0.0  #: Σ F_xR (applied force)
-    w_first: float = 0.0  #: ω of the opening sample
-    ay_ref: float = 0.0  #: smallest |v_d ω_d| of the reference at the interval's ends
-    v_first: float = math.nan  #: measured speed at the interval's first sample [m/s]
+    open: bool  #: an interval is open (a measured pose started it); False: no interval
+    ok: bool  #: every sample measured and finite
+    sx: float  #: measured pose at the interval's start
+    sy: float
+    sth: float
+    n: int  #: samples
+    sv: float  #: Σ v, trapezoid (the opening and closing samples count half)
+    sv_dth: float  #: Σ v (θ − θ_start), trapezoid
+    sv_alpha: float  #: Σ v α̂
+    sv_ay: float  #: Σ v â_y
+    sv_full: float  #: Σ v, every sample in full (the weights of α̂ and â_y)
+    s_delta: float  #: Σ δ (applied steering)
+    s_w_v: float  #: Σ ω / v
+    s_vw: float  #: Σ v ω (measured lateral acceleration, α̇ aside)
+    s_F: float  #: Σ F_xR (applied force)
+    w_first: float  #: ω of the opening sample
+    ay_ref: float  #: smallest |v_d ω_d| of the reference at the interval's ends
+    v_first: float  #: measured speed at the interval's first sample [m/s]
+
+
+#: No interval open (before the first measured pose, after a missing one).
+NO_INTERVAL = Interval(False, False, 0.0, 0.0, 0.0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                       0.0, 0.0)
+
+
+class CourseParams(NamedTuple):
+    """Parameters of the course fusion (:func:`course_params` builds them).
+
+    Attributes:
+        Tc: MPC period T_c [s] (one interval).
+        sigma: configured position noise σ [m] (at least 0.1 mm).
+        has_vehicle: a model vehicle is given (without one: no stiffness fit).
+        C_f, C_r: the model's axle cornering stiffnesses [N/rad] (1 without a vehicle).
+        mass, inertia, a, b, g: the model vehicle's M [kg], I_z [kg m²], axle distances [m], g [m/s²].
+        prior_num_f, prior_num_r, prior_den_f, prior_den_r: the compliance fits' prior, Σ w F α and
+            Σ w F² of the model's 1/C with relative σ ``STIFF_PRIOR_REL``: (C / REL)² / C, (C / REL)².
+    """
+
+    Tc: float
+    sigma: float
+    has_vehicle: bool
+    C_f: float
+    C_r: float
+    mass: float
+    inertia: float
+    a: float
+    b: float
+    g: float
+    prior_num_f: float
+    prior_num_r: float
+    prior_den_f: float
+    prior_den_r: float
+
+
+class SlipFit(NamedTuple):
+    """The slip fit z = κ a_y + β (recursive least squares with forgetting) and the chords' noise
+    level measured on straights (Σ (innovation / σ_chord)², Σ 1)."""
+
+    kappa: float
+    beta: float
+    P00: float
+    P01: float
+    P10: float
+    P11: float
+    n2: float
+    n1: float
+
+
+class SpeedFit(NamedTuple):
+    """The speed-offset fit: Σ w (v̄_measured − v_ground), Σ w (with forgetting)."""
+
+    sv: float
+    sw: float
+
+
+class StiffFit(NamedTuple):
+    """The compliance fits α = F / C per axle: Σ w F α and Σ w F² (front, rear, prior included),
+    and α̂ of the previous cornering chord (``has_prev`` False: none)."""
+
+    num_f: float
+    num_r: float
+    den_f: float
+    den_r: float
+    alpha_prev: float
+    has_prev: bool
+
+
+class CourseState(NamedTuple):
+    """State of the course fusion between MPC steps (the open interval is its own record).
+
+    Attributes:
+        ring: the last ``BASELINE`` closed intervals, oldest first (only the last ``n_iv`` are real).
+        n_iv: closed intervals held (at most ``BASELINE``).
+        omega_now: measured yaw rate at the last MPC step [rad/s].
+        v_now: measured speed at the last MPC step [m/s].
+        n_chords: chords fitted.
+        slip, speed, stiff: the three fits.
+    """
+
+    ring: tuple[Interval, ...]
+    n_iv: int
+    omega_now: float
+    v_now: float
+    n_chords: int
+    slip: SlipFit
+    speed: SpeedFit
+    stiff: StiffFit
+
+
+@jitable
+def course_params(Tc: float, position_sigma: float, has_vehicle: bool, C_f: float, C_r: float, mass: float,
+                  inertia: float, a: float, b: float, g: float) -> CourseParams:
+    """The parameters from the rates, the configured position σ and the model vehicle (without
+    one, C_f = C_r = 1 for the prior's arithmetic)."""
+    qf, qr = C_f / STIFF_PRIOR_REL, C_r / STIFF_PRIOR_REL
+    den_f, den_r = qf * qf, qr * qr
+    return CourseParams(Tc, max(position_sigma, 1e-4), has_vehicle, C_f, C_r, mass, inertia, a, b, g,
+                        den_f / C_f, den_r / C_r, den_f, den_r)
+
+
+def course_start(p: CourseParams) -> CourseState:
+    """The state after a reset: no interval, the fits at their priors (κ = β = 0, P the prior's
+    variances, the noise level at its prior, the compliances at the model's)."""
+    slip = SlipFit(0.0, 0.0, SLIP_PRIOR[0] * SLIP_PRIOR[0], 0.0, 0.0, SLIP_PRIOR[1] * SLIP_PRIOR[1],
+                   NOISE_PRIOR_CHORDS, NOISE_PRIOR_CHORDS)
+    stiff = StiffFit(p.prior_num_f, p.prior_num_r, p.prior_den_f, p.prior_den_r, 0.0, False)
+    return CourseState((NO_INTERVAL,) * BASELINE, 0, 0.0, math.nan, 0, slip, SpeedFit(0.0, 0.0), stiff)
+
+
+@jitable
+def course_sample(cur: Interval, ok: bool, theta: float, v: float, alpha_hat: float, a_y: float,
+                  omega: float, delta: float, force: float) -> Interval:
+    """One T_d sample into the open interval: measured heading θ, speed v (raw) and yaw rate ω,
+    the estimate's α̂ and â_y = v̂ ω̂, the applied steering δ and force F_xR; ``ok`` False for a
+    missing or rejected sample (spoils the interval). No interval open: unchanged."""
+    if not cur.open:
+        return cur
+    if not (ok and math.isfinite(theta) and math.isfinite(v) and math.isfinite(alpha_hat)
+            and math.isfinite(a_y) and math.isfinite(omega) and math.isfinite(delta)
+            and math.isfinite(force)):
+        return Interval(cur.open, False, cur.sx, cur.sy, cur.sth, cur.n, cur.sv, cur.sv_dth, cur.sv_alpha,
+                        cur.sv_ay, cur.sv_full, cur.s_delta, cur.s_w_v, cur.s_vw, cur.s_F, cur.w_first,
+                        cur.ay_ref, cur.v_first)
+    dth = _wrap(theta - cur.sth)
+    first = cur.n == 0
+    w = 0.5 if first else 1.0  # trapezoid: the opening sample counts half
+    return Interval(cur.open, cur.ok, cur.sx, cur.sy, cur.sth, cur.n + 1, cur.sv + w * v,
+                    cur.sv_dth + w * v * dth, cur.sv_alpha + v * alpha_hat, cur.sv_ay + v * a_y,
+                    cur.sv_full + v, cur.s_delta + delta, cur.s_w_v + omega / max(v, 1.0),
+                    cur.s_vw + v * omega, cur.s_F + force, omega if first else cur.w_first, cur.ay_ref,
+                    v if first else cur.v_first)
+
+
+@jitable
+def course_close(p: CourseParams, s: CourseState, cur: Interval, has_pose: bool, X: float, Y: float,
+                 theta: float, v: float, omega: float, ay_ref: float) -> tuple[CourseState, Interval]:
+    """An MPC step: the open interval is closed on the measured pose (X, Y, θ) now (``has_pose``
+    False: missing, no chord ends here) and speed ``v`` (the closing sample; NaN: missing), a
+    chord over the last ``BASELINE`` intervals is fitted (:func:`course_chord`) when they are all
+    measured, and the next interval opens. ``omega``: measured yaw rate now, ``ay_ref``: the
+    reference's lateral acceleration v_d ω_d now. Returns (the state, the open interval)."""
+    ay = abs(ay_ref) if math.isfinite(ay_ref) else 0.0
+    good = (has_pose and math.isfinite(X) and math.isfinite(Y) and math.isfinite(theta)
+            and math.isfinite(v))
+    ring, n_iv = s.ring, s.n_iv
+    chord = False
+    if cur.open:
+        sv, sv_dth, ok = cur.sv, cur.sv_dth, cur.ok
+        if good and cur.n > 0 and ok:  # the closing sample, counted half
+            dth = _wrap(theta - cur.sth)
+            sv += 0.5 * v
+            sv_dth += 0.5 * v * dth
+        else:
+            ok = False
+        closed = Interval(cur.open, ok, cur.sx, cur.sy, cur.sth, cur.n, sv, sv_dth, cur.sv_alpha,
+                          cur.sv_ay, cur.sv_full, cur.s_delta, cur.s_w_v, cur.s_vw, cur.s_F, cur.w_first,
+                          min(cur.ay_ref, ay), cur.v_first)
+        ring = ring[1:] + (closed,)  # noqa: RUF005 (numba has no starred tuples) the oldest drops out
+        n_iv = min(n_iv + 1, BASELINE)
+        chord = good and n_iv == BASELINE
+        for iv in ring:
+            chord = chord and iv.ok
+    s = CourseState(ring, n_iv, omega, v, s.n_chords, s.slip, s.speed, s.stiff)
+    if chord:
+        s = course_chord(p, s, X, Y, theta)
+    if not good:
+        return s, NO_INTERVAL
+    return s, Interval(True, True, X, Y, theta, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ay,
+                       math.nan)
+
+
+@jitable
+def course_chord(p: CourseParams, s: CourseState, ex: float, ey: float, eth: float) -> CourseState:
+    """The slip, speed-offset and stiffness fits on the chord of the ``BASELINE`` closed intervals
+    of ``s`` ending at the measured pose (ex, ey, eth) (see the module docstring); a chord shorter
+    than ``MIN_CHORD_M`` or without speed changes nothing."""
+    ring = s.ring
+    first = ring[0]
+    dx, dy = ex - first.sx, ey - first.sy
+    chord = exact_hypot(dx, dy)
+    if chord < MIN_CHORD_M:
+        return s
+    # speed-weighted means over the chord (θ relative to the chord's first pose)
+    sv = 0.0
+    for iv in ring:
+        sv += iv.sv
+    if sv <= 0.0:
+        return s
+    sv_th = 0.0
+    n = 0
+    sv_full = 0.0
+    s_alpha = 0.0
+    s_ay = 0.0
+    s_vw = 0.0
+    s_F = 0.0
+    s_wv = 0.0
+    s_d = 0.0
+    ay_min = first.ay_ref
+    for iv in ring:
+        sv_th += iv.sv_dth + _wrap(iv.sth - first.sth) * iv.sv
+        n += iv.n
+        sv_full += iv.sv_full
+        s_alpha += iv.sv_alpha
+        s_ay += iv.sv_ay
+        s_vw += iv.s_vw
+        s_F += iv.s_F
+        s_wv += iv.s_w_v
+        s_d += iv.s_delta
+        ay_min = min(ay_min, iv.ay_ref)
+    th_mean = first.sth + sv_th / sv
+    a_course = _wrap(math.atan2(dy, dx) - th_mean)
+    alpha_hat = s_alpha / sv_full
+    a_y = s_ay / sv_full
+    Tc = p.Tc
+    slip, noise_sig = _slip_fit(s.slip, Tc, a_course - alpha_hat, a_y, chord, p.sigma, ay_min >= CORNER_ACCEL)
+    # speed over ground: the arc of the chord (turn Δχ ≈ Δθ) over its time span
+    turn = abs(_wrap(eth - first.sth))
+    arc = chord * ((0.5 * turn) / math.sin(0.5 * turn) if turn > 1e-6 else 1.0)
+    v_ground = arc / (BASELINE * Tc)
+    v_meas = sv / n  # the trapezoid mean of the measured speed over the chord's time
+    w = (chord / (2.0 * p.sigma)) ** 2
+    g = 1.0 - Tc / SPEED_MEMORY_S
+    speed = SpeedFit(g * s.speed.sv + w * (v_meas - v_ground), g * s.speed.sw + w)
+    stiff = s.stiff
+    # axle stiffnesses from the course's slip (quasi-steady single track), only where the reference
+    # turns (a straight carries no information on C, only the traces of a lightly damped yaw motion)
+    # and at nearly constant speed (pure slip: STIFF_MAX_ACCEL); a NaN speed fails the test
+    a_x = (s.v_now - first.v_first) / (BASELINE * Tc)
+    steady = p.has_vehicle and abs(a_x) <= STIFF_MAX_ACCEL * p.g
+    if p.has_vehicle and math.isfinite(s.omega_now) and ay_min >= CORNER_ACCEL and steady:
+        # α̇ from the model's α̂ over consecutive chords (smooth; the course's own α would put its
+        # noise through a 1/T_c difference into the force)
+        al_dot = (alpha_hat - stiff.alpha_prev) / Tc if stiff.has_prev else 0.0
+        stiff = _stiffness_fit(p, stiff, a_course, alpha_hat, al_dot, s_vw / n, v_meas, s_F / n,
+                               s.omega_now - first.w_first, s_wv / n, s_d / n, noise_sig)
+    return CourseState(ring, s.n_iv, s.omega_now, s.v_now, s.n_chords + 1, slip, speed, stiff)
+
+
+@jitable
+def _slip_fit(f: SlipFit, Tc: float, z: float, a_y: float, chord: float, sigma: float,
+              cornering: bool) -> tuple[SlipFit, float]:
+    """One chord in the slip fit z = ᾱ_course − ᾱ̂ = κ ā_y + β (recursive least squares with
+    forgetting, φ = [ā_y, 1]), weighted by the chord's noise (positions at both ends, scaled by the
+    noise level measured on straights, which a chord where the reference runs straight updates:
+    there the slip and the model's error in it are ≈ 0, so the innovation is noise). Returns (the
+    fit, the chord's slip noise σ)."""
+    sig0 = 2.0 * math.sqrt(2.0) * sigma / chord + 2e-4
+    innov = z - (a_y * f.kappa + f.beta)
+    n2, n1 = f.n2, f.n1
+    if not cornering:
+        g_n = 1.0 - Tc / NOISE_MEMORY_S
+        r = innov / sig0
+        n2 = g_n * n2 + r * r
+        n1 = g_n * n1 + 1.0
+    sig = sig0 * noise_scale(SlipFit(f.kappa, f.beta, f.P00, f.P01, f.P10, f.P11, n2, n1))
+    lam = 1.0 - Tc / SLIP_MEMORY_S
+    P00, P01, P10, P11 = f.P00 / lam, f.P01 / lam, f.P10 / lam, f.P11 / lam
+    Pp0 = P00 * a_y + P01  # P φ
+    Pp1 = P10 * a_y + P11
+    pP0 = a_y * P00 + P10  # φ P
+    pP1 = a_y * P01 + P11
+    den = sig * sig + (pP0 * a_y + pP1)
+    k0, k1 = Pp0 / den, Pp1 / den
+    return SlipFit(f.kappa + k0 * innov, f.beta + k1 * innov, P00 - k0 * pP0, P01 - k0 * pP1,
+                   P10 - k1 * pP0, P11 - k1 * pP1, n2, n1), sig
+
+
+@jitable
+def _axle_pair(C0: float, force: float, slip: float) -> tuple[float, float]:
+    """(F, α) of one axle when the chord's own stiffness F / α is a plausible one (same sign,
+    within ``STIFF_RANGE`` × the model's ``C0``), else (0, 0): anything else is no quasi-steady
+    pure-slip chord (a transient, a lag between forces and slips, a saturated tyre) and would drag
+    the fit to its bounds (on Spa at 22 m/s one corner took it to 2× and doubled the largest e_y)."""
+    fa, sa = abs(force), abs(slip)
+    if force * slip > 0.0 and sa * STIFF_RANGE[1] * C0 >= fa and sa * STIFF_RANGE[0] * C0 <= fa:
+        return force, slip
+    return 0.0, 0.0
+
+
+@jitable
+def _stiffness_fit(p: CourseParams, f: StiffFit, a_course: float, alpha_hat: float, al_dot: float,
+                   vw: float, v_meas: float, F_x: float, d_omega: float, w_v: float, delta: float,
+                   sig: float) -> StiffFit:
+    """One cornering chord in the compliance fits. Lateral force S = M (v ω + v α̇) + F_x α and
+    yaw moment T = I ω̇ give F_yF = (b S + T)/L, F_yR = (a S − T)/L; slips α_F = δ − α − a ω/v,
+    α_R = b ω/v − α (chord means: ``vw`` of v ω, ``w_v`` of ω / v, ``delta``, ``F_x``; ``d_omega``
+    the change of ω over the chord). The fit is of the compliance 1/C with the force as regressor
+    (slip = F / C): the forces come from v, ω (precise), the slips carry the course's noise — as
+    the response, noise does not bias the fit (as a regressor it would pull C towards 0 on every
+    straight). Each chord weighs by its slip noise ``sig`` (or the fit's own floor), shared with the
+    neighbouring chords (``STIFF_CORRELATION``); forgetting is towards the prior (a fit without
+    excitation returns to the model)."""
+    S = p.mass * (vw + v_meas * al_dot) + F_x * a_course
+    T = p.inertia * d_omega / (BASELINE * p.Tc)
+    L = p.a + p.b
+    F_f, a_f = _axle_pair(p.C_f, (p.b * S + T) / L, delta - a_course - p.a * w_v)
+    F_r, a_r = _axle_pair(p.C_r, (p.a * S - T) / L, p.b * w_v - a_course)
+    s_slip = max(sig, STIFF_SLIP_FLOOR)
+    w_c = 1.0 / (STIFF_CORRELATION * s_slip * s_slip)
+    g2 = 1.0 - p.Tc / STIFF_MEMORY_S
+    return StiffFit(g2 * f.num_f + (1.0 - g2) * p.prior_num_f + w_c * (F_f * a_f),
+                    g2 * f.num_r + (1.0 - g2) * p.prior_num_r + w_c * (F_r * a_r),
+                    g2 * f.den_f + (1.0 - g2) * p.prior_den_f + w_c * (F_f * F_f),
+                    g2 * f.den_r + (1.0 - g2) * p.prior_den_r + w_c * (F_r * F_r),
+                    alpha_hat, True)
+
+
+@jitable
+def slip_correction(f: SlipFit, a_y: float) -> float:
+    """κ̂ a_y + β̂ [rad] (a non-finite a_y counts as 0), bounded by ``SLIP_CORRECTION_MAX``."""
+    if not math.isfinite(a_y):
+        a_y = 0.0
+    return min(max(f.kappa * a_y + f.beta, -SLIP_CORRECTION_MAX), SLIP_CORRECTION_MAX)
+
+
+@jitable
+def noise_scale(f: SlipFit) -> float:
+    """The chords' slip noise as measured on straights, over the configured σ's (≥ 1: the
+    configured σ is a floor)."""
+    return math.sqrt(max(1.0, f.n2 / f.n1))
+
+
+@jitable
+def speed_offset(f: SpeedFit) -> float:
+    """Estimated speed-sensor offset [m/s] (measured − true), bounded by ``SPEED_OFFSET_MAX``."""
+    if f.sw <= 0.0:
+        return 0.0
+    return min(max(f.sv / f.sw, -SPEED_OFFSET_MAX), SPEED_OFFSET_MAX)
+
+
+@jitable
+def _inverse(num: float, den: float) -> float:
+    """1 / (num / den), the compliance at least 1e-12; ∞ for a compliance ≤ 0."""
+    comp = num / den
+    if not comp > 0.0:
+        return math.inf
+    return 1.0 / max(comp, 1e-12)
+
+
+@jitable
+def stiffness(p: CourseParams, f: StiffFit) -> tuple[float, float]:
+    """(Ĉ_f, Ĉ_r) [N/rad]: the inverse of the fitted compliances (the model's until data outweigh
+    the prior), within ``STIFF_RANGE`` × the model's."""
+    lo, hi = STIFF_RANGE
+    return (min(max(_inverse(f.num_f, f.den_f), lo * p.C_f), hi * p.C_f),
+            min(max(_inverse(f.num_r, f.den_r), lo * p.C_r), hi * p.C_r))
+
+
+@jitable
+def model_changed(f: SlipFit) -> SlipFit:
+    """The MHE's model got new stiffnesses: the slip fit's κ restarts from its prior (it was the
+    a_y-proportional error of the previous model, which the new one no longer makes; kept, it
+    corrects a bias that has gone, for its memory). β, a heading-sensor offset that no model change
+    explains, is kept (its row and column of P too)."""
+    return SlipFit(0.0, f.beta, SLIP_PRIOR[0] * SLIP_PRIOR[0], 0.0, 0.0, f.P11, f.n2, f.n1)
+
+
+@jitable
+def stiffness_update(p: CourseParams, s: CourseState, has_applied: bool, C_f: float,
+                     C_r: float) -> tuple[bool, float, float, CourseState]:
+    """The fitted (Ĉ_f, Ĉ_r) against those the MHE and the inner loop have (``has_applied``
+    False: the model's): (give them: both moved by over 1 % or none given yet, Ĉ_f, Ĉ_r, the
+    state — when they replace given ones, the slip fit's κ restarts, :func:`model_changed`)."""
+    cf, cr = stiffness(p, s.stiff)
+    if has_applied and abs(cf - C_f) <= 0.01 * abs(C_f) and abs(cr - C_r) <= 0.01 * abs(C_r):
+        return False, cf, cr, s
+    if has_applied:
+        s = CourseState(s.ring, s.n_iv, s.omega_now, s.v_now, s.n_chords, model_changed(s.slip), s.speed,
+                        s.stiff)
+    return True, cf, cr, s
 
 
 class CourseFusion:
     """Course and speed over ground from the measured positions, fitted against the model
-    (see the module docstring). Call :meth:`sample` every T_d and :meth:`close` at every MPC
-    step, before the MPC runs."""
+    (see the module docstring; the online wrapper of :func:`course_sample`, :func:`course_close`
+    and the fits' outputs). Call :meth:`sample` every T_d and :meth:`close` at every MPC step,
+    before the MPC runs."""
 
     def __init__(self, Tc: float, position_sigma: float, vehicle: VehicleParams | None = None) -> None:
         self.Tc = float(Tc)
-        self.sigma = max(float(position_sigma), 1e-4)
         self.vehicle = vehicle
+        p = vehicle
+        self.params = (course_params(self.Tc, float(position_sigma), False, 1.0, 1.0, math.nan, math.nan,
+                                     math.nan, math.nan, math.nan) if p is None else
+                       course_params(self.Tc, float(position_sigma), True, float(p.C_f), float(p.C_r),
+                                     float(p.mass), float(p.inertia), float(p.a), float(p.b), float(p.g)))
+        self.sigma = self.params.sigma
         self.reset()
 
     def reset(self) -> None:
         """Forget everything: corrections back to zero."""
-        self._iv: deque[_Interval] = deque(maxlen=BASELINE)
-        self._cur: _Interval | None = None
-        self._omega_now = 0.0
-        self._v_now = math.nan
-        self._theta = np.zeros(2)  # [κ, β]
-        self._P = np.diag(np.square(SLIP_PRIOR))
-        self._sv = 0.0  # speed-offset fit: Σ w b, Σ w
-        self._sw = 0.0
-        self.n_chords = 0
-        # measured noise level: Σ (innovation / σ_chord)² and Σ 1 of the slip fit on straights
-        self._n2 = NOISE_PRIOR_CHORDS
-        self._n1 = NOISE_PRIOR_CHORDS
-        # compliance fits α = F / C per axle: Σ w F α, Σ w F² with the prior 1/C_model of
-        # standard deviation STIFF_PRIOR_REL / C_model, i.e. information (C_model / REL)²
-        p = self.vehicle
-        c0 = np.array((p.C_f, p.C_r) if p is not None else (1.0, 1.0))
-        self._prior_den = np.square(c0 / STIFF_PRIOR_REL)
-        self._prior_num = self._prior_den / c0
-        self._c0 = c0  # the model's (C_f, C_r): the plausible range of a chord's own stiffness
-        self._cnum = self._prior_num.copy()
-        self._cden = self._prior_den.copy()
-        self._alpha_hat_prev: float | None = None
+        self.state = course_start(self.params)
+        self.cur = NO_INTERVAL
+
+    @property
+    def n_chords(self) -> int:
+        """Chords fitted since the reset."""
+        return self.state.n_chords
 
     @property
     def slip_params(self) -> tuple[float, float]:
         """(κ̂ [rad per m/s²], β̂ [rad])."""
-        return float(self._theta[0]), float(self._theta[1])
+        return self.state.slip.kappa, self.state.slip.beta
 
     def slip_correction(self, a_y: float) -> float:
         """κ̂ a_y + β̂ [rad], bounded by ``SLIP_CORRECTION_MAX``."""
-        if not math.isfinite(a_y):
-            a_y = 0.0
-        c = float(self._theta[0] * a_y + self._theta[1])
-        return min(max(c, -SLIP_CORRECTION_MAX), SLIP_CORRECTION_MAX)
+        return slip_correction(self.state.slip, float(a_y))
 
     @property
     def noise_scale(self) -> float:
-        """The chords' slip noise as measured on straights, over the configured σ's (≥ 1: the
-        configured σ is a floor)."""
-        return math.sqrt(max(1.0, self._n2 / self._n1))
+        """The chords' slip noise as measured on straights, over the configured σ's (≥ 1)."""
+        return noise_scale(self.state.slip)
 
     @property
     def speed_offset(self) -> float:
         """Estimated speed-sensor offset [m/s] (measured − true)."""
-        if self._sw <= 0.0:
-            return 0.0
-        return min(max(self._sv / self._sw, -SPEED_OFFSET_MAX), SPEED_OFFSET_MAX)
+        return speed_offset(self.state.speed)
 
     @property
     def stiffness(self) -> tuple[float, float] | None:
-        """(Ĉ_f, Ĉ_r) [N/rad]: the inverse of the fitted compliances (the model's until data
-        outweigh the prior), within ``STIFF_RANGE`` × the model's; None without a vehicle."""
-        p = self.vehicle
-        if p is None:
-            return None
-        lo, hi = STIFF_RANGE
-        comp = self._cnum / self._cden
-        c = np.where(comp > 0.0, 1.0 / np.maximum(comp, 1e-12), np.inf)
-        return (min(max(float(c[0]), lo * p.C_f), hi * p.C_f),
-                min(max(float(c[1]), lo * p.C_r), hi * p.C_r))
+        """(Ĉ_f, Ĉ_r) [N/rad] within ``STIFF_RANGE`` × the model's; None without a vehicle."""
+        return stiffness(self.params, self.state.stiff) if self.vehicle is not None else None
 
     def model_changed(self) -> None:
-        """The MHE's model got new stiffnesses: the slip fit's κ restarts from its prior (it was
-        the a_y-proportional error of the previous model, which the new one no longer makes;
-        kept, it corrects a bias that has gone, for its memory). β, a heading-sensor offset that
-        no model change explains, is kept."""
-        self._theta[0] = 0.0
-        self._P[0, :] = 0.0
-        self._P[:, 0] = 0.0
-        self._P[0, 0] = SLIP_PRIOR[0] * SLIP_PRIOR[0]
+        """The MHE's model got new stiffnesses: κ restarts from its prior (:func:`model_changed`)."""
+        self.state = self.state._replace(slip=model_changed(self.state.slip))
+
+    def stiffness_update(self, applied: list[float]) -> tuple[float, float] | None:
+        """The stiffnesses to give the MHE and the inner loop, given those they have (``applied``,
+        empty: the model's), or None (no vehicle, or no change of over 1 %); when they replace given
+        ones, κ restarts (:func:`stiffness_update`)."""
+        if self.vehicle is None:
+            return None
+        has = bool(applied)
+        give, cf, cr, self.state = stiffness_update(self.params, self.state, has,
+                                                    applied[0] if has else 0.0, applied[1] if has else 0.0)
+        return (cf, cr) if give else None
 
     def sample(self, ok: bool, theta: float, v: float, alpha_hat: float, a_y: float,
                omega: float = 0.0, delta: float = 0.0, force: float = 0.0) -> None:
-        """One T_d sample: measured heading θ, speed v (raw) and yaw rate ω, the estimate's α̂
-        and â_y = v̂ ω̂, the applied steering δ and force F_xR; ``ok`` False for a missing or
-        rejected sample (spoils the interval)."""
-        cur = self._cur
-        if cur is None:
-            return
-        if not (ok and math.isfinite(theta) and math.isfinite(v) and math.isfinite(alpha_hat)
-                and math.isfinite(a_y) and math.isfinite(omega) and math.isfinite(delta)
-                and math.isfinite(force)):
-            cur.ok = False
-            return
-        dth = _wrap(theta - cur.start[2])
-        w = 0.5 if cur.n == 0 else 1.0  # trapezoid: the opening sample counts half
-        if cur.n == 0:
-            cur.w_first = omega
-            cur.v_first = v
-        cur.n += 1
-        cur.sv_full += v
-        cur.s_delta += delta
-        cur.s_w_v += omega / max(v, 1.0)
-        cur.s_vw += v * omega
-        cur.s_F += force
-        cur.sv += w * v
-        cur.sv_dth += w * v * dth
-        cur.sv_alpha += v * alpha_hat
-        cur.sv_ay += v * a_y
+        """One T_d sample (:func:`course_sample`)."""
+        self.cur = course_sample(self.cur, bool(ok), float(theta), float(v), float(alpha_hat), float(a_y),
+                                 float(omega), float(delta), float(force))
 
     def close(self, pose: NDArray[np.float64] | None, v: float, omega: float = 0.0,
               ay_ref: float = 0.0) -> None:
-        """An MPC step: ``pose`` the measured pose now (None if missing: no chord ends here),
-        ``v`` and ``omega`` the measured speed and yaw rate now (the closing sample), ``ay_ref``
-        the reference's lateral acceleration v_d ω_d now."""
-        self._omega_now = omega
-        self._v_now = v
-        ay = abs(ay_ref) if math.isfinite(ay_ref) else 0.0
-        cur = self._cur
-        good = pose is not None and bool(np.all(np.isfinite(pose))) and math.isfinite(v)
-        if cur is not None:
-            cur.ay_ref = min(cur.ay_ref, ay)
-            if good and cur.n > 0 and cur.ok:
-                assert pose is not None
-                dth = _wrap(float(pose[2]) - cur.start[2])
-                cur.sv += 0.5 * v
-                cur.sv_dth += 0.5 * v * dth
-            else:
-                cur.ok = False
-            self._iv.append(cur)
-            if good and len(self._iv) == BASELINE and all(i.ok for i in self._iv):
-                assert pose is not None
-                self._chord(np.asarray(pose, dtype=float))
-        self._cur = _Interval(start=tuple(float(c) for c in pose), ay_ref=ay) if good else None  # type: ignore[arg-type, union-attr]
+        """An MPC step (:func:`course_close`): ``pose`` the measured pose now (None if missing: no
+        chord ends here), ``v`` and ``omega`` the measured speed and yaw rate now, ``ay_ref`` the
+        reference's lateral acceleration v_d ω_d now."""
+        if pose is None:
+            X = Y = th = math.nan
+        else:
+            X, Y, th = float(pose[0]), float(pose[1]), float(pose[2])
+        self.state, self.cur = course_close(self.params, self.state, self.cur, pose is not None, X, Y, th,
+                                            float(v), float(omega), float(ay_ref))
 
-    def _chord(self, end: NDArray[np.float64]) -> None:
-        first = self._iv[0].start
-        dx, dy = float(end[0] - first[0]), float(end[1] - first[1])
-        chord = math.hypot(dx, dy)
-        if chord < MIN_CHORD_M:
-            return
-        # speed-weighted means over the chord (θ relative to the chord's first pose)
-        sv = sum(i.sv for i in self._iv)
-        if sv <= 0.0:
-            return
-        sv_th = sum(i.sv_dth + _wrap(i.start[2] - first[2]) * i.sv for i in self._iv)
-        th_mean = first[2] + sv_th / sv
-        n = sum(i.n for i in self._iv)
-        sv_full = sum(i.sv_full for i in self._iv)
-        a_course = _wrap(math.atan2(dy, dx) - th_mean)
-        alpha_hat = sum(i.sv_alpha for i in self._iv) / sv_full
-        a_y = sum(i.sv_ay for i in self._iv) / sv_full
-        self.n_chords += 1
-        # slip: z = ᾱ_course − ᾱ̂ = κ ā_y + β, weighted by the chord's noise (positions at both ends)
-        z = a_course - alpha_hat
-        sig0 = 2.0 * math.sqrt(2.0) * self.sigma / chord + 2e-4
-        # where the reference turns (its turn, not the car's, so that weaving is no corner): the
-        # stiffness fit below takes only such chords; where it runs straight the slip and the
-        # model's error in it are ≈ 0, so the fit's innovation there is the chord's noise, and its
-        # level scales the configured σ up (positions noisier than the config says)
-        cornering = min(i.ay_ref for i in self._iv) >= CORNER_ACCEL
-        phi = np.array([a_y, 1.0])
-        innov = z - phi @ self._theta
-        if not cornering:
-            g_n = 1.0 - self.Tc / NOISE_MEMORY_S
-            r = innov / sig0  # (a scalar: 1-D @ 1-D, which numpy's stubs type as an array)
-            self._n2 = g_n * self._n2 + r * r  # type: ignore[assignment]
-            self._n1 = g_n * self._n1 + 1.0
-        sig = sig0 * self.noise_scale
-        lam = 1.0 - self.Tc / SLIP_MEMORY_S
-        P = self._P / lam
-        k = P @ phi / (sig * sig + phi @ P @ phi)
-        self._theta = self._theta + k * innov
-        self._P = P - np.outer(k, phi @ P)
-        # speed over ground: the arc of the chord (turn Δχ ≈ Δθ) over its time span
-        turn = abs(_wrap(float(end[2]) - first[2]))
-        arc = chord * ((0.5 * turn) / math.sin(0.5 * turn) if turn > 1e-6 else 1.0)
-        v_ground = arc / (BASELINE * self.Tc)
-        v_meas = sv / n  # the trapezoid mean of the measured speed over the chord's time
-        w = (chord / (2.0 * self.sigma)) ** 2
-        g = 1.0 - self.Tc / SPEED_MEMORY_S
-        self._sv = g * self._sv + w * (v_meas - v_ground)
-        self._sw = g * self._sw + w
-        # axle stiffnesses from the course's slip (quasi-steady single track):
-        # lateral force S = M v (ω + α̇) + F_x α and yaw moment T = I ω̇ give F_yF = (b S + T)/L,
-        # F_yR = (a S − T)/L; slips α_F = δ − α − a ω/v, α_R = b ω/v − α (chord means). The fit
-        # is of the compliance 1/C with the force as regressor (slip = F / C): the forces come
-        # from v, ω (precise), the slips carry the course's noise — as the response, noise does not
-        # bias the fit (as a regressor it would pull C towards 0 on every straight).
-        p = self.vehicle
-        vw = sum(i.s_vw for i in self._iv) / n
-        # and only where the reference turns (``cornering``): a straight carries no information on
-        # C (slips and forces ≈ 0), only the traces of a lightly damped yaw motion (the same Monza
-        # case drifted there)
-        # and at nearly constant speed (pure slip: STIFF_MAX_ACCEL); a NaN speed fails the test
-        a_x = (self._v_now - self._iv[0].v_first) / (BASELINE * self.Tc)
-        steady = p is not None and abs(a_x) <= STIFF_MAX_ACCEL * p.g
-        if p is not None and math.isfinite(self._omega_now) and cornering and steady:
-            span = BASELINE * self.Tc
-            # α̇ from the model's α̂ over consecutive chords (smooth; the course's own α would put
-            # its noise through a 1/T_c difference into the force)
-            ah_prev, self._alpha_hat_prev = self._alpha_hat_prev, alpha_hat
-            al_dot = 0.0 if ah_prev is None else (alpha_hat - ah_prev) / self.Tc
-            S = p.mass * (vw + v_meas * al_dot) + sum(i.s_F for i in self._iv) / n * a_course
-            T = p.inertia * (self._omega_now - self._iv[0].w_first) / span
-            L = p.a + p.b
-            w_v = sum(i.s_w_v for i in self._iv) / n
-            delta = sum(i.s_delta for i in self._iv) / n
-            slips = np.array([delta - a_course - p.a * w_v, p.b * w_v - a_course])
-            forces = np.array([(p.b * S + T) / L, (p.a * S - T) / L])
-            # per axle, only a chord whose own stiffness F / slip is a plausible one (the sign and
-            # STIFF_RANGE × the model's): anything else is no quasi-steady pure-slip chord (a
-            # transient, a lag between forces and slips, a saturated tyre) and would drag the fit to
-            # its bounds (on Spa at 22 m/s one corner took it to 2× and doubled the largest e_y)
-            lo, hi = STIFF_RANGE
-            fa, sa = np.abs(forces), np.abs(slips)
-            ok = (forces * slips > 0.0) & (sa * hi * self._c0 >= fa) & (sa * lo * self._c0 <= fa)
-            forces, slips = np.where(ok, forces, 0.0), np.where(ok, slips, 0.0)
-            # the chord's weight: its slip noise (the course's, or the fit's own floor), shared
-            # with the neighbouring chords (STIFF_CORRELATION)
-            s_slip = max(sig, STIFF_SLIP_FLOOR)
-            w_c = 1.0 / (STIFF_CORRELATION * s_slip * s_slip)
-            g2 = 1.0 - self.Tc / STIFF_MEMORY_S
-            # forgetting towards the prior (a fit without excitation returns to the model)
-            self._cnum = g2 * self._cnum + (1.0 - g2) * self._prior_num + w_c * (forces * slips)
-            self._cden = g2 * self._cden + (1.0 - g2) * self._prior_den + w_c * (forces * forces)
+
+# ============================================================================ mass estimator
+class MassParams(NamedTuple):
+    """Parameters of the mass estimator.
+
+    Attributes:
+        mass: the model mass M [kg].
+        Td: call period T_d [s].
+        window: the MHE's horizon N [samples] (ā is the mean acceleration over it).
+        tau: the inner loop's speed time constant τ [s] (its feedback M (v_ref − v̂)/τ).
+        speed_feedback: the inner loop has that speed feedback (``lqr.speed_feedback``).
+    """
+
+    mass: float
+    Td: float
+    window: int
+    tau: float
+    speed_feedback: bool
+
+
+class MassState(NamedTuple):
+    """State of the mass estimator (the speeds of the window are a ring of ``window`` + 1 samples
+    outside the record, written in place).
+
+    Attributes:
+        count: finite samples since the reset (the ring's write position is ``count`` mod its size).
+        run: consecutive latest samples above ``MASS_MIN_SPEED`` (at most the ring's size).
+        accel: ā, the window's mean acceleration [m/s²].
+        lf, la: the high-pass filters' low-pass parts of F̂ and ā.
+        open: the fit ran at the previous sample (else the filters restart).
+        sxy, sxx: Σ x y and Σ x² of the high-passed ā (x) and F̂ (y), with forgetting.
+    """
+
+    count: int
+    run: int
+    accel: float
+    lf: float
+    la: float
+    open: bool
+    sxy: float
+    sxx: float
+
+
+MASS_START = MassState(0, 0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
+
+
+@jitable
+def mass_update(p: MassParams, s: MassState, ring: NDArray[np.float64] | list[float], v_hat: float,
+                F_hat: float) -> MassState:
+    """One sample of the MHE's v̂ and F̂ (``ring``: the window's speeds, ``window`` + 1 of them,
+    written in place): ā over the window, and — above ``MASS_MIN_SPEED`` all along a full window —
+    one step of the high-passed least squares F̂_hp = ΔM ā_hp. A non-finite sample changes nothing
+    but stops the fit (its high-pass restarts when it opens again)."""
+    if not (math.isfinite(v_hat) and math.isfinite(F_hat)):
+        return MassState(s.count, s.run, s.accel, s.lf, s.la, False, s.sxy, s.sxx)
+    size = p.window + 1
+    ring[s.count % size] = v_hat
+    count = s.count + 1
+    run = min(s.run + 1, size) if v_hat > MASS_MIN_SPEED else 0
+    n = min(count, size) - 1
+    oldest = ring[count % size] if count >= size else ring[0]
+    accel = (v_hat - oldest) / (n * p.Td) if n > 0 else 0.0
+    if run < size:  # a window not yet full, or with a speed at or below MASS_MIN_SPEED
+        return MassState(count, run, accel, s.lf, s.la, False, s.sxy, s.sxx)
+    lf, la = s.lf, s.la
+    if not s.open:
+        lf, la = F_hat, accel
+    g = p.Td / MASS_HIGHPASS_S
+    lf += g * (F_hat - lf)
+    la += g * (accel - la)
+    y, x = F_hat - lf, accel - la
+    lam = 1.0 - p.Td / MASS_MEMORY_S
+    return MassState(count, run, accel, lf, la, True, lam * s.sxy + x * y, lam * s.sxx + x * x)
+
+
+@jitable
+def delta_mass(p: MassParams, s: MassState) -> float:
+    """ΔM̂ [kg] (0 until the fit is excited, Σ x² ≥ ``MASS_EXCITATION``), within ``MASS_RANGE`` ×
+    the model mass."""
+    if s.sxx < MASS_EXCITATION:
+        return 0.0
+    lo, hi = MASS_RANGE
+    return min(max(s.sxy / s.sxx, lo * p.mass), hi * p.mass)
+
+
+@jitable
+def inertia_force(p: MassParams, s: MassState, v_hat: float, v_ref: float) -> float:
+    """The force to add to the compensated F̂: −ΔM̂ ā (the mass error's inertia is not friction)
+    + ΔM̂ (v_ref − v̂)/τ with the speed feedback (its missing mass); 0 without an estimate or with
+    a non-finite v̂ or v_ref."""
+    dm = delta_mass(p, s)
+    if dm == 0.0 or not (math.isfinite(v_hat) and math.isfinite(v_ref)):
+        return 0.0
+    out = -dm * s.accel
+    if p.speed_feedback:
+        out += dm * (v_ref - v_hat) / p.tau
+    return out
 
 
 class MassEstimator:
-    """ΔM from the friction estimate and the window's acceleration (see the module docstring).
-    Call :meth:`update` every T_d with the MHE's v̂ and F̂."""
+    """ΔM from the friction estimate and the window's acceleration (see the module docstring; the
+    online wrapper of :func:`mass_update`). Call :meth:`update` every T_d with the MHE's v̂ and F̂."""
 
-    def __init__(self, mass: float, Td: float, window: int) -> None:
+    def __init__(self, mass: float, Td: float, window: int, tau: float = 1.0,
+                 speed_feedback: bool = False) -> None:
         self.mass = float(mass)
         self.Td = float(Td)
         self.window = int(window)
+        self.params = MassParams(self.mass, self.Td, self.window, float(tau), bool(speed_feedback))
         self.reset()
 
     def reset(self) -> None:
         """Forget everything: ΔM̂ = 0."""
-        self._v: deque[float] = deque(maxlen=self.window + 1)
-        self._lf = self._la = 0.0
-        self._open = False
-        self._sxy = self._sxx = 0.0
-        self.accel = 0.0
+        self.state = MASS_START
+        self._ring = [0.0] * (self.window + 1)
+
+    @property
+    def accel(self) -> float:
+        """ā, the window's mean acceleration at the last sample [m/s²]."""
+        return self.state.accel
 
     @property
     def delta_mass(self) -> float:
         """ΔM̂ [kg] (0 until the fit is excited), within ``MASS_RANGE`` × the model mass."""
-        if self._sxx < MASS_EXCITATION:
-            return 0.0
-        lo, hi = MASS_RANGE
-        return min(max(self._sxy / self._sxx, lo * self.mass), hi * self.mass)
+        return delta_mass(self.params, self.state)
 
     def update(self, v_hat: float, F_hat: float) -> float:
         """Add one sample; returns ā, the window's mean acceleration [m/s²]."""
-        if not (math.isfinite(v_hat) and math.isfinite(F_hat)):
-            self._open = False
-            return self.accel
-        self._v.append(v_hat)
-        n = len(self._v) - 1
-        self.accel = (self._v[-1] - self._v[0]) / (n * self.Td) if n > 0 else 0.0
-        if n < self.window or min(self._v) <= MASS_MIN_SPEED:
-            self._open = False  # the high-pass restarts when the fit opens again
-            return self.accel
-        a = self.accel
-        if not self._open:
-            self._lf, self._la, self._open = F_hat, a, True
-        g = self.Td / MASS_HIGHPASS_S
-        self._lf += g * (F_hat - self._lf)
-        self._la += g * (a - self._la)
-        y, x = F_hat - self._lf, a - self._la
-        lam = 1.0 - self.Td / MASS_MEMORY_S
-        self._sxy = lam * self._sxy + x * y
-        self._sxx = lam * self._sxx + x * x
-        return a
+        self.state = mass_update(self.params, self.state, self._ring, float(v_hat), float(F_hat))
+        return self.state.accel
+
+    def inertia_terms(self, v_hat: float, F_hat: float, v_ref: float) -> float:
+        """Add one sample; the force to add to the compensated F̂ (:func:`inertia_force`)."""
+        self.state = mass_update(self.params, self.state, self._ring, float(v_hat), float(F_hat))
+        return inertia_force(self.params, self.state, float(v_hat), float(v_ref))
 
 
 class Fusion:
@@ -473,11 +838,11 @@ class Fusion:
     def __init__(self, cfg: Config) -> None:
         self.settings: FusionSettings = cfg.fusion
         self.Td, self.Tc = cfg.rates.Td, cfg.rates.Tc
-        self.guard = RepeatGuard()
-        self.course = CourseFusion(self.Tc, cfg.noise.position * cfg.noise.scale, cfg.vehicle)
-        self.mass = MassEstimator(cfg.vehicle.mass, self.Td, cfg.mhe.N)
         self.tau = cfg.lqr.speed_time_constant
         self.speed_feedback = cfg.lqr.speed_feedback
+        self.guard = RepeatGuard()
+        self.course = CourseFusion(self.Tc, cfg.noise.position * cfg.noise.scale, cfg.vehicle)
+        self.mass = MassEstimator(cfg.vehicle.mass, self.Td, cfg.mhe.N, self.tau, self.speed_feedback)
 
     def reset(self, pose: NDArray[np.float64] | None) -> None:
         """Start over from ``pose`` (None: the first measured one)."""
@@ -493,7 +858,7 @@ class Fusion:
 
     def speed_offset(self) -> float:
         """The speed-sensor offset to remove (0 with ``course_speed`` off)."""
-        return self.course.speed_offset if self.settings.course_speed else 0.0
+        return speed_offset(self.course.state.speed) if self.settings.course_speed else 0.0
 
     def slip_correction(self, a_y: float) -> float:
         """The correction added to α̂ for the outer loop (0 with ``course_slip`` off)."""
@@ -505,11 +870,4 @@ class Fusion:
         feedback's missing mass)."""
         if not self.settings.mass_estimate:
             return 0.0
-        a = self.mass.update(v_hat, F_hat)
-        dm = self.mass.delta_mass
-        if dm == 0.0 or not (math.isfinite(v_hat) and math.isfinite(v_ref)):
-            return 0.0
-        out = -dm * a
-        if self.speed_feedback:
-            out += dm * (v_ref - v_hat) / self.tau
-        return out
+        return self.mass.inertia_terms(v_hat, F_hat, v_ref)

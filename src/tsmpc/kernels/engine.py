@@ -9,9 +9,12 @@ mass-error terms, the TS-LQR) and the plant's T_d/h RK4 steps — and logs into 
 The blocks are the compiled kernels the Python wrappers call: the TS-MPC's step (paper eq. "MPC";
 :func:`~tsmpc.kernels.mpc.guarded_step`), the MHE-UIO's window (eqs. "MHE", "disturb_estimation";
 :func:`~tsmpc.kernels.mhe.window_step`), the TS-LQR (Sec. 3.2; :func:`~tsmpc.kernels.lqr.lqr_step`)
-and the plant's RK4 block (the single-track plant; :func:`~tsmpc.kernels.plant.rk4_block`). The glue between
-them is ported operation by operation (same order, same rounding, Python's ``min``/``max``/``%``
-and ``math.hypot``), so the engine reproduces the Python loop to the last bit.
+and the plant's RK4 block (the single-track plant; :func:`~tsmpc.kernels.plant.rk4_block`). The
+``@jitable`` blocks (:mod:`tsmpc.kernels.jit`: the sample gates, the fusion estimators of
+:mod:`tsmpc.estimation.fusion`, friction-step detection, the slip gate, …) are the cascade's own
+functions, compiled in, their records loaded from and stored to the state slots around each call.
+The glue between them is ported operation by operation (same order, same rounding, Python's
+``min``/``max``/``%`` and ``math.hypot``), so the engine reproduces the Python loop to the last bit.
 
 Where a block's compiled fast path does not decide a step (the MPC's condensed QP / SOCP path, the
 MHE's dense QP with an active state bound, a singular reference gain of the TS-LQR, a non-finite
@@ -53,6 +56,27 @@ from tsmpc.estimation.friction_step import (
     FrictionStepState,
     friction_step_update,
 )
+from tsmpc.estimation.fusion import (
+    BASELINE,
+    CourseState,
+    Interval,
+    MassParams,
+    MassState,
+    RepeatState,
+    SlipFit,
+    SpeedFit,
+    StiffFit,
+    course_close,
+    course_params,
+    course_sample,
+    delta_mass,
+    inertia_force,
+    mass_update,
+    repeat_check,
+    slip_correction,
+    speed_offset,
+    stiffness_update,
+)
 from tsmpc.kernels.jit import cpython_hypot
 from tsmpc.kernels.lqr import lqr_step
 from tsmpc.kernels.mhe import window_step
@@ -92,10 +116,9 @@ N_FP = FP_SENS + N_SP
 (IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
- IP_FMA,
  IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV,
- IP_GOV, IP_G_ORACLE, IP_G_PREVIEW) = range(31)
-N_IP = 31
+ IP_GOV, IP_G_ORACLE, IP_G_PREVIEW) = range(30)
+N_IP = 30
 # ---------------------------------------------------------------------------- MHE parameters
 # mp = [q(3), r(2), p(3), p_F, x_min(3), x_max(3), box lo(3), box hi(3), M, I, C_f, C_r, a, b, μ_o g,
 #       drag, T_d]: MHEUIO's kernel arguments in its order (C_f, C_r change with the stiffness fit)
@@ -105,16 +128,16 @@ N_MP = 30
 # ---------------------------------------------------------------------------- float state
 (SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, SF_HELD, _H1, _H2, SF_UPREV, _U1, SF_UAPP, _A1,
  SF_PLANTU, _PU1, SF_LASTA, SF_GUARD, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
- SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_PRIOR, _R1, SF_AHPREV,
+ SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, _FREE0, _FREE1, SF_AHPREV,
  SF_LF, SF_LA, SF_SXY, SF_SXX, SF_ACCEL, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2,
- SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM, SF_PRIORD, _RD1, SF_N2,
+ SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM, _FREE2, _FREE3, SF_N2,
  SF_N1, SF_JUMP, _J1, _J2, _J3, SF_JT0,
  SF_TOFF, SF_GRATE, SF_GGRIP, SF_GHOLD) = range(70)
 SF_SENS = 70  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
 N_SF = SF_SENS + N_SS
 # ---------------------------------------------------------------------------- integer state
-(SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_HASCUR, SI_NCHORDS,
+(SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_MASSRUN, SI_NCHORDS,
  SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
  SI_FRESH, SI_SPOK, SI_POSEOK, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
  SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, SI_FSN, SI_FSSINCE,
@@ -126,9 +149,9 @@ N_SI = 37
  SC_PU, _PU2, SC_UK, _UK1) = range(30)
 N_SC = 30
 # ---------------------------------------------------------------------------- course intervals
-(IV_SX, IV_SY, IV_STH, IV_OK, IV_N, IV_SV, IV_SVDTH, IV_SVALPHA, IV_SVAY, IV_SVFULL, IV_SDELTA,
- IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST) = range(17)
-N_IV = 17
+(IV_OPEN, IV_OK, IV_SX, IV_SY, IV_STH, IV_N, IV_SV, IV_SVDTH, IV_SVALPHA, IV_SVAY, IV_SVFULL,
+ IV_SDELTA, IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST) = range(18)  # Interval's fields
+N_IV = 18
 # ---------------------------------------------------------------------------- inner log columns
 (LI_X, _LX1, _LX2, _LX3, _LX4, _LX5, LI_EST, _LE1, _LE2, LI_MEAS, _LM1, LI_FHAT, LI_FRAW,
  LI_FTRUE, LI_MU, LI_CMD, _LC1, LI_TMHE, LI_TLQR) = range(19)
@@ -140,18 +163,6 @@ N_LO = 20
 # integer outer log columns
 LOI_STATUS, LOI_IT, LOI_QPIT, LOI_CLIP = range(4)
 
-# Constants of the blocks ported here (their modules: tsmpc.control.cascade, .slip_aware,
-# tsmpc.estimation.fusion); tsmpc.sim.engine checks that they still agree before every run.
-BASELINE, MIN_CHORD_M, SLIP_MEMORY_S, SPEED_MEMORY_S = 5, 2.0, 30.0, 10.0
-SLIP_CORRECTION_MAX, SPEED_OFFSET_MAX = 0.05, 2.0
-SLIP_PRIOR = (0.005, 0.02)
-MASS_MIN_SPEED, MASS_HIGHPASS_S, MASS_MEMORY_S, MASS_EXCITATION = 3.0, 2.0, 100.0, 50.0
-MASS_RANGE_LO, MASS_RANGE_HI = -0.4, 0.6
-STIFF_PRIOR_REL, STIFF_SLIP_FLOOR, STIFF_CORRELATION = 0.3, 5e-4, 5.0
-NOISE_MEMORY_S, NOISE_PRIOR_CHORDS = 30.0, 10.0
-STIFF_MEMORY_S, STIFF_RANGE_LO, STIFF_RANGE_HI, CORNER_ACCEL = 100.0, 0.5, 2.0, 0.2
-STIFF_MAX_ACCEL = 0.1
-MASS_RANGE, STIFF_RANGE = (MASS_RANGE_LO, MASS_RANGE_HI), (STIFF_RANGE_LO, STIFF_RANGE_HI)  # (checks)
 # friction programs (the profiles of tsmpc.scenarios / tsmpc.conditions as data)
 FR_CONST, FR_PAPER, FR_PATCH = 0, 1, 2
 
@@ -178,7 +189,7 @@ def _ticks(typingctx):
 
 @intrinsic
 def _fma(typingctx, a, b, c):
-    """a·b + c with one rounding (what the BLAS of numpy's ``P @ φ`` does on FMA machines)."""
+    """a·b + c with one rounding (llvm.fma)."""
     def codegen(context, builder, signature, args):
         d = ir.DoubleType()
         fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(d, [d, d, d]),
@@ -224,16 +235,6 @@ def _wrap(a):
 #: not cached on its own: its cache entry would be keyed by kernels/jit.py, outside the engine's
 #: entries that a broken cache's repair deletes)
 hypot_py = njit(cache=False, fastmath=False)(cpython_hypot)
-
-
-@njit(cache=True, fastmath=False)
-def _matvec2(p00, p01, x0, x1, fma_mode):
-    """One row of numpy's 2×2 ``P @ x``: plain, or fused as the BLAS does (``fma_mode``)."""
-    if fma_mode == 1:
-        return _fma(p00, x0, p01 * x1)
-    if fma_mode == 2:
-        return _fma(p01, x1, p00 * x0)
-    return p00 * x0 + p01 * x1
 
 
 @njit(cache=True, fastmath=False)
@@ -284,285 +285,126 @@ def _pose_errors(X, Y, th, xd, yd, thd, out):
     out[2] = _wrap(thd - th)
 
 
-@njit(cache=True, fastmath=False)
-def _course_sample(ok, theta, v, alpha_hat, a_y, omega, delta, force, cur, si):
-    """``CourseFusion.sample`` into the open interval ``cur``."""
-    if si[SI_HASCUR] == 0:
-        return
-    if not (ok and math.isfinite(theta) and math.isfinite(v) and math.isfinite(alpha_hat)
-            and math.isfinite(a_y) and math.isfinite(omega) and math.isfinite(delta)
-            and math.isfinite(force)):
-        cur[IV_OK] = 0.0
-        return
-    dth = _wrap(theta - cur[IV_STH])
-    w = 0.5 if cur[IV_N] == 0.0 else 1.0
-    if cur[IV_N] == 0.0:
-        cur[IV_WFIRST] = omega
-        cur[IV_VFIRST] = v
-    cur[IV_N] += 1.0
-    cur[IV_SVFULL] += v
-    cur[IV_SDELTA] += delta
-    cur[IV_SWV] += omega / _pmax(v, 1.0)
-    cur[IV_SVW] += v * omega
-    cur[IV_SF] += force
-    cur[IV_SV] += w * v
-    cur[IV_SVDTH] += w * v * dth
-    cur[IV_SVALPHA] += v * alpha_hat
-    cur[IV_SVAY] += v * a_y
+# ============================================================================ fusion
+# The fusion's blocks are tsmpc.estimation.fusion's (one definition); here their records are
+# loaded from and stored to the engine's state slots around each call.
+assert BASELINE == 5  # _course_load lists the ring's intervals one by one
 
 
 @njit(cache=True, fastmath=False)
-def _chord(ex, ey, eth, ivs, sf, si, fp, ip):
-    """``CourseFusion._chord``: the slip, speed-offset and stiffness fits on the chord of the
-    BASELINE closed intervals ``ivs`` ending at the measured pose (ex, ey, eth)."""
-    fx, fy, fth = ivs[0, IV_SX], ivs[0, IV_SY], ivs[0, IV_STH]
-    dx, dy = ex - fx, ey - fy
-    chord = hypot_py(dx, dy)
-    if chord < MIN_CHORD_M:
-        return
-    sv = 0.0
-    for i in range(BASELINE):
-        sv += ivs[i, IV_SV]
-    if sv <= 0.0:
-        return
-    sv_th = 0.0
-    n = 0.0
-    sv_full = 0.0
-    s_alpha = 0.0
-    s_ay = 0.0
-    for i in range(BASELINE):
-        sv_th += ivs[i, IV_SVDTH] + _wrap(ivs[i, IV_STH] - fth) * ivs[i, IV_SV]
-    th_mean = fth + sv_th / sv
-    for i in range(BASELINE):
-        n += ivs[i, IV_N]
-    for i in range(BASELINE):
-        sv_full += ivs[i, IV_SVFULL]
-    a_course = _wrap(math.atan2(dy, dx) - th_mean)
-    for i in range(BASELINE):
-        s_alpha += ivs[i, IV_SVALPHA]
-    alpha_hat = s_alpha / sv_full
-    for i in range(BASELINE):
-        s_ay += ivs[i, IV_SVAY]
-    a_y = s_ay / sv_full
-    si[SI_NCHORDS] += 1
-    Tc = fp[FP_TC]
-    sigma = fp[FP_COURSE_SIGMA]
-    # slip: recursive least squares of z = κ a_y + β with forgetting (numpy's 2-vector algebra)
-    z = a_course - alpha_hat
-    sig0 = 2.0 * math.sqrt(2.0) * sigma / chord + 2e-4
-    # the chords' noise level measured on straights scales the configured σ up (CourseFusion)
-    ay_min = ivs[0, IV_AYREF]
-    for i in range(1, BASELINE):
-        ay_min = _pmin(ay_min, ivs[i, IV_AYREF])
-    cornering = ay_min >= CORNER_ACCEL
-    phi0, phi1 = a_y, 1.0
-    th0, th1 = sf[SF_THETA], sf[SF_THETA + 1]
-    innov = z - (phi0 * th0 + phi1 * th1)
-    if not cornering:
-        g_n = 1.0 - Tc / NOISE_MEMORY_S
-        r = innov / sig0
-        sf[SF_N2] = g_n * sf[SF_N2] + r * r
-        sf[SF_N1] = g_n * sf[SF_N1] + 1.0
-    sig = sig0 * math.sqrt(_pmax(1.0, sf[SF_N2] / sf[SF_N1]))
-    lam = 1.0 - Tc / SLIP_MEMORY_S
-    P00, P01 = sf[SF_P] / lam, sf[SF_P + 1] / lam
-    P10, P11 = sf[SF_P + 2] / lam, sf[SF_P + 3] / lam
-    fm = ip[IP_FMA]
-    Pp0 = _matvec2(P00, P01, phi0, phi1, fm)
-    Pp1 = _matvec2(P10, P11, phi0, phi1, fm)
-    pP0 = phi0 * P00 + phi1 * P10  # φ @ P
-    pP1 = phi0 * P01 + phi1 * P11
-    den = sig * sig + (pP0 * phi0 + pP1 * phi1)
-    k0, k1 = Pp0 / den, Pp1 / den
-    sf[SF_THETA] = th0 + k0 * innov
-    sf[SF_THETA + 1] = th1 + k1 * innov
-    sf[SF_P] = P00 - k0 * pP0
-    sf[SF_P + 1] = P01 - k0 * pP1
-    sf[SF_P + 2] = P10 - k1 * pP0
-    sf[SF_P + 3] = P11 - k1 * pP1
-    # speed over ground: the chord's arc over its time span
-    turn = abs(_wrap(eth - fth))
-    arc = chord * ((0.5 * turn) / math.sin(0.5 * turn) if turn > 1e-6 else 1.0)
-    v_ground = arc / (BASELINE * Tc)
-    v_meas = sv / n
-    w = (chord / (2.0 * sigma)) ** 2
-    g = 1.0 - Tc / SPEED_MEMORY_S
-    sf[SF_SV] = g * sf[SF_SV] + w * (v_meas - v_ground)
-    sf[SF_SW] = g * sf[SF_SW] + w
-    # axle stiffnesses (quasi-steady single track), only where the reference turns
-    s_vw = 0.0
-    for i in range(BASELINE):
-        s_vw += ivs[i, IV_SVW]
-    vw = s_vw / n
-    # (only where the reference turns: ``cornering`` above)
-    # and at nearly constant speed (a pure-slip fit); a NaN speed fails the test
-    a_x = (sf[SF_VNOW] - ivs[0, IV_VFIRST]) / (BASELINE * Tc)
-    steady = abs(a_x) <= STIFF_MAX_ACCEL * fp[FP_VG]
-    if math.isfinite(sf[SF_OMNOW]) and cornering and steady:
-        span = BASELINE * Tc
-        ah_prev = sf[SF_AHPREV]
-        has_prev = si[SI_HASAH] != 0
-        sf[SF_AHPREV] = alpha_hat
-        si[SI_HASAH] = 1
-        al_dot = 0.0 if not has_prev else (alpha_hat - ah_prev) / Tc
-        s_F = 0.0
-        for i in range(BASELINE):
-            s_F += ivs[i, IV_SF]
-        S = fp[FP_VM] * (vw + v_meas * al_dot) + s_F / n * a_course
-        T = fp[FP_VI] * (sf[SF_OMNOW] - ivs[0, IV_WFIRST]) / span
-        a, b = fp[FP_VA], fp[FP_VB]
-        L = a + b
-        s_wv = 0.0
-        for i in range(BASELINE):
-            s_wv += ivs[i, IV_SWV]
-        w_v = s_wv / n
-        s_d = 0.0
-        for i in range(BASELINE):
-            s_d += ivs[i, IV_SDELTA]
-        delta = s_d / n
-        sl0 = delta - a_course - a * w_v
-        sl1 = b * w_v - a_course
-        f0 = (b * S + T) / L
-        f1 = (a * S - T) / L
-        # per axle, only a chord whose own F / slip is a plausible stiffness (CourseFusion._chord)
-        m0, m1 = fp[FP_CF0], fp[FP_CR0]
-        fa0, sa0, fa1, sa1 = abs(f0), abs(sl0), abs(f1), abs(sl1)
-        if not (f0 * sl0 > 0.0 and sa0 * STIFF_RANGE_HI * m0 >= fa0 and sa0 * STIFF_RANGE_LO * m0 <= fa0):
-            f0, sl0 = 0.0, 0.0
-        if not (f1 * sl1 > 0.0 and sa1 * STIFF_RANGE_HI * m1 >= fa1 and sa1 * STIFF_RANGE_LO * m1 <= fa1):
-            f1, sl1 = 0.0, 0.0
-        s_slip = _pmax(sig, STIFF_SLIP_FLOOR)  # the chord's weight (CourseFusion._chord)
-        w_c = 1.0 / (STIFF_CORRELATION * s_slip * s_slip)
-        g2 = 1.0 - Tc / STIFF_MEMORY_S
-        sf[SF_CNUM] = g2 * sf[SF_CNUM] + (1.0 - g2) * sf[SF_PRIOR] + w_c * (f0 * sl0)
-        sf[SF_CNUM + 1] = g2 * sf[SF_CNUM + 1] + (1.0 - g2) * sf[SF_PRIOR + 1] + w_c * (f1 * sl1)
-        sf[SF_CDEN] = g2 * sf[SF_CDEN] + (1.0 - g2) * sf[SF_PRIORD] + w_c * (f0 * f0)
-        sf[SF_CDEN + 1] = g2 * sf[SF_CDEN + 1] + (1.0 - g2) * sf[SF_PRIORD + 1] + w_c * (f1 * f1)
+def _repeated(X, Y, th, v, omega, sf, si):
+    """The repeat guard (:func:`repeat_check`; the simulator's samples carry no stamp)."""
+    same, g = repeat_check(RepeatState(si[SI_GUARDHAS] != 0, sf[SF_GUARD], sf[SF_GUARD + 1],
+                                       sf[SF_GUARD + 2], sf[SF_GUARD + 3], sf[SF_GUARD + 4], -math.inf),
+                           X, Y, th, v, omega, -math.inf)
+    si[SI_GUARDHAS] = 1 if g.has else 0
+    sf[SF_GUARD], sf[SF_GUARD + 1], sf[SF_GUARD + 2], sf[SF_GUARD + 3], sf[SF_GUARD + 4] = \
+        g.X, g.Y, g.theta, g.v, g.omega
+    return same
 
 
 @njit(cache=True, fastmath=False)
-def _course_close(good, px, py, pth, v, omega, ay_ref, cur, ivs, sf, si, fp, ip):
-    """``CourseFusion.close`` at an MPC step (``good``: a measured pose and speed)."""
-    sf[SF_OMNOW] = omega
-    sf[SF_VNOW] = v
-    ay = abs(ay_ref) if math.isfinite(ay_ref) else 0.0
-    good = good and math.isfinite(px) and math.isfinite(py) and math.isfinite(pth) \
-        and math.isfinite(v)
-    if si[SI_HASCUR] != 0:
-        cur[IV_AYREF] = _pmin(cur[IV_AYREF], ay)
-        if good and cur[IV_N] > 0.0 and cur[IV_OK] != 0.0:
-            dth = _wrap(pth - cur[IV_STH])
-            cur[IV_SV] += 0.5 * v
-            cur[IV_SVDTH] += 0.5 * v * dth
-        else:
-            cur[IV_OK] = 0.0
-        n = si[SI_IVN]
-        if n == BASELINE:  # the deque drops its oldest interval
-            for r in range(BASELINE - 1):
-                for c in range(N_IV):
-                    ivs[r, c] = ivs[r + 1, c]
-            n -= 1
-        for c in range(N_IV):
-            ivs[n, c] = cur[c]
-        n += 1
-        si[SI_IVN] = n
-        if good and n == BASELINE:
-            all_ok = True
-            for r in range(BASELINE):
-                if ivs[r, IV_OK] == 0.0:
-                    all_ok = False
-            if all_ok:
-                _chord(px, py, pth, ivs, sf, si, fp, ip)
-    if good:
-        for c in range(N_IV):
-            cur[c] = 0.0
-        cur[IV_SX], cur[IV_SY], cur[IV_STH] = px, py, pth
-        cur[IV_OK] = 1.0
-        cur[IV_AYREF] = ay
-        cur[IV_VFIRST] = math.nan
-        si[SI_HASCUR] = 1
-    else:
-        si[SI_HASCUR] = 0
+def _iv_load(a):
+    """The :class:`~tsmpc.estimation.fusion.Interval` of a row of ``cur`` / ``ivs``."""
+    return Interval(a[IV_OPEN] != 0.0, a[IV_OK] != 0.0, a[IV_SX], a[IV_SY], a[IV_STH], int(a[IV_N]),
+                    a[IV_SV], a[IV_SVDTH], a[IV_SVALPHA], a[IV_SVAY], a[IV_SVFULL], a[IV_SDELTA],
+                    a[IV_SWV], a[IV_SVW], a[IV_SF], a[IV_WFIRST], a[IV_AYREF], a[IV_VFIRST])
 
 
 @njit(cache=True, fastmath=False)
-def _apply_stiffness(sf, si, fp, mp, prm):
-    """``Cascade._apply_stiffness`` with ``CourseFusion.stiffness``: the fitted (Ĉ_f, Ĉ_r) to the
-    MHE's model and the TS-LQR's N̄, when they moved by over 1 %; when they replace earlier
-    ones, the slip fit's κ restarts from its prior (``CourseFusion.model_changed``)."""
-    comp = sf[SF_CNUM] / sf[SF_CDEN]
-    c0 = 1.0 / (comp if comp >= 1e-12 else 1e-12) if comp > 0.0 else math.inf
-    comp = sf[SF_CNUM + 1] / sf[SF_CDEN + 1]
-    c1 = 1.0 / (comp if comp >= 1e-12 else 1e-12) if comp > 0.0 else math.inf
-    m0, m1 = fp[FP_CF0], fp[FP_CR0]
-    C0 = _pmin(_pmax(c0, STIFF_RANGE_LO * m0), STIFF_RANGE_HI * m0)
-    C1 = _pmin(_pmax(c1, STIFF_RANGE_LO * m1), STIFF_RANGE_HI * m1)
-    if si[SI_HASAPPLIED] != 0:
-        a0, a1 = sf[SF_APPLIED], sf[SF_APPLIED + 1]
-        if abs(C0 - a0) <= 0.01 * abs(a0) and abs(C1 - a1) <= 0.01 * abs(a1):
-            return
-    prm[2], prm[3] = C0, C1
-    mp[MP_CF], mp[MP_CR] = C0, C1
-    sf[SF_APPLIED], sf[SF_APPLIED + 1] = C0, C1
-    if si[SI_HASAPPLIED] != 0:  # a model change: κ restarts (its row and column of P too)
-        sf[SF_THETA] = 0.0
-        sf[SF_P], sf[SF_P + 1], sf[SF_P + 2] = SLIP_PRIOR[0] * SLIP_PRIOR[0], 0.0, 0.0
-    si[SI_HASAPPLIED] = 1
+def _iv_store(iv, a):
+    """An interval into a row of ``cur`` / ``ivs``."""
+    a[IV_OPEN], a[IV_OK] = 1.0 if iv.open else 0.0, 1.0 if iv.ok else 0.0
+    a[IV_SX], a[IV_SY], a[IV_STH], a[IV_N] = iv.sx, iv.sy, iv.sth, float(iv.n)
+    a[IV_SV], a[IV_SVDTH], a[IV_SVALPHA], a[IV_SVAY] = iv.sv, iv.sv_dth, iv.sv_alpha, iv.sv_ay
+    a[IV_SVFULL], a[IV_SDELTA], a[IV_SWV], a[IV_SVW] = iv.sv_full, iv.s_delta, iv.s_w_v, iv.s_vw
+    a[IV_SF], a[IV_WFIRST], a[IV_AYREF], a[IV_VFIRST] = iv.s_F, iv.w_first, iv.ay_ref, iv.v_first
 
 
 @njit(cache=True, fastmath=False)
-def _mass_terms(v_hat, F_hat, v_ref, mv, sf, si, fp, ip):
-    """``Fusion.inertia_terms`` (with ``MassEstimator.update``): the force added to F̂."""
-    Td = fp[FP_TD]
-    W = ip[IP_NW]
-    if not (math.isfinite(v_hat) and math.isfinite(F_hat)):
-        si[SI_MASSOPEN] = 0
-        a = sf[SF_ACCEL]
-    else:
-        n = si[SI_MASSN]
-        if n == W + 1:
-            for r in range(W):
-                mv[r] = mv[r + 1]
-            n -= 1
-        mv[n] = v_hat
-        n += 1
-        si[SI_MASSN] = n
-        nn = n - 1
-        sf[SF_ACCEL] = (mv[n - 1] - mv[0]) / (nn * Td) if nn > 0 else 0.0
-        vmin = mv[0]
-        for r in range(1, n):
-            vmin = _pmin(vmin, mv[r])
-        if nn < W or vmin <= MASS_MIN_SPEED:
-            si[SI_MASSOPEN] = 0
-        else:
-            a = sf[SF_ACCEL]
-            if si[SI_MASSOPEN] == 0:
-                sf[SF_LF], sf[SF_LA] = F_hat, a
-                si[SI_MASSOPEN] = 1
-            g = Td / MASS_HIGHPASS_S
-            sf[SF_LF] += g * (F_hat - sf[SF_LF])
-            sf[SF_LA] += g * (a - sf[SF_LA])
-            yy, xx = F_hat - sf[SF_LF], a - sf[SF_LA]
-            lam = 1.0 - Td / MASS_MEMORY_S
-            sf[SF_SXY] = lam * sf[SF_SXY] + xx * yy
-            sf[SF_SXX] = lam * sf[SF_SXX] + xx * xx
-        a = sf[SF_ACCEL]
-    dm = _delta_mass(sf, fp)
-    if dm == 0.0 or not (math.isfinite(v_hat) and math.isfinite(v_ref)):
-        return 0.0
-    out = -dm * a
-    if ip[IP_SPEEDFB] != 0:
-        out += dm * (v_ref - v_hat) / fp[FP_TAU]
-    return out
+def _slip_load(sf):
+    """The :class:`~tsmpc.estimation.fusion.SlipFit` of the engine's slots."""
+    return SlipFit(sf[SF_THETA], sf[SF_THETA + 1], sf[SF_P], sf[SF_P + 1], sf[SF_P + 2], sf[SF_P + 3],
+                   sf[SF_N2], sf[SF_N1])
+
+
+@njit(cache=True, fastmath=False)
+def _course_load(sf, si, ivs):
+    """The :class:`~tsmpc.estimation.fusion.CourseState` of the engine's slots."""
+    ring = (_iv_load(ivs[0]), _iv_load(ivs[1]), _iv_load(ivs[2]), _iv_load(ivs[3]), _iv_load(ivs[4]))
+    slip = _slip_load(sf)
+    stiff = StiffFit(sf[SF_CNUM], sf[SF_CNUM + 1], sf[SF_CDEN], sf[SF_CDEN + 1], sf[SF_AHPREV],
+                     si[SI_HASAH] != 0)
+    return CourseState(ring, si[SI_IVN], sf[SF_OMNOW], sf[SF_VNOW], si[SI_NCHORDS], slip,
+                       SpeedFit(sf[SF_SV], sf[SF_SW]), stiff)
+
+
+@njit(cache=True, fastmath=False)
+def _course_store(s, sf, si, ivs):
+    """A course state into the engine's slots."""
+    for r in range(BASELINE):
+        _iv_store(s.ring[r], ivs[r])
+    si[SI_IVN], si[SI_NCHORDS] = s.n_iv, s.n_chords
+    sf[SF_OMNOW], sf[SF_VNOW] = s.omega_now, s.v_now
+    f = s.slip
+    sf[SF_THETA], sf[SF_THETA + 1] = f.kappa, f.beta
+    sf[SF_P], sf[SF_P + 1], sf[SF_P + 2], sf[SF_P + 3] = f.P00, f.P01, f.P10, f.P11
+    sf[SF_N2], sf[SF_N1] = f.n2, f.n1
+    sf[SF_SV], sf[SF_SW] = s.speed.sv, s.speed.sw
+    c = s.stiff
+    sf[SF_CNUM], sf[SF_CNUM + 1], sf[SF_CDEN], sf[SF_CDEN + 1] = c.num_f, c.num_r, c.den_f, c.den_r
+    sf[SF_AHPREV] = c.alpha_prev
+    si[SI_HASAH] = 1 if c.has_prev else 0
+
+
+@njit(cache=True, fastmath=False)
+def _course_step(cp, has_pose, X, Y, th, v, omega, ay_ref, stiff, cur, ivs, sf, si, mp, prm):
+    """An MPC step of the course fusion (``Cascade._outer``): :func:`course_close`, then with the
+    stiffness fit :func:`stiffness_update` (``Cascade._apply_stiffness``): the fitted (Ĉ_f, Ĉ_r)
+    to the MHE's model and the TS-LQR's N̄ when they moved by over 1 %."""
+    s, c = course_close(cp, _course_load(sf, si, ivs), _iv_load(cur), has_pose, X, Y, th, v, omega,
+                        ay_ref)
+    if stiff:
+        give, C0, C1, s = stiffness_update(cp, s, si[SI_HASAPPLIED] != 0, sf[SF_APPLIED],
+                                           sf[SF_APPLIED + 1])
+        if give:
+            prm[2], prm[3] = C0, C1
+            mp[MP_CF], mp[MP_CR] = C0, C1
+            sf[SF_APPLIED], sf[SF_APPLIED + 1] = C0, C1
+            si[SI_HASAPPLIED] = 1
+    _course_store(s, sf, si, ivs)
+    _iv_store(c, cur)
+
+
+@njit(cache=True, fastmath=False)
+def _course_sample(ok, theta, v, alpha_hat, a_y, omega, delta, force, cur):
+    """One T_d sample into the open interval ``cur`` (:func:`course_sample`)."""
+    if cur[IV_OPEN] != 0.0:
+        _iv_store(course_sample(_iv_load(cur), ok, theta, v, alpha_hat, a_y, omega, delta, force), cur)
+
+
+@njit(cache=True, fastmath=False)
+def _mass_load(sf, si):
+    """The :class:`~tsmpc.estimation.fusion.MassState` of the engine's slots."""
+    return MassState(si[SI_MASSN], si[SI_MASSRUN], sf[SF_ACCEL], sf[SF_LF], sf[SF_LA], si[SI_MASSOPEN] != 0,
+                     sf[SF_SXY], sf[SF_SXX])
+
+
+@njit(cache=True, fastmath=False)
+def _mass_terms(mpar, v_hat, F_hat, v_ref, mv, sf, si):
+    """``Fusion.inertia_terms``: :func:`mass_update` on the window's speeds ``mv``, then the force
+    added to F̂ (:func:`inertia_force`)."""
+    s = mass_update(mpar, _mass_load(sf, si), mv, v_hat, F_hat)
+    si[SI_MASSN], si[SI_MASSRUN], si[SI_MASSOPEN] = s.count, s.run, 1 if s.open else 0
+    sf[SF_ACCEL], sf[SF_LF], sf[SF_LA], sf[SF_SXY], sf[SF_SXX] = s.accel, s.lf, s.la, s.sxy, s.sxx
+    return inertia_force(mpar, s, v_hat, v_ref)
 
 
 @njit(cache=True, fastmath=False)
 def _delta_mass(sf, fp):
-    """``MassEstimator.delta_mass``: ΔM̂ (0 until the fit is excited), within the mass range."""
-    mass = fp[FP_VM]
-    if sf[SF_SXX] < MASS_EXCITATION:
-        return 0.0
-    return _pmin(_pmax(sf[SF_SXY] / sf[SF_SXX], MASS_RANGE_LO * mass), MASS_RANGE_HI * mass)
+    """ΔM̂ of the engine's mass slots (:func:`delta_mass`)."""
+    return delta_mass(MassParams(fp[FP_VM], fp[FP_TD], 0, fp[FP_TAU], False),
+                      MassState(0, 0, sf[SF_ACCEL], sf[SF_LF], sf[SF_LA], False, sf[SF_SXY], sf[SF_SXX]))
 
 
 # ============================================================================ speed governor
@@ -787,6 +629,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     gmv = np.empty(N + 1)
     gmw = np.empty(N + 1)
     gates = GateParams(fp[FP_V_LO], fp[FP_V_HI], fp[FP_W_LIM], fp[FP_POSE_NOISE], fp[FP_HEAD_NOISE], Td)
+    cpar = course_params(Tc, fp[FP_COURSE_SIGMA], True, fp[FP_CF0], fp[FP_CR0], fp[FP_VM], fp[FP_VI],
+                         fp[FP_VA], fp[FP_VB], fp[FP_VG])
+    mpar = MassParams(fp[FP_VM], Td, ip[IP_NW], fp[FP_TAU], ip[IP_SPEEDFB] != 0)
     sens = unpack_params(fp[FP_SENS:FP_SENS + N_SP])
     sens_state = sf[SF_SENS:SF_SENS + N_SS]
     mhe_views = (mp[MP_Q:MP_Q + 3], mp[MP_R:MP_R + 2], mp[MP_P:MP_P + 3], mp[MP_XMIN:MP_XMIN + 3],
@@ -824,15 +669,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             speeds_ok = plausible_speeds(gates, v, omv)
             if not speeds_ok:
                 ev[EV_SPEED_REJ] += 1
-            if ip[IP_REPEAT] != 0 and not (X != X or Y != Y or th != th or v != v or omv != omv):
-                same = si[SI_GUARDHAS] != 0 and X == sf[SF_GUARD] and Y == sf[SF_GUARD + 1] \
-                    and th == sf[SF_GUARD + 2] and v == sf[SF_GUARD + 3] and omv == sf[SF_GUARD + 4]
-                sf[SF_GUARD], sf[SF_GUARD + 1], sf[SF_GUARD + 2] = X, Y, th
-                sf[SF_GUARD + 3], sf[SF_GUARD + 4] = v, omv
-                si[SI_GUARDHAS] = 1
-                if same:
-                    fresh = False
-                    ev[EV_REPEATED] += 1
+            if ip[IP_REPEAT] != 0 and _repeated(X, Y, th, v, omv, sf, si):
+                fresh = False
+                ev[EV_REPEATED] += 1
             pose_ok = fresh and math.isfinite(X) and math.isfinite(Y) and math.isfinite(th)
             if fresh and not pose_ok:
                 ev[EV_POSE_NAN] += 1
@@ -868,11 +707,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 kc = kw if kw < ip[IP_REFLEN] - 1 else ip[IP_REFLEN] - 1
                 if ip[IP_ANYCOURSE] != 0:
                     meas_ok = fresh and speeds_ok
-                    _course_close(pose_ok, X, Y, th, v if meas_ok else math.nan,
-                                  omv if meas_ok else math.nan, ref_v[kc] * ref_w[kc], cur, ivs,
-                                  sf, si, fp, ip)
-                    if ip[IP_STIFF] != 0:
-                        _apply_stiffness(sf, si, fp, mp, prm)
+                    _course_step(cpar, pose_ok, X, Y, th, v if meas_ok else math.nan,
+                                 omv if meas_ok else math.nan, ref_v[kc] * ref_w[kc], ip[IP_STIFF] != 0,
+                                 cur, ivs, sf, si, mp, prm)
                 if pose_ok:
                     for i in range(3):
                         sf[SF_HELD + i] = sf[SF_POSE + i]
@@ -901,11 +738,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                     a_hat = sf[SF_LASTA] if slip and has_last else 0.0
                     if slip and has_last:
                         corr = 0.0
-                        if ip[IP_CSLIP] != 0:  # CourseFusion.slip_correction
-                            if not math.isfinite(ay):
-                                ay = 0.0
-                            corr = _pmin(_pmax(sf[SF_THETA] * ay + sf[SF_THETA + 1],
-                                               -SLIP_CORRECTION_MAX), SLIP_CORRECTION_MAX)
+                        if ip[IP_CSLIP] != 0:  # the course-fitted slip error at the reference's a_y
+                            corr = slip_correction(_slip_load(sf), ay)
                         a_hat += corr
                     if slip:
                         a_hat, si[SI_GATEN] = slip_gate_update(fp[FP_GATE_SIGMA], gate, si[SI_GATEN],
@@ -965,8 +799,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             sc[SC_VREF], sc[SC_WREF] = sf[SF_UPREV], sf[SF_UPREV + 1]
             if fresh and speeds_ok:
                 off = 0.0
-                if ip[IP_CSPEED] != 0 and sf[SF_SW] > 0.0:  # CourseFusion.speed_offset
-                    off = _pmin(_pmax(sf[SF_SV] / sf[SF_SW], -SPEED_OFFSET_MAX), SPEED_OFFSET_MAX)
+                if ip[IP_CSPEED] != 0:  # the course-fitted speed-sensor offset
+                    off = speed_offset(SpeedFit(sf[SF_SV], sf[SF_SW]))
                 sc[SC_YM], sc[SC_YM + 1] = y[3] - off, y[4]
             else:
                 sc[SC_YM], sc[SC_YM + 1] = math.nan, math.nan
@@ -989,13 +823,13 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 gates, sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], ev0, ev1, ev2)
             if ip[IP_ANYCOURSE] != 0:
                 _course_sample(si[SI_POSEOK] != 0 and si[SI_SPOK] != 0, y[2], y[3], ev1, ev0 * ev2,
-                               y[4], sc[SC_UMHE + 1], sc[SC_UMHE], cur, si)
+                               y[4], sc[SC_UMHE + 1], sc[SC_UMHE], cur)
             F_in, Fr_in = sc[SC_ESTF], sc[SC_ESTFR]
             F_c = F_in  # the compensated window estimate (lqr.friction_step)
             if ip[IP_FSTEP] != 0:
                 F_c = _friction_step(F_in, Fr_in, si[SI_ESTSTAT] == ST_OK, sf, si, fp, ip, ev)
             if ip[IP_MASSEST] != 0:
-                dF = _mass_terms(ev0, F_in, sc[SC_VREF], mass_v, sf, si, fp, ip)
+                dF = _mass_terms(mpar, ev0, F_in, sc[SC_VREF], mass_v, sf, si)
                 if dF != 0.0:
                     F_c, Fr_in = F_c + dF, Fr_in + dF
             sc[SC_INF], sc[SC_INFR] = F_c, Fr_in

@@ -38,6 +38,7 @@ BLOCK_MODULES = (
     "tsmpc.control.governor",
     "tsmpc.control.slip_aware",
     "tsmpc.estimation.friction_step",
+    "tsmpc.estimation.fusion",
     "tsmpc.kernels.jit",
     "tsmpc.scenarios",
     "tsmpc.sensors",

@@ -37,7 +37,6 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -138,7 +137,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade._step": "1b77b0acc6c113f8",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "748ed28374e52348",
-    "tsmpc.control.cascade:Cascade._outer": "53f0252f7b4bac32",
+    "tsmpc.control.cascade:Cascade._outer": "c3f0fb3dc4ccf2ab",
     "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
     "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
     "tsmpc.control.cascade:Cascade._govern": "7db84fbd67992ceb",
@@ -155,14 +154,8 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade._watch_samples": "7a7df27fe2b75dfc",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
-    "tsmpc.control.cascade:Cascade._apply_stiffness": "64539bcf90245f1d",
-    "tsmpc.control.cascade:_apply_stiffness_to": "5a20c2976a06a2d3",
-    "tsmpc.estimation.fusion:_wrap": "3fd9daeaa886e92c",
-    "tsmpc.estimation.fusion:RepeatGuard": "27f9c316059eec4f",
-    "tsmpc.estimation.fusion:_Interval": "a5469bc5f990c457",
-    "tsmpc.estimation.fusion:CourseFusion": "c3c66ce9b3ae99d0",
-    "tsmpc.estimation.fusion:MassEstimator": "d73e4cf873cfe3df",
-    "tsmpc.estimation.fusion:Fusion": "f8e25eefdcfffb99",
+    "tsmpc.control.cascade:Cascade._apply_stiffness": "46da19951b5e07db",
+    "tsmpc.control.cascade:_apply_stiffness_to": "3dd6d16df1ce959c",
     "tsmpc.control.slip_aware:outer_loop_errors": "3775c2395e80851d",
     "tsmpc.control.slip_aware:velocity_frame_errors": "b81a30dfed8c53bb",
     "tsmpc.models.kinematic:pose_to_errors": "21aace1283045776",
@@ -185,14 +178,6 @@ _PORTED: dict[str, str] = {
     "tsmpc.vehicle.actuators:_gain": "8f043d71c729db22",
     "tsmpc.vehicle.actuators:ActuatedPlant": "cc05ddc1d367181b",
 }
-#: Constants of the ported modules that the kernel holds as its own (name in the kernel module).
-_CONSTANTS = (
-    *(("tsmpc.estimation.fusion", n, n) for n in (
-        "BASELINE", "MIN_CHORD_M", "SLIP_MEMORY_S", "SPEED_MEMORY_S", "SLIP_CORRECTION_MAX", "SLIP_PRIOR",
-        "SPEED_OFFSET_MAX", "MASS_MIN_SPEED", "MASS_HIGHPASS_S", "MASS_MEMORY_S", "MASS_EXCITATION",
-        "STIFF_PRIOR_REL", "STIFF_SLIP_FLOOR", "STIFF_CORRELATION", "STIFF_MEMORY_S", "CORNER_ACCEL",
-        "STIFF_MAX_ACCEL", "MASS_RANGE", "STIFF_RANGE", "NOISE_MEMORY_S", "NOISE_PRIOR_CHORDS")),
-)
 
 
 def fingerprint(target: str) -> str:
@@ -219,18 +204,9 @@ def fingerprint(target: str) -> str:
 
 
 def stale_ports() -> list[str]:
-    """The ported code that changed since the port (targets whose fingerprint differs, constants
-    whose value differs), empty when the engine reproduces the current code."""
-    import importlib
-
-    out = [t for t, fp in _PORTED.items() if fingerprint(t) != fp]
-    ke = _load_kernel()  # (numba may only be imported after tsmpc.kernels set its cache folder)
-    if ke is None:
-        return out
-    for mod_name, name, mine in _CONSTANTS:
-        if getattr(importlib.import_module(mod_name), name) != getattr(ke, mine):
-            out.append(f"{mod_name}.{name}")
-    return out
+    """The ported code that changed since the port (targets whose fingerprint differs), empty when
+    the engine reproduces the current code."""
+    return [t for t, fp in _PORTED.items() if fingerprint(t) != fp]
 
 
 def _changed_since_port() -> str | None:
@@ -459,31 +435,6 @@ def _noise(cfg: Config, M: int) -> NDArray[np.float64]:
 _PROBES: dict[str, Any] = {}
 
 
-def _fma(a: float, b: float, c: float) -> float:
-    return float(Fraction(a) * Fraction(b) + Fraction(c))
-
-
-def _matvec_mode() -> int:
-    """How this numpy's BLAS computes a row of a 2×2 ``P @ φ`` (the course fusion's RLS):
-    0 plain, 1 ``fma(P00, φ0, P01 φ1)``, 2 ``fma(P01, φ1, P00 φ0)`` (FMA kernels)."""
-    if "matvec" not in _PROBES:
-        rng = np.random.default_rng(20250)
-        hits = np.zeros(3, dtype=int)
-        n = 0
-        for _ in range(64):
-            P, phi = rng.normal(size=(2, 2)), rng.normal(size=2)
-            r = P @ phi
-            for i in range(2):
-                a, b, c, d = float(P[i, 0]), float(phi[0]), float(P[i, 1]), float(phi[1])
-                cands = (a * b + c * d, _fma(a, b, c * d), _fma(c, d, a * b))
-                hits += np.array([x == float(r[i]) for x in cands])
-                n += 1
-        best = int(np.argmax(hits))
-        _PROBES["matvec"] = best if hits[best] == n else 0
-        _PROBES["matvec_exact"] = bool(hits[best] == n)
-    return int(_PROBES["matvec"])
-
-
 def _hypot_exact(ke: Any) -> bool:
     """Does the kernel's hypot reproduce this interpreter's ``math.hypot``?"""
     if "hypot" not in _PROBES:
@@ -494,11 +445,11 @@ def _hypot_exact(ke: Any) -> bool:
 
 
 def exact() -> bool | None:
-    """Whether the last engine run's glue reproduces this interpreter's and BLAS's rounding to the
-    bit (None before any run): ``math.hypot`` of CPython ≤ 3.11, numpy's 2×2 products."""
+    """Whether the last engine run's glue reproduces this interpreter's rounding to the bit (None
+    before any run): ``math.hypot`` of CPython ≤ 3.11."""
     if "hypot" not in _PROBES:
         return None
-    return bool(_PROBES["hypot"] and _PROBES.get("matvec_exact", True))
+    return bool(_PROBES["hypot"])
 
 
 # ------------------------------------------------------------------------------ the kernel
@@ -740,7 +691,6 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     if fstep is not None:
         fp[ke.FP_FS_H] = fstep.threshold
     ip[ke.IP_MFORCE], ip[ke.IP_MSTEER] = scenario.measured_force, scenario.measured_steering
-    ip[ke.IP_FMA] = _matvec_mode()
     rc = cascade._recovery
     ip[ke.IP_RECOV] = rc is not None
     fp[ke.FP_REINIT] = 0.0 if rc is None else rc.pose_reinit_s
@@ -782,14 +732,14 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf[ke.SF_UPREV:ke.SF_UPREV + 2] = cascade._u_prev
     sf[ke.SF_UAPP:ke.SF_UAPP + 2] = cascade._u_applied
     sf[ke.SF_LOW] = cascade._low_applied
-    sf[ke.SF_THETA:ke.SF_THETA + 2] = course._theta
-    sf[ke.SF_P:ke.SF_P + 4] = course._P.reshape(-1)
-    sf[ke.SF_CNUM:ke.SF_CNUM + 2] = course._cnum
-    sf[ke.SF_CDEN:ke.SF_CDEN + 2] = course._cden
-    sf[ke.SF_PRIOR:ke.SF_PRIOR + 2] = course._prior_num
-    sf[ke.SF_PRIORD:ke.SF_PRIORD + 2] = course._prior_den
-    sf[ke.SF_N2], sf[ke.SF_N1] = course._n2, course._n1
-    sf[ke.SF_VNOW] = course._v_now
+    cs = course.state  # (a reset cascade: no interval held, the arrays' zeros)
+    sf[ke.SF_THETA:ke.SF_THETA + 2] = cs.slip.kappa, cs.slip.beta
+    sf[ke.SF_P:ke.SF_P + 4] = cs.slip.P00, cs.slip.P01, cs.slip.P10, cs.slip.P11
+    sf[ke.SF_N2], sf[ke.SF_N1] = cs.slip.n2, cs.slip.n1
+    sf[ke.SF_SV], sf[ke.SF_SW] = cs.speed.sv, cs.speed.sw
+    sf[ke.SF_CNUM:ke.SF_CNUM + 2] = cs.stiff.num_f, cs.stiff.num_r
+    sf[ke.SF_CDEN:ke.SF_CDEN + 2] = cs.stiff.den_f, cs.stiff.den_r
+    sf[ke.SF_OMNOW], sf[ke.SF_VNOW] = cs.omega_now, cs.v_now
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
     sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival

@@ -1,0 +1,362 @@
+"""The fusion estimators' blocks (tsmpc.estimation.fusion, issue 34 item 1): the repeat guard, the
+course fusion (sample, close, chord fits, outputs) and the mass estimator, each one ``@jitable``
+definition that the Python cascade calls as Python and the run engine and the batch compile.
+
+Every by-hand test runs twice — the block as Python (the Python loop's) and compiled by numba (the
+engine's, skipped without numba) — on numbers chosen so that the expected values are simple: a
+mutation of a block's arithmetic fails the test in both loops. The last test runs a random drive
+through both and asks for the same records to the bit."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tsmpc import kernels
+from tsmpc.estimation import fusion as fu
+from tsmpc.estimation.fusion import (
+    BASELINE,
+    MASS_HIGHPASS_S,
+    MASS_MEMORY_S,
+    NO_INTERVAL,
+    REPEAT_START,
+    SLIP_PRIOR,
+    STIFF_CORRELATION,
+    STIFF_MEMORY_S,
+    STIFF_PRIOR_REL,
+    CourseState,
+    Interval,
+    MassParams,
+    MassState,
+    SlipFit,
+)
+
+#: The blocks the tests call (their names in tsmpc.estimation.fusion).
+BLOCKS = ("repeat_check", "course_params", "course_sample", "course_close", "course_chord",
+          "slip_correction", "noise_scale", "speed_offset", "stiffness", "model_changed",
+          "stiffness_update", "mass_update", "delta_mass", "inertia_force")
+_COMPILED: dict[str, object] = {}
+
+
+class _Blocks:
+    """The blocks as Python, or compiled (a plain njit of the same source, as the engine compiles
+    them)."""
+
+    def __init__(self, compiled: bool) -> None:
+        for name in BLOCKS:
+            fn = getattr(fu, name)
+            if compiled:
+                if name not in _COMPILED:
+                    from numba import njit
+
+                    _COMPILED[name] = njit(cache=False)(fn)
+                fn = _COMPILED[name]
+            setattr(self, name, fn)
+
+
+@pytest.fixture(params=["python", "compiled"])
+def b(request) -> _Blocks:
+    if request.param == "compiled" and kernels.load("mpc") is None:
+        pytest.skip("compiled kernels unavailable")
+    return _Blocks(request.param == "compiled")
+
+
+def _params(b: _Blocks, Tc: float = 0.1, sigma: float = 0.01, C: tuple[float, float] = (50000.0, 50000.0)):
+    """A car with round numbers: M 1000 kg, I_z 1500 kg m², a = 1, b = 1.5 m, g = 10 m/s²."""
+    return b.course_params(Tc, sigma, True, C[0], C[1], 1000.0, 1500.0, 1.0, 1.5, 10.0)
+
+
+def _records(x):
+    """A record's numbers, flattened (NaN as the string "nan": equal to itself)."""
+    if isinstance(x, tuple):
+        return [v for item in x for v in _records(item)]
+    return ["nan" if isinstance(x, float) and math.isnan(x) else x]
+
+
+def _drive_arc(b: _Blocks, p, v: float, w: float, seconds: float, v_sensor: float = 0.0,
+               Td: float = 0.01):
+    """Exact samples of a circular arc at speed v and yaw rate ω (α = 0: the course is the
+    heading), the speed sensor reading v + ``v_sensor``: (state, open interval) after it."""
+    s, cur = fu.course_start(p), NO_INTERVAL
+    n_in = round(p.Tc / Td)
+    R = v / w
+    for k in range(round(seconds / Td) + 1):
+        th = w * k * Td
+        if k % n_in == 0:
+            s, cur = b.course_close(p, s, cur, True, R * math.sin(th), R * (1.0 - math.cos(th)), th,
+                                    v + v_sensor, w, v * w)
+        cur = b.course_sample(cur, True, th, v + v_sensor, 0.0, v * w, w, 0.0, 0.0)
+    return s, cur
+
+
+# ------------------------------------------------------------------------------------ repeat guard
+def test_repeat_guard_by_hand(b: _Blocks) -> None:
+    s = REPEAT_START
+    same, s = b.repeat_check(s, 1.0, 2.0, 0.1, 10.0, 0.01, -math.inf)
+    assert not same and s.has
+    same, s = b.repeat_check(s, 1.0, 2.0, 0.1, 10.0, 0.01, -math.inf)
+    assert same
+    for i in range(6):  # any one of the six numbers differing: a new sample
+        x = [1.0, 2.0, 0.1, 10.0, 0.01, -math.inf]
+        x[i] = 5.0
+        assert not b.repeat_check(s, *x)[0]
+    same, s2 = b.repeat_check(s, 1.0, math.nan, 0.1, 10.0, 0.01, -math.inf)
+    assert not same and tuple(s2) == tuple(s)  # a NaN sample: not a repeat, not remembered
+    assert b.repeat_check(s, -0.0 + 1.0, 2.0, 0.1, 10.0, 0.01, -math.inf)[0]
+
+
+# ------------------------------------------------------------------------------------ course fusion
+def test_an_interval_sums_by_the_trapezoid(b: _Blocks) -> None:
+    """Opening pose, samples at v = 10 and 12 m/s, closing at 14 m/s: Σ v = 10/2 + 12 + 14/2 =
+    24 (the opening and closing samples count half), Σ v in full 22; the first sample's ω and v
+    are kept; a missing sample spoils the interval."""
+    p = _params(b)
+    s, cur = b.course_close(p, fu.course_start(p), NO_INTERVAL, True, 0.0, 0.0, 0.0, 10.0, 0.0, 0.3)
+    assert cur.open and cur.ok and cur.n == 0 and cur.ay_ref == 0.3 and math.isnan(cur.v_first)
+    cur = b.course_sample(cur, True, 0.0, 10.0, 0.01, 1.0, 0.1, 0.02, 500.0)
+    cur = b.course_sample(cur, True, 0.2, 12.0, 0.03, 2.0, 0.2, 0.04, 700.0)
+    assert cur.n == 2 and cur.w_first == 0.1 and cur.v_first == 10.0
+    assert cur.sv == pytest.approx(5.0 + 12.0) and cur.sv_full == pytest.approx(22.0)
+    assert cur.sv_dth == pytest.approx(12.0 * 0.2)  # v (θ − θ_start), the first counting half
+    assert cur.sv_alpha == pytest.approx(10.0 * 0.01 + 12.0 * 0.03)
+    assert cur.sv_ay == pytest.approx(10.0 * 1.0 + 12.0 * 2.0)
+    assert cur.s_delta == pytest.approx(0.06) and cur.s_F == pytest.approx(1200.0)
+    assert cur.s_w_v == pytest.approx(0.1 / 10.0 + 0.2 / 12.0) and cur.s_vw == pytest.approx(1.0 + 2.4)
+    s, nxt = b.course_close(p, s, cur, True, 2.2, 0.0, 0.4, 14.0, 0.0, -0.2)
+    last = s.ring[-1]
+    assert s.n_iv == 1 and last.ok and last.ay_ref == 0.2  # the smaller |v_d ω_d| of both ends
+    assert last.sv == pytest.approx(24.0) and last.sv_dth == pytest.approx(12.0 * 0.2 + 7.0 * 0.4)
+    assert nxt.open and (nxt.sx, nxt.sy, nxt.sth) == (2.2, 0.0, 0.4)
+    spoilt = b.course_sample(nxt, False, 0.4, 14.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    assert not spoilt.ok and spoilt.n == 0
+    assert b.course_sample(NO_INTERVAL, True, 0.4, 14.0, 0.0, 0.0, 0.0, 0.0, 0.0) == NO_INTERVAL
+    s, none = b.course_close(p, s, spoilt, False, math.nan, math.nan, math.nan, 14.0, 0.0, 0.0)
+    assert not none.open and not s.ring[-1].ok and s.n_iv == 2
+
+
+def test_the_speed_over_ground_is_the_arc_not_the_chord(b: _Blocks) -> None:
+    """On an exact arc (10 m/s, 0.5 rad/s: 0.25 rad of turn per chord of 5 T_c) the arc's length
+    over the chord's time is the speed itself: the fitted sensor offset is 0, or the sensor's
+    0.3 m/s. The chord alone is shorter by v Δθ²/24 (0.026 m/s here)."""
+    p = _params(b)
+    s, _ = _drive_arc(b, p, 10.0, 0.5, 3.0)
+    assert s.n_chords == 30 - BASELINE + 1
+    assert abs(b.speed_offset(s.speed)) < 1e-9
+    s, _ = _drive_arc(b, p, 10.0, 0.5, 3.0, v_sensor=0.3)
+    assert b.speed_offset(s.speed) == pytest.approx(0.3, abs=1e-9)
+    # the speed fit's weights: (chord / 2σ)² per chord, forgetting 1 − T_c / SPEED_MEMORY_S
+    chord = 2.0 * (10.0 / 0.5) * math.sin(0.125)
+    g = 1.0 - 0.1 / fu.SPEED_MEMORY_S
+    weights = (chord / 0.02) ** 2 * sum(g ** k for k in range(s.n_chords))
+    assert s.speed.sw == pytest.approx(weights, rel=1e-12)
+    assert b.speed_offset(fu.SpeedFit(5.0, 1.0)) == fu.SPEED_OFFSET_MAX  # bounded
+    assert b.speed_offset(fu.SpeedFit(5.0, 0.0)) == 0.0  # no weight: no offset
+
+
+def _corner_ring(p, alpha_hat: float = -0.01, ay_ref: float = 5.0, v_first: float = 10.0) -> CourseState:
+    """Five measured intervals of 10 samples at v = 10 m/s, ω = 0.5 rad/s (a_y = 5 m/s²), δ = 0.11
+    rad, no force, heading 0, the model's α̂ = ``alpha_hat``, from the pose (0, 0, 0); the fits at
+    their start, but the noise measured at half the configured level (the configured σ stays the
+    floor: the noise scale is 1)."""
+    iv = Interval(True, True, 0.0, 0.0, 0.0, 10, 100.0, 0.0, 100.0 * alpha_hat, 500.0, 100.0, 1.1, 0.5,
+                  50.0, 0.0, 0.5, ay_ref, v_first)
+    s = fu.course_start(p)
+    slip = s.slip._replace(n2=0.25 * fu.NOISE_PRIOR_CHORDS)
+    return CourseState((iv,) * BASELINE, BASELINE, 0.5, 10.0, 0, slip, s.speed, s.stiff)
+
+
+def test_one_cornering_chord_in_the_slip_and_stiffness_fits(b: _Blocks) -> None:
+    """The chord of :func:`_corner_ring` to (5, 0, 0): course 0, so the slip error z = 0.01 rad at
+    ā_y = 5, one recursive least-squares step from the prior; the axle forces of S = M v ω =
+    5000 N, F_yF = b S / L = 3000 N, F_yR = a S / L = 2000 N, the slips α_F = δ − a ω/v = 0.06,
+    α_R = b ω/v = 0.075 rad, each weighed against the model's prior (relative σ STIFF_PRIOR_REL):
+    Ĉ = (C / REL)² + w F²) / ((C / REL)² / C + w F α)."""
+    p = _params(b)
+    s = b.course_chord(p, _corner_ring(p), 5.0, 0.0, 0.0)
+    assert s.n_chords == 1
+    sig = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4  # the chord's slip noise (noise scale 1)
+    lam = 1.0 - 0.1 / fu.SLIP_MEMORY_S
+    P = np.diag(np.square(SLIP_PRIOR)) / lam
+    phi = np.array([5.0, 1.0])
+    k = P @ phi / (sig ** 2 + phi @ P @ phi)
+    assert (s.slip.kappa, s.slip.beta) == pytest.approx(tuple(k * 0.01), rel=1e-12)
+    P1 = P - np.outer(k, phi @ P)
+    assert (s.slip.P00, s.slip.P01, s.slip.P10, s.slip.P11) == pytest.approx(tuple(P1.ravel()), rel=1e-12)
+    assert (s.slip.n2, s.slip.n1) == (0.25 * fu.NOISE_PRIOR_CHORDS, fu.NOISE_PRIOR_CHORDS)  # a corner
+    w = 1.0 / (STIFF_CORRELATION * sig * sig)
+    prior = (50000.0 / STIFF_PRIOR_REL) ** 2
+    C_f = (prior + w * 3000.0 ** 2) / (prior / 50000.0 + w * 3000.0 * 0.06)
+    C_r = (prior + w * 2000.0 ** 2) / (prior / 50000.0 + w * 2000.0 * 0.075)
+    assert b.stiffness(p, s.stiff) == pytest.approx((C_f, C_r), rel=1e-12)
+    assert 30000.0 < C_r < 40000.0  # between the prior (50000) and the chord's own (26667)
+    assert s.stiff.has_prev and s.stiff.alpha_prev == pytest.approx(-0.01)
+    # the next chord: α̇ from the α̂ of consecutive chords, forgetting towards the prior
+    s2 = b.course_chord(p, CourseState(_corner_ring(p, -0.02).ring, BASELINE, 0.5, 10.0, 1, s.slip, s.speed,
+                                       s.stiff), 5.0, 0.0, 0.0)
+    g2 = 1.0 - 0.1 / STIFF_MEMORY_S
+    S = 1000.0 * (5.0 + 10.0 * (-0.01 / 0.1))  # M (v ω + v α̇), α̇ = −0.01 rad / T_c: 4000 N
+    F_f = 1.5 * S / 2.5  # 2400 N on α_F = 0.06: 40000 N/rad, plausible; the rear's 1600 N on
+    num_f = g2 * s.stiff.num_f + (1.0 - g2) * prior / 50000.0 + w * F_f * 0.06  # 0.075 is not (21333)
+    assert s2.stiff.num_f == pytest.approx(num_f, rel=1e-12)
+    assert s2.stiff.den_f == pytest.approx(g2 * s.stiff.den_f + (1.0 - g2) * prior + w * F_f ** 2, rel=1e-12)
+    assert s2.stiff.den_r == pytest.approx(g2 * s.stiff.den_r + (1.0 - g2) * prior, rel=1e-12)
+    assert s2.stiff.alpha_prev == pytest.approx(-0.02)
+
+
+def test_the_stiffness_fit_takes_only_steady_corners(b: _Blocks) -> None:
+    """No stiffness update where the reference runs straight (min |v_d ω_d| < CORNER_ACCEL), where
+    the car accelerates (|Δv| / span > STIFF_MAX_ACCEL g) or for an implausible F / α; on the
+    straight the slip fit's innovation measures the chords' noise instead."""
+    p = _params(b)
+    start = fu.course_start(p).stiff
+    straight = b.course_chord(p, _corner_ring(p, alpha_hat=-0.05, ay_ref=0.1), 5.0, 0.0, 0.0)
+    assert straight.stiff == start and straight.n_chords == 1
+    sig0 = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4
+    g_n = 1.0 - 0.1 / fu.NOISE_MEMORY_S
+    assert straight.slip.n2 == pytest.approx(g_n * 2.5 + (0.05 / sig0) ** 2, rel=1e-12)
+    assert straight.slip.n1 == pytest.approx(g_n * 10.0 + 1.0, rel=1e-12)
+    scale = math.sqrt(straight.slip.n2 / straight.slip.n1)  # 0.05 rad of innovation: 2.6× the σ
+    assert b.noise_scale(straight.slip) == pytest.approx(scale) and scale > 2.0
+    # 0.1 g over the chord's 0.5 s is 0.5 m/s: 0.49 passes, 0.51 does not
+    assert b.course_chord(p, _corner_ring(p, v_first=10.0 - 0.49), 5.0, 0.0, 0.0).stiff != start
+    assert b.course_chord(p, _corner_ring(p, v_first=10.0 - 0.51), 5.0, 0.0, 0.0).stiff == start
+    stiff_car = _params(b, C=(200000.0, 200000.0))  # the chord's F / α is below 0.5 C: out
+    s = b.course_chord(stiff_car, _corner_ring(stiff_car), 5.0, 0.0, 0.0)
+    assert b.stiffness(stiff_car, s.stiff) == pytest.approx((200000.0, 200000.0), rel=1e-12)
+    assert b.course_chord(p, _corner_ring(p), 1.9, 0.0, 0.0) == _corner_ring(p)  # < MIN_CHORD_M
+    r = _corner_ring(p)
+    still = CourseState(tuple(iv._replace(sv=0.0) for iv in r.ring), *r[1:])  # no speed: no chord
+    assert b.course_chord(p, still, 5.0, 0.0, 0.0) == still
+
+
+def test_stiffness_bounds_prior_and_application(b: _Blocks) -> None:
+    """The prior is the model (Ĉ = C); the fit is bounded to STIFF_RANGE × C; the stiffnesses are
+    given when they moved by over 1 % (or were never given), and replacing given ones restarts κ."""
+    p = _params(b, C=(40000.0, 60000.0))
+    s0 = fu.course_start(p)
+    assert p.prior_den_f == pytest.approx((40000.0 / STIFF_PRIOR_REL) ** 2, rel=1e-15)
+    assert p.prior_num_r == pytest.approx((60000.0 / STIFF_PRIOR_REL) ** 2 / 60000.0, rel=1e-15)
+    assert b.stiffness(p, s0.stiff) == pytest.approx((40000.0, 60000.0), rel=1e-15)
+    far = fu.StiffFit(1.0, -1.0, 1e6, 1.0, 0.0, False)  # 1e6 N/rad and a negative compliance
+    assert b.stiffness(p, far) == (2.0 * 40000.0, 2.0 * 60000.0)
+    assert b.stiffness(p, fu.StiffFit(1.0, 1.0, 1.0, 1.0, 0.0, False)) == (0.5 * 40000.0, 0.5 * 60000.0)
+    slip = SlipFit(0.003, 0.002, 1e-5, 2e-6, 2e-6, 3e-4, 12.0, 11.0)
+    s = CourseState(s0.ring, 0, 0.0, math.nan, 0, slip, s0.speed, s0.stiff)
+    give, cf, cr, s1 = b.stiffness_update(p, s, False, 0.0, 0.0)  # none given yet: give, κ kept
+    assert give and (cf, cr) == pytest.approx((40000.0, 60000.0)) and s1.slip == slip
+    give, _, _, s1 = b.stiffness_update(p, s, True, 40000.0 * 1.0099, 60000.0 / 1.0099)
+    assert not give and s1.slip == slip  # within 1 %
+    give, _, _, s1 = b.stiffness_update(p, s, True, 40000.0, 60000.0 * 1.0102)
+    assert give and s1.slip == b.model_changed(slip)
+    assert tuple(s1.slip) == (0.0, 0.002, SLIP_PRIOR[0] ** 2, 0.0, 0.0, 3e-4, 12.0, 11.0)
+
+
+def test_slip_correction_by_hand(b: _Blocks) -> None:
+    f = SlipFit(0.002, -0.001, 0.0, 0.0, 0.0, 0.0, 10.0, 10.0)
+    assert b.slip_correction(f, 3.0) == pytest.approx(0.005)
+    assert b.slip_correction(f, math.nan) == -0.001  # no a_y: β alone
+    assert b.slip_correction(f, 1000.0) == fu.SLIP_CORRECTION_MAX
+    assert b.slip_correction(f, -1000.0) == -fu.SLIP_CORRECTION_MAX
+    assert b.noise_scale(SlipFit(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0, 8.0)) == 1.0  # σ is a floor
+
+
+# ------------------------------------------------------------------------------------ mass estimator
+def test_the_mass_fit_high_passes_force_and_acceleration(b: _Blocks) -> None:
+    """Window N = 2 at T_d = 0.1 s: ā = (v_k − v_(k−2)) / 0.2 = 1.0, 1.5, 2.5 m/s² over the speeds
+    below, F̂ = 1000 + 100 ā (a mass error of 100 kg on a constant resistance). The fit opens on
+    the first full window (filters started there: x = y = 0), then x = ā − low-pass(ā), y likewise,
+    with gain T_d / MASS_HIGHPASS_S; Σ x² forgets by 1 − T_d / MASS_MEMORY_S."""
+    p = MassParams(683.0, 0.1, 2, 2.0, True)
+    ring = np.zeros(3)
+    s = MassState(0, 0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
+    accels = []
+    for v, F in ((4.0, 1000.0), (4.1, 1000.0), (4.2, 1100.0), (4.4, 1150.0), (4.7, 1250.0)):
+        s = b.mass_update(p, s, ring, v, F)
+        accels.append(s.accel)
+    assert accels[2:] == pytest.approx([1.0, 1.5, 2.5], rel=1e-12)
+    g, lam = 0.1 / MASS_HIGHPASS_S, 1.0 - 0.1 / MASS_MEMORY_S
+    la1 = 1.0 + g * (1.5 - 1.0)
+    la2 = la1 + g * (2.5 - la1)
+    x1, x2 = 1.5 - la1, 2.5 - la2
+    assert s.open and s.la == pytest.approx(la2, rel=1e-12)
+    assert s.sxx == pytest.approx(lam * x1 * x1 + x2 * x2, rel=1e-12)
+    assert s.sxy / s.sxx == pytest.approx(100.0, rel=1e-9)  # ΔM, the constant resistance gone
+    assert b.delta_mass(p, s) == 0.0  # not excited yet (Σ x² < MASS_EXCITATION)
+    # a NaN sample changes nothing but closes the fit (its filters restart)
+    s2 = b.mass_update(p, s, ring, math.nan, 1000.0)
+    assert not s2.open and s2[:5] == s[:5] and s2[6:] == s[6:]
+
+
+def test_the_mass_fit_waits_for_a_full_window_above_the_speed_floor(b: _Blocks) -> None:
+    """One sample at or below MASS_MIN_SPEED anywhere in the window keeps the fit closed until
+    N + 1 samples above it have come."""
+    p = MassParams(683.0, 0.1, 2, 2.0, True)
+    ring, s = np.zeros(3), MassState(0, 0, 0.0, 0.0, 0.0, False, 0.0, 0.0)
+    opened = []
+    for v in (4.0, 4.1, 4.2, 3.0, 4.4, 4.5, 4.6, 4.7):
+        s = b.mass_update(p, s, ring, v, 1000.0)
+        opened.append(s.open)
+    assert opened == [False, False, True, False, False, False, True, True]
+
+
+def test_the_mass_terms_by_hand(b: _Blocks) -> None:
+    """ΔM̂ = Σxy / Σx² (50 kg) within MASS_RANGE × M; the force added to F̂ is −ΔM̂ ā plus, with the
+    speed feedback, ΔM̂ (v_ref − v̂)/τ."""
+    p = MassParams(683.0, 0.01, 30, 2.0, True)
+    s = MassState(40, 40, 0.5, 0.0, 0.0, True, 5000.0, 100.0)
+    assert b.delta_mass(p, s) == pytest.approx(50.0)
+    assert b.inertia_force(p, s, 10.0, 12.0) == pytest.approx(-25.0 + 50.0)
+    assert b.inertia_force(MassParams(683.0, 0.01, 30, 2.0, False), s, 10.0, 12.0) == pytest.approx(-25.0)
+    assert b.inertia_force(p, s, 10.0, math.nan) == 0.0
+    assert b.delta_mass(p, MassState(40, 40, 0.5, 0.0, 0.0, True, 1e6, 100.0)) == pytest.approx(0.6 * 683.0)
+    assert b.delta_mass(p, MassState(40, 40, 0.5, 0.0, 0.0, True, -1e6, 100.0)) == pytest.approx(-0.4 * 683.0)
+    assert b.delta_mass(p, MassState(40, 40, 0.5, 0.0, 0.0, True, 5000.0, 49.9)) == 0.0
+
+
+# ------------------------------------------------------------------------------------ both ways alike
+def test_compiled_blocks_equal_python_to_the_bit_on_a_random_drive() -> None:
+    """A noisy drive with dropouts and missing poses through the blocks as Python and compiled:
+    the same records after every call (the engine's bit-identity with the Python loop rests on it)."""
+    if kernels.load("mpc") is None:
+        pytest.skip("compiled kernels unavailable")
+    py, nb = _Blocks(False), _Blocks(True)
+    rng = np.random.default_rng(34)
+    p = _params(py, sigma=0.005, C=(60000.0, 70000.0))
+    states = [fu.course_start(p)] * 2
+    curs = [NO_INTERVAL] * 2
+    mp = MassParams(683.0, 0.01, 30, 2.0, True)
+    ms = [fu.MASS_START] * 2
+    rings = [np.zeros(31), np.zeros(31)]
+    gs = [REPEAT_START] * 2
+    applied = [(False, 0.0, 0.0)] * 2
+    X = Y = th = 0.0
+    v = 6.0
+    for k in range(3000):
+        w = 0.3 * math.sin(0.004 * k) + rng.normal(0, 0.02)
+        v = max(2.5, v + rng.normal(0, 0.03))
+        alpha = 0.03 * w + rng.normal(0, 5e-4)
+        sample = (X + rng.normal(0, 0.005), Y, th, v, w, -math.inf)
+        if rng.random() < 0.003:
+            sample = tuple(math.nan if i == 1 else c for i, c in enumerate(sample))
+        for i, blk in enumerate((py, nb)):
+            _, gs[i] = blk.repeat_check(gs[i], *sample)
+            if k % 10 == 0:
+                states[i], curs[i] = blk.course_close(p, states[i], curs[i], k % 470 != 0, sample[0],
+                                                      sample[1], th, v, w, v * w)
+                give, cf, cr, states[i] = blk.stiffness_update(p, states[i], *applied[i])
+                if give:
+                    applied[i] = (True, cf, cr)
+            curs[i] = blk.course_sample(curs[i], k % 397 != 0, th, v, alpha, v * w, w, 0.05 * w, 300.0)
+            ms[i] = blk.mass_update(mp, ms[i], rings[i], v if k % 53 else math.nan, 800.0 + 90.0 * v)
+        assert _records(states[0]) == _records(states[1]), k
+        assert _records(curs[0]) == _records(curs[1]) and _records(gs[0]) == _records(gs[1]), k
+        assert _records(ms[0]) == _records(ms[1]) and np.array_equal(rings[0], rings[1]), k
+        assert applied[0] == applied[1]
+        assert py.inertia_force(mp, ms[0], v, v + 1.0) == nb.inertia_force(mp, ms[1], v, v + 1.0)
+        assert py.slip_correction(states[0].slip, v * w) == nb.slip_correction(states[1].slip, v * w)
+        th += w * 0.01
+        X += v * math.cos(th + alpha) * 0.01
+        Y += v * math.sin(th + alpha) * 0.01
+    assert states[0].n_chords > 150 and applied[0][0] and ms[0].sxx > 0.0
