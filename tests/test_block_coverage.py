@@ -42,6 +42,11 @@ BLOCK_TESTS = (
         "test_preview_rate_by_hand", "test_rate_limits_count_the_rate_change_itself",
         "test_governed_window_by_hand", "test_no_action_while_the_grip_suffices",
         "test_slow_down_then_return_to_the_plan")),
+    *(f"tests/test_sensors.py::{t}" for t in (
+        "test_bias_drift_scale_by_hand", "test_extra_gnss_noise_by_hand", "test_delay_and_dropouts_by_hand",
+        "test_sample_rates_and_heading",
+        "test_burst_block_by_hand", "test_the_records_cross_into_the_engine_unchanged",
+        "test_steering_offset_moves_the_steady_state_yaw_rate")),
 )
 
 

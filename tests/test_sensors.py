@@ -17,6 +17,7 @@ from tsmpc.conditions import apply_conditions
 from tsmpc.config import Config, SensorFaults, replace
 from tsmpc.sensors import (
     FAULT_HOLD_BURST,
+    FAULT_NAN_BURST,
     BurstParams,
     BurstState,
     SensorModel,
@@ -54,6 +55,15 @@ def test_bias_drift_scale_by_hand() -> None:
     np.testing.assert_allclose(out[:, 2], 0.5 + 0.01 + 0.002 * t, rtol=0, atol=1e-12)  # no scale
     np.testing.assert_allclose(out[:, 3], 0.97 * 8.0 - 0.3 + 0.01 * t, rtol=0, atol=1e-12)
     np.testing.assert_allclose(out[:, 4], 1.1 * 0.2 + 0.02 - 0.001 * t, rtol=0, atol=1e-12)
+
+
+def test_extra_gnss_noise_by_hand() -> None:
+    """gnss_noise_scale 3: X and Y get σ_pos √(3² − 1) more noise, from the model's own stream."""
+    out = _feed(_model(gnss_noise_scale=3.0), (10.0, -4.0, 0.5, 8.0, 0.2), 100)
+    g = np.random.default_rng([3, 21, 2]).standard_normal((100, 2))
+    np.testing.assert_allclose(out[:, 0], 10.0 + 0.001 * math.sqrt(8.0) * g[:, 0], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(out[:, 1], -4.0 + 0.001 * math.sqrt(8.0) * g[:, 1], rtol=0, atol=1e-15)
+    assert np.all(out[:, 2:] == (0.5, 8.0, 0.2))
 
 
 def test_delay_and_dropouts_by_hand() -> None:
@@ -96,6 +106,12 @@ def test_sample_rates_and_heading() -> None:
     assert poses.sum() == 20 and np.array_equal(np.flatnonzero(poses), np.arange(0, 1000, 50))
     assert np.array_equal(np.isfinite(out[:, 1]), poses) and np.array_equal(np.isfinite(out[:, 2]), poses)
     assert np.isfinite(out[:, 3]).sum() == 250 and np.isfinite(out[:, 4]).all()
+    out = _feed(_model(omega_rate_hz=3.0), (1.0, 2.0, 0.3, 5.0, 0.1), 1000)  # 1/3 s is no whole T_d
+    assert np.array_equal(np.flatnonzero(np.isfinite(out[:, 4])), [0, 34, 67, 100, 134, 167, 200, 234, 267,
+                                                                   300, 334, 367, 400, 434, 467, 500, 534,
+                                                                   567, 600, 634, 667, 700, 734, 767, 800,
+                                                                   834, 867, 900, 934, 967])
+    assert np.isfinite(out[:, :4]).all()
     out = _feed(_model(pose_heading=False), (1.0, 2.0, 0.3, 5.0, 0.1), 50)
     assert np.isnan(out[:, 2]).all() and np.isfinite(out[:, [0, 1, 3, 4]]).all()
 
@@ -108,6 +124,9 @@ def test_burst_block_by_hand() -> None:
     assert y1 == (1.0, 2.0, 3.0, 4.0, 5.0) and y2 == y1  # held through the burst
     y3, s = burst_sample(p, s, 2.21, (7.0, 7.0, 7.0, 7.0, 7.0))
     assert y3 == (7.0,) * 5
+    nan = BurstParams(FAULT_NAN_BURST, 7.0, 0.05, 3.0)
+    assert all(math.isnan(v) for v in burst_sample(nan, s, 3.01, y3)[0])
+    assert burst_sample(nan, s, 3.06, y3)[0] == y3 and burst_sample(BurstParams(), s, 2.05, y3) == (y3, s)
 
 
 def test_blocks_compiled_equal_python() -> None:
@@ -236,3 +255,25 @@ def test_defaults_change_nothing() -> None:
     cfg = Config()
     assert apply_conditions(cfg, load_scenario(cfg)).scenario.sensor_fault is None
     assert math.isfinite(cfg.scenario.plant.steering_offset_rad)
+
+
+def test_the_records_cross_into_the_engine_unchanged() -> None:
+    """pack_params / unpack_params and pack_state / unpack_state / store_state (the engine's flat
+    slots) give back the records."""
+    from tsmpc.sensors import N_SS, pack_params, pack_state, store_state, unpack_params, unpack_state
+
+    burst = BurstParams(FAULT_HOLD_BURST, 5.0, 0.2, 2.0)
+    p = SensorParams(scale=(1.01, 0.99, 1.0, 1.03, 0.95), bias=(0.1, -0.2, 0.01, 0.3, -0.02),
+                     drift=(0.0, 0.0, 1e-3, -2e-3, 1e-4), walk=(1e-3, 2e-3, 1e-4, 1e-3, 3e-4),
+                     extra_sigma=0.02, p_drop=0.1, hold=True, delay_n=3, heading=False, rate_pose=0.07,
+                     rate_v=0.5, rate_omega=0.25)
+    assert unpack_params(pack_params(burst, p)) == (burst, True, p)
+    assert unpack_params(pack_params(BurstParams(), None))[:2] == (BurstParams(), False)
+    fifo = np.zeros((4, 5))
+    bs = BurstState((1.0, 2.0, 3.0, 4.0, 5.0), True)
+    ms = SensorState(fifo, 2, 3, (6.0, 7.0, 8.0, 9.0, 10.0), True, (0.1, 0.2, 0.3, 0.4, 0.5), 17)
+    a = np.zeros(N_SS)
+    store_state(a, bs, ms)
+    bs2, ms2 = unpack_state(a, fifo)
+    assert bs2 == bs and ms2[1:] == ms[1:] and ms2.fifo is fifo
+    assert np.array_equal(pack_state(bs, ms), a)
