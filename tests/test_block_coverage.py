@@ -41,7 +41,8 @@ BLOCK_TESTS = (
         "test_a_spin_engages_the_governor_on_a_dry_road", "test_sample_demand_by_hand",
         "test_preview_rate_by_hand", "test_rate_limits_count_the_rate_change_itself",
         "test_governed_window_by_hand", "test_no_action_while_the_grip_suffices",
-        "test_slow_down_then_return_to_the_plan")),
+        "test_slow_down_then_return_to_the_plan", "test_grip_inputs_follow_the_configs_tyre_model",
+        "test_a_spin_lowers_the_grip_in_both_models", "test_the_oracle_reads_the_true_road")),
     *(f"tests/test_sensors.py::{t}" for t in (
         "test_bias_drift_scale_by_hand", "test_extra_gnss_noise_by_hand", "test_delay_and_dropouts_by_hand",
         "test_sample_rates_and_heading",

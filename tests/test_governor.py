@@ -12,8 +12,10 @@ from tsmpc.config import Config, apply_overrides
 from tsmpc.control.governor import (
     GovernorParams,
     GovernorState,
+    GripParams,
     governed_fill,
     governed_window,
+    governor_inputs,
     governor_update,
     grip_estimate,
     interp_unit,
@@ -64,6 +66,51 @@ def test_a_spin_engages_the_governor_on_a_dry_road() -> None:
     for _ in range(29):
         s = governor_update(P, s, 0.9, 100.0, v, w)
     assert s.spin_hold == pytest.approx(0.1, abs=1e-9) and s.rate < 1.0
+
+
+#: Round numbers: μ_o 0.5, M 1000 kg, g 10 (a resistance F̂ = −1000 N reads μ̂(road) 0.4), the rear
+#: axle carries 0.4 of the weight, 10 kN of drive; tyre-only (grip_per_road 0) unless replaced.
+GP = GripParams(oracle=False, mu_nominal=0.5, mu_dry=0.9, mu_tyre=0.9, grip_per_road=0.0, deadband=0.05,
+                g=10.0, mass=1000.0, rear_share=0.4, force_max=10000.0)
+
+
+def test_grip_inputs_follow_the_configs_tyre_model() -> None:
+    """μ̂(road) 0.4 (F̂ = −1000 N): the tyre-only model keeps its prior 0.9, the coupled one reads
+    0.4 · 0.9 / 0.9 = 0.4; both count the same force budget (10000 − 0.4 · 1000 · 10) / 1000 = 6 m/s²
+    (at M̂ 1250 kg: μ̂(road) 0.42, (10000 − 5250) / 1250 = 3.8). An unusable reading: no grip
+    sample (NaN: the last one stands) and the budget at μ_o."""
+    assert governor_inputs(GP, -1000.0, True, 1000.0, False, 5000.0, math.nan) == (
+        0.9, False, pytest.approx(6.0, abs=1e-12))
+    coupled = GP._replace(grip_per_road=1.0)
+    grip, spin, fpk = governor_inputs(coupled, -1000.0, True, 1000.0, False, 5000.0, math.nan)
+    assert (grip, spin, fpk) == (pytest.approx(0.4, abs=1e-15), False, pytest.approx(6.0, abs=1e-12))
+    assert governor_inputs(coupled, -1000.0, True, 1250.0, False, 5000.0, math.nan)[0::2] == (
+        pytest.approx(0.42, abs=1e-15), pytest.approx(3.8, abs=1e-12))
+    for p in (GP, coupled):
+        grip, spin, fpk = governor_inputs(p, -1000.0, False, 1000.0, False, 5000.0, math.nan)
+        assert math.isnan(grip) and not spin and fpk == pytest.approx(5.0, abs=1e-12)
+
+
+def test_a_spin_lowers_the_grip_in_both_models() -> None:
+    """Saturated drive with F̂ = +5000 N: μ̂(road) at the model's mass 1.0 > (1 + 0.05) · 0.9 =
+    0.945, a spin in either model; the grip is the traction the rear tyre delivered,
+    |9000 − 1.0 · 1000 · 10| / (0.4 · 1000 · 10) = 0.25. Without the saturation, or at
+    F̂ = +4000 N (μ̂(road) 0.9: a road may have that), no spin."""
+    for p in (GP, GP._replace(grip_per_road=1.0)):
+        grip, spin, _ = governor_inputs(p, 5000.0, True, 1000.0, True, 9000.0, math.nan)
+        assert spin and grip == pytest.approx(0.25, abs=1e-12)
+        assert not governor_inputs(p, 5000.0, True, 1000.0, False, 9000.0, math.nan)[1]
+        assert not governor_inputs(p, 4000.0, True, 1000.0, True, 9000.0, math.nan)[1]
+
+
+def test_the_oracle_reads_the_true_road() -> None:
+    """The oracle: the true μ(road) 0.5 through the coupling (0.5) or the prior (tyre-only), its
+    budget (10000 − 5000) / 1000 = 5; it knows the grip, so a spin engages it without lowering it."""
+    o = GP._replace(oracle=True)
+    assert governor_inputs(o._replace(grip_per_road=1.0), math.nan, False, 1000.0, False, 0.0, 0.5) == (
+        0.5, False, pytest.approx(5.0, abs=1e-12))
+    assert governor_inputs(o, math.nan, False, 1000.0, False, 0.0, 0.5)[0] == 0.9
+    assert governor_inputs(o, 5000.0, True, 1000.0, True, 9000.0, 0.5)[:2] == (0.9, True)
 
 
 def test_sample_demand_by_hand() -> None:
@@ -193,7 +240,14 @@ _DROP = ["scenario.plant.combined_slip=true", "scenario.plant.grip_scales_with_r
 
 @pytest.fixture(scope="module")
 def drop_estimate():
+    """The drop declared in the plant only: the governor's grip model is tyre-only (the config's)."""
     return _run([*_DROP, "governor.enabled=true"], 9.0)
+
+
+@pytest.fixture(scope="module")
+def drop_declared():
+    """The drop with the coupling declared in the config's tyre: plant and governor agree."""
+    return _run([*_DROP, "tyre.scale_grip_with_road=true"], 9.0)
 
 
 @pytest.fixture(scope="module")
@@ -203,21 +257,26 @@ def drop_oracle():
 
 def test_governor_on_changes_nothing_while_grip_suffices() -> None:
     """Built-in circuit, dry road, 6 s (its hardest acceleration): no action, and the run is the
-    run without the governor, bit for bit."""
-    on = _run(["governor.enabled=true"], 6.0)
-    off = _run([], 6.0)
+    run without the governor, bit for bit (on by default)."""
+    assert Config().governor.enabled
+    assert not any(Config.preset(n).governor.enabled for n in ("paper", "paper-as-run"))
+    on = _run([], 6.0)
+    off = _run(["governor.enabled=false"], 6.0)
     assert on.events["governor_actions"] == 0 and on.events["governor_steps"] == 0
     np.testing.assert_array_equal(on.state, off.state)
     np.testing.assert_array_equal(on.ref, off.ref)
 
 
-def test_slows_down_on_a_mu_drop(drop_estimate) -> None:
+@pytest.mark.parametrize("run", ["drop_estimate", "drop_declared"])
+def test_slows_down_on_a_mu_drop(run: str, request: pytest.FixtureRequest) -> None:
     """μ 0.9 → 0.3 at 1 s while the plan accelerates at 2.6 m/s² (the rear tyre holds 1.2 m/s² on
-    0.3): the governor slows the reference within 0.5 s of the drop (measured: the reference is
-    slowed from 1.3 s, read from the spinning wheel's traction), the governed speed ends below 70 %
-    of the planned one (measured 3.9 of 12.4 m/s), and the car stays on the governed path
-    (measured max |e_y| 0.002 m; without the governor it leaves the road at 7.3 s)."""
-    log = drop_estimate
+    0.3): the wheel spins, and a spin lowers the grip in both grip models (tyre-only, the drop
+    declared in the plant only; the coupling declared in the config): the governor slows the
+    reference within 0.5 s of the drop (measured: slowed from 1.3 s in both, read from the spinning
+    wheel's traction), the governed speed ends below 70 % of the planned one (measured 6.6
+    tyre-only, 3.9 coupled, of 12.4 m/s), and the car stays on the governed path (measured max
+    |e_y| 0.015 and 0.002 m; without the governor it leaves the road at 7.3 s)."""
+    log = request.getfixturevalue(run)
     assert log.termination == "completed"
     planned = np.asarray(log.meta["planned_v"])
     slowed = np.flatnonzero(log.ref[:, 3] < planned - 1e-9)
@@ -227,19 +286,58 @@ def test_slows_down_on_a_mu_drop(drop_estimate) -> None:
     assert np.max(np.abs(log.errors[:, 1])) < 0.1
 
 
-def test_oracle_row_knows_the_drop_at_once(drop_oracle, drop_estimate) -> None:
-    """The oracle governor reads the true μ(road): the MPC step at the drop (1.0 s) sets the rate
-    of the next, slowed from 1.1 s (the estimate needs its window: later), and the estimate's run
-    tracks within 1.5x of its max |e_y| (the acceptance's bound)."""
+def test_oracle_row_knows_the_drop_at_once(drop_oracle, drop_declared) -> None:
+    """The oracle governor reads the true μ(road) (through the plant's coupling): the MPC step at
+    the drop (1.0 s) sets the rate of the next, slowed from 1.1 s (the estimate needs its window:
+    later), and the estimate's run with the coupling declared (plant and governor agree: the
+    acceptance's case) tracks within 1.5x of its max |e_y| (the acceptance's bound; measured 0.0035
+    and 0.0017 m). The tyre-only estimate (the drop declared in the plant only) learns of it from
+    the spin: later, and further off the path (measured 0.015 m)."""
     firsts = []
-    for log in (drop_oracle, drop_estimate):
+    for log in (drop_oracle, drop_declared):
         planned = np.asarray(log.meta["planned_v"])
         firsts.append(log.t_outer[np.flatnonzero(log.ref[:, 3] < planned - 1e-9)[0]])
     assert firsts[0] == pytest.approx(1.1, abs=1e-9)
     assert firsts[1] > firsts[0]
     ey_o = np.max(np.abs(drop_oracle.errors[:, 1]))
-    ey_e = np.max(np.abs(drop_estimate.errors[:, 1]))
+    ey_e = np.max(np.abs(drop_declared.errors[:, 1]))
     assert ey_e <= 1.5 * max(ey_o, 0.01)
+
+
+def _engine_run(sets: list[str], reference: object, seconds: float):
+    exp = prepare(apply_overrides(Config(), sets), ["ref"], reference=reference, duration=seconds)
+    return simulate(exp.config, "ref", exp.scenario, max_steps=exp.max_steps)
+
+
+def test_the_default_tyre_holds_its_prior_on_the_default_run() -> None:
+    """Built-in circuit, 40 s, defaults: the road follows the paper's μ program (down to 0.68)
+    while the default tyre's grip does not; the governor (on) holds μ_tyre: no action, every column
+    the run without it. The same road with the coupling declared (``tyre.scale_grip_with_road``:
+    the plant's grip follows too, and the governor reads it from the resistance) slows it (measured:
+    1 action, from 29.6 s) — the reading the tyre-only model must not make."""
+    on = _engine_run([], None, 40.0)
+    off = _engine_run(["governor.enabled=false"], None, 40.0)
+    assert on.events["governor_actions"] == 0 and on.events["governor_steps"] == 0
+    for name in ("state", "ref", "errors", "errors_measured", "command", "estimate"):
+        np.testing.assert_array_equal(getattr(on, name), getattr(off, name), err_msg=name)
+    assert _engine_run(["tyre.scale_grip_with_road=true"], None, 40.0).events["governor_actions"] == 1
+
+
+def test_an_undeclared_mu_drop_is_a_model_mismatch(paper_reference_path) -> None:
+    """Paper reference, μ 0.9 → 0.5 at 30 s, combined slip, 60 s. Declared in the plant only (the
+    config says the tyres do not follow the road), the governor holds its prior through the drop:
+    its one action is the start's spin (from 2.8 s; measured: no governed step after 28 s), and
+    the car is still on the road at 60 s (it leaves it at 64.4 s, after the first spin since the
+    drop: too late). With the coupling declared in ``[tyre]`` it reads the drop and slows before the
+    next demanding stretch (measured: a second action, between 40 and 60 s; the whole run
+    completes, max |e_y| 0.040 m)."""
+    drop = ["scenario.plant.combined_slip=true", "scenario.base_mu=0.9",
+            "scenario.friction=[{at_s = 30.0, mu = 0.5}]"]
+    plant_only = _engine_run([*drop, "scenario.plant.grip_scales_with_road=true"], paper_reference_path, 60.0)
+    declared = _engine_run([*drop, "tyre.scale_grip_with_road=true"], paper_reference_path, 60.0)
+    assert plant_only.termination == declared.termination == "completed"
+    assert plant_only.events["governor_actions"] == 1
+    assert declared.events["governor_actions"] == 2
 
 
 def test_the_engine_and_the_batch_run_the_governor() -> None:

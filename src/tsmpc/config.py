@@ -1055,11 +1055,13 @@ class GripSource(StrEnum):
 
 
 class GovernorSettings(_Frozen):
-    """The speed governor (issue 36; beyond the paper, off in the ``paper`` presets): the reference
-    is re-timed online so that the speed and curvature ahead need at most ``margin`` x the
-    estimated grip (tsmpc.control.governor)."""
+    """The speed governor (issue 36; beyond the paper: on by default, off in the ``paper`` presets):
+    the reference is re-timed online so that the speed and curvature ahead need at most ``margin``
+    x the estimated grip (tsmpc.control.governor). Its grip model is the config's tyre model: read
+    from the road's resistance when ``tyre.scale_grip_with_road``, else the tyre's own grip, lowered
+    only by a spin of the rear wheel."""
 
-    enabled: _Flag = Field(default=False, description="re-time the reference online to the estimated grip")
+    enabled: _Flag = Field(default=True, description="re-time the reference online to the estimated grip")
     margin: PositiveFloat = Field(
         default=0.8, le=1.0, description="share of the estimated grip mu g the reference ahead may use "
         "(lateral and driven-axle longitudinal acceleration combined) [-], (0, 1]")

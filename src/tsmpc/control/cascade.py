@@ -55,7 +55,7 @@ from tsmpc.control.gates import (
     pose_consistent,
     speed_bounded_yaw_rate,
 )
-from tsmpc.control.governor import Governor, GovernorParams, governed_window, grip_estimate, spin_grip
+from tsmpc.control.governor import Governor, GovernorParams, GripParams, governed_window, governor_inputs
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep
@@ -653,33 +653,17 @@ class Cascade:
         recovery re-anchors, one clock)."""
         gov, cfg, ref = self.governor, self.cfg, self.reference
         assert gov is not None
-        veh = cfg.vehicle
-        mass = veh.mass
+        mass = cfg.vehicle.mass
         if cfg.fusion.mass_estimate:
             mass += self._fusion.mass.delta_mass
-        grip_per_road = cfg.tyre.mu_tyre / cfg.tyre.mu_dry
-        if cfg.governor.grip_source == "oracle":
-            mu_road = self.road_mu
-        else:
-            last = self._last
-            # the friction estimate means nothing below the dynamic box's speeds (the resistance
-            # fades at standstill; the MHE starts up there) nor from a rejected or failed sample
-            usable = (last is not None and last.estimate.status == EstimatorStatus.OK
-                      and float(last.estimate.x[0]) >= cfg.dynamic_box.v[0])
-            F = float(last.estimate.F_fr) if usable and last is not None else math.nan
-            mu_road = grip_estimate(F, mass, veh.mu_nominal, veh.g, 1.0)
-        grip = mu_road * grip_per_road if math.isfinite(mu_road) else math.nan
-        # more resistance than any road (at the model's mass) under saturated drive: a spin
         last = self._last
-        mu_model = grip_estimate(last.estimate.F_fr if last is not None else math.nan, veh.mass,
-                                 veh.mu_nominal, veh.g, 1.0)
-        spinning = (last is not None and last.saturated
-                    and mu_model > (1.0 + cfg.governor.deadband) * cfg.tyre.mu_dry)
-        if spinning and cfg.governor.grip_source != "oracle":  # (the oracle knows the grip)
-            grip = spin_grip(float(self._u_applied[0]), mu_model, veh.mass, veh.g, veh.a / veh.wheelbase)
-        f_max = self._force_limits[1]
-        mu_res = mu_road if math.isfinite(mu_road) else veh.mu_nominal
-        force_per_kg = (f_max - mu_res * mass * veh.g) / mass
+        # the friction estimate means nothing below the dynamic box's speeds (the resistance
+        # fades at standstill; the MHE starts up there) nor from a rejected or failed sample
+        usable = (last is not None and last.estimate.status == EstimatorStatus.OK
+                  and float(last.estimate.x[0]) >= cfg.dynamic_box.v[0])
+        grip, spinning, force_per_kg = governor_inputs(
+            gov.grip, float(last.estimate.F_fr) if last is not None else math.nan, usable, mass,
+            last is not None and bool(last.saturated), float(self._u_applied[0]), self.road_mu)
         k = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(ref) - 1)
         w = ref.window(k, gov.preview + 1)
         before = gov.actions
@@ -802,7 +786,16 @@ def _build_governor(cfg: Config) -> Governor:
         grip_alpha=min(Tc / g.grip_time_constant_s, 1.0))
     # the MPC's horizon, and the samples a slow-down from 1 to rate_min takes at rate_down
     preview = cfg.mpc.N + math.ceil((1.0 - g.rate_min) / (g.rate_down * Tc))
-    return Governor(params, preview)
+    # the grip model is the config's tyre model: read from the road's resistance when the tyres'
+    # grip follows the road, else tyre-only (governor.py); the oracle knows the plant's tyre
+    tyre, plant = cfg.tyre, cfg.scenario.plant
+    follows = tyre.scale_grip_with_road or (g.grip_source == "oracle" and plant.grip_scales_with_road)
+    grip = GripParams(
+        oracle=g.grip_source == "oracle", mu_nominal=veh.mu_nominal, mu_dry=tyre.mu_dry,
+        mu_tyre=tyre.mu_tyre, grip_per_road=tyre.mu_tyre / tyre.mu_dry if follows else 0.0,
+        deadband=g.deadband, g=veh.g, mass=veh.mass, rear_share=veh.a / veh.wheelbase,
+        force_max=cfg.lqr.force_limits(veh)[1])
+    return Governor(params, preview, grip)
 
 
 def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> None:

@@ -9,19 +9,37 @@ unchanged, the car drives it at r times the planned speed (v_d(τ) r, ω_d(τ) r
 acceleration v_d ω_d and its acceleration along the path both scale with r². The cascade keeps τ
 as its reference-time offset (``t − τ``, the recovery's offset, :mod:`tsmpc.control.cascade`).
 
-Grip. The friction force the MHE-UIO estimates (its unknown input, :mod:`tsmpc.estimation.mhe_uio`)
-is F̂_fr = (μ(road) − μ_o) M g, so μ̂(road) = μ_o + F̂_fr / (M̂ g) (M̂: the mass estimate of
-``fusion.mass_estimate`` when on); the tyres' grip is taken to follow the road, μ̂_t = μ̂(road)
-μ_tyre / μ_dry (the plant's ``tyre.scale_grip_with_road``). A wheel that spins breaks that reading:
-the acceleration the drive force does not produce looks like more resistance (μ 0.9 → 0.3 under full
-throttle: μ̂(road) 1.36). A μ̂(road) at the model's mass above every road the tyre knows, (1 +
-deadband) μ_dry, while the inner loop saturates is read as such (a mass error alone also raises
-μ̂(road), without the saturation): the grip is then the traction the rear tyre delivers, |F_xR −
-μ̂(road) M g| over its load (:func:`spin_grip`; 0.30 there), and the governor is engaged for
-``SPIN_HOLD_S`` whatever the grip: a plan that asks more traction than the dry tyre has (the paper
-reference's start on the friction-ellipse tyre) spins the wheel too. The estimate is low-passed
-(time constant ``grip_time_constant_s``) but a lower value is taken at once: grip lost is believed
-at once, grip regained slowly.
+Grip. Its model is the config's tyre model (``tyre.scale_grip_with_road``, the flag the plant's
+tyre also uses unless a scenario overrides it), read each MPC step by :func:`governor_inputs`:
+
+- *The tyres' grip follows the road* (``scale_grip_with_road = true``). The friction force the
+  MHE-UIO estimates (its unknown input, :mod:`tsmpc.estimation.mhe_uio`) is F̂_fr = (μ(road) − μ_o)
+  M g, so μ̂(road) = μ_o + F̂_fr / (M̂ g) (M̂: the mass estimate of ``fusion.mass_estimate`` when
+  on), and the grip is μ̂_t = μ̂(road) μ_tyre / μ_dry.
+- *Tyre-only* (``false``, the default tyre). The grip holds its prior μ_tyre and is lowered only
+  by what the tyre itself shows: a spin (below). Why not read it from the resistance: before the
+  wheel first spins, a μ drop 0.9 → 0.5 and the default run's μ program look the same to the
+  controller — the road's resistance drops and the tyres' utilisation stays ≤ 0.43 — so the grip is
+  not observable in time (the study of 2026-11-27, notes/governor-grip-study); only the resistance
+  change, read through the coupling "the tyres' grip follows the road", warns early enough. Whether
+  that coupling holds is a property of the vehicle's tyres, which the config states, not something
+  the governor can estimate: read through a coupling the tyres do not have, the default run's μ
+  program slowed the built-in circuit (1 action, RMSE v 0.049 → 0.051 m/s) for grip it never lost.
+  A road whose grip drops while the config says the tyres do not follow (a plant-only
+  ``scenario.plant.grip_scales_with_road``) is a model mismatch: the governor learns of it at the
+  first spin only (the paper reference's μ drop at 30 s: the car leaves the road at ≈ 64.4 s).
+
+A wheel that spins (either model) shows in the estimate: the acceleration the drive force does not
+produce looks like more resistance (μ 0.9 → 0.3 under full throttle: μ̂(road) 1.36). A μ̂(road) at
+the model's mass above every road the tyre knows, (1 + deadband) μ_dry, while the inner loop
+saturates is read as such (a mass error alone also raises μ̂(road), without the saturation): the
+grip is then the traction the rear tyre delivers, |F_xR − μ̂(road) M g| over its load
+(:func:`spin_grip`; 0.30 there), and the governor is engaged for ``SPIN_HOLD_S`` whatever the grip:
+a plan that asks more traction than the dry tyre has (the paper reference's start on the
+friction-ellipse tyre) spins the wheel too. The estimate is low-passed (time constant
+``grip_time_constant_s``) but a lower value is taken at once: grip lost is believed at once, grip
+regained (back to the prior, tyre-only) slowly. The oracle row (``grip_source = "oracle"``) reads
+the true μ(road) through the plant's coupling (the config's tyre or ``scenario.plant``'s).
 
 Demand of a reference sample (v_d, ω_d, a_d = dv_d/dτ) at rate 1, as an acceleration [m/s²]::
 
@@ -47,9 +65,11 @@ smoothly (rate-limited) when the grip returns.
 
 It never acts while μ̂_t ≥ (1 − deadband) μ_tyre: a plan checked for the vehicle's grip and force
 budget before the run (:mod:`tsmpc.planning.retime`) needs nothing from it, and the nominal run is
-the cascade's without the governor, bit for bit.
+the cascade's without the governor, bit for bit — which is why it is on by default (off in the
+``paper`` presets): with the default tyre it holds μ_tyre until a wheel spins.
 
-:func:`governor_update` is the block's one definition (:mod:`tsmpc.kernels.jit`);
+:func:`governor_inputs` and :func:`governor_update` are the block's one definition
+(:mod:`tsmpc.kernels.jit`: the cascade and the run engine call them);
 :class:`Governor` is its online wrapper, :func:`governed_window` the reference the MPC sees.
 """
 
@@ -68,9 +88,11 @@ __all__ = [
     "Governor",
     "GovernorParams",
     "GovernorState",
+    "GripParams",
     "governed_fill",
     "governed_index",
     "governed_window",
+    "governor_inputs",
     "governor_update",
     "grip_estimate",
     "interp_unit",
@@ -117,6 +139,35 @@ class GovernorParams(NamedTuple):
     grip_alpha: float
 
 
+class GripParams(NamedTuple):
+    """What :func:`governor_inputs` reads the grip with (from the config's vehicle and tyre).
+
+    Attributes:
+        oracle: the grip comes from the true μ(road) given each step (``grip_source = "oracle"``).
+        mu_nominal: μ_o, the control model's nominal friction coefficient [-].
+        mu_dry: the road μ at which the tyre has ``mu_tyre`` [-].
+        mu_tyre: the tyre's grip, the plan's (the prior of the tyre-only model) [-].
+        grip_per_road: μ_tyre / μ_dry when the tyres' grip follows the road
+            (``tyre.scale_grip_with_road``), 0 for the tyre-only model [-].
+        deadband: a resistance above (1 + deadband) μ_dry under saturation is a spin [-].
+        g: gravity [m/s²].
+        mass: the control model's mass M (the spin's reading) [kg].
+        rear_share: a / (a + b), the share of the weight on the driven rear axle [-].
+        force_max: the inner loop's largest drive force [N].
+    """
+
+    oracle: bool
+    mu_nominal: float
+    mu_dry: float
+    mu_tyre: float
+    grip_per_road: float
+    deadband: float
+    g: float
+    mass: float
+    rear_share: float
+    force_max: float
+
+
 class GovernorState(NamedTuple):
     """State of the governor.
 
@@ -145,6 +196,38 @@ def spin_grip(F_applied: float, mu_road: float, mass: float, g: float, rear_shar
     """μ̂_t of a rear wheel that spins: the traction it delivers, F_xR − μ̂(road) M g (the force
     the MHE's model sees accelerate the car), over its load ``rear_share`` M g."""
     return abs(F_applied - mu_road * mass * g) / (rear_share * mass * g)
+
+
+@jitable
+def governor_inputs(p: GripParams, F_fr: float, usable: bool, mass: float, saturated: bool,
+                    F_applied: float, road_mu: float) -> tuple[float, bool, float]:
+    """This MPC step's (grip sample μ̂_t, spinning, force budget per kg) for :func:`governor_update`.
+
+    ``F_fr``: the inner loop's last friction estimate (NaN before the first); ``usable``: that
+    estimate may be read as the road's resistance (accepted, at a speed of the dynamic box);
+    ``mass``: M̂, the mass the resistance is read with; ``saturated``: the inner loop's last step
+    saturated; ``F_applied``: the drive force applied [N]; ``road_mu``: the true μ(road) (oracle).
+
+    μ̂(road) = μ_o + F̂_fr / (M̂ g) (the oracle: the true μ). The grip: μ̂(road) ``grip_per_road``
+    when the tyres follow the road, else the prior μ_tyre while a reading is usable (tyre-only: the
+    resistance says nothing about the tyre). A resistance at the model's mass above every road,
+    (1 + deadband) μ_dry, while the inner loop saturates is a spin: the grip is then the traction
+    the rear tyre delivers (:func:`spin_grip`; the oracle knows the grip and ignores it). The force
+    budget: (F_max − μ̂(road) M̂ g) / M̂ (μ_o without a reading)."""
+    if p.oracle:
+        mu_road = road_mu
+    else:
+        mu_road = grip_estimate(F_fr if usable else math.nan, mass, p.mu_nominal, p.g, 1.0)
+    grip = math.nan
+    if math.isfinite(mu_road):
+        grip = mu_road * p.grip_per_road if p.grip_per_road > 0.0 else p.mu_tyre
+    mu_model = grip_estimate(F_fr, p.mass, p.mu_nominal, p.g, 1.0)
+    spinning = saturated and mu_model > (1.0 + p.deadband) * p.mu_dry
+    if spinning and not p.oracle:
+        grip = spin_grip(F_applied, mu_model, p.mass, p.g, p.rear_share)
+    mu_res = mu_road if math.isfinite(mu_road) else p.mu_nominal
+    force_per_kg = (p.force_max - mu_res * mass * p.g) / mass
+    return grip, spinning, force_per_kg
 
 
 @jitable
@@ -286,11 +369,13 @@ class Governor:
     Args:
         params: the block's parameters.
         preview: samples of the reference the governor looks ahead (≥ the MPC horizon).
+        grip: how the grip is read (:func:`governor_inputs`).
     """
 
-    def __init__(self, params: GovernorParams, preview: int) -> None:
+    def __init__(self, params: GovernorParams, preview: int, grip: GripParams) -> None:
         self.params = params
         self.preview = int(preview)
+        self.grip = grip  #: how the grip is read (:func:`governor_inputs`)
         self.reset()
 
     def reset(self) -> None:

@@ -43,12 +43,12 @@ from tsmpc.control.gates import GateParams, dead_reckon, jump_run, plausible_spe
 from tsmpc.control.governor import (
     GovernorParams,
     GovernorState,
+    GripParams,
     governed_fill,
     governed_index,
+    governor_inputs,
     governor_update,
-    grip_estimate,
     interp_unit,
-    spin_grip,
 )
 from tsmpc.control.slip_aware import slip_gate_update
 from tsmpc.estimation.friction_step import (
@@ -429,24 +429,17 @@ def _govern(t, fp, ip, sf, si, sc, frb, patches, events, ref_v, ref_w):
     p = GovernorParams(fp[FP_G_MARGIN], fp[FP_G_RDOWN], fp[FP_G_RUP], fp[FP_G_RMIN], fp[FP_G_MUPLAN],
                        fp[FP_G_DEADBAND], fp[FP_G_KT], fp[FP_G_DRAG], fp[FP_G_G], fp[FP_G_TC],
                        fp[FP_G_ALPHA])
-    g = p.g
+    oracle = ip[IP_G_ORACLE] != 0
+    gp = GripParams(oracle, fp[FP_G_MUNOM], fp[FP_G_MUDRY], fp[FP_G_MUPLAN], fp[FP_G_GPR], p.deadband,
+                    p.g, fp[FP_VM], fp[FP_G_REAR], fp[FP_G_FMAX])
     mass = fp[FP_VM]
     if ip[IP_MASSEST] != 0:
         mass += _delta_mass(sf, fp)
     has_last = si[SI_HASLAST] != 0
-    F_last = sc[SC_ESTF] if has_last else math.nan
-    if ip[IP_G_ORACLE] != 0:
-        mu_road = friction_mu(t, sf[SF_STRAVEL], frb, patches, events)
-    else:
-        usable = has_last and si[SI_ESTSTAT] == ST_OK and sc[SC_EST] >= fp[FP_G_VMIN]
-        mu_road = grip_estimate(F_last if usable else math.nan, mass, fp[FP_G_MUNOM], g, 1.0)
-    grip = mu_road * fp[FP_G_GPR] if math.isfinite(mu_road) else math.nan
-    mu_model = grip_estimate(F_last, fp[FP_VM], fp[FP_G_MUNOM], g, 1.0)
-    spinning = has_last and si[SI_SAT] != 0 and mu_model > (1.0 + p.deadband) * fp[FP_G_MUDRY]
-    if spinning and ip[IP_G_ORACLE] == 0:
-        grip = spin_grip(sf[SF_UAPP], mu_model, fp[FP_VM], g, fp[FP_G_REAR])
-    mu_res = mu_road if math.isfinite(mu_road) else fp[FP_G_MUNOM]
-    force_per_kg = (fp[FP_G_FMAX] - mu_res * mass * g) / mass
+    usable = has_last and si[SI_ESTSTAT] == ST_OK and sc[SC_EST] >= fp[FP_G_VMIN]
+    road_mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events) if oracle else math.nan
+    grip, spinning, force_per_kg = governor_inputs(gp, sc[SC_ESTF] if has_last else math.nan, usable, mass,
+                                                   has_last and si[SI_SAT] != 0, sf[SF_UAPP], road_mu)
     Tc = fp[FP_TC]
     k = min(max(math.floor((t - sf[SF_TOFF]) / Tc + 1e-6), 0), ip[IP_REFLEN] - 1)
     n = ip[IP_G_PREVIEW] + 1

@@ -132,7 +132,8 @@ def velocity_figure(logs: dict[str, RunLog]) -> Figure:
 def _governor_lines(ax: Any, logs: dict[str, RunLog]) -> None:
     """The speed governor's slow-down (tsmpc.control.governor): the planned speed, and each
     governed run's own v_d (the reference it tracked) where it differs from the first's."""
-    governed = {n: g for n, g in logs.items() if "planned_v" in g.meta}
+    governed = {n: g for n, g in logs.items()  # (on by default: only the runs it slowed)
+                if "planned_v" in g.meta and g.events.get("governor_actions", 0) > 0}
     if not governed:
         return
     first = next(iter(governed.values()))

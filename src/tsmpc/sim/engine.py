@@ -140,7 +140,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade._outer": "c3f0fb3dc4ccf2ab",
     "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
     "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
-    "tsmpc.control.cascade:Cascade._govern": "7db84fbd67992ceb",
+    "tsmpc.control.cascade:Cascade._govern": "5e06de8d6a2b15e0",
     "tsmpc.control.cascade:Cascade._governed": "b1b952c55d88d9b3",
     "tsmpc.control.cascade:Cascade.reference_row": "257f90494b63c8c2",
     "tsmpc.control.governor:governed_window": "cadafab2efb735cb",
@@ -703,7 +703,7 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
          fp[ke.FP_G_ALPHA]) = p
         fp[ke.FP_G_VMIN] = cfg.dynamic_box.v[0]
         fp[ke.FP_G_MUNOM], fp[ke.FP_G_MUDRY] = veh.mu_nominal, cfg.tyre.mu_dry
-        fp[ke.FP_G_GPR] = cfg.tyre.mu_tyre / cfg.tyre.mu_dry
+        fp[ke.FP_G_GPR] = gov.grip.grip_per_road  # 0: the tyre-only grip model (governor.py)
         fp[ke.FP_G_REAR] = veh.a / veh.wheelbase
         fp[ke.FP_G_FMAX] = cascade._force_limits[1]
         fp[ke.FP_G_DT], fp[ke.FP_G_MDT] = ref.dt, cascade._mpc_reference.dt
