@@ -179,6 +179,38 @@ def test_one_step_of_the_as_run_law_by_hand(as_run: Config) -> None:
     assert law.state[:3] == pytest.approx((F1n, s1n, T * (r[1] - x[2])), rel=1e-9)
 
 
+@pytest.mark.parametrize("extrapolate", [True, False])
+def test_step_on_floats_equals_the_numpy_formula(as_run: Config, extrapolate: bool) -> None:
+    """The step (plain floats, N̄ in closed form) computes what the public numpy functions compute:
+    K = Σ μ_i K_i (as_run_memberships), N̄ = as_run_reference_gain(model5) and u = N̄ r + K x, over
+    states inside and outside the box (δ beyond ±25° through σ, v + 2 beyond 18 m/s, α beyond
+    ±0.1, v under the model's floor). rel 1e-9: the two N̄ differ by rounding only (≤ 1e-10 seen:
+    the numpy LU and the closed form round differently; a wrong entry is off by orders more)."""
+    law = _law(as_run, _gains(), extrapolate_memberships=extrapolate)
+    box = law.model.premise_box
+    lo, hi, bits = np.array(box.lower), np.array(box.upper), np.array(box.vertex_bits)
+    st, a, b = law.settings, 0.01, as_run.lqr.steering_bias_rad
+    rng = np.random.default_rng(7)
+    law.step(_est((0.12, 0.0, 0.0)), 0.5, 0.0)  # started
+    for k in range(300):
+        x = (float(rng.choice([0.05, rng.uniform(0.1, 25.0)])), float(rng.uniform(-0.2, 0.2)),
+             float(rng.uniform(-1.0, 1.0)))
+        r = np.array([rng.uniform(0.0, 20.0), rng.uniform(-1.0, 1.0)])
+        law._sigma = float(rng.uniform(-0.7, 0.7)) + b  # δ over and beyond the box
+        F1, s1, zeta, F_app = law.state
+        d = s1 - b
+        mu = as_run_memberships((d, x[0] + 2.0, x[1]), lo, hi, bits, extrapolate=extrapolate)
+        K = np.tensordot(mu, law.K, axes=(0, 0))
+        Nbar = as_run_reference_gain(law.model5(d, x[0]), law.B5, K)
+        u = Nbar @ r + K @ np.array([*x, F_app, s1, zeta])
+        cmd = law.step(_est(x), *r)
+        F1n, s1n = F1 + a * (u[0] - F1), s1 + a * (u[1] - s1)
+        assert law.state == pytest.approx((F1n, s1n, zeta + 0.001 * (r[1] - x[2]),
+                                           min(max(F1n, -2000.0), 10000.0)), rel=1e-9), k
+        assert (cmd.F_xR, cmd.delta) == pytest.approx(
+            (min(max(F1n, -2000.0), 10000.0), min(max(s1n - b, -st.delta_max), st.delta_max)), rel=1e-9)
+
+
 def test_steering_bias_enters_as_K5_times_b(as_run: Config) -> None:
     """Same δ, bias b or none: the filter input differs by exactly K(:, 5)·b, so after one Euler
     step (a = T_d λ) the applied steering differs by a b (K_δ,5 − 1) and the force by a b K_F,5

@@ -106,7 +106,24 @@ class AsRunLQR:
         f_lo, f_hi = settings.force_limits(vehicle)
         self._lo = (f_lo, -settings.delta_max)
         self._hi = (f_hi, settings.delta_max)
+        self._prepare()
         self.reset()
+
+    def _prepare(self) -> None:
+        """Per-step constants of :meth:`step` (plain floats; the vehicle is fixed at construction).
+
+        The step is ~100 scalar operations; numpy's per-call overhead on 2- to 5-element arrays
+        dominated it (≈ 200 µs per step before), hence plain floats and one small dot."""
+        if self._bits.shape[1] != 3:
+            raise ConfigError(f"AsRunLQR: the premise box must have 3 variables (δ, v, α), "
+                              f"got {self._bits.shape[1]}")
+        self._box = tuple((float(lo), float(hi) - float(lo)) for lo, hi in zip(self._lower, self._upper,
+                                                                               strict=True))
+        # μ_i = Π_j w_j with w_j = η_j (upper bound) or 1 − η_j: indices into (1−η₀, η₀, 1−η₁, …)
+        self._mu_idx = tuple(tuple(2 * j + int(b) for j, b in enumerate(row)) for row in self._bits)
+        self._K_flat = np.ascontiguousarray(self.K.reshape(self.K.shape[0], 12))
+        p = self.vehicle
+        self._veh = (p.mass, p.inertia, p.C_f, p.C_r, p.a, p.b, p.mu_nominal * p.g, p.drag_factor)
 
     @property
     def dt(self) -> float:
@@ -120,7 +137,7 @@ class AsRunLQR:
         self._zeta = 0.0
         self._F_app = 0.0
         self._started = False
-        self._applied = np.zeros(2)
+        self._applied = (0.0, 0.0)
 
     @property
     def state(self) -> tuple[float, float, float, float]:
@@ -130,7 +147,7 @@ class AsRunLQR:
     @property
     def applied_input(self) -> NDArray[np.float64]:
         """The last plant input [F_xR, δ]."""
-        return self._applied.copy()
+        return np.array(self._applied)
 
     def gains(self, z: tuple[float, float, float]) -> NDArray[np.float64]:
         """K (2, 6) = Σ μ_i(z) K_i at the scheduling point z = (δ, v, α) (already shifted)."""
@@ -165,23 +182,39 @@ class AsRunLQR:
 
     def step(self, estimate: Any, v_ref: float, omega_ref: float) -> InnerCommand:
         """One inner step from the state (``.x`` = [v, α, ω]: the true state in the published run)
-        and the outer references; returns the plant input for the next T_d."""
-        v, al, om = (float(c) for c in estimate.x)
+        and the outer references; returns the plant input for the next T_d.
+
+        The same computation as :meth:`gains`, :meth:`model5` and :func:`as_run_reference_gain`
+        (tested to rounding), on plain floats with N̄ in closed form (:func:`_reference_gain`)."""
+        v, al, om = np.asarray(estimate.x, dtype=float).tolist()
         if not (math.isfinite(v) and math.isfinite(al) and math.isfinite(om)):
-            return InnerCommand(float(self._applied[0]), float(self._applied[1]), True, 0.0)
+            return InnerCommand(self._applied[0], self._applied[1], True, 0.0)
         st = self.settings
-        r = np.array([float(v_ref), float(omega_ref)])
+        v_ref, omega_ref = float(v_ref), float(omega_ref)
         if not self._started:
-            self._start(v, al, r)
+            self._start(v, al, np.array([v_ref, omega_ref]))
         bias = st.steering_bias_rad
-        delta_s = self._sigma - bias
-        K, A5 = self.gains((delta_s, v + st.scheduling_speed_shift, al)), self.model5(delta_s, v)
-        Nbar = as_run_reference_gain(A5, self.B5, K)
-        x = np.array([v, al, om, self._F_app, self._sigma, self._zeta])
-        u = Nbar @ r + K @ x
+        sigma = self._sigma
+        delta_s = sigma - bias
+        # memberships (as_run_memberships) and K = Σ μ_i K_i
+        eta = []
+        for z, (lo, width) in zip((delta_s, v + st.scheduling_speed_shift, al), self._box, strict=True):
+            e = (z - lo) / width
+            if not st.extrapolate_memberships:
+                e = min(max(e, 0.0), 1.0)
+            eta += (1.0 - e, e)
+        mu = [eta[i] * eta[j] * eta[k] for i, j, k in self._mu_idx]
+        K = np.dot(mu, self._K_flat).tolist()  # K[0:6] the force row, K[6:12] the steering row
         a = self.Td * self.bandwidth
-        self._F1 += a * (float(u[0]) - self._F1)
-        self._sigma += a * (float(u[1]) - self._sigma)
+        n00, n01, n10, n11 = _reference_gain(self._veh, self.Td, self.bandwidth, delta_s,
+                                             max(v, V_MODEL_FLOOR), K)
+        F_app, zeta = self._F_app, self._zeta
+        u0 = (n00 * v_ref + n01 * omega_ref) + (K[0] * v + K[1] * al + K[2] * om + K[3] * F_app
+                                                + K[4] * sigma + K[5] * zeta)
+        u1 = (n10 * v_ref + n11 * omega_ref) + (K[6] * v + K[7] * al + K[8] * om + K[9] * F_app
+                                                + K[10] * sigma + K[11] * zeta)
+        self._F1 += a * (u0 - self._F1)
+        self._sigma += a * (u1 - self._sigma)
         F_add = self.vehicle.mass * (v_ref - v) / st.speed_time_constant if st.speed_feedback else 0.0
         comp = 0.0
         if st.friction_compensation:
@@ -192,5 +225,51 @@ class AsRunLQR:
         o0, o1 = self._clip(0, out0), self._clip(1, out1)
         self._F_app = self._clip(0, self._F1)
         self._zeta += self.Td * (omega_ref - om)  # no anti-windup
-        self._applied = np.array([o0, o1])
+        self._applied = (o0, o1)
         return InnerCommand(o0, o1, o0 != out0 or o1 != out1, comp)
+
+
+def _reference_gain(veh: tuple[float, ...], Td: float, lam: float, delta: float, v: float,
+                    K: list[float]) -> tuple[float, float, float, float]:
+    """N̄ (row-major 2 × 2) of :func:`as_run_reference_gain` at the model of :meth:`AsRunLQR.model5`
+    (v already floored) and the blended gains K (12 floats, row-major 2 × 6), in closed form.
+
+    M = I − A₅ − B₅K₁:₅ is formed entry by entry as numpy forms it (the 1 − (1 + T_d a) of the
+    diagonal included). With M = [[M₁₁, M₁₂], [M₂₁, M₂₂]] (3 + 2) and B₅ = [0; a I] (a = T_d λ),
+    X = M⁻¹B₅ is X₂ = a S⁻¹, X₁ = −Y X₂ with Y = M₁₁⁻¹M₁₂ and S = M₂₂ − M₂₁Y, so
+    N̄ = (C X)⁻¹ = −S Y_C⁻¹ / a, Y_C = Y's rows v and ω. The model's structure (A's first column and
+    B's first column are zero below the v row) makes M₁₁ block upper triangular, Y's first column
+    (Y₀₀, 0, 0) and Y_C upper triangular: a 2 × 2 solve and a few divisions."""
+    M, I, Cf, Cr, a_, b_, mug, drag = veh
+    sd, cd = math.sin(delta), math.cos(delta)
+    # continuous_matrices, the same expressions
+    A00 = -mug / v - drag * v / M
+    A01 = Cf * sd / M
+    A02 = Cf * a_ * sd / (M * v)
+    A11 = -(Cr + Cf * cd) / (M * v)
+    A12 = (Cr * b_ - Cf * a_ * cd) / (M * v**2) - 1.0
+    A21 = (Cr * b_ - Cf * a_ * cd) / I
+    A22 = -(Cf * a_**2 * cd + Cr * b_**2) / (I * v)
+    # M₁₁ (its (1,0), (2,0) entries are 0) and M₁₂ = −T_d B (its (1,0), (2,0) entries are 0)
+    m00, m01, m02 = 1.0 - (1.0 + Td * A00), -(Td * A01), -(Td * A02)
+    m11, m12 = 1.0 - (1.0 + Td * A11), -(Td * A12)
+    m21, m22 = -(Td * A21), 1.0 - (1.0 + Td * A22)
+    p00, p01 = -(Td * (1.0 / M)), -(Td * (-Cf * sd / M))
+    p11, p21 = -(Td * (Cf * cd / (M * v))), -(Td * (Cf * a_ * cd / I))
+    # Y = M₁₁⁻¹ M₁₂: column 0 is (p00/m00, 0, 0); column 1 from the ω-α 2 × 2 block
+    det = m11 * m22 - m12 * m21
+    y1 = (p11 * m22 - m12 * p21) / det
+    y2 = (m11 * p21 - m21 * p11) / det
+    y0 = (p01 - m01 * y1 - m02 * y2) / m00
+    Y00 = p00 / m00
+    # S = M₂₂ − M₂₁ Y with M₂₁ = −a K[:, :3], M₂₂ = (1 − (1 − T_d λ)) I − a K[:, 3:5]
+    a = Td * lam
+    d = 1.0 - (1.0 + Td * -lam)
+    s00 = (d - a * K[3]) + (a * K[0]) * Y00
+    s01 = -(a * K[4]) + ((a * K[0]) * y0 + (a * K[1]) * y1 + (a * K[2]) * y2)
+    s10 = -(a * K[9]) + (a * K[6]) * Y00
+    s11 = (d - a * K[10]) + ((a * K[6]) * y0 + (a * K[7]) * y1 + (a * K[8]) * y2)
+    # N̄ = −S [[1/Y00, −y0/(Y00 y2)], [0, 1/y2]] / a
+    q0, q1 = s00 / Y00, s10 / Y00
+    ay2 = a * y2
+    return -q0 / a, -(s01 - q0 * y0) / ay2, -q1 / a, -(s11 - q1 * y0) / ay2
