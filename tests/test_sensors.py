@@ -124,6 +124,8 @@ def test_burst_block_by_hand() -> None:
     assert y1 == (1.0, 2.0, 3.0, 4.0, 5.0) and y2 == y1  # held through the burst
     y3, s = burst_sample(p, s, 2.21, (7.0, 7.0, 7.0, 7.0, 7.0))
     assert y3 == (7.0,) * 5
+    first, _ = burst_sample(BurstParams(FAULT_HOLD_BURST, 5.0, 0.2, 0.0), BurstState(), 0.0, y3)
+    assert first == y3  # a burst from the first sample on: nothing to hold yet, the sample passes
     nan = BurstParams(FAULT_NAN_BURST, 7.0, 0.05, 3.0)
     assert all(math.isnan(v) for v in burst_sample(nan, s, 3.01, y3)[0])
     assert burst_sample(nan, s, 3.06, y3)[0] == y3 and burst_sample(BurstParams(), s, 2.05, y3) == (y3, s)
