@@ -10,6 +10,7 @@ through both and asks for the same records to the bit."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -54,6 +55,9 @@ class _Blocks:
                     _COMPILED[name] = njit(cache=False)(fn)
                 fn = _COMPILED[name]
             setattr(self, name, fn)
+
+    def __getattr__(self, name: str) -> Any:  # (for the type checkers: the blocks are set above)
+        raise AttributeError(name)
 
 
 @pytest.fixture(params=["python", "compiled"])

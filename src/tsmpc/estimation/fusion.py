@@ -207,9 +207,8 @@ class RepeatGuard:
         """True (counted) when ``sample`` (X, Y, θ, v, ω[, stamp]) equals the previous finite
         sample in every number (no stamp: −inf)."""
         X, Y, th, v, om = sample[:5]
-        stamp = sample[5] if len(sample) > 5 else -math.inf
-        same, self.state = repeat_check(self.state, float(X), float(Y), float(th), float(v), float(om),
-                                        float(stamp))
+        same, self.state = repeat_check(self.state, X, Y, th, v, om,
+                                        sample[5] if len(sample) > 5 else -math.inf)
         self.n_repeated += same
         return same
 
@@ -679,8 +678,7 @@ class CourseFusion:
     def sample(self, ok: bool, theta: float, v: float, alpha_hat: float, a_y: float,
                omega: float = 0.0, delta: float = 0.0, force: float = 0.0) -> None:
         """One T_d sample (:func:`course_sample`)."""
-        self.cur = course_sample(self.cur, bool(ok), float(theta), float(v), float(alpha_hat), float(a_y),
-                                 float(omega), float(delta), float(force))
+        self.cur = course_sample(self.cur, ok, theta, v, alpha_hat, a_y, omega, delta, force)
 
     def close(self, pose: NDArray[np.float64] | None, v: float, omega: float = 0.0,
               ay_ref: float = 0.0) -> None:
@@ -719,7 +717,8 @@ class MassState(NamedTuple):
     outside the record, written in place).
 
     Attributes:
-        count: finite samples since the reset (the ring's write position is ``count`` mod its size).
+        n_samples: finite samples since the reset (the ring's write position is ``n_samples`` mod
+            its size).
         run: consecutive latest samples above ``MASS_MIN_SPEED`` (at most the ring's size).
         accel: ā, the window's mean acceleration [m/s²].
         lf, la: the high-pass filters' low-pass parts of F̂ and ā.
@@ -727,7 +726,7 @@ class MassState(NamedTuple):
         sxy, sxx: Σ x y and Σ x² of the high-passed ā (x) and F̂ (y), with forgetting.
     """
 
-    count: int
+    n_samples: int
     run: int
     accel: float
     lf: float
@@ -748,10 +747,10 @@ def mass_update(p: MassParams, s: MassState, ring: NDArray[np.float64] | list[fl
     one step of the high-passed least squares F̂_hp = ΔM ā_hp. A non-finite sample changes nothing
     but stops the fit (its high-pass restarts when it opens again)."""
     if not (math.isfinite(v_hat) and math.isfinite(F_hat)):
-        return MassState(s.count, s.run, s.accel, s.lf, s.la, False, s.sxy, s.sxx)
+        return MassState(s.n_samples, s.run, s.accel, s.lf, s.la, False, s.sxy, s.sxx)
     size = p.window + 1
-    ring[s.count % size] = v_hat
-    count = s.count + 1
+    ring[s.n_samples % size] = v_hat
+    count = s.n_samples + 1
     run = min(s.run + 1, size) if v_hat > MASS_MIN_SPEED else 0
     n = min(count, size) - 1
     oldest = ring[count % size] if count >= size else ring[0]
@@ -822,13 +821,13 @@ class MassEstimator:
 
     def update(self, v_hat: float, F_hat: float) -> float:
         """Add one sample; returns ā, the window's mean acceleration [m/s²]."""
-        self.state = mass_update(self.params, self.state, self._ring, float(v_hat), float(F_hat))
+        self.state = mass_update(self.params, self.state, self._ring, v_hat, F_hat)
         return self.state.accel
 
     def inertia_terms(self, v_hat: float, F_hat: float, v_ref: float) -> float:
         """Add one sample; the force to add to the compensated F̂ (:func:`inertia_force`)."""
-        self.state = mass_update(self.params, self.state, self._ring, float(v_hat), float(F_hat))
-        return inertia_force(self.params, self.state, float(v_hat), float(v_ref))
+        self.state = mass_update(self.params, self.state, self._ring, v_hat, F_hat)
+        return inertia_force(self.params, self.state, v_hat, v_ref)
 
 
 class Fusion:

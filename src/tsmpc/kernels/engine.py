@@ -395,7 +395,7 @@ def _mass_terms(mpar, v_hat, F_hat, v_ref, mv, sf, si):
     """``Fusion.inertia_terms``: :func:`mass_update` on the window's speeds ``mv``, then the force
     added to F̂ (:func:`inertia_force`)."""
     s = mass_update(mpar, _mass_load(sf, si), mv, v_hat, F_hat)
-    si[SI_MASSN], si[SI_MASSRUN], si[SI_MASSOPEN] = s.count, s.run, 1 if s.open else 0
+    si[SI_MASSN], si[SI_MASSRUN], si[SI_MASSOPEN] = s.n_samples, s.run, 1 if s.open else 0
     sf[SF_ACCEL], sf[SF_LF], sf[SF_LA], sf[SF_SXY], sf[SF_SXX] = s.accel, s.lf, s.la, s.sxy, s.sxx
     return inertia_force(mpar, s, v_hat, v_ref)
 
