@@ -44,10 +44,12 @@ class SDPSolver(StrEnum):
     SCS = "SCS"
 
 
-#: Solver options: Clarabel's defaults; SCS asked for far more accuracy than its default 1e-4.
+#: Solver options: Clarabel's defaults; SCS asked for far more accuracy than its default 1e-4, with
+#: over-relaxation 1.8 (its default 1.5): the kinematic design's first answer then certifies, one
+#: 100k-iteration solve of the LQR-LMI instead of two (measured 35.6 → 18.3 s of CPU).
 _OPTIONS: dict[SDPSolver, dict[str, Any]] = {
     SDPSolver.CLARABEL: {},
-    SDPSolver.SCS: {"eps_abs": 1e-6, "eps_rel": 1e-6, "max_iters": 100_000},
+    SDPSolver.SCS: {"eps_abs": 1e-6, "eps_rel": 1e-6, "max_iters": 100_000, "alpha": 1.8},
 }
 
 
