@@ -159,8 +159,11 @@ def test_a_lane_does_not_depend_on_the_others(setup) -> None:
 def test_lanes_with_their_own_plant_and_faults(setup) -> None:
     """Lanes differ in the plant's mass and stiffness (the scenario's plant_vehicle), in a sensor
     fault with NaN bursts (the MHE's and MPC's slow paths: the lane waits for Python), and one
-    diverges (initial offset beyond a tight bound): each equals its own engine run."""
+    diverges (initial offset beyond a tight bound): each equals its own engine run. (Without the
+    speed governor, on by default: with it these lanes took no slow path, measured, and the slow
+    paths are what this test exercises; tests/test_governor.py batches governed lanes.)"""
     cfg, sc, designs = setup
+    cfg = replace(cfg, governor=replace(cfg.governor, enabled=False))
     v = cfg.vehicle
     heavy = dc_replace(sc, plant_vehicle=replace(v.with_stiffness_scaled(0.8), mass=1.2 * v.mass))
     _, bursts = apply_robustness("nan_bursts", cfg, sc)
