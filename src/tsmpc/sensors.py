@@ -223,7 +223,9 @@ class SensorParams(NamedTuple):
         hold: a lost sample repeats the previous one (else NaN).
         delay_n: delay in whole samples.
         heading: the pose sensor delivers the heading θ (else θ is missing).
-        rate_pose, rate_v, rate_omega: each sensor's samples per call, rate · T_d (1: every call).
+        rate_pose: the pose's samples per call, rate · T_d (1: every call).
+        rate_v: the speed sensor's samples per call, rate · T_d.
+        rate_omega: the yaw-rate sensor's samples per call, rate · T_d.
     """
 
     scale: Sample = _ONE5

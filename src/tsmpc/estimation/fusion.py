@@ -249,10 +249,18 @@ class CourseParams(NamedTuple):
         Tc: MPC period T_c [s] (one interval).
         sigma: configured position noise σ [m] (at least 0.1 mm).
         has_vehicle: a model vehicle is given (without one: no stiffness fit).
-        C_f, C_r: the model's axle cornering stiffnesses [N/rad] (1 without a vehicle).
-        mass, inertia, a, b, g: the model vehicle's M [kg], I_z [kg m²], axle distances [m], g [m/s²].
-        prior_num_f, prior_num_r, prior_den_f, prior_den_r: the compliance fits' prior, Σ w F α and
-            Σ w F² of the model's 1/C with relative σ ``STIFF_PRIOR_REL``: (C / REL)² / C, (C / REL)².
+        C_f: the model's front axle cornering stiffness [N/rad] (1 without a vehicle).
+        C_r: the model's rear axle cornering stiffness [N/rad] (1 without a vehicle).
+        mass: the model vehicle's M [kg].
+        inertia: its yaw inertia I_z [kg m²].
+        a: the distance from the centre of gravity to the front axle [m].
+        b: the distance from the centre of gravity to the rear axle [m].
+        g: gravity [m/s²].
+        prior_num_f: the front compliance fit's prior Σ w F α of the model's 1/C with relative σ
+            ``STIFF_PRIOR_REL``: (C / REL)² / C.
+        prior_num_r: the same for the rear axle.
+        prior_den_f: the front compliance fit's prior Σ w F²: (C / REL)².
+        prior_den_r: the same for the rear axle.
     """
 
     Tc: float
@@ -313,7 +321,9 @@ class CourseState(NamedTuple):
         omega_now: measured yaw rate at the last MPC step [rad/s].
         v_now: measured speed at the last MPC step [m/s].
         n_chords: chords fitted.
-        slip, speed, stiff: the three fits.
+        slip: the slip fit.
+        speed: the speed-offset fit.
+        stiff: the stiffness fit.
     """
 
     ring: tuple[Interval, ...]
@@ -721,9 +731,11 @@ class MassState(NamedTuple):
             its size).
         run: consecutive latest samples above ``MASS_MIN_SPEED`` (at most the ring's size).
         accel: ā, the window's mean acceleration [m/s²].
-        lf, la: the high-pass filters' low-pass parts of F̂ and ā.
+        lf: the high-pass filter's low-pass part of F̂.
+        la: the same of ā.
         open: the fit ran at the previous sample (else the filters restart).
-        sxy, sxx: Σ x y and Σ x² of the high-passed ā (x) and F̂ (y), with forgetting.
+        sxy: Σ x y of the high-passed ā (x) and F̂ (y), with forgetting.
+        sxx: Σ x² of the high-passed ā, with forgetting.
     """
 
     n_samples: int
