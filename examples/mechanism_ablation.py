@@ -8,7 +8,7 @@ the largest gain it brings on any case and column, and the cases that complete o
 
 The rule: a switch stays when some case is better by 5 % or more with it in some column (RMSE x, y,
 θ, v, ω or max |e_y|), or completes only with it; else it is removed, not switched off.
-:func:`mechanism_blocks` is the docs generator's section ``mechanisms``. 672 whole runs: ≈ 45 min
+:func:`mechanism_blocks` is the docs generator's section ``mechanisms``. 720 whole runs: ≈ 45 min
 with one worker on two shared cores.
 """
 
@@ -41,6 +41,7 @@ MECHANISMS = {
     "no-course-speed": ("fusion.course_speed", "speed offset from the speed over ground"),
     "no-stiffness": ("fusion.stiffness_estimate", "cornering stiffness fit"),
     "no-mass": ("fusion.mass_estimate", "mass-error inertia out of the friction estimate"),
+    "no-governor": ("governor.enabled", "speed governor (the plan re-timed to the grip)"),
 }
 COLUMNS = {"rmse_x": "RMSE x", "rmse_y": "RMSE y", "rmse_theta": "RMSE θ", "rmse_v": "RMSE v",
            "rmse_omega": "RMSE ω", "max_abs_lateral_m": "max abs e_y"}
