@@ -1012,6 +1012,11 @@ class FusionSettings(_Frozen):
     course_speed: _Flag = Field(
         default=True, description="the speed sensor's offset is estimated from the speed over ground "
         "(chord of the measured positions) and removed before the MHE and the inner loop")
+    gyro_bias: _Flag = Field(
+        default=True, description="the yaw-rate sensor's bias is estimated as a slowly varying state "
+        "(the integrated measured yaw rate against the measured heading's change over chords of 1 s; "
+        "needs the pose's heading, else the estimate holds its prior 0) and removed from omega before "
+        "the MHE, the inner loop and the course fusion")
     stiffness_estimate: _Flag = Field(
         default=True, description="the axle cornering stiffnesses of the MHE's and the inner loop's models "
         "are fitted online (least squares F_y = C alpha per axle, the slip from the course over "
@@ -1177,7 +1182,8 @@ T = TypeVar("T", bound=BaseModel)
 
 #: Every switch of :class:`FusionSettings` off (the paper has none of them).
 _FUSION_OFF = {"reject_repeated_samples": False, "predict_pose": False, "course_slip": False,
-               "course_speed": False, "stiffness_estimate": False, "mass_estimate": False}
+               "course_speed": False, "gyro_bias": False, "stiffness_estimate": False,
+               "mass_estimate": False}
 
 #: Named configurations: overrides of ``Config()`` (beyond the paper). Select with ``Config.preset(name)``,
 #: ``preset = "paper"`` at the top of a TOML file, or ``--preset paper`` on the command line.

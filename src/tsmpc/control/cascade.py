@@ -516,6 +516,10 @@ class Cascade:
         if self._x0 is None:
             self._start_from(t, X, Y, th, v, om)
         fresh, speeds_ok, pose_ok = self._gate(t, m, X, Y, th, v, om)
+        # fusion.gyro_bias: the raw ω against the accepted poses' heading; every block below gets
+        # ω less the bias (the MHE, hence ω̂ for the TS-LQR and the dead reckoning; the course fits)
+        self._fusion.gyro_sample(pose_ok, th, fresh and speeds_ok, om)
+        om = om - self._fusion.gyro_bias()
         plan = e_meas = None
         t_mpc = 0.0
         if self._calls % self.n_inner == 0:

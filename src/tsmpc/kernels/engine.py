@@ -59,6 +59,8 @@ from tsmpc.estimation.friction_step import (
 from tsmpc.estimation.fusion import (
     BASELINE,
     CourseState,
+    GyroParams,
+    GyroState,
     Interval,
     MassParams,
     MassState,
@@ -70,6 +72,8 @@ from tsmpc.estimation.fusion import (
     course_params,
     course_sample,
     delta_mass,
+    gyro_bias,
+    gyro_sample,
     inertia_force,
     mass_update,
     repeat_check,
@@ -110,15 +114,16 @@ N_EVENTS = 19
  FP_G_MARGIN, FP_G_RDOWN, FP_G_RUP, FP_G_RMIN, FP_G_MUPLAN, FP_G_DEADBAND, FP_G_KT, FP_G_DRAG,
  FP_G_G, FP_G_TC, FP_G_ALPHA, FP_G_VMIN, FP_G_MUNOM, FP_G_MUDRY, FP_G_GPR, FP_G_REAR, FP_G_FMAX,
  FP_G_DT, FP_G_MDT) = range(55)
-FP_SENS = 55  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
+FP_GYRO = 55  # the yaw-rate bias fit's GyroParams (Td, var_theta, var_omega, prior_w)
+FP_SENS = 59  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
 N_FP = FP_SENS + N_SP
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
  IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV,
- IP_GOV, IP_G_ORACLE, IP_G_PREVIEW) = range(30)
-N_IP = 30
+ IP_GOV, IP_G_ORACLE, IP_G_PREVIEW, IP_GYRO) = range(31)
+N_IP = 31
 # ---------------------------------------------------------------------------- MHE parameters
 # mp = [q(3), r(2), p(3), p_F, x_min(3), x_max(3), box lo(3), box hi(3), M, I, C_f, C_r, a, b, μ_o g,
 #       drag, T_d]: MHEUIO's kernel arguments in its order (C_f, C_r change with the stiffness fit)
@@ -133,16 +138,18 @@ N_MP = 30
  SF_ARR, _AR1, _AR2,
  SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM, _FREE2, _FREE3, SF_N2,
  SF_N1, SF_JUMP, _J1, _J2, _J3, SF_JT0,
- SF_TOFF, SF_GRATE, SF_GGRIP, SF_GHOLD) = range(70)
-SF_SENS = 70  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
+ SF_TOFF, SF_GRATE, SF_GGRIP, SF_GHOLD,
+ SF_GYTH0, SF_GYINT, SF_GYWLAST, SF_GYSB, SF_GYSW) = range(75)  # SF_GY*: the GyroState's floats
+SF_SENS = 75  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
 N_SF = SF_SENS + N_SS
 # ---------------------------------------------------------------------------- integer state
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_MASSRUN, SI_NCHORDS,
  SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
  SI_FRESH, SI_SPOK, SI_POSEOK, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
  SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, SI_FSN, SI_FSSINCE,
- SI_GACT, SI_GSTEPS, SI_GWIN) = range(37)
-N_SI = 37
+ SI_GACT, SI_GSTEPS, SI_GWIN,
+ SI_GYOPEN, SI_GYN, SI_GYGAP, SI_GYCHORDS) = range(41)  # SI_GY*: the GyroState's flags and counts
+N_SI = 41
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
@@ -381,6 +388,30 @@ def _course_sample(ok, theta, v, alpha_hat, a_y, omega, delta, force, cur):
     """One T_d sample into the open interval ``cur`` (:func:`course_sample`)."""
     if cur[IV_OPEN] != 0.0:
         _iv_store(course_sample(_iv_load(cur), ok, theta, v, alpha_hat, a_y, omega, delta, force), cur)
+
+
+@njit(cache=True, fastmath=False)
+def _gyro_load(sf, si):
+    """The :class:`~tsmpc.estimation.fusion.GyroState` of the engine's slots."""
+    return GyroState(si[SI_GYOPEN] != 0, sf[SF_GYTH0], si[SI_GYN], sf[SF_GYINT], sf[SF_GYWLAST],
+                     si[SI_GYGAP], sf[SF_GYSB], sf[SF_GYSW], si[SI_GYCHORDS])
+
+
+@njit(cache=True, fastmath=False)
+def _gyro_step(gp, has_heading, theta, has_omega, omega, sf, si):
+    """``Fusion.gyro_sample`` (:func:`gyro_sample`) on the engine's slots; returns the bias
+    estimate after the sample (:func:`gyro_bias`)."""
+    s = gyro_sample(gp, _gyro_load(sf, si), has_heading, theta, has_omega, omega)
+    si[SI_GYOPEN], si[SI_GYN], si[SI_GYGAP], si[SI_GYCHORDS] = 1 if s.open else 0, s.n, s.gap, s.n_chords
+    sf[SF_GYTH0], sf[SF_GYINT], sf[SF_GYWLAST] = s.th0, s.integ, s.w_last
+    sf[SF_GYSB], sf[SF_GYSW] = s.sb, s.sw
+    return gyro_bias(s)
+
+
+@njit(cache=True, fastmath=False)
+def _gyro_now(ip, sf, si):
+    """``Fusion.gyro_bias``: the yaw-rate bias to remove (0 with ``fusion.gyro_bias`` off)."""
+    return gyro_bias(_gyro_load(sf, si)) if ip[IP_GYRO] != 0 else 0.0
 
 
 @njit(cache=True, fastmath=False)
@@ -625,6 +656,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     cpar = course_params(Tc, fp[FP_COURSE_SIGMA], True, fp[FP_CF0], fp[FP_CR0], fp[FP_VM], fp[FP_VI],
                          fp[FP_VA], fp[FP_VB], fp[FP_VG])
     mpar = MassParams(fp[FP_VM], Td, ip[IP_NW], fp[FP_TAU], ip[IP_SPEEDFB] != 0)
+    gpar = GyroParams(fp[FP_GYRO], fp[FP_GYRO + 1], fp[FP_GYRO + 2], fp[FP_GYRO + 3])
     sens = unpack_params(fp[FP_SENS:FP_SENS + N_SP])
     sens_state = sf[SF_SENS:SF_SENS + N_SS]
     mhe_views = (mp[MP_Q:MP_Q + 3], mp[MP_R:MP_R + 2], mp[MP_P:MP_P + 3], mp[MP_XMIN:MP_XMIN + 3],
@@ -690,6 +722,12 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             si[SI_FRESH] = 1 if fresh else 0
             si[SI_SPOK] = 1 if speeds_ok else 0
             si[SI_POSEOK] = 1 if pose_ok else 0
+            # fusion.gyro_bias: the raw ω against the accepted pose's heading; ω less the bias
+            # from here on (the course fusion, the MHE's measurement below)
+            gb = 0.0
+            if ip[IP_GYRO] != 0:
+                gb = _gyro_step(gpar, pose_ok, th, fresh and speeds_ok, omv, sf, si)
+            omv = omv - gb
             mpc_step = si[SI_CALLS] % n_in == 0
             phase = PH_MHE
             if mpc_step:
@@ -794,7 +832,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 off = 0.0
                 if ip[IP_CSPEED] != 0:  # the course-fitted speed-sensor offset
                     off = speed_offset(SpeedFit(sf[SF_SV], sf[SF_SW]))
-                sc[SC_YM], sc[SC_YM + 1] = y[3] - off, y[4]
+                sc[SC_YM], sc[SC_YM + 1] = y[3] - off, y[4] - _gyro_now(ip, sf, si)
             else:
                 sc[SC_YM], sc[SC_YM + 1] = math.nan, math.nan
             u0 = sf[SF_PLANTU] if ip[IP_MFORCE] != 0 else sf[SF_UAPP]
@@ -816,7 +854,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 gates, sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], ev0, ev1, ev2)
             if ip[IP_ANYCOURSE] != 0:
                 _course_sample(si[SI_POSEOK] != 0 and si[SI_SPOK] != 0, y[2], y[3], ev1, ev0 * ev2,
-                               y[4], sc[SC_UMHE + 1], sc[SC_UMHE], cur)
+                               y[4] - _gyro_now(ip, sf, si), sc[SC_UMHE + 1], sc[SC_UMHE], cur)
             F_in, Fr_in = sc[SC_ESTF], sc[SC_ESTFR]
             F_c = F_in  # the compensated window estimate (lqr.friction_step)
             if ip[IP_FSTEP] != 0:

@@ -134,7 +134,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade.__init__": "0824875cc4d52255",
     "tsmpc.control.cascade:Cascade.reset": "5add1caa7458313d",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "1b77b0acc6c113f8",
+    "tsmpc.control.cascade:Cascade._step": "a7272f45fbec86d8",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "748ed28374e52348",
     "tsmpc.control.cascade:Cascade._outer": "c3f0fb3dc4ccf2ab",
@@ -682,6 +682,8 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     ip[ke.IP_ANYCOURSE] = fu.any_course
     ip[ke.IP_CSLIP], ip[ke.IP_CSPEED] = fs.course_slip, fs.course_speed
     ip[ke.IP_STIFF], ip[ke.IP_MASSEST] = fs.stiffness_estimate, fs.mass_estimate
+    ip[ke.IP_GYRO] = fs.gyro_bias
+    fp[ke.FP_GYRO:ke.FP_GYRO + 4] = fu.gyro.params
     ip[ke.IP_SPEEDFB], ip[ke.IP_LQR_SFB] = fu.speed_feedback, sfb
     ip[ke.IP_COMP] = cfg.lqr.friction_compensation
     ip[ke.IP_UIO] = cfg.lqr.friction_estimate.value == "uio"
@@ -740,6 +742,10 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf[ke.SF_CNUM:ke.SF_CNUM + 2] = cs.stiff.num_f, cs.stiff.num_r
     sf[ke.SF_CDEN:ke.SF_CDEN + 2] = cs.stiff.den_f, cs.stiff.den_r
     sf[ke.SF_OMNOW], sf[ke.SF_VNOW] = cs.omega_now, cs.v_now
+    gs = cascade._fusion.gyro.state  # the yaw-rate bias fit (a reset cascade: its prior)
+    si[ke.SI_GYOPEN], si[ke.SI_GYN], si[ke.SI_GYGAP], si[ke.SI_GYCHORDS] = gs.open, gs.n, gs.gap, gs.n_chords
+    sf[ke.SF_GYTH0], sf[ke.SF_GYINT], sf[ke.SF_GYWLAST] = gs.th0, gs.integ, gs.w_last
+    sf[ke.SF_GYSB], sf[ke.SF_GYSW] = gs.sb, gs.sw
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
     sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival
