@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from tsmpc import kernels
+from tsmpc.conditions import apply_conditions
 from tsmpc.config import Config, replace
 from tsmpc.kernels import batch as batch_k
 from tsmpc.robustness import apply_robustness
@@ -158,8 +159,9 @@ def test_a_lane_does_not_depend_on_the_others(setup) -> None:
 
 def test_lanes_with_their_own_plant_and_faults(setup) -> None:
     """Lanes differ in the plant's mass and stiffness (the scenario's plant_vehicle), in a sensor
-    fault with NaN bursts (the MHE's and MPC's slow paths: the lane waits for Python), and one
-    diverges (initial offset beyond a tight bound): each equals its own engine run. (Without the
+    fault with NaN bursts (the MHE's and MPC's slow paths: the lane waits for Python), one
+    diverges (initial offset beyond a tight bound), one has a biased, drifting gyro: each equals
+    its own engine run. (Without the
     speed governor, on by default: with it these lanes took no slow path, measured, and the slow
     paths are what this test exercises; tests/test_governor.py batches governed lanes.)"""
     cfg, sc, designs = setup
@@ -168,10 +170,13 @@ def test_lanes_with_their_own_plant_and_faults(setup) -> None:
     heavy = dc_replace(sc, plant_vehicle=replace(v.with_stiffness_scaled(0.8), mass=1.2 * v.mass))
     _, bursts = apply_robustness("nan_bursts", cfg, sc)
     off = dc_replace(sc, initial_error=(0.4, 0.0), divergence_bound_m=0.3)
-    scs = [sc, heavy, bursts, off]
-    logs = batch.simulate_batch(cfg, "ITER", scs, seeds=[0, 1, 2, 3], kinematic_design=designs[0],
+    # a yaw-rate sensor 0.02 rad/s off, drifting (fusion.gyro_bias busy all along)
+    gyro = apply_conditions(replace(cfg, scenario=replace(cfg.scenario, sensors=replace(
+        cfg.scenario.sensors, omega_bias=0.02, omega_drift=2e-4))), sc).scenario
+    scs = [sc, heavy, bursts, off, gyro]
+    logs = batch.simulate_batch(cfg, "ITER", scs, seeds=[0, 1, 2, 3, 4], kinematic_design=designs[0],
                                 dynamic_design=designs[1], max_steps=200)
-    assert batch.LAST_BATCH["batched"] == 4
+    assert batch.LAST_BATCH["batched"] == 5
     assert sum(batch.LAST_BATCH["slow_paths"].values()) > 0  # the bursts took Python's path
     for s, (scn, log) in enumerate(zip(scs, logs, strict=True)):
         _close(log, _single(cfg, "ITER", scn, designs, s, 200))

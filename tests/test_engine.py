@@ -92,8 +92,8 @@ def test_sensor_dropouts_bursts_biases_and_delay(cfg: Config, paper_reference_pa
     extra GNSS noise and delay on top of a stalled-bus fault (DropoutFault), and NaN bursts. The
     fault objects are left as the Python loop leaves them (it runs second on the same objects)."""
     base = load_scenario(cfg, paper_reference_path)
-    sensors = {"dropout_probability": 0.05, "v_bias": 0.1, "omega_drift": 1e-4, "theta_bias": 0.005,
-               "delay_s": 0.02, "gnss_noise_scale": 3.0}
+    sensors = {"dropout_probability": 0.05, "v_bias": 0.1, "omega_bias": -0.01, "omega_drift": 1e-4,
+               "theta_bias": 0.005, "delay_s": 0.02, "gnss_noise_scale": 3.0}
     c0, s0 = apply_robustness("sensor_dropout", cfg, base)
     for hold in (False, True):
         c = replace(c0, scenario=replace(c0.scenario, sensors=replace(

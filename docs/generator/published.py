@@ -1193,7 +1193,7 @@ def mismatch(ctx: Context) -> Produced:
 def fusion_ablation(ctx: Context) -> Produced:
     """Each fusion switch off in turn under the conditions that motivated it (docs/mismatch.md)."""
     p = Produced()
-    ctx.progress("examples/fusion_ablation.py (63 runs)")
+    ctx.progress("examples/fusion_ablation.py (88 runs)")
     for name, body in _example(ctx, "fusion_ablation").fusion_blocks(ctx.paper_reference,
                                                                       ctx.max_steps).items():
         p.add("fusion-ablation", name, body)
@@ -1377,7 +1377,7 @@ PRODUCERS: tuple[Producer, ...] = (
     Producer("sweep-example", sweep_example, "the example sweep: figure and time"),
     Producer("paper-explained", paper_explained, "Table 5 explained (≈ 25 runs, 10–15 min)"),
     Producer("mismatch", mismatch, "the mismatch benchmark: 135 runs, 10–20 min"),
-    Producer("fusion-ablation", fusion_ablation, "the fusion switches' ablation (63 runs)"),
+    Producer("fusion-ablation", fusion_ablation, "the fusion switches' ablation (88 runs)"),
     Producer("mechanisms", mechanisms, "which default-on mechanisms pay (720 runs, ≈ 45 min)"),
     Producer("race-speeds", race_speeds, "the public tracks at 22 and 25 m/s, S-bends"),
     Producer("baselines", baselines, "the baselines against the TS-MPC on five cases (6 compares)"),
