@@ -10,66 +10,134 @@ cannot go green by skipping.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
-import time
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from _compile_once import STAGES, wait_for
 from _paths import need_data, tooling_on_path
 from tsmpc.config import Config
 
 tooling_on_path()  # the docs generator and the Table 5 study (docs/generator) for the tests
 
-#: What the compile-once step said (the session header prints it).
-_WARMUP: list[str] = []
+#: The compile-once process (controller only) and its folder of marks (tests/_compile_once.py).
+_COMPILE: dict[str, object] = {}
+_WARM_ENV = "TSMPC_TEST_COMPILE_DIR"
+
+#: The last compile step each test module needs, recorded by a run that logged, for every test,
+#: each load of the kernels, the run engine and the batch kernel (in the test's process and in
+#: the processes it starts). A module not listed needs none. The table orders and paces the
+#: tests only: a module listed wrongly or not at all still gets what it needs (the product's
+#: compile locks make a process wait for the one compiling), it may only wait inside its own
+#: time limits. A module that copies the whole cache (test_hostile_env) waits for all of it.
+_NEEDS: dict[str, str] = {
+    **dict.fromkeys(
+        ("test_blocks", "test_cascade_garbage", "test_dynamic", "test_fusion_blocks", "test_inner_loop",
+         "test_install", "test_ltv_mpc", "test_mhe_robustness", "test_nl_mpc", "test_paper_as_run",
+         "test_plant", "test_recovery", "test_resources", "test_signals", "test_ts_mpc",
+         "test_vehicle_params"), "kernels"),
+    **dict.fromkeys(
+        ("test_actuators", "test_architecture", "test_baselines", "test_blas", "test_cascade",
+         "test_comfort", "test_commonroad", "test_compare", "test_degraded", "test_divergence",
+         "test_docs", "test_docs_generated", "test_engine", "test_experiment", "test_first_run",
+         "test_friction_step", "test_fusion", "test_gyro_bias", "test_hostile_inputs",
+         "test_hostile_results", "test_hostile_round3", "test_kernels", "test_low_speed_resistance",
+         "test_mismatch_acceptance", "test_newcomer", "test_outputs", "test_paper_acceptance",
+         "test_paper_preset", "test_plan_feasibility", "test_race_envelope", "test_report",
+         "test_robustness", "test_sensors", "test_slip_aware", "test_time_base"), "engine"),
+    **dict.fromkeys(
+        ("test_batch", "test_cluster", "test_cluster_lifecycle", "test_examples", "test_governor",
+         "test_hostile_env", "test_hostile_outputs", "test_kernels_runtime", "test_mutation_guards",
+         "test_sweep"), "batch"),
+}
+_RANK = {None: 0, **{s: i + 1 for i, s in enumerate(STAGES)}}
 
 
-#: The compile-once steps: the kernels first (the other two call them), then the run engine and
-#: the batch kernel side by side (measured cold at load 7: 26, 42 and 114 s of CPU).
-_WARM_STEPS = ("from tsmpc import kernels; assert kernels.warmup()[0]",
-               ("from tsmpc.sim import engine; assert engine.warmup()",
-                "from tsmpc.sim import batch; batch.warmup()"))
-
-
-def _warm(codes: tuple[str, ...]) -> list[str]:
-    """Run the compile steps ``codes`` side by side; what failed (empty: all compiled)."""
-    procs = [subprocess.Popen([sys.executable, "-c", c], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                              text=True) for c in codes]
-    failed = []
-    for c, p in zip(codes, procs, strict=True):
-        try:
-            _, err = p.communicate(timeout=1800)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            err = "timed out"
-        if p.returncode != 0:
-            failed.append(f"{c.split(';')[0]}: {(err.strip().splitlines() or ['?'])[-1]}")
-    return failed
+def _need(item: pytest.Item) -> str | None:
+    return _NEEDS.get(Path(str(item.fspath)).stem)
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Compile once per test run (issue 37): the kernels, the run engine and the batch kernel —
-    minutes from a cold cache — fill the kernel cache before any test starts. Without it the
-    first tests to need a kernel compile it inside their own time limits, and with ``-n auto``
-    (pytest-xdist, the README's command) the workers would compile the same kernels at once.
-    The xdist controller does it; its workers find the cache full."""
-    if hasattr(config, "workerinput") or os.environ.get("TSMPC_NO_JIT"):
+    """Compile once per test run, beside the first tests (tests/_compile_once.py): the xdist
+    controller (or a run without xdist) starts the compile process and goes on; its workers find
+    the marks' folder in the environment they inherit."""
+    if hasattr(config, "workerinput") or os.environ.get("TSMPC_NO_JIT") or _WARM_ENV in os.environ:
         return
-    t0 = time.perf_counter()
+    folder = Path(tempfile.mkdtemp(prefix="tsmpc-compile-"))
     try:
-        failed = _warm((_WARM_STEPS[0],))
-        if not failed:
-            failed = _warm(_WARM_STEPS[1])
-    except OSError as err:  # the tests then compile as they go
-        failed = [f"{type(err).__name__}: {err}"]
-    _WARMUP.append(f"compile once: kernels, run engine and batch kernel in "
-                   f"{time.perf_counter() - t0:.0f} s" + (f"; failed: {failed}" if failed else ""))
+        proc = subprocess.Popen([sys.executable, str(Path(__file__).with_name("_compile_once.py")),
+                                 str(folder)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                text=True)
+    except OSError:  # the tests then compile as they go
+        return
+    (folder / "pid").write_text(str(proc.pid), encoding="utf-8")
+    os.environ[_WARM_ENV] = str(folder)
+    _COMPILE.update(proc=proc, folder=folder)
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    proc = _COMPILE.get("proc")
+    if isinstance(proc, subprocess.Popen) and proc.poll() is None:
+        proc.kill()  # a run that needed no compiled code (e.g. -k): nothing left to wait for
+    if isinstance(proc, subprocess.Popen):
+        proc.communicate()
+    folder = _COMPILE.get("folder")
+    if isinstance(folder, Path):
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Order the tests so that every worker starts with those that need no compiled code, then
+    those that need the kernels, the engine, the batch kernel (pytest-xdist's worksteal gives each
+    worker a contiguous share of this order). Every worker collects alike: the order depends only
+    on the collection and the worker count."""
+    if os.environ.get("TSMPC_NO_JIT"):
+        return
+    n = max(1, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
+    groups: list[list[pytest.Item]] = [[] for _ in _RANK]
+    for it in items:
+        groups[_RANK[_need(it)]].append(it)
+    shares: list[list[pytest.Item]] = [[] for _ in range(n)]
+    for g in groups:
+        for i in range(n):
+            shares[i].extend(g[i * len(g) // n:(i + 1) * len(g) // n])
+    items[:] = [it for share in shares for it in share]
+
+
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    """A test that needs a compile step waits for it here, outside its time limits (outermost:
+    before pytest-timeout's timer starts)."""
+    folder, stage = os.environ.get(_WARM_ENV), _need(item)
+    if folder and stage and not os.environ.get("TSMPC_NO_JIT"):
+        why = wait_for(Path(folder), stage)
+        if why and not _COMPILE.get("said"):
+            _COMPILE["said"] = True
+            sys.stderr.write(f"compile once: {why}; the tests compile what they need\n")
+    yield
 
 
 def pytest_report_header(config: pytest.Config) -> list[str]:
-    return list(_WARMUP)
+    if "folder" in _COMPILE:
+        return ["compile once: the kernels, the run engine and the batch kernel, beside the tests "
+                "that need no compiled code (tests/_compile_once.py)"]
+    return []
+
+
+def _compile_summary() -> str | None:
+    folder = _COMPILE.get("folder")
+    if not isinstance(folder, Path):
+        return None
+    parts = [f"{s} {(folder / f'{s}.done').read_text(encoding='utf-8')} s" for s in STAGES
+             if (folder / f"{s}.done").exists()]
+    failed = folder / "failed"
+    tail = f"; failed: {failed.read_text(encoding='utf-8')}" if failed.exists() else ""
+    return "compile once (beside the first tests): " + (", ".join(parts) or "nothing") + tail
 
 
 @pytest.fixture(scope="session")
@@ -92,6 +160,9 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
     blocks' branch coverage, tests/test_block_coverage.py) in the session's summary, so CI's log
     shows them: pytest captures a test's output, and pytest-xdist carries user properties from its
     workers to the controller with each report."""
+    line = _compile_summary()
+    if line:
+        terminalreporter.write_line(line)
     for key in ("passed", "failed"):
         for rep in terminalreporter.stats.get(key, ()):
             for name, text in getattr(rep, "user_properties", ()):

@@ -129,7 +129,7 @@ def test_a_cache_that_cannot_be_cleaned_or_rebuilt_is_named_in_one_line(monkeypa
                                                                         capsys) -> None:
     from tsmpc import kernels
 
-    # _import_all forgets the kernel modules (sys.modules) to re-import them: restore this
+    # _import_all forgets a broken kernel module (sys.modules) to re-import it: restore this
     # process's afterwards, or the run engine of later tests sees "replaced" kernels and steps aside
     for m in kernels._MODULES:
         if f"tsmpc.kernels.{m}" in sys.modules:
@@ -139,7 +139,7 @@ def test_a_cache_that_cannot_be_cleaned_or_rebuilt_is_named_in_one_line(monkeypa
     folder.mkdir(parents=True)
     (folder / "mpc.fast_step-1.py311.nbi").write_text("garbage")
 
-    def corrupt() -> dict:
+    def corrupt(modules: tuple[str, ...] = ()) -> dict:
         raise ValueError("invalid literal for int() with base 10: 'arbage'")
 
     monkeypatch.setattr(kernels, "_compile_all", corrupt)
@@ -149,7 +149,7 @@ def test_a_cache_that_cannot_be_cleaned_or_rebuilt_is_named_in_one_line(monkeypa
     assert not list(folder.glob("*.nbi"))  # the entry was deleted before the second try
     (folder / "mpc.fast_step-1.py311.nbi").write_text("garbage")
 
-    def no_delete(_folder: Path) -> int:
+    def no_delete(_folder: Path, _modules: tuple[str, ...] = ()) -> int:
         raise PermissionError(13, "Permission denied")
 
     monkeypatch.setattr(kernels, "_purge", no_delete)
@@ -182,16 +182,18 @@ def test_a_corrupt_kernel_cache_is_rebuilt_once_and_then_loads(tmp_path: Path) -
     else:  # no cache yet on this machine: make one
         subprocess.run(cmd, env=env, capture_output=True, timeout=500, check=True)
     folder = kernels._tree_folder(tmp_path / "c")
-    # The kernels' entries: the process rebuilds them (seconds). The run engine's and the batch
-    # kernel's repair (sim.engine._compiled, minutes of compiling) has its own test below, on a
-    # stand-in kernel.
-    entries = sorted(p for p in folder.glob("*.nb[ic]") if p.name.split(".")[0] in kernels._MODULES)
+    # The plant kernel's entries (index truncated, machine code garbage): the process rebuilds
+    # that module only (seconds; each kernel module is loaded and repaired on its own). The run
+    # engine's and the batch kernel's repair (sim.engine._compiled, minutes of compiling) has its
+    # own test below, on a stand-in kernel.
+    entries = sorted(folder.glob("plant.*.nb[ic]"))
     assert entries
-    for i, p in enumerate(entries):
-        p.write_bytes(b"" if i % 3 == 0 else b"\x80garbage" * 10)
+    for p in entries:
+        p.write_bytes(b"" if p.suffix == ".nbi" else b"\x80garbage" * 10)
     first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=500)
     assert first.returncode == 0, first.stdout + first.stderr
     assert "could not be loaded" in first.stderr and "kernels and run engine ready" in first.stdout
+    assert "compiling the plant kernels again" in first.stderr
     second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=500)
     assert second.returncode == 0 and "could not be loaded" not in second.stderr
     assert "compiling" not in second.stderr

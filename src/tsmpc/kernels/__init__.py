@@ -155,25 +155,20 @@ class KernelCacheError(RuntimeError):
     """The kernel cache folder is unusable, or its entries cannot be loaded nor rebuilt."""
 
 
-def _forget_modules() -> None:
-    for m in _MODULES:
-        sys.modules.pop(f"tsmpc.kernels.{m}", None)
-
-
-def _purge(folder: Path) -> int:
-    """Delete this tree's cache entries of the kernel modules; returns how many."""
+def _purge(folder: Path, modules: tuple[str, ...] = _MODULES) -> int:
+    """Delete this tree's cache entries of the kernel ``modules``; returns how many."""
     n = 0
     for p in folder.glob("*.nb[ic]"):
-        if p.name.split(".")[0] in _MODULES:
+        if p.name.split(".")[0] in modules:
             p.unlink()
             n += 1
     return n
 
 
-def _compile_all() -> dict[str, ModuleType]:
+def _compile_all(modules: tuple[str, ...] = _MODULES) -> dict[str, ModuleType]:
     import importlib
 
-    mods = {m: importlib.import_module(f"tsmpc.kernels.{m}") for m in _MODULES}
+    mods = {m: importlib.import_module(f"tsmpc.kernels.{m}") for m in modules}
     for m in mods.values():
         m.warm()  # compile (or load) every signature now, not inside the first timed step
     return mods
@@ -196,30 +191,37 @@ def _import_locked(cache: Path) -> dict[str, ModuleType]:
     if cold:
         print("tsmpc: compiling kernels (first run only)…", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    try:
-        mods = _compile_all()
-    except Exception as err:  # a corrupt, truncated or unreadable cache entry: rebuild it once
-        folder = _tree_folder(cache)
+    mods: dict[str, ModuleType] = {}
+    for m in _MODULES:  # one module at a time: a broken entry costs its module's compile only
         try:
-            removed = _purge(folder)
-        except OSError as rm_err:
-            raise KernelCacheError(f"the kernel cache {folder} cannot be loaded ({type(err).__name__}: "
-                                   f"{err}) nor cleaned ({rm_err.strerror or rm_err})") from None
-        if not removed:
-            raise
-        print(f"tsmpc: the kernel cache in {folder} could not be loaded ({type(err).__name__}); "
-              "compiling the kernels again…", file=sys.stderr, flush=True)
-        _forget_modules()
-        cold = True
-        try:
-            mods = _compile_all()
-        except Exception as err2:
-            raise KernelCacheError(f"the kernel cache {folder} is unusable even after a rebuild "
-                                   f"({type(err2).__name__}: {err2})") from None
+            mods.update(_compile_all((m,)))
+        except Exception as err:  # a corrupt, truncated or unreadable cache entry: rebuild it once
+            mods.update(_rebuild(_tree_folder(cache), m, err))
+            cold = True
     if cold:
         print(f"tsmpc: kernels compiled in {time.perf_counter() - t0:.1f} s (cached in {cache})",
               file=sys.stderr, flush=True)
     return mods
+
+
+def _rebuild(folder: Path, module: str, err: Exception) -> dict[str, ModuleType]:
+    """Delete the cache entries of the kernel ``module`` whose loading raised ``err`` and compile
+    it again, once; a :class:`KernelCacheError` naming the folder when that fails too."""
+    try:
+        removed = _purge(folder, (module,))
+    except OSError as rm_err:
+        raise KernelCacheError(f"the kernel cache {folder} cannot be loaded ({type(err).__name__}: "
+                               f"{err}) nor cleaned ({rm_err.strerror or rm_err})") from None
+    if not removed:
+        raise err
+    print(f"tsmpc: the kernel cache in {folder} could not be loaded ({type(err).__name__}); "
+          f"compiling the {module} kernels again…", file=sys.stderr, flush=True)
+    sys.modules.pop(f"tsmpc.kernels.{module}", None)
+    try:
+        return _compile_all((module,))
+    except Exception as err2:
+        raise KernelCacheError(f"the kernel cache {folder} is unusable even after a rebuild "
+                               f"({type(err2).__name__}: {err2})") from None
 
 
 def warmup() -> tuple[bool, float]:
