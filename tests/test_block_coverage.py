@@ -48,6 +48,10 @@ BLOCK_TESTS = (
         "test_sample_rates_and_heading",
         "test_burst_block_by_hand", "test_the_records_cross_into_the_engine_unchanged",
         "test_steering_offset_moves_the_steady_state_yaw_rate")),
+    *(f"tests/test_gyro_bias.py::{t}" for t in (
+        "test_the_fit_converges_to_a_constant_bias_within_its_noise", "test_the_fit_tracks_a_drifting_bias",
+        "test_without_headings_the_estimate_holds",
+        "test_a_missing_yaw_rate_is_held_briefly_and_a_long_gap_drops_the_chord")),
 )
 
 
