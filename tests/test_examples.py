@@ -21,6 +21,9 @@ BLOCKS = re.findall(r"^```python\n(.*?)^```", README.read_text(encoding="utf-8")
 NEEDS = {"baseline_table.py": ("paper", "tracks"), "fusion_ablation.py": ("paper",),
          "mechanism_ablation.py": ("paper",),
          "paper_ablation.py": ("paper",), "paper_explained.py": ("paper",), "race_tracks.py": ("tracks",)}
+#: Arguments for the shortened test runs: one local Dask worker for ten-step runs (a second would
+#: cost its start, imports and kernel loads, ~5 s of CPU, for nothing).
+ARGS = {"mismatch_table.py": ["--workers", "1"]}
 
 
 def test_the_readme_has_python_blocks_and_examples_exist() -> None:
@@ -49,7 +52,7 @@ def test_example_script_runs(script: Path, tmp_path: Path) -> None:
     env = {**os.environ, "TSMPC_EXAMPLE_STEPS": "10",
            "PYTHONPATH": os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")])}
     # from another folder: the examples find their data relative to themselves, not the cwd
-    res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env,
-                         timeout=600, cwd=tmp_path)
+    res = subprocess.run([sys.executable, str(script), *ARGS.get(script.name, [])], capture_output=True,
+                         text=True, env=env, timeout=600, cwd=tmp_path)
     assert res.returncode == 0, res.stderr[-2000:]
     assert res.stdout.strip(), "the example printed nothing"
