@@ -4,8 +4,10 @@ half-written file and an interrupted run leaves the previous file intact."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 __all__ = ["atomic_savefig", "atomic_write_bytes", "atomic_write_text", "open_lock_file",
@@ -83,3 +85,31 @@ def open_lock_file(path: Path) -> int:
         os.close(fd)
         raise OSError(errno.EINVAL, "not a regular file", str(path))
     return fd
+
+
+@contextlib.contextmanager
+def file_lock(path: Path) -> Iterator[bool]:
+    """Hold an exclusive ``flock`` on the lock file ``path`` (its folder created) for the block;
+    yields whether it holds one. A process that dies releases it. Without ``fcntl`` (Windows), or
+    where the lock file cannot be opened (a read-only folder, a FIFO at the path), there is no
+    lock (False): the caller's work must be correct without one, the lock only saves doing it
+    twice at once."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        fcntl = None  # type: ignore[assignment]
+    fd = -1
+    if fcntl is not None:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd = open_lock_file(path)
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:
+            if fd >= 0:
+                os.close(fd)
+            fd = -1
+    try:
+        yield fd >= 0
+    finally:
+        if fd >= 0:
+            os.close(fd)  # (closing releases the flock)

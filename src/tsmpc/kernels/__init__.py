@@ -91,28 +91,15 @@ def compile_lock(name: str) -> Iterator[None]:
     from the cache instead of compiling it again (numba would: minutes of CPU each for the batch
     kernel). The lock is the kernel's; a process that dies releases it. Without ``fcntl``
     (Windows) or a writable cache folder there is no lock: each process compiles for itself."""
-    from tsmpc.io import open_lock_file
+    from tsmpc.io import file_lock
 
     try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not POSIX
-        fcntl = None  # type: ignore[assignment]
-    fd = -1
-    if fcntl is not None:
-        try:
-            folder = _tree_folder(numba_cache_dir())
-            folder.mkdir(parents=True, exist_ok=True)
-            fd = open_lock_file(folder / f"{name}.lock")
-            fcntl.flock(fd, fcntl.LOCK_EX)
-        except OSError:
-            if fd >= 0:
-                os.close(fd)
-            fd = -1
-    try:
+        folder = _tree_folder(numba_cache_dir())
+    except OSError:
         yield
-    finally:
-        if fd >= 0:
-            os.close(fd)  # (closing releases the flock)
+        return
+    with file_lock(folder / f"{name}.lock"):
+        yield
 
 
 def in_cache(function: str) -> bool:

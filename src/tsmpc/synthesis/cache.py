@@ -10,8 +10,10 @@ Location: ``$TSMPC_CACHE_DIR`` or ``~/.cache/tsmpc``. Writes are atomic (temp fi
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+from contextlib import AbstractContextManager
 from dataclasses import asdict, fields
 from dataclasses import replace as dc_replace
 from pathlib import Path
@@ -21,7 +23,7 @@ import numpy as np
 
 from tsmpc.config import Config, DynamicLMIFormulation
 from tsmpc.errors import TsmpcError
-from tsmpc.io import atomic_write_text
+from tsmpc.io import atomic_write_text, file_lock
 from tsmpc.synthesis.certificates import Certificate, check
 from tsmpc.synthesis.dynamic import DynamicDesign, certify_dynamic, design_dynamic
 from tsmpc.synthesis.kinematic import KinematicDesign, certify_kinematic, design_kinematic
@@ -151,9 +153,21 @@ def _rechecked(design: KinematicDesign | DynamicDesign, cfg: Config, text: str) 
     return _RECHECKED[digest]
 
 
+def _entry_lock(path: Path, use_cache: bool) -> AbstractContextManager[bool]:
+    """The lock of the cache entry ``path`` (``<entry>.lock`` beside it): two processes that need
+    the same design at once (a sweep's workers, the run engine's warm-up beside a test) solve it
+    once — the second waits, then loads the first one's entry. No lock without a cache."""
+    return file_lock(path.with_suffix(".lock")) if use_cache else contextlib.nullcontext(False)
+
+
 def _load_or_design(cfg: Config, kind: str, directory: Path | None, use_cache: bool) -> Any:
     key = kinematic_key(cfg) if kind == "kinematic" else dynamic_key(cfg)
     path = (directory or cache_dir()) / f"{kind}-{key[:32]}.json"
+    with _entry_lock(path, use_cache):
+        return _load_or_solve(cfg, kind, key, path, use_cache)
+
+
+def _load_or_solve(cfg: Config, kind: str, key: str, path: Path, use_cache: bool) -> Any:
     if use_cache and path.exists():
         try:  # a regular file of bounded size only (a folder, a FIFO: re-solved, never blocks)
             from tsmpc.textfile import read_text
@@ -206,10 +220,16 @@ def load_or_design_feasibility(
     :func:`dynamic_key`), solved and stored when missing (the published run's design,
     :mod:`tsmpc.synthesis.paper_as_run`). The vertex certificates are recomputed on load; a stale
     or tampered entry is re-solved."""
-    from tsmpc.textfile import read_text
 
     key = dynamic_key(cfg)
     path = (directory or cache_dir()) / f"dynamic-{key[:32]}.json"
+    with _entry_lock(path, use_cache):
+        return _load_or_solve_feasibility(cfg, key, path, use_cache)
+
+
+def _load_or_solve_feasibility(cfg: Config, key: str, path: Path, use_cache: bool) -> FeasibilityDesign:
+    from tsmpc.textfile import read_text
+
     lmi = cfg.dynamic_lmi
     if use_cache and path.exists():
         try:
