@@ -1201,7 +1201,7 @@ def fusion_ablation(ctx: Context) -> Produced:
 
 
 def mechanisms(ctx: Context) -> Produced:
-    """Which default-on mechanisms pay (examples/mechanisms.toml, 720 runs; docs/mismatch.md)."""
+    """Which default-on mechanisms pay (examples/mechanisms.toml, 816 runs; docs/mismatch.md)."""
     p = Produced()
     ctx.progress("examples/mechanism_ablation.py (the sweep of examples/mechanisms.toml)")
     for name, body in _example(ctx, "mechanism_ablation").mechanism_blocks(
@@ -1378,7 +1378,7 @@ PRODUCERS: tuple[Producer, ...] = (
     Producer("paper-explained", paper_explained, "Table 5 explained (≈ 25 runs, 10–15 min)"),
     Producer("mismatch", mismatch, "the mismatch benchmark: 135 runs, 10–20 min"),
     Producer("fusion-ablation", fusion_ablation, "the fusion switches' ablation (88 runs)"),
-    Producer("mechanisms", mechanisms, "which default-on mechanisms pay (720 runs, ≈ 45 min)"),
+    Producer("mechanisms", mechanisms, "which default-on mechanisms pay (816 runs, ≈ 50 min)"),
     Producer("race-speeds", race_speeds, "the public tracks at 22 and 25 m/s, S-bends"),
     Producer("baselines", baselines, "the baselines against the TS-MPC on five cases (6 compares)"),
     Producer("baseline-tuning", baseline_tuning, "the baselines' tuning search (≈ 700 runs)"),
