@@ -379,7 +379,8 @@ def _print_tables(console: Any, metrics: dict[str, Any], timed_in: dict[str, str
         tr.add_column(escape(col), justify="right" if col not in ("method", "events") else "left",
                       no_wrap=True)
     for name, m in metrics["methods"].items():
-        ev = "\n".join(f"{k}={v}" for k, v in m["events"].items() if v) or "-"
+        ev = "\n".join(([f"behind plan {m['plan_delay_s']:.1f} s"] if m.get("plan_delay_s") else [])
+                       + [f"{k}={v}" for k, v in m["events"].items() if v]) or "-"
         if m.get("status") == "diverged":
             tr.add_row(name, f"{m['max_abs_lateral_m']:.3f}", "—", "—", ev, style="bold red")
             continue

@@ -651,6 +651,14 @@ class Cascade:
         g = self.governor
         return g is not None and (g.actions > 0 or g.rate < 1.0)
 
+    @property
+    def plan_delay(self) -> float:
+        """How far behind the plan's timing the reference is sampled [s]: t − τ, what the speed
+        governor's slow-downs (and the recovery's re-anchoring) have added up to. The tracking
+        errors are measured against the reference at τ, so this is the time a governed run lost,
+        which its RMSEs do not show."""
+        return float(self._t_offset)
+
     def _govern(self, t: float) -> None:
         """After an MPC step: the governor's rate for the next step from the grip estimate and the
         reference ahead; the reference time offset advances by (1 − r) T_c (the offset the

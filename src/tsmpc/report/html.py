@@ -118,6 +118,10 @@ def _events_table(metrics: dict[str, Any]) -> str:
     rows = [([_e(k), *(_e(m.get("events", {}).get(k, 0)) for m in metrics["methods"].values())],
              "bad" if any(m.get("events", {}).get(k, 0) for m in metrics["methods"].values()) else "")
             for k in names]
+    if any(m.get("plan_delay_s") for m in metrics["methods"].values()):  # the governor's cost in time
+        rows.append(([_e("behind plan [s]"),
+                      *(_e(f"{m['plan_delay_s']:.1f}" if "plan_delay_s" in m else "—")
+                        for m in metrics["methods"].values())], "bad"))
     return _table("table-events", ("event", *metrics["methods"]), rows)
 
 

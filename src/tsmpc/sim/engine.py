@@ -125,7 +125,7 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
 #: steps aside (the Python loop runs) until kernels/engine.py follows the change and this table is
 #: refreshed (``python -m tsmpc.sim.engine`` prints it; tests/test_engine.py checks it).
 _PORTED: dict[str, str] = {
-    "tsmpc.sim.simulator:simulate": "7ebb7f0efcd8580b",
+    "tsmpc.sim.simulator:simulate": "dc420a749e929087",
     "tsmpc.sim.start:_start_state": "2e35ad3de46ce500",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
     "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
@@ -1069,7 +1069,8 @@ def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termina
         mhe_status=_MHE_TEXT[a.lstat[i]].astype("<U16"),
         wall_s=wall_s, termination=termination, events=events,
         meta={"oracle": False, "seed": cfg.seed, **scenario.meta, "final_state": x.tolist(),
-              **({"planned_v": ref.v[:done].tolist()} if gov else {})})
+              **({"planned_v": ref.v[:done].tolist(), "plan_delay_s": float(a.sf[ke.SF_TOFF])}
+                 if gov else {})})
 
 
 def cached() -> bool | None:

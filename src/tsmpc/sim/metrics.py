@@ -148,6 +148,10 @@ class RunMetrics:
     termination: str
     events: dict[str, int]
     comfort: ComfortMetrics | None = None  #: comfort and effort (tsmpc.sim.comfort)
+    #: With the speed governor: how far behind the plan's timing the run ended [s]
+    #: (:attr:`tsmpc.control.cascade.Cascade.plan_delay`); its errors are measured against the
+    #: re-timed reference, so this is the time the slow-downs cost. None without a governor.
+    plan_delay_s: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The metrics.json entry of one method (schema of issue 7, names kept stable)."""
@@ -174,6 +178,7 @@ class RunMetrics:
             "termination": self.termination,
             "events": dict(self.events),
             **({"comfort": self.comfort.as_dict()} if self.comfort is not None else {}),
+            **({"plan_delay_s": self.plan_delay_s} if self.plan_delay_s is not None else {}),
         }
 
 
@@ -282,6 +287,7 @@ def run_metrics(log: RunLog) -> RunMetrics:
         termination=log.termination,
         events=dict(log.events),
         comfort=run_comfort(log),
+        plan_delay_s=(float(log.meta["plan_delay_s"]) if "plan_delay_s" in log.meta else None),
     )
 
 

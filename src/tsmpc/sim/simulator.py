@@ -196,4 +196,5 @@ def simulate(
                    wall_s=time.perf_counter() - t_start, termination=termination, events=cascade.events,
                    meta={"oracle": oracle, "seed": cfg.seed, **scenario.meta,
                          "final_state": x.tolist(),
-                         **({} if cascade.governor is None else {"planned_v": ref.v[:done].tolist()})})
+                         **({} if cascade.governor is None else {"planned_v": ref.v[:done].tolist(),
+                                                                 "plan_delay_s": cascade.plan_delay})})
