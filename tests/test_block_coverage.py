@@ -52,6 +52,10 @@ BLOCK_TESTS = (
         "test_the_fit_converges_to_a_constant_bias_within_its_noise", "test_the_fit_tracks_a_drifting_bias",
         "test_without_headings_the_estimate_holds",
         "test_a_missing_yaw_rate_is_held_briefly_and_a_long_gap_drops_the_chord")),
+    *(f"tests/test_lqr_block.py::{t}" for t in (
+        "test_compensation_chooses_the_configured_estimate", "test_low_speed_residual_by_hand",
+        "test_a_non_finite_estimate_holds_the_last_input", "test_without_a_law_the_numpy_step_gets_the_terms",
+        "test_the_law_gets_both_force_terms_and_its_answer_passes")),
 )
 
 

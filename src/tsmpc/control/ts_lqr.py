@@ -37,22 +37,37 @@ sees, so the model's resistance is μ_o M g at every speed.
 
 The law as the published run ran it (the published run; ``lqr.law = "as-run"``, a quirk of that run) is
 :mod:`tsmpc.control.paper_as_run`.
+
+One definition (issue 34): the step's glue around the compiled law — the hold on a non-finite
+estimate, the compensated estimate (:func:`compensated_friction`), the low-speed residual
+(:func:`low_speed_force`) and the call of :func:`tsmpc.kernels.lqr.lqr_step` — is the ``@jitable``
+block :func:`inner_step` over the records :class:`InnerParams` and :class:`LQRLaw`. :meth:`TSLQR.step`
+calls it as Python; the run engine (``tsmpc.kernels.engine.run``) and the batch compile it. Its
+status (:data:`LQR_OK`, :data:`LQR_HELD`, :data:`LQR_NUMPY`) says who decided the step: when the
+compiled law is absent or finds N̄ singular, the numpy step of :class:`TSLQR` decides (the engine
+hands that step to its caller, which runs it).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tsmpc.config import FrictionEstimate, LQRSettings, VehicleParams
 from tsmpc.errors import ConfigError
+from tsmpc.kernels.jit import _numba_ready, jitable
 from tsmpc.models.dynamic import DynamicTS, continuous_matrices
 
-__all__ = ["TSLQR", "InnerCommand", "equilibrium", "steady_states"]
+lqr_step: Any = None  # no compiled law: inner_step leaves every step to the numpy law (law=None)
+if _numba_ready():  # the compiled law, called by inner_step (compiled into the engine with it)
+    from tsmpc.kernels.lqr import lqr_step
+
+__all__ = ["LQR_HELD", "LQR_NUMPY", "LQR_OK", "TSLQR", "InnerCommand", "InnerParams", "InnerStep", "LQRLaw",
+           "compensated_friction", "equilibrium", "inner_step", "low_speed_force", "steady_states"]
 
 
 @dataclass(frozen=True)
@@ -66,6 +81,134 @@ class InnerCommand:
     #: the model's road resistance below the box's speed floor included in F_xR [N]
     #: (``low_speed_resistance``; the MHE must see F_xR minus this, see :meth:`TSLQR.low_speed_residual`)
     F_low_speed: float = 0.0
+
+
+#: Statuses of :func:`inner_step`: who decided the step.
+LQR_OK = 0  #: the compiled law
+LQR_HELD = 1  #: nobody: the estimate is not finite, the last input is held (reported saturated)
+LQR_NUMPY = 2  #: the numpy step of :class:`TSLQR` must (no compiled law, or it found N̄ singular)
+
+
+class InnerParams(NamedTuple):
+    """The step's switches and constants around the law (:class:`~tsmpc.config.LQRSettings`, the
+    vehicle and the dynamic box).
+
+    Attributes:
+        compensation: add the friction estimate F̂_fr to the force (``friction_compensation``).
+        raw_estimate: compensate the paper's one-step UIO formula instead of the MHE's window fit
+            (``friction_estimate = "uio"``).
+        low_speed: add the low-speed residual (``low_speed_resistance``).
+        v_min: the dynamic box's speed floor [m/s].
+        resistance: the model's road resistance μ_o g M [N] (drag apart).
+    """
+
+    compensation: bool
+    raw_estimate: bool
+    low_speed: bool
+    v_min: float
+    resistance: float
+
+
+class LQRLaw(NamedTuple):
+    """The compiled law's parameters (:func:`tsmpc.kernels.lqr.lqr_step`'s, in its order).
+
+    Attributes:
+        Kv: (n_v, 2, 6) vertex gains K_i.
+        zlo: (3,) lower corner of the premise box (δ, v, α).
+        zhi: (3,) upper corner of the premise box.
+        bits: (n_v, 3) vertex bits of the box (True: the upper side).
+        prm: (8,) [M, I, C_f, C_r, a, b, μ_o g, drag factor] of N̄'s model (C_f, C_r follow the
+            stiffness fit: written in place).
+        lam: Apkarian filter bandwidth λ [rad/s].
+        afilt: the filter's e^{−λ T_d}.
+        Td: sample time [s].
+        F_min: lower force limit [N].
+        F_max: upper force limit [N].
+        d_min: lower steering limit [rad].
+        d_max: upper steering limit [rad].
+        speed_feedback: the speed-error feedback M (v_ref − v̂)/τ (``speed_feedback``).
+        tau: its time constant τ [s].
+    """
+
+    Kv: NDArray[np.float64]
+    zlo: NDArray[np.float64]
+    zhi: NDArray[np.float64]
+    bits: NDArray[np.bool_]
+    prm: NDArray[np.float64]
+    lam: float
+    afilt: float
+    Td: float
+    F_min: float
+    F_max: float
+    d_min: float
+    d_max: float
+    speed_feedback: bool
+    tau: float
+
+
+class InnerStep(NamedTuple):
+    """What :func:`inner_step` decided.
+
+    Attributes:
+        F_xR: rear force for the next T_d [N] (after saturation; 0 with :data:`LQR_NUMPY`).
+        delta: steering [rad] (after saturation; 0 with :data:`LQR_NUMPY`).
+        saturated: an input saturated (True when held).
+        F_comp: the friction compensation in F_xR [N].
+        F_low_speed: the low-speed residual in F_xR [N].
+        status: :data:`LQR_OK`, :data:`LQR_HELD` or :data:`LQR_NUMPY`.
+    """
+
+    F_xR: float
+    delta: float
+    saturated: bool
+    F_comp: float
+    F_low_speed: float
+    status: int
+
+
+@jitable
+def compensated_friction(p: InnerParams, F_window: float, F_raw: float) -> float:
+    """F̂_fr the force compensates (paper Sec. 4: F_xR = F_f + F̂_fr): the window fit or the one-step
+    UIO formula as configured; 0 without compensation or for a non-finite estimate."""
+    if not p.compensation:
+        return 0.0
+    F_hat = F_raw if p.raw_estimate else F_window
+    return F_hat if math.isfinite(F_hat) else 0.0
+
+
+@jitable
+def low_speed_force(p: InnerParams, v: float) -> float:
+    """The model's road resistance the clipped premise leaves out at speed ``v`` [N] (beyond the
+    paper): μ_o M g (1 − max(v, 0) / v_min) below the box's speed floor, 0 above it and with the
+    switch off."""
+    if not p.low_speed or not v < p.v_min:
+        return 0.0
+    return p.resistance * (1.0 - max(v, 0.0) / p.v_min)
+
+
+@jitable
+def inner_step(p: InnerParams, law: LQRLaw | None, s: NDArray[np.float64], v: float, alpha: float,
+               omega: float, F_window: float, F_raw: float, v_ref: float, w_ref: float) -> InnerStep:
+    """One T_d of the TS-LQR around its law, from the estimate (v̂, α̂, ω̂), the friction estimates
+    (window fit, one-step UIO) and the outer loop's references (v_ref, ω_ref).
+
+    A non-finite estimate holds the last input (``s[4:6]``) and changes nothing. Else the law —
+    the compiled :func:`~tsmpc.kernels.lqr.lqr_step` on the controller state ``s`` (updated in
+    place) with the compensation and the low-speed residual added outside the filter — decides,
+    unless ``law`` is None or N̄ is singular (:data:`LQR_NUMPY`: ``s`` unchanged, the terms are
+    returned for the numpy step)."""
+    if not (math.isfinite(v) and math.isfinite(alpha) and math.isfinite(omega)):
+        return InnerStep(float(s[4]), float(s[5]), True, 0.0, 0.0, LQR_HELD)
+    comp = compensated_friction(p, F_window, F_raw)
+    low = low_speed_force(p, v)
+    if law is None:
+        return InnerStep(0.0, 0.0, False, comp, low, LQR_NUMPY)
+    F, d, sat, ok = lqr_step(s, v, alpha, omega, comp + low, v_ref, w_ref, law.Kv, law.zlo, law.zhi, law.bits,
+                             law.prm, law.lam, law.afilt, law.Td, law.F_min, law.F_max, law.d_min, law.d_max,
+                             law.speed_feedback, law.tau)
+    if not ok:  # singular reference gain: the numpy step decides (and may raise)
+        return InnerStep(0.0, 0.0, False, comp, low, LQR_NUMPY)
+    return InnerStep(F, d, sat, comp, low, LQR_OK)
 
 
 def equilibrium(v: float, omega: float, p: VehicleParams, iters: int = 4) -> tuple[float, float, float]:
@@ -143,22 +286,31 @@ class TSLQR:
         self._bits = tuple(tuple(bool(b) for b in row) for row in box.vertex_bits)
         # Controller state [f_F, f_δ, ζ, started, applied_F, applied_δ], shared by both paths.
         self._s = np.zeros(6)
+        p = vehicle
+        # The step's glue (inner_step): the same record in the engine (kernels/engine.py builds it
+        # from the same values: μ_o g from the law's prm times M, v_min = zlo[1]).
+        self._inner = InnerParams(
+            compensation=bool(settings.friction_compensation),
+            raw_estimate=settings.friction_estimate != FrictionEstimate.WINDOW,
+            low_speed=bool(settings.low_speed_resistance), v_min=self._zlo[1],
+            resistance=p.mu_nominal * p.g * p.mass)
         self._kern = None
+        self._law: LQRLaw | None = None
         if jit is None or jit:
             from tsmpc import kernels
 
             self._kern = kernels.load("lqr")
         if self._kern is not None:
-            p = vehicle
             try:
-                self._kargs = (np.ascontiguousarray(self.K), np.array(self._zlo), np.array(self._zhi),
-                               np.array(self._bits, dtype=np.bool_),
-                               np.array([p.mass, p.inertia, getattr(p, "C_f", p.cornering_stiffness),
-                                         getattr(p, "C_r", p.cornering_stiffness), p.a, p.b,
-                                         p.mu_nominal * p.g, p.drag_factor], dtype=float),
-                               self.bandwidth, self._a, self.Td, float(self._lo[0]), float(self._hi[0]),
-                               float(self._lo[1]), float(self._hi[1]), bool(settings.speed_feedback),
-                               float(settings.speed_time_constant))
+                self._law = LQRLaw(
+                    Kv=np.ascontiguousarray(self.K), zlo=np.array(self._zlo), zhi=np.array(self._zhi),
+                    bits=np.array(self._bits, dtype=np.bool_),
+                    prm=np.array([p.mass, p.inertia, getattr(p, "C_f", p.cornering_stiffness),
+                                  getattr(p, "C_r", p.cornering_stiffness), p.a, p.b, p.mu_nominal * p.g,
+                                  p.drag_factor], dtype=float),
+                    lam=self.bandwidth, afilt=self._a, Td=self.Td, F_min=float(self._lo[0]),
+                    F_max=float(self._hi[0]), d_min=float(self._lo[1]), d_max=float(self._hi[1]),
+                    speed_feedback=bool(settings.speed_feedback), tau=float(settings.speed_time_constant))
             except (AttributeError, TypeError):  # parameters the kernel does not know: numpy
                 self._kern = None
         if self._kern is not None:
@@ -197,8 +349,8 @@ class TSLQR:
 
         self.vehicle = replace(self.vehicle, cornering_stiffness_front=float(C_f),
                                cornering_stiffness_rear=float(C_r))
-        if self._kern is not None:
-            prm = self._kargs[4]  # [M, I, C_f, C_r, a, b, μ_o g, d], read by every kernel step
+        if self._law is not None:
+            prm = self._law.prm  # [M, I, C_f, C_r, a, b, μ_o g, d], read by every kernel step
             prm[2], prm[3] = float(C_f), float(C_r)
 
     def reset(self) -> None:
@@ -273,31 +425,22 @@ class TSLQR:
     def low_speed_residual(self, v: float) -> float:
         """The model's road resistance the clipped premise leaves out at speed ``v`` [N]:
         μ_o M g (1 − v / v_min) below the box's speed floor v_min, 0 above it and with
-        ``low_speed_resistance`` off."""
-        v_min = self._zlo[1]
-        if not self.settings.low_speed_resistance or not v < v_min:
-            return 0.0
-        p = self.vehicle
-        return p.mu_nominal * p.g * p.mass * (1.0 - max(v, 0.0) / v_min)
+        ``low_speed_resistance`` off (:func:`low_speed_force`)."""
+        return low_speed_force(self._inner, v)
 
     def _step(self, estimate: Any, v_ref: float, omega_ref: float) -> InnerCommand:
         v, al, om = (float(c) for c in estimate.x)
-        if not (math.isfinite(v) and math.isfinite(al) and math.isfinite(om)):
-            # Never command from a corrupted estimate: hold the last input.
-            return InnerCommand(float(self._applied[0]), float(self._applied[1]), True, 0.0)
+        # the block decides (the compiled law inside it), or hands the step to the numpy law below
+        out = inner_step(self._inner, self._law if self._kern is not None else None, self._s, v, al, om,
+                         float(estimate.F_fr), float(estimate.F_fr_raw), float(v_ref), float(omega_ref))
+        if out.status != LQR_NUMPY:
+            return InnerCommand(out.F_xR, out.delta, out.saturated, out.F_comp, out.F_low_speed)
+        return self._numpy_step(v, al, om, float(v_ref), float(omega_ref), out.F_comp, out.F_low_speed)
+
+    def _numpy_step(self, v: float, al: float, om: float, v_ref: float, omega_ref: float, comp: float,
+                    low: float) -> InnerCommand:
+        """The law in numpy (no compiled law, or it found N̄ singular): the tests' oracle."""
         st = self.settings
-        low = self.low_speed_residual(v)
-        if self._kern is not None:
-            comp = 0.0
-            if st.friction_compensation:
-                F_hat = float(estimate.F_fr if st.friction_estimate == FrictionEstimate.WINDOW
-                              else estimate.F_fr_raw)
-                comp = F_hat if math.isfinite(F_hat) else 0.0
-            o0, o1, sat, ok = self._kern.lqr_step(self._s, v, al, om, comp + low, float(v_ref),
-                                                  float(omega_ref), *self._kargs)
-            if ok:
-                return InnerCommand(o0, o1, sat, comp, low)
-            # singular reference gain: the numpy step below decides (and may raise)
         Fmin, dmin = float(self._lo[0]), float(self._lo[1])
         Fmax, dmax = float(self._hi[0]), float(self._hi[1])
         r = np.array([v_ref, omega_ref])
@@ -318,11 +461,6 @@ class TSLQR:
         F_add = 0.0
         if st.speed_feedback:  # feedback on the speed error (beyond the paper)
             F_add = self.vehicle.mass * (v_ref - v) / st.speed_time_constant
-        comp = 0.0
-        if st.friction_compensation:  # (the oracle ablation's estimate carries F̂ = 0)
-            F_hat = float(estimate.F_fr if st.friction_estimate == FrictionEstimate.WINDOW
-                          else estimate.F_fr_raw)
-            comp = F_hat if math.isfinite(F_hat) else 0.0
         out0 = f0 + F_add + comp + low
         o0, o1 = min(max(out0, Fmin), Fmax), min(max(f1, dmin), dmax)
         saturated = o0 != out0 or o1 != f1

@@ -8,7 +8,8 @@ its fits, the slip-aware outer-loop errors, the TS-MPC every T_c/T_d calls, the 
 mass-error terms, the TS-LQR) and the plant's T_d/h RK4 steps — and logs into preallocated arrays.
 The blocks are the compiled kernels the Python wrappers call: the TS-MPC's step (paper eq. "MPC";
 :func:`~tsmpc.kernels.mpc.guarded_step`), the MHE-UIO's window (eqs. "MHE", "disturb_estimation";
-:func:`~tsmpc.kernels.mhe.window_step`), the TS-LQR (Sec. 3.2; :func:`~tsmpc.kernels.lqr.lqr_step`)
+:func:`~tsmpc.kernels.mhe.window_step`), the TS-LQR (Sec. 3.2; its step's block
+:func:`~tsmpc.control.ts_lqr.inner_step` around :func:`~tsmpc.kernels.lqr.lqr_step`)
 and the plant's RK4 block (the single-track plant; :func:`~tsmpc.kernels.plant.rk4_block`). The
 ``@jitable`` blocks (:mod:`tsmpc.kernels.jit`: the sample gates, the fusion estimators of
 :mod:`tsmpc.estimation.fusion`, friction-step detection, the slip gate, …) are the cascade's own
@@ -51,6 +52,7 @@ from tsmpc.control.governor import (
     interp_unit,
 )
 from tsmpc.control.slip_aware import slip_gate_update
+from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams, LQRLaw, inner_step
 from tsmpc.estimation.friction_step import (
     FrictionStepParams,
     FrictionStepState,
@@ -82,7 +84,6 @@ from tsmpc.estimation.fusion import (
     stiffness_update,
 )
 from tsmpc.kernels.jit import cpython_hypot
-from tsmpc.kernels.lqr import lqr_step
 from tsmpc.kernels.mhe import window_step
 from tsmpc.kernels.mpc import guarded_step
 from tsmpc.kernels.plant import rk4_block
@@ -659,6 +660,10 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     gpar = GyroParams(fp[FP_GYRO], fp[FP_GYRO + 1], fp[FP_GYRO + 2], fp[FP_GYRO + 3])
     sens = unpack_params(fp[FP_SENS:FP_SENS + N_SP])
     sens_state = sf[SF_SENS:SF_SENS + N_SS]
+    # the TS-LQR's records (TSLQR._inner, TSLQR._law: the same values)
+    lqr_p = InnerParams(ip[IP_COMP] != 0, ip[IP_UIO] != 0, ip[IP_LOWRES] != 0, zlo[1], prm[6] * prm[0])
+    law = LQRLaw(Kv, zlo, zhi, bits, prm, fp[FP_L_LAM], fp[FP_L_AF], fp[FP_L_TD], fp[FP_L_FMIN],
+                 fp[FP_L_FMAX], fp[FP_L_DMIN], fp[FP_L_DMAX], ip[IP_LQR_SFB] != 0, fp[FP_L_TAU])
     mhe_views = (mp[MP_Q:MP_Q + 3], mp[MP_R:MP_R + 2], mp[MP_P:MP_P + 3], mp[MP_XMIN:MP_XMIN + 3],
                  mp[MP_XMAX:MP_XMAX + 3], mp[MP_LO:MP_LO + 3], mp[MP_HI:MP_HI + 3],
                  sf[SF_MX:SF_MX + 3], sf[SF_ARR:SF_ARR + 3], sc[SC_UK:SC_UK + 2])
@@ -864,30 +869,15 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 if dF != 0.0:
                     F_c, Fr_in = F_c + dF, Fr_in + dF
             sc[SC_INF], sc[SC_INFR] = F_c, Fr_in
-            # TSLQR.step (compiled law; a singular N̄ goes to the caller's numpy step)
-            if not (math.isfinite(ev0) and math.isfinite(ev1) and math.isfinite(ev2)):
-                sc[SC_OF], sc[SC_OD] = ls[4], ls[5]
-                si[SI_SAT] = 1
-                sf[SF_LOW] = 0.0
-            else:
-                comp = 0.0
-                if ip[IP_COMP] != 0:
-                    Fh = Fr_in if ip[IP_UIO] != 0 else F_c
-                    comp = Fh if math.isfinite(Fh) else 0.0
-                low = 0.0  # TSLQR.low_speed_residual
-                if ip[IP_LOWRES] != 0 and ev0 < zlo[1]:
-                    low = prm[6] * prm[0] * (1.0 - _pmax(ev0, 0.0) / zlo[1])
-                sf[SF_LOW] = low
-                o0, o1, sat, ok = lqr_step(
-                    ls, ev0, ev1, ev2, comp + low, sc[SC_VREF], sc[SC_WREF], Kv, zlo, zhi, bits, prm,
-                    fp[FP_L_LAM], fp[FP_L_AF], fp[FP_L_TD], fp[FP_L_FMIN], fp[FP_L_FMAX],
-                    fp[FP_L_DMIN], fp[FP_L_DMAX], ip[IP_LQR_SFB] != 0, fp[FP_L_TAU])
-                if not ok:
-                    li[m, LI_TLQR] = float(_ticks() - tick)
-                    si[SI_PHASE] = PH_POST_LQR
-                    return NEED_LQR
-                sc[SC_OF], sc[SC_OD] = o0, o1
-                si[SI_SAT] = 1 if sat else 0
+            # TSLQR.step: its block (ts_lqr.inner_step); the numpy step (singular N̄) is the caller's
+            out = inner_step(lqr_p, law, ls, ev0, ev1, ev2, F_c, Fr_in, sc[SC_VREF], sc[SC_WREF])
+            if out.status == LQR_NUMPY:
+                li[m, LI_TLQR] = float(_ticks() - tick)
+                si[SI_PHASE] = PH_POST_LQR
+                return NEED_LQR
+            sc[SC_OF], sc[SC_OD] = out.F_xR, out.delta
+            si[SI_SAT] = 1 if out.saturated else 0
+            sf[SF_LOW] = out.F_low_speed
             li[m, LI_TLQR] = float(_ticks() - tick)
             phase = PH_POST_LQR
         if phase == PH_POST_LQR:

@@ -37,6 +37,7 @@ BLOCK_MODULES = (
     "tsmpc.control.gates",
     "tsmpc.control.governor",
     "tsmpc.control.slip_aware",
+    "tsmpc.control.ts_lqr",
     "tsmpc.estimation.friction_step",
     "tsmpc.estimation.fusion",
     "tsmpc.kernels.jit",

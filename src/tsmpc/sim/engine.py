@@ -167,10 +167,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.estimation.mhe_uio:MHEUIO._failed": "481c2d5e6c42c5f7",
     "tsmpc.estimation.mhe_uio:MHEUIO.set_cornering_stiffness": "4c2e3c0b21b47861",
     "tsmpc.control.ts_lqr:TSLQR.reset": "87b87f561a20499d",
-    "tsmpc.control.ts_lqr:TSLQR.step": "6e5fb694882a1850",
-    "tsmpc.control.ts_lqr:TSLQR._step": "8d51097438eb8dd0",
-    "tsmpc.control.ts_lqr:TSLQR.low_speed_residual": "82f47f9cb03354b2",
-    "tsmpc.control.ts_lqr:TSLQR.set_cornering_stiffness": "be3fd84f79326402",
+    "tsmpc.control.ts_lqr:TSLQR.set_cornering_stiffness": "2650a8e957df2414",
     "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
     "tsmpc.vehicle.plant:VehiclePlant": "0b52c004a843c73b",
@@ -270,10 +267,14 @@ def _replaced_code() -> str | None:
             return f"{mod_name}.{name} was replaced (the Python loop runs the replacement)"
     if "mod" in _KERNEL and _KERNEL["mod"] is not None:
         ke = _KERNEL["mod"]
-        for block, fn in (("mpc", "guarded_step"), ("mhe", "window_step"), ("lqr", "lqr_step"),
-                          ("plant", "rk4_block")):
+        for block, fn in (("mpc", "guarded_step"), ("mhe", "window_step"), ("plant", "rk4_block")):
             if getattr(importlib.import_module(f"tsmpc.kernels.{block}"), fn) is not getattr(ke, fn):
                 return f"tsmpc.kernels.{block}.{fn} was replaced"
+        ts_lqr = importlib.import_module("tsmpc.control.ts_lqr")  # its block calls the law
+        if importlib.import_module("tsmpc.kernels.lqr").lqr_step is not ts_lqr.lqr_step:
+            return "tsmpc.kernels.lqr.lqr_step was replaced"
+        if ts_lqr.inner_step is not ke.inner_step:
+            return "tsmpc.control.ts_lqr.inner_step was replaced"
     return None
 
 
@@ -669,10 +670,12 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     bound = scenario.divergence_bound_m or cfg.divergence_bound_m
     ip[ke.IP_HASBOUND] = bound is not None
     fp[ke.FP_BOUND] = math.inf if bound is None else float(bound)
-    (lam, afilt, lTd, Fmin, Fmax, dmin, dmax, sfb, tau) = lqr._kargs[5:]
-    fp[ke.FP_L_LAM], fp[ke.FP_L_AF], fp[ke.FP_L_TD] = lam, afilt, lTd
-    fp[ke.FP_L_FMIN], fp[ke.FP_L_FMAX], fp[ke.FP_L_DMIN], fp[ke.FP_L_DMAX] = Fmin, Fmax, dmin, dmax
-    fp[ke.FP_L_TAU] = tau
+    law = lqr._law  # the TS-LQR's records: the kernel rebuilds them from these slots
+    assert law is not None  # run() checked lqr._kern
+    fp[ke.FP_L_LAM], fp[ke.FP_L_AF], fp[ke.FP_L_TD] = law.lam, law.afilt, law.Td
+    fp[ke.FP_L_FMIN], fp[ke.FP_L_FMAX], fp[ke.FP_L_DMIN], fp[ke.FP_L_DMAX] = (law.F_min, law.F_max,
+                                                                              law.d_min, law.d_max)
+    fp[ke.FP_L_TAU] = law.tau
     ip[ke.IP_NIN], ip[ke.IP_N] = n_in, N
     ip[ke.IP_NSUB] = round(cascade.Td / plant.model.h)
     ip[ke.IP_NW], ip[ke.IP_REFLEN] = cfg.mhe.N, len(ref)
@@ -684,10 +687,9 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     ip[ke.IP_STIFF], ip[ke.IP_MASSEST] = fs.stiffness_estimate, fs.mass_estimate
     ip[ke.IP_GYRO] = fs.gyro_bias
     fp[ke.FP_GYRO:ke.FP_GYRO + 4] = fu.gyro.params
-    ip[ke.IP_SPEEDFB], ip[ke.IP_LQR_SFB] = fu.speed_feedback, sfb
-    ip[ke.IP_COMP] = cfg.lqr.friction_compensation
-    ip[ke.IP_UIO] = cfg.lqr.friction_estimate.value == "uio"
-    ip[ke.IP_LOWRES] = lqr.settings.low_speed_resistance
+    ip[ke.IP_SPEEDFB], ip[ke.IP_LQR_SFB] = fu.speed_feedback, law.speed_feedback
+    inner = lqr._inner
+    ip[ke.IP_COMP], ip[ke.IP_UIO], ip[ke.IP_LOWRES] = inner.compensation, inner.raw_estimate, inner.low_speed
     fstep = cascade._friction_step
     ip[ke.IP_FSTEP] = fstep is not None
     if fstep is not None:
@@ -767,7 +769,9 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     mpc, mhe, lqr = cascade.mpc, cascade.mhe, _static_lqr(cascade)
     fp, ip = _parameters(cfg, cascade, scenario, plant, ke)
     sf, si = _state(cascade, ke)
-    (Kv, zlo, zhi, bits, prm) = lqr._kargs[:5]
+    law = lqr._law
+    assert law is not None  # run() checked lqr._kern
+    Kv, zlo, zhi, bits, prm = law.Kv, law.zlo, law.zhi, law.bits, law.prm
     mp = np.array([*mhe._kargs[0], *mhe._kargs[1], *mhe._kargs[2], mhe._kargs[3], *mhe._kargs[4],
                    *mhe._kargs[5], *mhe._kargs[6], *mhe._kargs[7], *mhe._kargs[8:17]], dtype=float)
     u_drop, gnss, fifo = _fault_data(scenario.sensor_fault, M, fp, ip, sf, si)
