@@ -201,11 +201,18 @@ def test_one_cornering_chord_in_the_slip_and_stiffness_fits(b: _Blocks) -> None:
                                        s.stiff), 5.0, 0.0, 0.0)
     g2 = 1.0 - 0.1 / STIFF_MEMORY_S
     S = 1000.0 * (5.0 + 10.0 * (-0.01 / 0.1))  # M (v ω + v α̇), α̇ = −0.01 rad / T_c: 4000 N
-    F_f = 1.5 * S / 2.5  # 2400 N on α_F = 0.06: 40000 N/rad, plausible; the rear's 1600 N on
-    num_f = g2 * s.stiff.num_f + (1.0 - g2) * prior / 50000.0 + w * F_f * 0.06  # 0.075 is not (21333)
+    F_f = 1.5 * S / 2.5  # 2400 N on α_F = 0.06: 40000 N/rad, plausible
+    num_f = g2 * s.stiff.num_f + (1.0 - g2) * prior / 50000.0 + w * F_f * 0.06
     assert s2.stiff.num_f == pytest.approx(num_f, rel=1e-12)
     assert s2.stiff.den_f == pytest.approx(g2 * s.stiff.den_f + (1.0 - g2) * prior + w * F_f ** 2, rel=1e-12)
-    assert s2.stiff.den_r == pytest.approx(g2 * s.stiff.den_r + (1.0 - g2) * prior, rel=1e-12)
+    # the rear's 1600 N on 0.075 rad is 21333 N/rad, below 0.5 C; but the slip the range allows,
+    # 1600 / 25000 = 0.064 rad, is 0.011 rad away: within STIFF_WINDOW_SIGMAS (3) of the chord's σ
+    # (0.0059 rad), so the chord counts (the window is on the measured, noisy slip)
+    F_r = 1.0 * S / 2.5
+    assert 0.075 - F_r / 25000.0 < fu.STIFF_WINDOW_SIGMAS * sig < 2.0 * (0.075 - F_r / 25000.0)
+    assert s2.stiff.den_r == pytest.approx(g2 * s.stiff.den_r + (1.0 - g2) * prior + w * F_r ** 2, rel=1e-12)
+    assert s2.stiff.num_r == pytest.approx(g2 * s.stiff.num_r + (1.0 - g2) * prior / 50000.0
+                                           + w * F_r * 0.075, rel=1e-12)
     assert s2.stiff.alpha_prev == pytest.approx(-0.02)
 
 
@@ -215,7 +222,7 @@ def test_the_stiffness_fit_takes_only_steady_corners(b: _Blocks) -> None:
     straight the slip fit's innovation measures the chords' noise instead."""
     p = _params(b)
     start = fu.course_start(p).stiff
-    straight = b.course_chord(p, _corner_ring(p, alpha_hat=-0.05, ay_ref=0.1), 5.0, 0.0, 0.0)
+    straight = b.course_chord(p, _corner_ring(p, alpha_hat=-0.05, ay_ref=0.04), 5.0, 0.0, 0.0)
     assert straight.stiff == start and straight.n_chords == 1
     sig0 = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4
     g_n = 1.0 - 0.1 / fu.NOISE_MEMORY_S
@@ -223,12 +230,25 @@ def test_the_stiffness_fit_takes_only_steady_corners(b: _Blocks) -> None:
     assert straight.slip.n1 == pytest.approx(g_n * 10.0 + 1.0, rel=1e-12)
     scale = math.sqrt(straight.slip.n2 / straight.slip.n1)  # 0.05 rad of innovation: 2.6× the σ
     assert b.noise_scale(straight.slip) == pytest.approx(scale) and scale > 2.0
+    # a gentle bend counts (issue 35: the bends before a track's first corner teach the fit)
+    assert fu.CORNER_ACCEL <= 0.05
+    assert b.course_chord(p, _corner_ring(p, ay_ref=0.05), 5.0, 0.0, 0.0).stiff != start
     # 0.1 g over the chord's 0.5 s is 0.5 m/s: 0.49 passes, 0.51 does not
     assert b.course_chord(p, _corner_ring(p, v_first=10.0 - 0.49), 5.0, 0.0, 0.0).stiff != start
     assert b.course_chord(p, _corner_ring(p, v_first=10.0 - 0.51), 5.0, 0.0, 0.0).stiff == start
     stiff_car = _params(b, C=(200000.0, 200000.0))  # the chord's F / α is below 0.5 C: out
     s = b.course_chord(stiff_car, _corner_ring(stiff_car), 5.0, 0.0, 0.0)
     assert b.stiffness(stiff_car, s.stiff) == pytest.approx((200000.0, 200000.0), rel=1e-12)
+    # the window allows 3 σ of the chord's slip noise, no more (σ = 0.0059 rad, F / 0.5 C = 0.03
+    # and 0.02 rad against the chord's 0.06 and 0.075): a car with C 2.8× the chord's takes the
+    # front (0.0536 + 3 σ > 0.06), one with 3.3× takes neither
+    sig = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4
+    for C, front in ((56000.0 * 2.0, True), (165000.0, False)):
+        q = _params(b, C=(C, C))
+        s = b.course_chord(q, _corner_ring(q), 5.0, 0.0, 0.0)
+        assert (s.stiff.den_f != q.prior_den_f) == front, C
+        assert 0.06 - 3000.0 / (0.5 * C) - fu.STIFF_WINDOW_SIGMAS * sig < 0.0 or not front
+        assert s.stiff.den_r == q.prior_den_r
     assert b.course_chord(p, _corner_ring(p), 1.9, 0.0, 0.0) == _corner_ring(p)  # < MIN_CHORD_M
     r = _corner_ring(p)
     still = CourseState(tuple(iv._replace(sv=0.0) for iv in r.ring), *r[1:])  # no speed: no chord
@@ -237,7 +257,8 @@ def test_the_stiffness_fit_takes_only_steady_corners(b: _Blocks) -> None:
 
 def test_stiffness_bounds_prior_and_application(b: _Blocks) -> None:
     """The prior is the model (Ĉ = C); the fit is bounded to STIFF_RANGE × C; the stiffnesses are
-    given when they moved by over 1 % (or were never given), and replacing given ones restarts κ."""
+    given when they moved by over 1 % (or were never given); given ones move T_c / STIFF_APPLY_TAU_S
+    of the way in the compliance, and κ keeps the share of the model error left."""
     p = _params(b, C=(40000.0, 60000.0))
     s0 = fu.course_start(p)
     assert p.prior_den_f == pytest.approx((40000.0 / STIFF_PRIOR_REL) ** 2, rel=1e-15)
@@ -252,9 +273,29 @@ def test_stiffness_bounds_prior_and_application(b: _Blocks) -> None:
     assert give and (cf, cr) == pytest.approx((40000.0, 60000.0)) and s1.slip == slip
     give, _, _, s1 = b.stiffness_update(p, s, True, 40000.0 * 1.0099, 60000.0 / 1.0099)
     assert not give and s1.slip == slip  # within 1 %
-    give, _, _, s1 = b.stiffness_update(p, s, True, 40000.0, 60000.0 * 1.0102)
-    assert give and s1.slip == b.model_changed(slip)
-    assert tuple(s1.slip) == (0.0, 0.002, SLIP_PRIOR[0] ** 2, 0.0, 0.0, 3e-4, 12.0, 11.0)
+    give, cf, cr, s1 = b.stiffness_update(p, s, True, 40000.0, 60000.0 * 1.0102)
+    k = 0.1 / fu.STIFF_APPLY_TAU_S
+    assert 0.0 < k < 1.0
+    assert give and s1.slip == b.model_changed(slip, 1.0 - k)
+    kept = (0.003 * (1.0 - k), 0.002, SLIP_PRIOR[0] ** 2, 0.0, 0.0, 3e-4, 12.0, 11.0)
+    assert tuple(s1.slip) == pytest.approx(kept, rel=1e-12)
+    assert cf == pytest.approx(40000.0, rel=1e-12)  # the front is where the fit is: it stays
+    assert 1.0 / cr == pytest.approx((1.0 - k) / (60000.0 * 1.0102) + k / 60000.0, rel=1e-12)
+    # applied step by step, the compliance closes on the fit as 1 − (1 − k)^n, until within 1 %
+    # (the relative gap of the stiffness is the compliance's, C / Ĉ − 1 = x: 1/3 (1 − k)^n ≤ 0.01)
+    applied, n = (40000.0, 60000.0 * 1.5), 0
+    while True:
+        give, cf, cr, _ = b.stiffness_update(p, s, True, *applied)
+        if not give:
+            break
+        n += 1
+        applied = (cf, cr)
+        gap = (1.0 - k) ** n * (1.0 / (60000.0 * 1.5) - 1.0 / 60000.0)
+        assert 1.0 / cr == pytest.approx(1.0 / 60000.0 + gap, rel=1e-9)
+    assert abs(applied[1] - 60000.0) <= 0.01 * applied[1]
+    assert n == math.ceil(math.log(0.03) / math.log(1.0 - k))
+    # the whole step (time constant 0): κ restarts from its prior, as before issue 35
+    assert tuple(b.model_changed(slip, 0.0)) == (0.0, 0.002, SLIP_PRIOR[0] ** 2, 0.0, 0.0, 3e-4, 12.0, 11.0)
 
 
 def test_slip_correction_by_hand(b: _Blocks) -> None:
