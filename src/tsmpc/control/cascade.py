@@ -798,10 +798,11 @@ def _build_governor(cfg: Config) -> Governor:
         grip_alpha=min(Tc / g.grip_time_constant_s, 1.0))
     # the MPC's horizon, and the samples a slow-down from 1 to rate_min takes at rate_down
     preview = cfg.mpc.N + math.ceil((1.0 - g.rate_min) / (g.rate_down * Tc))
-    # the grip model is the config's tyre model: read from the road's resistance when the tyres'
-    # grip follows the road, else tyre-only (governor.py); the oracle knows the plant's tyre
+    # the grip model is the road the run declares, the plan check's (experiment.check_plan_limits):
+    # read from the road's resistance when the tyres' grip follows the road (the config's tyre or
+    # the scenario's), else tyre-only (governor.py)
     tyre, plant = cfg.tyre, cfg.scenario.plant
-    follows = tyre.scale_grip_with_road or (g.grip_source == "oracle" and plant.grip_scales_with_road)
+    follows = tyre.scale_grip_with_road or plant.grip_scales_with_road
     grip = GripParams(
         oracle=g.grip_source == "oracle", mu_nominal=veh.mu_nominal, mu_dry=tyre.mu_dry,
         mu_tyre=tyre.mu_tyre, grip_per_road=tyre.mu_tyre / tyre.mu_dry if follows else 0.0,

@@ -9,25 +9,33 @@ unchanged, the car drives it at r times the planned speed (v_d(τ) r, ω_d(τ) r
 acceleration v_d ω_d and its acceleration along the path both scale with r². The cascade keeps τ
 as its reference-time offset (``t − τ``, the recovery's offset, :mod:`tsmpc.control.cascade`).
 
-Grip. Its model is the config's tyre model (``tyre.scale_grip_with_road``, the flag the plant's
-tyre also uses unless a scenario overrides it), read each MPC step by :func:`governor_inputs`:
+Grip. Its model is the road the run declares — whether the tyres' grip follows μ(road): the
+config's tyre (``tyre.scale_grip_with_road``) or the scenario's
+(``scenario.plant.grip_scales_with_road``), the reading the plan check makes of the same road
+(:func:`tsmpc.sim.experiment.check_plan_limits`) — read each MPC step by :func:`governor_inputs`:
 
-- *The tyres' grip follows the road* (``scale_grip_with_road = true``). The friction force the
-  MHE-UIO estimates (its unknown input, :mod:`tsmpc.estimation.mhe_uio`) is F̂_fr = (μ(road) − μ_o)
-  M g, so μ̂(road) = μ_o + F̂_fr / (M̂ g) (M̂: the mass estimate of ``fusion.mass_estimate`` when
-  on), and the grip is μ̂_t = μ̂(road) μ_tyre / μ_dry.
-- *Tyre-only* (``false``, the default tyre). The grip holds its prior μ_tyre and is lowered only
-  by what the tyre itself shows: a spin (below). Why not read it from the resistance: before the
-  wheel first spins, a μ drop 0.9 → 0.5 and the default run's μ program look the same to the
-  controller — the road's resistance drops and the tyres' utilisation stays ≤ 0.43 — so the grip is
-  not observable in time (the study of 2026-11-27, notes/governor-grip-study); only the resistance
+- *The tyres' grip follows the road* (either flag). The friction force the MHE-UIO estimates (its
+  unknown input, :mod:`tsmpc.estimation.mhe_uio`) is F̂_fr = (μ(road) − μ_o) M g, so
+  μ̂(road) = μ_o + F̂_fr / (M̂ g) (M̂: the mass estimate of ``fusion.mass_estimate`` when on), and
+  the grip is μ̂_t = μ̂(road) μ_tyre / μ_dry.
+- *Tyre-only* (neither, the default). The grip holds its prior μ_tyre and is lowered only by what
+  the tyre itself shows: a spin (below). Why not read it from the resistance: before the wheel
+  first spins, a μ drop 0.9 → 0.5 and the default run's μ program look the same to the controller
+  — the road's resistance drops and the tyres' utilisation stays ≤ 0.43 — so the grip is not
+  observable in time (the study of 2026-11-27, notes/governor-grip-study); only the resistance
   change, read through the coupling "the tyres' grip follows the road", warns early enough. Whether
-  that coupling holds is a property of the vehicle's tyres, which the config states, not something
-  the governor can estimate: read through a coupling the tyres do not have, the default run's μ
-  program slowed the built-in circuit (1 action, RMSE v 0.049 → 0.051 m/s) for grip it never lost.
-  A road whose grip drops while the config says the tyres do not follow (a plant-only
-  ``scenario.plant.grip_scales_with_road``) is a model mismatch: the governor learns of it at the
-  first spin only (the paper reference's μ drop at 30 s: the car leaves the road at ≈ 64.4 s).
+  that coupling holds is a property of the tyres on that road, which the run declares, not
+  something the governor can estimate. Read through a coupling nobody declared — the conservative
+  belief μ̂_t = μ_tyre min(μ̂(road)/μ_dry, 1) on every run, measured (REF, Python loop) — the
+  default run's μ program slows the built-in circuit for grip it never lost (1 action, max |e_y|
+  0.0076 → 0.0082 m, RMSE v 0.049 → 0.051 m/s), and a μ 0.9 → 0.5 drop at 30 s that leaves the
+  grip alone is slowed throughout: 7 actions on the built-in circuit (max |e_y| 0.0083 → 0.0169 m,
+  RMSE v +14 %), 8 on Monza (RMSE v +12 %). The plan's own demand is above ``margin`` of the
+  governor's grip even at μ_tyre there (the deadband holds it), so any grip belief lowered on a
+  resistance drop acts. Tyres that follow the road without the run saying so (a real car configured
+  tyre-only) stay a model mismatch the governor learns of at the first spin only: on the paper
+  reference's μ 0.9 → 0.5 at 30 s too late (the car left the road at ≈ 64.4 s when this model
+  read ``tyre.scale_grip_with_road`` alone and the drop was declared in ``scenario.plant``).
 
 A wheel that spins (either model) shows in the estimate: the acceleration the drive force does not
 produce looks like more resistance (μ 0.9 → 0.3 under full throttle: μ̂(road) 1.36). A μ̂(road) at
@@ -39,7 +47,7 @@ a plan that asks more traction than the dry tyre has (the paper reference's star
 friction-ellipse tyre) spins the wheel too. The estimate is low-passed (time constant
 ``grip_time_constant_s``) but a lower value is taken at once: grip lost is believed at once, grip
 regained (back to the prior, tyre-only) slowly. The oracle row (``grip_source = "oracle"``) reads
-the true μ(road) through the plant's coupling (the config's tyre or ``scenario.plant``'s).
+the true μ(road) through the same declared coupling.
 
 Demand of a reference sample (v_d, ω_d, a_d = dv_d/dτ) at rate 1, as an acceleration [m/s²]::
 
