@@ -2,7 +2,7 @@
 10 minutes on 2 cores from a cold cache).
 
 The kernels, the run engine and the batch kernel take minutes of CPU from a cold cache (measured
-cold: 27, 39 and 88 s), most of it numba's type inference on one core. Compiled before any test
+cold at load 1-4: 29, 47 and 48 s), most of it numba's type inference on one core. Compiled before any test
 (as this suite first did), the machine's second core idles for that time; compiled inside the
 tests, each worker compiles the same kernels. So the pytest controller starts this script as one
 background process, which compiles the three in the order they build on each other and marks
@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 #: The steps, in the order they build on each other (the engine calls the kernels; the batch
-#: kernel compiles the engine again with two of its blocks deferred).
+#: kernel calls the engine's compiled run with two of its blocks deferred).
 STAGES = ("kernels", "engine", "batch")
 
 _CODE = {"kernels": "from tsmpc import kernels; assert kernels.warmup()[0], 'kernels off'",

@@ -361,7 +361,7 @@ class MHEUIO:
             A[:], B[:] = self.model.matrices(np.stack([us[:, 1], xs[:n, 0], xs[:n, 1]], axis=-1))
         code, F, pred_v = self._kern.window_step(
             self._Y[: n + 1], self._W[: n + 1], us, xs, n, self._x, self._F, u, ok, full, self._arrival,
-            *self._kargs[:-1], eval_model, A, B, self._Xb[: n + 1])
+            *self._kargs[:-1], eval_model, A, B, self._Xb[: n + 1], False)
         F_raw = float((pred_v - y[0]) * self.vehicle.mass / self.Td) if ok else 0.0
         if code == 3 or not math.isfinite(F_raw):
             return self._failed(F_raw, t0)

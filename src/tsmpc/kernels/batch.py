@@ -2,10 +2,10 @@
 structure-of-arrays layout so that LLVM vectorises them across runs.
 
 Every T_d each run ("lane") executes the run engine's own step (:func:`tsmpc.kernels.engine.run`,
-compiled here a second time with two of its block calls *deferred*, see :func:`_lane`): the
-sensors, gates, the TS-MPC, the MHE-UIO up to its window solve, the TS-LQR and the bookkeeping are
-the engine's code, operation for operation. The lane stops where it would solve the MHE window and
-where it would integrate the plant; :func:`advance` then does both for all lanes at once:
+the same compiled function, with its ``IP_DEFER`` flag set): the sensors, gates, the TS-MPC, the
+MHE-UIO up to its window solve, the TS-LQR and the bookkeeping are the engine's machine code. The
+lane stops where it would solve the MHE window and where it would integrate the plant;
+:func:`advance` then does both for all lanes at once:
 
 * **MHE window** (:func:`mhe_window_lanes`): the Euler model matrices along the window and the
   bordered block-tridiagonal solve of :func:`tsmpc.kernels.mhe.banded_solve`, lanes innermost,
@@ -30,7 +30,6 @@ Python code exactly as the engine's caller does and calls :func:`advance` again.
 from __future__ import annotations
 
 import math
-import types as pytypes
 from typing import Any
 
 import numpy as np
@@ -40,7 +39,6 @@ from numba.core import types as nbtypes
 from numba.np.arrayobj import populate_array
 
 from tsmpc.kernels import engine as ke
-from tsmpc.kernels import mhe as kmhe
 from tsmpc.kernels import plant as kplant
 from tsmpc.kernels.engine import intrinsic
 
@@ -186,9 +184,13 @@ def tanh_v(x):
 
 # ============================================================================ plant, lanes
 # Plant workspace: rows of LANES values (lane innermost). State, inputs, cos δ (libm, as the
-# scalar kernel), the constants of tsmpc.kernels.plant.pack.
+# scalar kernel), the constants of tsmpc.kernels.plant.pack; then one RK4 stage's state and
+# right-hand side, and the slopes k1 … k4 of the step (six rows each).
 PW_X, PW_F, PW_D, PW_MU, PW_COSD, PW_CST = 0, 6, 7, 8, 9, 10
-PW_ROWS = PW_CST + 18
+PW_S = PW_CST + 18  #: the stage's θ, v, α, ω
+PW_R = PW_S + 4  #: the stage's right-hand side (six rows)
+PW_K = PW_R + 6  #: the slopes k1 … k4 (six rows each)
+PW_ROWS = PW_K + 24
 
 
 @njit(**_INL)
@@ -241,30 +243,48 @@ def _rhs_v(s, lane, th, v, al, om, F, d, mu, cosd):
 
 
 @njit(**_NJ)
+def _rhs_lanes(s):
+    """The right-hand side of every lane at the stage state (rows PW_S) into rows PW_R: the one
+    call site of the inlined :func:`_rhs_v` (numba copies an inlined function's IR per call site,
+    seconds of compile each), and compile-time row offsets only, so LLVM vectorises the loop."""
+    for lane in range(LANES):
+        th, v = s[PW_S * LANES + lane], s[(PW_S + 1) * LANES + lane]
+        al, om = s[(PW_S + 2) * LANES + lane], s[(PW_S + 3) * LANES + lane]
+        F, d = s[PW_F * LANES + lane], s[PW_D * LANES + lane]
+        mu, cosd = s[PW_MU * LANES + lane], s[PW_COSD * LANES + lane]
+        r0, r1, r2, r3, r4, r5 = _rhs_v(s, lane, th, v, al, om, F, d, mu, cosd)
+        s[PW_R * LANES + lane], s[(PW_R + 1) * LANES + lane] = r0, r1
+        s[(PW_R + 2) * LANES + lane], s[(PW_R + 3) * LANES + lane] = r2, r3
+        s[(PW_R + 4) * LANES + lane], s[(PW_R + 5) * LANES + lane] = r4, r5
+
+
+@njit(**_NJ)
 def rk4_lanes(s, n, h):
-    """``n`` RK4 steps of length h for all LANES lanes of plant workspace ``s`` (in place)."""
+    """``n`` RK4 steps of length h for all LANES lanes of plant workspace ``s`` (in place), with
+    the operations of tsmpc.kernels.plant.rk4_block in its order: stage i evaluates the
+    right-hand side at x + c_i k_(i−1), c = (0, h/2, h/2, h), and the step is
+    x + h/6 (k1 + 2 (k2 + k3) + k4)."""
     h2 = 0.5 * h
     h6 = h / 6.0
     for _ in range(n):
-        for lane in range(LANES):
-            X, Y = s[PW_X * LANES + lane], s[(PW_X + 1) * LANES + lane]
-            th, v = s[(PW_X + 2) * LANES + lane], s[(PW_X + 3) * LANES + lane]
-            al, om = s[(PW_X + 4) * LANES + lane], s[(PW_X + 5) * LANES + lane]
-            F, d = s[PW_F * LANES + lane], s[PW_D * LANES + lane]
-            mu, cosd = s[PW_MU * LANES + lane], s[PW_COSD * LANES + lane]
-            a1, b1, c1, d1, e1, g1 = _rhs_v(s, lane, th, v, al, om, F, d, mu, cosd)
-            a2, b2, c2, d2, e2, g2 = _rhs_v(s, lane, th + h2 * c1, v + h2 * d1, al + h2 * e1,
-                                            om + h2 * g1, F, d, mu, cosd)
-            a3, b3, c3, d3, e3, g3 = _rhs_v(s, lane, th + h2 * c2, v + h2 * d2, al + h2 * e2,
-                                            om + h2 * g2, F, d, mu, cosd)
-            a4, b4, c4, d4, e4, g4 = _rhs_v(s, lane, th + h * c3, v + h * d3, al + h * e3,
-                                            om + h * g3, F, d, mu, cosd)
-            s[PW_X * LANES + lane] = X + h6 * (a1 + 2.0 * (a2 + a3) + a4)
-            s[(PW_X + 1) * LANES + lane] = Y + h6 * (b1 + 2.0 * (b2 + b3) + b4)
-            s[(PW_X + 2) * LANES + lane] = th + h6 * (c1 + 2.0 * (c2 + c3) + c4)
-            s[(PW_X + 3) * LANES + lane] = v + h6 * (d1 + 2.0 * (d2 + d3) + d4)
-            s[(PW_X + 4) * LANES + lane] = al + h6 * (e1 + 2.0 * (e2 + e3) + e4)
-            s[(PW_X + 5) * LANES + lane] = om + h6 * (g1 + 2.0 * (g2 + g3) + g4)
+        for stage in range(4):
+            c = h if stage == 3 else h2
+            kp = (PW_K + 6 * (stage - 1) + 2) * LANES  # the previous slopes' θ̇ row
+            for lane in range(LANES):
+                for i in range(4):  # θ, v, α, ω (the right-hand side does not read X, Y)
+                    x = s[(PW_X + 2 + i) * LANES + lane]
+                    s[(PW_S + i) * LANES + lane] = x if stage == 0 else \
+                        x + c * s[kp + i * LANES + lane]
+            _rhs_lanes(s)
+            ko = (PW_K + 6 * stage) * LANES
+            for j in range(6 * LANES):
+                s[ko + j] = s[PW_R * LANES + j]
+        for i in range(6):
+            o, k = (PW_X + i) * LANES, (PW_K + i) * LANES
+            for lane in range(LANES):
+                k1, k2 = s[k + lane], s[k + 6 * LANES + lane]
+                k3, k4 = s[k + 12 * LANES + lane], s[k + 18 * LANES + lane]
+                s[o + lane] = s[o + lane] + h6 * (k1 + 2.0 * (k2 + k3) + k4)
 
 
 # ============================================================================ MHE window, lanes
@@ -654,48 +674,11 @@ def mhe_window_lanes(s, n):
 
 
 # ============================================================================ the engine's step
-# The engine's run() compiled again with two block calls deferred (same source, other globals):
-# the plant's RK4 block returns "not done" (the engine's NEED_PLANT) and the MHE's window solve
-# returns "not decided" (NEED_MHE, after the window update, the model's last row and the
-# prediction). advance() then does both for every lane at once.
-def _rebound(fn: Any, name: str, **globals_: Any) -> pytypes.FunctionType:
-    """The Python function behind numba dispatcher ``fn`` with some of its globals replaced."""
-    py = fn.py_func
-    g = dict(py.__globals__)
-    g.update(globals_)
-    out = pytypes.FunctionType(py.__code__, g, name, py.__defaults__, py.__closure__)
-    out.__qualname__ = name
-    out.__doc__ = py.__doc__
-    return out
+# Each lane runs the engine's own compiled run() (the same machine code, loaded from its cache)
+# with ip[IP_DEFER] set: run() then returns NEED_PLANT where it would integrate the plant and
+# NEED_MHE where it would solve the MHE window (after the window update, the model's last row and
+# the prediction); advance() does both for every lane at once and the lane goes on.
 
-
-@njit(**_NJ)
-def _plant_later(x, F, d, mu, n, h, cst):
-    """Stands for rk4_block in the lane's step: the plant is integrated by advance()."""
-    return x, False
-
-
-@njit(**_NJ)
-def _solve_later(Y, W, U, A, B, n, arrival, F_prior, q, r, p, pF, X):
-    """Stands for banded_solve in the lane's step: the window is solved by advance()."""
-    return np.nan
-
-
-@njit(**_NJ)
-def _euler_last_row(U, XS, n, lo, hi, M, I, Cf, Cr, a, b, mug, kd, Td, A, B):
-    """euler_matrices for the window's last interval only (the prediction needs it; the other rows
-    are computed for all lanes at once)."""
-    kmhe.euler_matrices(U[n - 1:n], XS[n - 1:n], 1, lo, hi, M, I, Cf, Cr, a, b, mug, kd, Td,
-                        A[n - 1:n], B[n - 1:n])
-
-
-_window_deferred = njit(**_NJ)(_rebound(kmhe.window_step, "_window_deferred",
-                                        banded_solve=_solve_later, euler_matrices=_euler_last_row))
-_mhe_begin_deferred = njit(**_NJ)(_rebound(ke._mhe_begin, "_mhe_begin_deferred",
-                                           window_step=_window_deferred))
-#: One lane's steps up to the next deferred block (the engine's run(), inlined into advance()).
-_lane = njit(**_NJ)(_rebound(ke.run, "_lane", rk4_block=_plant_later,
-                              _mhe_begin=_mhe_begin_deferred))
 
 @intrinsic
 def _lane_of(typingctx, arr, index):
@@ -849,7 +832,7 @@ def advance(m_end, exact_plant, state, need, tally, pw, mws, akey, asin, acos, l
         for b in range(B):
             if state[b] != READY:
                 continue
-            code = _lane(m_end, _lane_of(x, b), _lane_of(fp, b), _lane_of(ip, b), _lane_of(sf, b),
+            code = ke.run(m_end, _lane_of(x, b), _lane_of(fp, b), _lane_of(ip, b), _lane_of(sf, b),
                          _lane_of(si, b), _lane_of(sc, b), _lane_of(ev, b), _lane_of(noise, b),
                          _lane_of(u_drop, b), _lane_of(gnss, b), _lane_of(fifo, b),
                          _lane_of(frb, b), _lane_of(patches, b), _lane_of(events, b),

@@ -123,8 +123,8 @@ N_FP = FP_SENS + N_SP
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
  IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV,
- IP_GOV, IP_G_ORACLE, IP_G_PREVIEW, IP_GYRO) = range(31)
-N_IP = 31
+ IP_GOV, IP_G_ORACLE, IP_G_PREVIEW, IP_GYRO, IP_DEFER) = range(32)
+N_IP = 32
 # ---------------------------------------------------------------------------- MHE parameters
 # mp = [q(3), r(2), p(3), p_F, x_min(3), x_max(3), box lo(3), box hi(3), M, I, C_f, C_r, a, b, μ_o g,
 #       drag, T_d]: MHEUIO's kernel arguments in its order (C_f, C_r change with the stiffness fit)
@@ -552,12 +552,13 @@ def _mhe_begin(y0, y1, u0, u1, mass, mY, mW, mU, mXS, mA, mB, mX, mp, views, sf,
         code, F, pred_v = window_step(
             mY, mW, mU, mXS, n, x, sf[SF_MF], u, ok, full, arrival, wq, wr, wp, mp[MP_PF], xmin,
             xmax, blo, bhi, mp[MP_M], mp[MP_I], mp[MP_CF], mp[MP_CR], mp[MP_A], mp[MP_B],
-            mp[MP_MUG], mp[MP_KD], mp[MP_TD], True, mA, mB, mX)
+            mp[MP_MUG], mp[MP_KD], mp[MP_TD], True, mA, mB, mX, ip[IP_DEFER] != 0)
     else:
         code, F, pred_v = window_step(
             mY[:n + 1], mW[:n + 1], mU[:n], mXS[:n + 1], n, x, sf[SF_MF], u, ok, full, arrival, wq,
             wr, wp, mp[MP_PF], xmin, xmax, blo, bhi, mp[MP_M], mp[MP_I], mp[MP_CF], mp[MP_CR],
-            mp[MP_A], mp[MP_B], mp[MP_MUG], mp[MP_KD], mp[MP_TD], True, mA[:n], mB[:n], mX[:n + 1])
+            mp[MP_A], mp[MP_B], mp[MP_MUG], mp[MP_KD], mp[MP_TD], True, mA[:n], mB[:n], mX[:n + 1],
+            ip[IP_DEFER] != 0)
     F_raw = (pred_v - y0) * mass / mp[MP_TD] if ok else 0.0
     sc[SC_FRAW] = F_raw
     if code == 3 or not math.isfinite(F_raw):  # _failed
@@ -904,7 +905,10 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             lstat[m] = st
             lsat[m] = si[SI_SAT] != 0
             if ip[IP_ACT] == 0:
-                xn, ok = rk4_block(x, sc[SC_OF], sc[SC_OD], mu, ip[IP_NSUB], fp[FP_H], cst)
+                if ip[IP_DEFER] != 0:  # the batch integrates its lanes at once (kernels.batch)
+                    xn, ok = x, False
+                else:
+                    xn, ok = rk4_block(x, sc[SC_OF], sc[SC_OD], mu, ip[IP_NSUB], fp[FP_H], cst)
                 if not ok:
                     si[SI_PHASE] = PH_POST_PLANT
                     return NEED_PLANT

@@ -205,7 +205,7 @@ def banded_solve(Y, W, U, A, B, n, arrival, F_prior, q, r, p, pF, X):
 
 @njit(cache=True, fastmath=False)
 def window_step(Y, W, U, XS, n, x, F, u, ok, full, arrival, q, r, p, pF, xmin, xmax, lo, hi,
-                M, I, Cf, Cr, a, b, mug, kd, Td, eval_model, A, B, X):
+                M, I, Cf, Cr, a, b, mug, kd, Td, eval_model, A, B, X, defer):
     """One MHE step after the window update (everything ``MHEUIO.step`` does from the model
     evaluation on). Writes XS[n−1], XS[n] (prediction) and, on success, the smoothed window.
 
@@ -214,7 +214,11 @@ def window_step(Y, W, U, XS, n, x, F, u, ok, full, arrival, q, r, p, pF, xmin, x
     (XS[n] holds the prediction); 3 = non-finite prediction (FAILED)."""
     XS[n - 1, 0], XS[n - 1, 1], XS[n - 1, 2] = x[0], x[1], x[2]
     if eval_model:
-        euler_matrices(U, XS, n, lo, hi, M, I, Cf, Cr, a, b, mug, kd, Td, A, B)
+        if defer:  # the last row only: the batch evaluates the others for all its lanes at once
+            euler_matrices(U[n - 1:n], XS[n - 1:n], 1, lo, hi, M, I, Cf, Cr, a, b, mug, kd, Td,
+                           A[n - 1:n], B[n - 1:n])
+        else:
+            euler_matrices(U, XS, n, lo, hi, M, I, Cf, Cr, a, b, mug, kd, Td, A, B)
     k = n - 1
     pred = np.empty(3)
     for i in range(3):
@@ -228,6 +232,8 @@ def window_step(Y, W, U, XS, n, x, F, u, ok, full, arrival, q, r, p, pF, xmin, x
         XS[n, 0], XS[n, 2] = Y[n, 0], Y[n, 1]
     if n < 2 or not ok:
         return 2, F, pred[0]
+    if defer:  # the batch solves the window (tsmpc.kernels.batch.mhe_window_lanes)
+        return 1, F, pred[0]
     arr = XS[0].copy() if full else arrival
     Fn = banded_solve(Y, W, U, A, B, n, arr, F, q, r, p, pF, X)
     if not math.isfinite(Fn):
@@ -251,4 +257,4 @@ def warm() -> None:
     o3 = np.ones(3)
     window_step(Y, W, U, XS, n, o3 * 5.0, 0.0, np.zeros(2), True, False, o3, o3, np.ones(2), o3, 1e-10,
                 -o3 * 100, o3 * 100, -o3, o3 * 20, 683.0, 560.0, 25000.0, 25000.0, 0.7, 1.0, 4.9, 0.4,
-                0.01, True, np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3)))
+                0.01, True, np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3)), False)

@@ -274,6 +274,7 @@ def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant
             st[f] = np.empty((B, *first.shape), dtype=first.dtype)
             for j, ln in enumerate(lanes):
                 st[f][j] = getattr(ln.run.a, f)
+    st["ip"][:, ke.IP_DEFER] = 1  # the plant and the MHE window wait for advance() (kernels.batch)
     n_in = lanes[0].run.n_in
     M = lanes[0].K * n_in
     nw = lanes[0].cfg.mhe.N

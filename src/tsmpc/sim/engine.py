@@ -163,7 +163,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.estimation.mhe_uio:MHEUIO.reset": "91c37b33d40113cb",
     "tsmpc.estimation.mhe_uio:MHEUIO.step": "8b50a38a7325cedc",
     "tsmpc.estimation.mhe_uio:MHEUIO._push": "399bd3980e3d8a56",
-    "tsmpc.estimation.mhe_uio:MHEUIO._step_kernel": "91e82de070de9265",
+    "tsmpc.estimation.mhe_uio:MHEUIO._step_kernel": "b056cdd1bcc8ea2f",
     "tsmpc.estimation.mhe_uio:MHEUIO._failed": "481c2d5e6c42c5f7",
     "tsmpc.estimation.mhe_uio:MHEUIO.set_cornering_stiffness": "4c2e3c0b21b47861",
     "tsmpc.control.ts_lqr:TSLQR.reset": "87b87f561a20499d",
