@@ -10,11 +10,11 @@ through both and asks for the same records to the bit."""
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 import pytest
 
+from _blocks import Blocks
 from tsmpc import kernels
 from tsmpc.estimation import fusion as fu
 from tsmpc.estimation.fusion import (
@@ -38,33 +38,14 @@ from tsmpc.estimation.fusion import (
 BLOCKS = ("repeat_check", "course_params", "course_sample", "course_close", "course_chord",
           "slip_correction", "noise_scale", "speed_offset", "stiffness", "model_changed",
           "stiffness_update", "mass_update", "delta_mass", "inertia_force")
-_COMPILED: dict[str, object] = {}
-
-
-class _Blocks:
-    """The blocks as Python, or compiled (a plain njit of the same source, as the engine compiles
-    them)."""
-
-    def __init__(self, compiled: bool) -> None:
-        for name in BLOCKS:
-            fn = getattr(fu, name)
-            if compiled:
-                if name not in _COMPILED:
-                    from numba import njit
-
-                    _COMPILED[name] = njit(cache=False)(fn)
-                fn = _COMPILED[name]
-            setattr(self, name, fn)
-
-    def __getattr__(self, name: str) -> Any:  # (for the type checkers: the blocks are set above)
-        raise AttributeError(name)
+_Blocks = Blocks
 
 
 @pytest.fixture(params=["python", "compiled"])
 def b(request) -> _Blocks:
     if request.param == "compiled" and kernels.load("mpc") is None:
         pytest.skip("compiled kernels unavailable")
-    return _Blocks(request.param == "compiled")
+    return Blocks(fu, BLOCKS, request.param == "compiled")
 
 
 def _params(b: _Blocks, Tc: float = 0.1, sigma: float = 0.01, C: tuple[float, float] = (50000.0, 50000.0)):
@@ -368,7 +349,7 @@ def test_compiled_blocks_equal_python_to_the_bit_on_a_random_drive() -> None:
     the same records after every call (the engine's bit-identity with the Python loop rests on it)."""
     if kernels.load("mpc") is None:
         pytest.skip("compiled kernels unavailable")
-    py, nb = _Blocks(False), _Blocks(True)
+    py, nb = Blocks(fu, BLOCKS, False), Blocks(fu, BLOCKS, True)
     rng = np.random.default_rng(34)
     p = _params(py, sigma=0.005, C=(60000.0, 70000.0))
     states = [fu.course_start(p)] * 2
@@ -418,7 +399,7 @@ def test_gradual_application_and_noise_allowance_when_switched_on(monkeypatch: p
     monkeypatch.setattr(fu, "STIFF_APPLY_TAU_S", 1.0)
     monkeypatch.setattr(fu, "STIFF_WINDOW_SIGMAS", 3.0)
     monkeypatch.setattr(fu, "CORNER_ACCEL", 0.05)
-    py = _Blocks(False)
+    py = Blocks(fu, BLOCKS, False)
     test_one_cornering_chord_in_the_slip_and_stiffness_fits(py)
     test_the_stiffness_fit_takes_only_steady_corners(py)
     test_stiffness_bounds_prior_and_application(py)

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from _blocks import Blocks
 from _paths import need_data
 from tsmpc import kernels
 from tsmpc.conditions import apply_conditions
@@ -26,33 +27,14 @@ from tsmpc.sim.metrics import compute_metrics
 from tsmpc.sim.simulator import simulate
 
 _BLOCKS = ("gyro_params", "gyro_start", "gyro_sample", "gyro_bias")
-_COMPILED: dict[str, Any] = {}
-
-
-class _Blocks:
-    """The gyro blocks as Python, or compiled (a plain njit of the same source, as the engine
-    compiles them)."""
-
-    def __init__(self, compiled: bool) -> None:
-        for name in _BLOCKS:
-            fn = getattr(fu, name)
-            if compiled:
-                if name not in _COMPILED:
-                    from numba import njit
-
-                    _COMPILED[name] = njit(cache=False)(fn)
-                fn = _COMPILED[name]
-            setattr(self, name, fn)
-
-    def __getattr__(self, name: str) -> Any:  # (for the type checkers: the blocks are set above)
-        raise AttributeError(name)
+_Blocks = Blocks
 
 
 @pytest.fixture(params=["python", "compiled"])
 def b(request) -> _Blocks:
     if request.param == "compiled" and kernels.load("mpc") is None:
         pytest.skip("compiled kernels unavailable")
-    return _Blocks(request.param == "compiled")
+    return Blocks(fu, _BLOCKS, request.param == "compiled")
 
 
 TD = 0.01

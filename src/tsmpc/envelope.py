@@ -95,7 +95,7 @@ class EnvelopeFit:
 
 def reference_ranges(ref: Reference, cfg: Config) -> ReferenceRanges:
     """Ranges of ``ref`` and the steady-state δ, α of the nominal model along it."""
-    from tsmpc.control.ts_lqr import steady_states
+    from tsmpc.models.dynamic import steady_states
 
     v = np.asarray(ref.v, dtype=float)
     w = np.asarray(ref.omega, dtype=float)

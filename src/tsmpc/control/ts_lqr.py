@@ -55,12 +55,12 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from tsmpc.config import FrictionEstimate, LQRSettings, VehicleParams
 from tsmpc.errors import ConfigError
 from tsmpc.kernels.jit import _numba_ready, jitable
-from tsmpc.models.dynamic import DynamicTS, continuous_matrices
+from tsmpc.models.dynamic import DynamicTS, continuous_matrices, equilibrium, steady_states
 
 lqr_step: Any = None  # no compiled law: inner_step leaves every step to the numpy law (law=None)
 if _numba_ready():  # the compiled law, called by inner_step (compiled into the engine with it)
@@ -209,43 +209,6 @@ def inner_step(p: InnerParams, law: LQRLaw | None, s: NDArray[np.float64], v: fl
     if not ok:  # singular reference gain: the numpy step decides (and may raise)
         return InnerStep(0.0, 0.0, False, comp, low, LQR_NUMPY)
     return InnerStep(F, d, sat, comp, low, LQR_OK)
-
-
-def equilibrium(v: float, omega: float, p: VehicleParams, iters: int = 4) -> tuple[float, float, float]:
-    """(α_eq, F_eq, δ_eq) with ẋ = A(v, δ)x + B(v, δ)u = 0 at x = (v, α, ω) (nominal model, no F_fr).
-
-    The α̇ and ω̇ rows are linear in (α, δ) for fixed matrix entries; the δ inside sin/cos is
-    updated by fixed-point iteration (it converges in a few steps: the dependence is weak).
-    """
-    v = max(v, 0.5)
-    delta = (p.a + p.b) * omega / v  # kinematic guess
-    alpha = 0.0
-    for _ in range(iters):
-        A, B = continuous_matrices(v, delta, p)
-        # rows 2–3: [A22 B22; A32 B32] [α; δ] = −[A23; A33] ω
-        m = np.array([[A[1, 1], B[1, 1]], [A[2, 1], B[2, 1]]])
-        rhs = -np.array([A[1, 2], A[2, 2]]) * omega
-        alpha, delta = np.linalg.solve(m, rhs)
-    A, B = continuous_matrices(v, delta, p)
-    F = -(A[0, 0] * v + A[0, 1] * alpha + A[0, 2] * omega + B[0, 1] * delta) / B[0, 0]
-    return float(alpha), float(F), float(delta)
-
-
-def steady_states(v: ArrayLike, omega: ArrayLike, p: VehicleParams,
-                  iters: int = 4) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(α_eq, δ_eq) of :func:`equilibrium` at many (v, ω) points at once (the same fixed-point
-    iteration, the 2×2 systems solved together): a reference's ≈ 1000 grid points in
-    milliseconds instead of a third of a second (:func:`tsmpc.envelope.reference_ranges`)."""
-    vv: NDArray[np.float64] = np.maximum(np.asarray(v, dtype=np.float64), 0.5)
-    w: NDArray[np.float64] = np.asarray(omega, dtype=np.float64)
-    sol: NDArray[np.float64] = np.stack([np.zeros_like(vv), (p.a + p.b) * w / vv], axis=-1)
-    for _ in range(iters):  # sol = [α, δ] per point
-        A, B = continuous_matrices(vv, sol[:, 1], p)
-        m = np.stack([np.stack([A[:, 1, 1], B[:, 1, 1]], axis=-1),
-                      np.stack([A[:, 2, 1], B[:, 2, 1]], axis=-1)], axis=-2)
-        rhs = -np.stack([A[:, 1, 2], A[:, 2, 2]], axis=-1) * w[:, None]
-        sol = np.asarray(np.linalg.solve(m, rhs[..., None])[..., 0], dtype=np.float64)
-    return sol[:, 0].copy(), sol[:, 1].copy()
 
 
 class TSLQR:
