@@ -21,9 +21,13 @@ BLOCKS = re.findall(r"^```python\n(.*?)^```", README.read_text(encoding="utf-8")
 NEEDS = {"baseline_table.py": ("paper", "tracks"), "fusion_ablation.py": ("paper",),
          "mechanism_ablation.py": ("paper",),
          "paper_ablation.py": ("paper",), "paper_explained.py": ("paper",), "race_tracks.py": ("tracks",)}
-#: Arguments for the shortened test runs: one local Dask worker for ten-step runs (a second would
-#: cost its start, imports and kernel loads, ~5 s of CPU, for nothing).
+#: Arguments for the shortened test runs: one local Dask worker (a second would cost its start,
+#: imports and kernel loads, ~5 s of CPU, for nothing).
 ARGS = {"mismatch_table.py": ["--workers", "1"]}
+#: MPC steps of the shortened runs: three run every block, table and figure end to end (ten cost
+#: the suite 23 s more of CPU, measured: 114 against 91 s); paper_ablation's launch figure reads
+#: its runs' first seconds.
+STEPS = {"paper_ablation.py": "10"}
 
 
 def test_the_readme_has_python_blocks_and_examples_exist() -> None:
@@ -49,7 +53,7 @@ def test_example_script_runs(script: Path, tmp_path: Path) -> None:
         pytest.skip("the [commonroad] extra is not installed")
     for name in NEEDS.get(script.name, ()):
         need_data(name)
-    env = {**os.environ, "TSMPC_EXAMPLE_STEPS": "10",
+    env = {**os.environ, "TSMPC_EXAMPLE_STEPS": STEPS.get(script.name, "3"),
            "PYTHONPATH": os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")])}
     # from another folder: the examples find their data relative to themselves, not the cwd
     res = subprocess.run([sys.executable, str(script), *ARGS.get(script.name, [])], capture_output=True,
