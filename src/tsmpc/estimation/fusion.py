@@ -30,11 +30,9 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     a loop ω → a_y → slip → e_θ → ω without the tyres' lag, fast enough to destabilise a car
     whose rear grip is 30 % below the model's (it did, in a trial); the reference's is exogenous.
     κ explains the error of the model the MHE runs *now*: when the stiffness fit below gives
-    the MHE new stiffnesses, κ restarts from its prior (β stays), or keeps the share of the error
-    they leave when they are given gradually (``STIFF_APPLY_TAU_S``). Kept whole, it went on
-    correcting the old model's bias for its memory on top of the new model's correct α̂ (issue 21:
-    with C_f 30 % below the model's, RMSE y 0.0095 → 0.0062 m, the oracle-tuned controller's
-    0.0043);
+    the MHE new stiffnesses, κ restarts from its prior (β stays). Kept, it went on correcting
+    the old model's bias for its memory on top of the new model's correct α̂ (issue 21: with
+    C_f 30 % below the model's, RMSE y 0.0095 → 0.0062 m, the oracle-tuned controller's 0.0043);
   - the speed sensor's offset: v̄_measured − v_ground, removed from v before the MHE and the inner
     loop.
 
@@ -44,15 +42,12 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     fitted per axle (least squares through the origin on the compliance 1/C, Bayesian: the
     model's C as prior with a relative σ of ``STIFF_PRIOR_REL``, each chord weighted by its slip
     noise, forgetting over ``STIFF_MEMORY_S``), from chords where the reference turns
-    (``CORNER_ACCEL``) and the car neither accelerates nor brakes
-    (``STIFF_MAX_ACCEL``), per axle only where the chord's slip is one a plausible stiffness gives
-    (``STIFF_RANGE``, optionally allowing ``STIFF_WINDOW_SIGMAS`` of the chord's noise). The fitted C_f, C_r
-    replace the model's in the MHE and in the inner loop's reference gain N̄ (the LMI gains stay):
-    with them α̂ and the steering feed-forward are right (issue 21: the stiffness error was worth
-    0.08 m of RMSE y; with the true C in both blocks the loss disappears, in the LMI gains alone
-    it does not). They reach the two blocks at once, or first-order in the compliance with the
-    time constant ``STIFF_APPLY_TAU_S`` (off by default: issue 35's measurements are in its
-    docstring).
+    (``CORNER_ACCEL``) and the car neither accelerates nor brakes (``STIFF_MAX_ACCEL``), per axle
+    only where the chord's own F / slip is a plausible stiffness (``STIFF_RANGE``). The
+    fitted C_f, C_r replace the model's in the MHE and in the inner loop's reference gain N̄ (the
+    LMI gains stay): with them α̂ and the steering feed-forward are right (issue 21: the stiffness
+    error was worth 0.08 m of RMSE y; with the true C in both blocks the loss disappears, in the
+    LMI gains alone it does not).
 
   The fits compare like with like (means over the same chord), so the chord's lag in a transient
   does not bias them; only chords of measured (not predicted) poses count. Each chord is weighted
@@ -171,9 +166,6 @@ STIFF_MEMORY_S = 100.0
 STIFF_RANGE = (0.5, 2.0)
 #: Smallest lateral acceleration of the *reference* v_d ω_d [m/s²] all along a chord for it to count
 #: in the stiffness fit (the reference, not the car: a car weaving on a straight is no corner).
-#: Issue 35 tried 0.05, so that the gentle bends before a track's first corner (the paper's
-#: reference: 0.05–0.08 m/s² for 10 s) teach the fit; see ``STIFF_APPLY_TAU_S`` for why it is not
-#: the default.
 CORNER_ACCEL = 0.2
 #: Shortest chord [s] of the yaw-rate bias fit: the heading noise enters a chord's bias as
 #: √2 σ_θ / D, the yaw rate's as σ_ω √(T_d / D); at the default σ's (1e-4 rad, 1e-4 rad/s) one
@@ -206,32 +198,6 @@ GYRO_HEADING_FLOOR = 1e-5
 #: fast corners, drove the fit's front/rear balance 10 % off, and the MHE with that balance left
 #: the road at 74 s; with the gate it tracks to 0.03 m.
 STIFF_MAX_ACCEL = 0.1
-#: Allowance of the per-axle plausibility test (``STIFF_RANGE``) for the chord's slip noise, in σ's
-#: (0: none). The test is on the *measured* slip, and a window that ignores the noise truncates it
-#: asymmetrically (a slip of [0.5, 2] × F / C is −0.5 to +1 times the expected slip), which biases
-#: the compliance up wherever the slip is not large against its noise: with the corner gate at
-#: 0.05 m/s² and no allowance, the fit of the nominal car drifted to 0.97 of its stiffness by 20 s on
-#: the paper's reference; with 3 σ it stayed within 1 %. Off by default (see ``STIFF_APPLY_TAU_S``).
-STIFF_WINDOW_SIGMAS = 0.0
-#: Time constant [s] with which the fitted stiffnesses reach the MHE and the TS-LQR's N̄ (0: at once,
-#: the default). With τ > 0 the applied compliances move T_c / τ of the way to the fitted ones each
-#: MPC step (first-order in the compliance, which the steering feed-forward and the steady slip are
-#: linear in) and the slip fit's κ keeps the share of the model error not yet removed. Given at
-#: once, a change of C_f steps the steering feed-forward on top of the yaw-rate integral that had
-#: been making up for the model's error, and restarts κ, which was doing the same in the outer loop
-#: (built-in circuit, REF, seed 1, C_f 40 % below the model's: 0.023 m of e_y right after the first
-#: update at 29 s; the oracle-tuned controller's largest is 0.008 m).
-#:
-#: Issue 35 measured τ = 1 s with ``CORNER_ACCEL`` 0.05 and ``STIFF_WINDOW_SIGMAS`` 3 (REF, seed 1,
-#: default preset, largest worst-column ratio to the oracle-tuned run over C_f and C_r ×0.6 and ×1.4):
-#: built-in circuit 2.94 → 1.29, paper reference 1.57 → 1.20 (C_f ×0.6: max |e_y| 0.0349 →
-#: 0.0272 m, oracle 0.0227); the nominal runs within 5 % (paper max |e_y| +4.7 %). It is not the
-#: default because the mismatch benchmark's dropouts_5pct case on the paper reference got worse:
-#: RMSE y 0.0053 → 0.0124 m, max |e_y| 0.019 → 0.063 m (seed 2: 0.021 → 0.027 m). Each part alone
-#: did it too (τ = 1 s alone: 0.051 m; the gate and the allowance alone: 0.067 m): with 5 % of the
-#: samples lost the corner at 62–65 s (a_y ≈ 3 m/s²) takes any change of the stiffness or of κ
-#: badly; the paper reference's mu_step case also moved (max |e_y| 0.158 → 0.214 m).
-STIFF_APPLY_TAU_S = 0.0
 
 
 @jitable
@@ -595,18 +561,13 @@ def _slip_fit(f: SlipFit, Tc: float, z: float, a_y: float, chord: float, sigma: 
 
 
 @jitable
-def _axle_pair(C0: float, force: float, slip: float, sig: float) -> tuple[float, float]:
-    """(F, α) of one axle when the chord's slip is one a plausible stiffness gives: within
-    ``STIFF_WINDOW_SIGMAS`` of its noise ``sig`` of the slips F / C for C in ``STIFF_RANGE`` × the
-    model's ``C0`` (on the force's side of 0), else (0, 0). A slip well outside is no quasi-steady
+def _axle_pair(C0: float, force: float, slip: float) -> tuple[float, float]:
+    """(F, α) of one axle when the chord's own stiffness F / α is a plausible one (same sign,
+    within ``STIFF_RANGE`` × the model's ``C0``), else (0, 0): anything else is no quasi-steady
     pure-slip chord (a transient, a lag between forces and slips, a saturated tyre) and would drag
-    the fit to its bounds (on Spa at 22 m/s one corner took it to 2× and doubled the largest e_y);
-    the allowance keeps chords whose slip is small against its noise unbiased (see
-    ``STIFF_WINDOW_SIGMAS``)."""
-    fa = abs(force)
-    sa = slip if force >= 0.0 else -slip  # the slip on the force's side
-    tol = STIFF_WINDOW_SIGMAS * sig  # (0: the test before issue 35, operation for operation)
-    if fa > 0.0 and (sa + tol) * STIFF_RANGE[1] * C0 >= fa and (sa - tol) * STIFF_RANGE[0] * C0 <= fa:
+    the fit to its bounds (on Spa at 22 m/s one corner took it to 2× and doubled the largest e_y)."""
+    fa, sa = abs(force), abs(slip)
+    if force * slip > 0.0 and sa * STIFF_RANGE[1] * C0 >= fa and sa * STIFF_RANGE[0] * C0 <= fa:
         return force, slip
     return 0.0, 0.0
 
@@ -627,9 +588,9 @@ def _stiffness_fit(p: CourseParams, f: StiffFit, a_course: float, alpha_hat: flo
     S = p.mass * (vw + v_meas * al_dot) + F_x * a_course
     T = p.inertia * d_omega / (BASELINE * p.Tc)
     L = p.a + p.b
+    F_f, a_f = _axle_pair(p.C_f, (p.b * S + T) / L, delta - a_course - p.a * w_v)
+    F_r, a_r = _axle_pair(p.C_r, (p.a * S - T) / L, p.b * w_v - a_course)
     s_slip = max(sig, STIFF_SLIP_FLOOR)
-    F_f, a_f = _axle_pair(p.C_f, (p.b * S + T) / L, delta - a_course - p.a * w_v, s_slip)
-    F_r, a_r = _axle_pair(p.C_r, (p.a * S - T) / L, p.b * w_v - a_course, s_slip)
     w_c = 1.0 / (STIFF_CORRELATION * s_slip * s_slip)
     g2 = 1.0 - p.Tc / STIFF_MEMORY_S
     return StiffFit(g2 * f.num_f + (1.0 - g2) * p.prior_num_f + w_c * (F_f * a_f),
@@ -681,40 +642,27 @@ def stiffness(p: CourseParams, f: StiffFit) -> tuple[float, float]:
 
 
 @jitable
-def model_changed(f: SlipFit, remaining: float) -> SlipFit:
-    """The MHE's model got new stiffnesses that remove all but the share ``remaining`` (0 to 1) of
-    its error against the fitted ones: κ (the a_y-proportional error of the previous model) keeps
-    that share, with its prior variance (kept whole, it corrects a bias that has gone, for its
-    memory; issue 21). β, a heading-sensor offset that no model change explains, is kept (its row
-    and column of P too)."""
-    kappa = remaining * f.kappa if remaining > 0.0 else 0.0
-    return SlipFit(kappa, f.beta, SLIP_PRIOR[0] * SLIP_PRIOR[0], 0.0, 0.0, f.P11, f.n2, f.n1)
+def model_changed(f: SlipFit) -> SlipFit:
+    """The MHE's model got new stiffnesses: the slip fit's κ restarts from its prior (it was the
+    a_y-proportional error of the previous model, which the new one no longer makes; kept, it
+    corrects a bias that has gone, for its memory). β, a heading-sensor offset that no model change
+    explains, is kept (its row and column of P too)."""
+    return SlipFit(0.0, f.beta, SLIP_PRIOR[0] * SLIP_PRIOR[0], 0.0, 0.0, f.P11, f.n2, f.n1)
 
 
 @jitable
 def stiffness_update(p: CourseParams, s: CourseState, has_applied: bool, C_f: float,
                      C_r: float) -> tuple[bool, float, float, CourseState]:
-    """The stiffnesses to give the MHE and the inner loop, against those they have (``C_f``,
-    ``C_r``; ``has_applied`` False: none given yet): (give: none given yet, or the fitted Ĉ_f or
-    Ĉ_r differs from the given one by over 1 %; the stiffnesses; the state). None given yet: the
-    fitted ones. Else the given compliances move k = T_c / ``STIFF_APPLY_TAU_S`` (at most 1) of the
-    way to the fitted ones, and the slip fit's κ keeps the share 1 − k of the model error they do
-    not remove yet (:func:`model_changed`)."""
+    """The fitted (Ĉ_f, Ĉ_r) against those the MHE and the inner loop have (``has_applied``
+    False: the model's): (give them: both moved by over 1 % or none given yet, Ĉ_f, Ĉ_r, the
+    state — when they replace given ones, the slip fit's κ restarts, :func:`model_changed`)."""
     cf, cr = stiffness(p, s.stiff)
-    if not has_applied:
-        return True, cf, cr, s
-    if abs(cf - C_f) <= 0.01 * abs(C_f) and abs(cr - C_r) <= 0.01 * abs(C_r):
+    if has_applied and abs(cf - C_f) <= 0.01 * abs(C_f) and abs(cr - C_r) <= 0.01 * abs(C_r):
         return False, cf, cr, s
-    k = min(p.Tc / STIFF_APPLY_TAU_S, 1.0) if STIFF_APPLY_TAU_S > 0.0 else 1.0
-    if k >= 1.0:  # at once: the fitted ones, κ restarts
-        s = CourseState(s.ring, s.n_iv, s.omega_now, s.v_now, s.n_chords, model_changed(s.slip, 0.0),
-                        s.speed, s.stiff)
-        return True, cf, cr, s
-    qf, qr = 1.0 / C_f, 1.0 / C_r
-    gf, gr = 1.0 / (qf + k * (1.0 / cf - qf)), 1.0 / (qr + k * (1.0 / cr - qr))
-    s = CourseState(s.ring, s.n_iv, s.omega_now, s.v_now, s.n_chords, model_changed(s.slip, 1.0 - k),
-                    s.speed, s.stiff)
-    return True, gf, gr, s
+    if has_applied:
+        s = CourseState(s.ring, s.n_iv, s.omega_now, s.v_now, s.n_chords, model_changed(s.slip), s.speed,
+                        s.stiff)
+    return True, cf, cr, s
 
 
 class CourseFusion:
@@ -768,16 +716,14 @@ class CourseFusion:
         """(Ĉ_f, Ĉ_r) [N/rad] within ``STIFF_RANGE`` × the model's; None without a vehicle."""
         return stiffness(self.params, self.state.stiff) if self.vehicle is not None else None
 
-    def model_changed(self, remaining: float = 0.0) -> None:
-        """The MHE's model got new stiffnesses that leave the share ``remaining`` of its error: κ
-        keeps that share (:func:`model_changed`)."""
-        self.state = self.state._replace(slip=model_changed(self.state.slip, float(remaining)))
+    def model_changed(self) -> None:
+        """The MHE's model got new stiffnesses: κ restarts from its prior (:func:`model_changed`)."""
+        self.state = self.state._replace(slip=model_changed(self.state.slip))
 
     def stiffness_update(self, applied: list[float]) -> tuple[float, float] | None:
         """The stiffnesses to give the MHE and the inner loop, given those they have (``applied``,
-        empty: none given yet), or None (no vehicle, or no change of over 1 %); when they replace
-        given ones, they move part of the way to the fitted ones and κ keeps the rest of the model
-        error (:func:`stiffness_update`)."""
+        empty: the model's), or None (no vehicle, or no change of over 1 %); when they replace given
+        ones, κ restarts (:func:`stiffness_update`)."""
         if self.vehicle is None:
             return None
         has = bool(applied)
