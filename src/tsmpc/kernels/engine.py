@@ -89,7 +89,14 @@ from tsmpc.kernels.mpc import guarded_step
 from tsmpc.kernels.plant import rk4_block
 from tsmpc.scenarios import apply_events, paper_mu, patch_mu
 from tsmpc.sensors import N_SP, N_SS, burst_sample, sensor_sample, store_state, unpack_params, unpack_state
-from tsmpc.vehicle.actuators import wheel_steering
+from tsmpc.vehicle.actuators import (
+    ActuatorParams,
+    ActuatorState,
+    actuator_start,
+    actuator_substep,
+    applied_mean,
+    wheel_steering,
+)
 
 __all__ = ["friction_mu", "hypot_py", "run", "ticks", "warm"]
 
@@ -601,33 +608,24 @@ def _est_out(sf, sc, si, status, F_raw):
 
 
 @njit(cache=True, fastmath=False)
-def _actuated(x, Fc, dc, mu, fp, ip, sf, si, cst):
-    """``ActuatedPlant.step`` over T_d: per sub-step the force lag and the rate-limited steering
-    servo, then the plant's RK4 steps with their outputs; the mean input over the step is what a
-    platform measures (``applied_input``). The state is committed only when every sub-step is
-    finite (else the caller's Python step words the error from the step's start)."""
-    n = ip[IP_ACT_N]
-    if si[SI_ACTHAS] != 0:
-        F, d = sf[SF_ACT], sf[SF_ACT + 1]
-    else:  # the actuators start at the first command
-        F, d = Fc, dc
-    gf, gd, rmax = fp[FP_A_GF], fp[FP_A_GD], fp[FP_A_RMAX]
-    acc0 = 0.0
-    acc1 = 0.0
+def _actuated(x, Fc, dc, mu, act, fp, ip, sf, si, cst):
+    """``ActuatedPlant.step`` over T_d: per sub-step the actuators' block
+    (:func:`~tsmpc.vehicle.actuators.actuator_substep`, one definition), then the plant's RK4 steps
+    with their outputs; the mean input over the step (:func:`applied_mean`) is what a platform
+    measures. The state is committed only when every sub-step is finite (else the caller's Python
+    step words the error from the step's start)."""
+    s = actuator_start(ActuatorState(sf[SF_ACT], sf[SF_ACT + 1]), si[SI_ACTHAS] != 0, Fc, dc)
     xn = x.copy()
-    ok = True
-    for _ in range(n):
-        F += gf * (Fc - F)
-        d += _pmin(_pmax(gd * (dc - d), -rmax), rmax)
-        xn, ok = rk4_block(xn, F, wheel_steering(d, fp[FP_A_DOFF]), mu, ip[IP_ACT_NRK], fp[FP_H], cst)
+    for _ in range(act.substeps):
+        s = actuator_substep(act, s, Fc, dc)
+        xn, ok = rk4_block(xn, s.F, wheel_steering(s.delta, act.steering_offset), mu, ip[IP_ACT_NRK],
+                           fp[FP_H], cst)
         if not ok:
             return xn, False
-        acc0 += F
-        acc1 += d
-    sf[SF_ACT], sf[SF_ACT + 1] = F, d
+    sf[SF_ACT], sf[SF_ACT + 1] = s.F, s.delta
     si[SI_ACTHAS] = 1
-    sf[SF_PLANTU], sf[SF_PLANTU + 1] = acc0 / n, acc1 / n
-    return xn, ok
+    sf[SF_PLANTU], sf[SF_PLANTU + 1] = applied_mean(act, s)
+    return xn, True
 
 
 # ============================================================================ the run
@@ -660,6 +658,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     mpar = MassParams(fp[FP_VM], Td, ip[IP_NW], fp[FP_TAU], ip[IP_SPEEDFB] != 0)
     gpar = GyroParams(fp[FP_GYRO], fp[FP_GYRO + 1], fp[FP_GYRO + 2], fp[FP_GYRO + 3])
     sens = unpack_params(fp[FP_SENS:FP_SENS + N_SP])
+    act = ActuatorParams(fp[FP_A_GF], fp[FP_A_GD], fp[FP_A_RMAX], fp[FP_A_DOFF], ip[IP_ACT_N])
     sens_state = sf[SF_SENS:SF_SENS + N_SS]
     # the TS-LQR's records (TSLQR._inner, TSLQR._law: the same values)
     lqr_p = InnerParams(ip[IP_COMP] != 0, ip[IP_UIO] != 0, ip[IP_LOWRES] != 0, zlo[1], prm[6] * prm[0])
@@ -914,7 +913,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                     return NEED_PLANT
                 sf[SF_PLANTU], sf[SF_PLANTU + 1] = sc[SC_OF], sc[SC_OD]
             else:
-                xn, ok = _actuated(x, sc[SC_OF], sc[SC_OD], mu, fp, ip, sf, si, cst)
+                xn, ok = _actuated(x, sc[SC_OF], sc[SC_OD], mu, act, fp, ip, sf, si, cst)
                 if not ok:
                     si[SI_PHASE] = PH_POST_PLANT
                     return NEED_PLANT

@@ -52,6 +52,7 @@ from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.scenarios import Scenario
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.start import _start_state, default_plant, tracked_steps
+from tsmpc.vehicle.actuators import ActuatorState
 
 if TYPE_CHECKING:
     from tsmpc.control.ts_lqr import TSLQR
@@ -171,9 +172,6 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
     "tsmpc.vehicle.plant:VehiclePlant": "0b52c004a843c73b",
-    "tsmpc.vehicle.actuators:Actuators": "2d96613999792a06",
-    "tsmpc.vehicle.actuators:_gain": "8f043d71c729db22",
-    "tsmpc.vehicle.actuators:ActuatedPlant": "cc05ddc1d367181b",
 }
 
 
@@ -244,7 +242,6 @@ _PORTED_FUNCTIONS = (
     ("tsmpc.control.cascade", "_apply_stiffness_to", "tsmpc.control.cascade"),
     ("tsmpc.control.slip_aware", "velocity_frame_errors", "tsmpc.control.slip_aware"),
     ("tsmpc.control.slip_aware", "pose_to_errors", "tsmpc.models.kinematic"),
-    ("tsmpc.vehicle.actuators", "_gain", "tsmpc.vehicle.actuators"),
 )
 
 
@@ -320,16 +317,12 @@ def _actuator_data(plant: Any, Td: float, fp: NDArray[np.float64], ip: NDArray[n
     """The ActuatedPlant's gains per sub-step into fp/ip (False: its sub-step is no whole number
     of RK4 steps — the Python loop raises the plant's error)."""
     from tsmpc.kernels import engine as ke
-    from tsmpc.vehicle.actuators import _gain
 
-    n = plant.substeps
-    h = Td / n  # ActuatedPlant.step's sub-step, as it computes it
-    sv, fl = plant.steering, plant.force
-    ip[ke.IP_ACT], ip[ke.IP_ACT_N] = 1, n
-    fp[ke.FP_A_GD] = _gain(sv.time_constant_s, h) if sv else 1.0
-    fp[ke.FP_A_RMAX] = sv.rate_limit * h if sv else math.inf
-    fp[ke.FP_A_GF] = _gain(fl.time_constant_s, h) if fl else 1.0
-    fp[ke.FP_A_DOFF] = plant.steering_offset
+    p = plant.params(Td)  # the ActuatedPlant's law, its record (the kernel rebuilds it from the slots)
+    h = Td / p.substeps  # ActuatedPlant.step's sub-step, as it computes it
+    ip[ke.IP_ACT], ip[ke.IP_ACT_N] = 1, p.substeps
+    fp[ke.FP_A_GF], fp[ke.FP_A_GD] = p.force_gain, p.steer_gain
+    fp[ke.FP_A_RMAX], fp[ke.FP_A_DOFF] = p.max_steer_step, p.steering_offset
     h_rk = plant.plant.model.h
     n_rk = round(h / h_rk)  # VehiclePlant.step's RK4 steps per sub-step
     ip[ke.IP_ACT_NRK] = n_rk
@@ -910,7 +903,7 @@ class _Run:
         self.plant.reset(a.x.copy())
         actuated = self.scenario.actuators is not None
         if actuated and a.si[ke.SI_ACTHAS]:  # the actuators where the step started
-            self.plant._a = a.sf[ke.SF_ACT:ke.SF_ACT + 2].copy()
+            self.plant._s = ActuatorState(float(a.sf[ke.SF_ACT]), float(a.sf[ke.SF_ACT + 1]))
         try:
             x_next = self.plant.step(np.array([a.sc[ke.SC_OF], a.sc[ke.SC_OD]]), self.cascade.Td,
                                      float(a.sc[ke.SC_MU]))
@@ -921,7 +914,7 @@ class _Run:
             return f"plant diverged at t = {k * self.cascade.Tc:.2f} s: {err}"
         a.x[:] = x_next
         if actuated:
-            a.sf[ke.SF_ACT:ke.SF_ACT + 2] = self.plant._a
+            a.sf[ke.SF_ACT], a.sf[ke.SF_ACT + 1] = self.plant._s.F, self.plant._s.delta
             a.si[ke.SI_ACTHAS] = 1
         a.sf[ke.SF_PLANTU:ke.SF_PLANTU + 2] = self.plant.applied_input
         return None
