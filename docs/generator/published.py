@@ -1190,6 +1190,18 @@ def mismatch(ctx: Context) -> Produced:
     return p
 
 
+def generalisation(ctx: Context) -> Produced:
+    """The generalisation benchmark (issue 35; examples/generalisation.toml and its held-back
+    draws, 200 runs): the distribution of the worst-column ratio, the five worst draws of each set."""
+    p = Produced()
+    ctx.progress("examples/generalisation_table.py (the sweeps of examples/generalisation*.toml)")
+    blocks = _example(ctx, "generalisation_table").generalisation_blocks(ctx.scratch / "generalisation",
+                                                                         steps=ctx.max_steps)
+    for name, body in blocks.items():
+        p.add("generalisation", name, body, timing=name == "time")
+    return p
+
+
 def fusion_ablation(ctx: Context) -> Produced:
     """Each fusion switch off in turn under the conditions that motivated it (docs/mismatch.md)."""
     p = Produced()
@@ -1377,6 +1389,8 @@ PRODUCERS: tuple[Producer, ...] = (
     Producer("sweep-example", sweep_example, "the example sweep: figure and time"),
     Producer("paper-explained", paper_explained, "Table 5 explained (≈ 25 runs, 10–15 min)"),
     Producer("mismatch", mismatch, "the mismatch benchmark: 135 runs, 10–20 min"),
+    Producer("generalisation", generalisation, "the generalisation benchmark: 100 draws × 2 "
+             "controllers, 100 oracle-tuned designs"),
     Producer("fusion-ablation", fusion_ablation, "the fusion switches' ablation (88 runs)"),
     Producer("mechanisms", mechanisms, "which default-on mechanisms pay (816 runs, ≈ 50 min)"),
     Producer("race-speeds", race_speeds, "the public tracks at 22 and 25 m/s, S-bends"),
