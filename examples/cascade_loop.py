@@ -2,9 +2,9 @@
 what your sensors measure and apply what it returns. tsmpc's plant stands in for the vehicle."""
 
 from tsmpc.config import Config
-from tsmpc.control.cascade import Cascade, Measurement
-from tsmpc.planning.circuit import builtin_circuit
-from tsmpc.vehicle.plant import VehiclePlant
+from tsmpc.control import Cascade, Measurement
+from tsmpc.planning import builtin_circuit
+from tsmpc.vehicle import VehiclePlant
 
 cfg = Config()
 reference = builtin_circuit(dt=cfg.rates.Tc)
