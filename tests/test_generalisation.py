@@ -153,6 +153,10 @@ def test_a_default_run_that_does_not_complete_is_an_infinite_ratio_and_fails() -
     # p90 at rank 8.1 leans on the diverged draw: ∞, not a number between
     assert math.isinf(s.p90)
     assert not acceptance(s)
+    # two that do not complete: p90 between two ∞ is ∞ (numpy's interpolation gives nan there)
+    two = distribution(draw_results(pd.DataFrame(rows[:-4] + _rows("d09", 1.1, status="diverged")
+                                                 + rows[-2:]), [f"d{i + 1:02d}" for i in range(10)]))
+    assert two.completed_default == 8 and math.isinf(two.p90) and two.median == pytest.approx(1.2)
     # all ten within the bounds but one not completed: still not met
     assert not acceptance(s.__class__(10, 1.0, 1.0, 1.0, 9, 10, {}))
     ds = draws(35, 10)

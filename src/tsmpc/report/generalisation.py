@@ -4,20 +4,18 @@ each drawn from the whole class at once, the default controller against the orac
 The class (uniform draws, independent, bounds of issue 35), in the scenario vocabulary
 (:class:`tsmpc.config.ScenarioSettings`):
 
-=========================  ==========================================  ==================
-quantity                   field                                       bounds
-=========================  ==========================================  ==================
-yaw-rate sensor bias       ``scenario.sensors.omega_bias``             ±0.02 rad/s
-speed sensor bias          ``scenario.sensors.v_bias``                 ±0.5 m/s
-speed sensor scale         ``scenario.sensors.v_scale``                1 ± 0.03
-steering offset            ``scenario.plant.steering_offset_rad``      ±1° (±0.017453 rad)
-front cornering stiffness  ``scenario.plant.cornering_front_scale``    1 ± 0.4
-rear cornering stiffness   ``scenario.plant.cornering_rear_scale``     1 ± 0.4
-mass                       ``scenario.plant.mass_scale``               1 ± 0.25
-yaw inertia                ``scenario.plant.inertia_scale``            1 ± 0.3
-CoG position               ``scenario.plant.cog_to_front_scale``       ±10 % of the wheelbase
-pose sample rate           ``scenario.sensors.pose_rate_hz``           1 to 10 Hz
-=========================  ==========================================  ==================
+| quantity | field | bounds |
+|---|---|---|
+| yaw-rate sensor bias | `scenario.sensors.omega_bias` | ±0.02 rad/s |
+| speed sensor bias | `scenario.sensors.v_bias` | ±0.5 m/s |
+| speed sensor scale | `scenario.sensors.v_scale` | 1 ± 0.03 |
+| steering offset | `scenario.plant.steering_offset_rad` | ±1° (±0.017453 rad) |
+| front cornering stiffness | `scenario.plant.cornering_front_scale` | 1 ± 0.4 |
+| rear cornering stiffness | `scenario.plant.cornering_rear_scale` | 1 ± 0.4 |
+| mass | `scenario.plant.mass_scale` | 1 ± 0.25 |
+| yaw inertia | `scenario.plant.inertia_scale` | 1 ± 0.3 |
+| CoG position | `scenario.plant.cog_to_front_scale` | ±10 % of the wheelbase |
+| pose sample rate | `scenario.sensors.pose_rate_hz` | 1 to 10 Hz |
 
 The CoG is drawn as a shift s of the wheelbase L = a + b (positive: forward, towards the front
 axle) and written as the scale of a that gives it: ``cog_to_front_scale = (a − s L) / a`` with the
