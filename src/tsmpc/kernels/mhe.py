@@ -84,6 +84,17 @@ def banded_solve(Y, W, U, A, B, n, arrival, F_prior, q, r, p, pF, X):
     L = np.empty((m, 3, 3))
     Yk = np.empty((m, 3, 3))  # L_k⁻¹ O_k
     V = np.empty((m, 3, 2))  # L_k⁻¹ ĝ_k for the two right-hand sides (g, h)
+    ok, hFF, gF = _eliminate(Y, W, U, A, B, n, arrival, F_prior, q, r, p, pF, L, Yk, V)
+    if not ok:
+        return np.nan
+    return _substitute(A, B, n, q, L, Yk, V, hFF, gF, X)
+
+
+@njit(cache=True, fastmath=False)
+def _eliminate(Y, W, U, A, B, n, arrival, F_prior, q, r, p, pF, L, Yk, V):
+    """banded_solve's forward block elimination over x_0 … x_n: the Cholesky factors L, Y_k and the
+    reduced right-hand sides V in place; returns (all pivots positive, H_FF, g_F) of the border."""
+    m = n + 1
     D = np.empty((3, 3))
     G = np.empty((3, 2))  # right-hand sides of block k
     hFF = pF
@@ -145,7 +156,7 @@ def banded_solve(Y, W, U, A, B, n, arrival, F_prior, q, r, p, pF, X):
                         acc += Yk[k - 1, l, i] * V[k - 1, l, c]
                     G[i, c] -= acc
         if not _chol3(D, L[k]):
-            return np.nan
+            return False, hFF, gF
         Lk = L[k]
         # V_k = L_k⁻¹ G (forward substitution), Y_k = L_k⁻¹ O_k with O_k = −A_kᵀ Q.
         for c in range(2):
@@ -163,6 +174,14 @@ def banded_solve(Y, W, U, A, B, n, arrival, F_prior, q, r, p, pF, X):
                 y1 = (o1 - Lk[1, 0] * y0) / Lk[1, 1]
                 y2 = (o2 - Lk[2, 0] * y0 - Lk[2, 1] * y1) / Lk[2, 2]
                 Yk[k, 0, j], Yk[k, 1, j], Yk[k, 2, j] = y0, y1, y2
+    return True, hFF, gF
+
+
+@njit(cache=True, fastmath=False)
+def _substitute(A, B, n, q, L, Yk, V, hFF, gF, X):
+    """banded_solve's back substitution and the border's Schur complement: X in place; returns F
+    (NaN on a non-positive complement)."""
+    m = n + 1
     # Back substitution: L_kᵀ x_k = V_k − Y_k x_{k+1}, both right-hand sides.
     Xg = np.empty((m, 3, 2))
     for k in range(n, -1, -1):

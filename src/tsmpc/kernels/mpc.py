@@ -78,6 +78,16 @@ def riccati(x0, up, c, s, r, Tc, q, P, rd, U, DU, X):
     N = c.size
     K = np.empty((N, 2, 5))
     kf = np.empty((N, 2))
+    if not _backward(c, s, r, Tc, q, P, rd, K, kf):
+        return np.nan
+    return _rollout(x0, up, c, s, r, Tc, q, P, rd, K, kf, U, DU, X)
+
+
+@njit(cache=True, fastmath=False)
+def _backward(c, s, r, Tc, q, P, rd, K, kf):
+    """The Riccati recursion from the terminal weight P backwards: the feedback K (N, 2, 5) and
+    feed-forward kf (N, 2) of ΔU in place; False if a pivot is not positive."""
+    N = c.size
     Pm = np.zeros((5, 5))
     pv = np.zeros(5)
     for a in range(3):
@@ -116,7 +126,7 @@ def riccati(x0, up, c, s, r, Tc, q, P, rd, U, DU, X):
         hu1 = -Tc * Pd[2] + Pd[4]
         det = h00 * h11 - h01 * h01
         if not (h00 > 0.0 and det > 0.0):
-            return np.nan
+            return False
         i00, i01, i11 = h11 / det, -h01 / det, h00 / det
         for b in range(5):
             K[i, 0, b] = -(i00 * Hux[0, b] + i01 * Hux[1, b])
@@ -156,7 +166,14 @@ def riccati(x0, up, c, s, r, Tc, q, P, rd, U, DU, X):
         for a in range(5):
             for b in range(a):
                 Pm[a, b] = Pm[b, a]
-    # Forward pass.
+    return True
+
+
+@njit(cache=True, fastmath=False)
+def _rollout(x0, up, c, s, r, Tc, q, P, rd, K, kf, U, DU, X):
+    """The forward pass of the recursion's law from x0: U, ΔU, X in place; returns the cost
+    (including x_0ᵀQx_0 and the terminal x_NᵀPx_N)."""
+    N = c.size
     e0, e1, e2 = x0[0], x0[1], x0[2]
     u0, u1 = up[0], up[1]
     X[0, 0], X[0, 1], X[0, 2] = e0, e1, e2
