@@ -28,6 +28,7 @@ from tsmpc.report.generalisation import (
     distribution,
     draw_results,
     draws,
+    drivers_table,
     summary_table,
     worst_table,
 )
@@ -56,8 +57,9 @@ def generalisation_blocks(out: Path, *, workers: int = 2, steps: int | None = No
                           sets: tuple[tuple[str, str, str], ...] = SETS) -> dict[str, str]:
     """Run (or finish) the sweeps into ``out/<set>``; return the blocks of docs/mismatch.md
     (``table``: the distributions, ``worst`` / ``worst-heldback``: the five worst draws of each set,
-    ``time``: how long it took). ``steps`` shortens every run to that many MPC steps and runs the
-    first two draws of each set only (the CI smoke run)."""
+    ``drivers``: which quantity drives the ratio on the main set, ``time``: how long it took).
+    ``steps`` shortens every run to that many MPC steps and runs the first two draws of each set
+    only (the CI smoke run)."""
     rows, blocks, took = [], {}, []
     for label, file, sub in sets:
         spec_path = ROOT / "examples" / file
@@ -78,7 +80,10 @@ def generalisation_blocks(out: Path, *, workers: int = 2, steps: int | None = No
             raise SystemExit(f"{out / sub}: no run records")
         results = draw_results(table, list(spec.grid.case or []))
         rows.append((label, distribution(results)))
-        blocks["worst" if sub == "main" else f"worst-{sub}"] = worst_table(results, _draws_of(spec_path))
+        ds = _draws_of(spec_path)
+        blocks["worst" if sub == "main" else f"worst-{sub}"] = worst_table(results, ds)
+        if sub == "main":  # what drives the ratio: tuned on nothing, read on the main set only
+            blocks["drivers"] = drivers_table(results, ds)
     blocks["table"] = summary_table(rows)
     blocks["time"] = "; ".join(took) + f" (load average {os.getloadavg()[0]:.1f})"
     return blocks

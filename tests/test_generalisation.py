@@ -21,10 +21,13 @@ from tsmpc.report.generalisation import (
     CLASS,
     P90_BOUND,
     WORST_BOUND,
+    DrawResult,
     acceptance,
     distribution,
     draw_results,
     draws,
+    drivers,
+    drivers_table,
     summary_table,
     worst_table,
 )
@@ -166,6 +169,26 @@ def test_a_default_run_that_does_not_complete_is_an_infinite_ratio_and_fails() -
     d = ds[0]  # a row names the draw's parameters in the table's units
     assert (f"| d01 | 1.20 | y [m] | {d.omega_bias:+.4f} | {d.v_bias:+.3f} | {d.v_scale:.4f} | "
             f"{math.degrees(d.steering_offset_rad):+.2f} |") in lines[3]
+
+
+def test_drivers_rank_the_quantity_that_makes_the_ratio() -> None:
+    ds = draws(35, 30)
+    # the ratio grows with the gyro bias's size, whatever its sign; one draw diverged (∞, largest)
+    res = [DrawResult(d.name, 1.0 + 100.0 * abs(d.omega_bias), "rmse_y", {}, "completed", "completed")
+           for d in ds]
+    top = max(ds, key=lambda d: abs(d.omega_bias))
+    res = [r if r.case != top.name else DrawResult(r.case, math.inf, "", {}, "diverged", "completed")
+           for r in res]
+    ranked = drivers(res, ds)
+    p, rho, rho_abs = ranked[0]
+    assert p.key == "omega_bias" and rho_abs == pytest.approx(1.0) and abs(rho) < 0.5
+    assert all(max(abs(a), abs(b)) < 0.6 for _, a, b in ranked[1:])  # the others: chance
+    # a ratio the same on every draw is driven by nothing (ties share their rank)
+    flat = [DrawResult(d.name, 1.0, "rmse_y", {}, "completed", "completed") for d in ds]
+    assert all(a == b == 0.0 for _, a, b in drivers(flat, ds))
+    text = drivers_table(res, ds)
+    assert text.splitlines()[2].startswith("| yaw-rate bias | `sensors.omega_bias` | ")
+    assert text.splitlines()[2].endswith(" | +1.00 |")
 
 
 # -- one real draw ------------------------------------------------------------------------------
