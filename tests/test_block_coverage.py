@@ -35,6 +35,8 @@ ROOT = Path(__file__).resolve().parents[1]
 BLOCK_TESTS = (
     "tests/test_blocks.py",
     "tests/test_fusion_blocks.py",
+    "tests/test_actuator_block.py",
+    "tests/test_plant_block.py",
     "tests/test_mutation_guards.py",
     *(f"tests/test_governor.py::{t}" for t in (
         "test_grip_estimate_from_the_friction_force", "test_spin_grip_by_hand",

@@ -195,8 +195,9 @@ PW_ROWS = PW_K + 24
 
 @njit(**_INL)
 def _rhs_v(s, lane, th, v, al, om, F, d, mu, cosd):
-    """The plant's right-hand side (tsmpc.kernels.plant._rhs) for one lane of workspace ``s``,
-    every tyre variant computed and selected (no branches), same operation order."""
+    """The plant's right-hand side (tsmpc.vehicle.single_track.plant_rhs) for one lane of workspace ``s``,
+    every tyre variant computed and selected (no branches), same operation order: the only second
+    form of the plant (tests/test_plant_block.py compares it with the scalar one)."""
     o = PW_CST * LANES + lane
     M, I, a, b = s[o + kplant._M * LANES], s[o + kplant._I * LANES], s[o + kplant._A * LANES], \
         s[o + kplant._B * LANES]

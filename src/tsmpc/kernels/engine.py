@@ -97,6 +97,7 @@ from tsmpc.vehicle.actuators import (
     applied_mean,
     wheel_steering,
 )
+from tsmpc.vehicle.single_track import friction_force
 
 __all__ = ["friction_mu", "hypot_py", "run", "ticks", "warm"]
 
@@ -898,7 +899,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 li[m, LI_EST + i] = sc[SC_EST + i]
             li[m, LI_MEAS], li[m, LI_MEAS + 1] = y[3], y[4]
             li[m, LI_FHAT], li[m, LI_FRAW] = sc[SC_ESTF], sc[SC_ESTFR]
-            li[m, LI_FTRUE] = (mu - fp[FP_MU_NOM]) * fp[FP_MG]
+            li[m, LI_FTRUE] = friction_force(fp[FP_MU_NOM], fp[FP_MG], mu)  # VehiclePlant's
             li[m, LI_MU] = mu
             li[m, LI_CMD], li[m, LI_CMD + 1] = sc[SC_OF], sc[SC_OD]
             lstat[m] = st

@@ -44,6 +44,7 @@ BLOCK_MODULES = (
     "tsmpc.scenarios",
     "tsmpc.sensors",
     "tsmpc.vehicle.actuators",
+    "tsmpc.vehicle.single_track",
 )
 
 

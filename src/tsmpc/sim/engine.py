@@ -53,6 +53,7 @@ from tsmpc.scenarios import Scenario
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.start import _start_state, default_plant, tracked_steps
 from tsmpc.vehicle.actuators import ActuatorState
+from tsmpc.vehicle.plant import rk4_count
 
 if TYPE_CHECKING:
     from tsmpc.control.ts_lqr import TSLQR
@@ -171,7 +172,6 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.ts_lqr:TSLQR.set_cornering_stiffness": "2650a8e957df2414",
     "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
-    "tsmpc.vehicle.plant:VehiclePlant": "0b52c004a843c73b",
 }
 
 
@@ -324,9 +324,9 @@ def _actuator_data(plant: Any, Td: float, fp: NDArray[np.float64], ip: NDArray[n
     fp[ke.FP_A_GF], fp[ke.FP_A_GD] = p.force_gain, p.steer_gain
     fp[ke.FP_A_RMAX], fp[ke.FP_A_DOFF] = p.max_steer_step, p.steering_offset
     h_rk = plant.plant.model.h
-    n_rk = round(h / h_rk)  # VehiclePlant.step's RK4 steps per sub-step
-    ip[ke.IP_ACT_NRK] = n_rk
-    return n_rk >= 1 and abs(n_rk * h_rk - h) <= 1e-9 * max(1.0, h)
+    n_rk = rk4_count(h, h_rk)  # VehiclePlant.step's RK4 steps per sub-step
+    ip[ke.IP_ACT_NRK] = 0 if n_rk is None else n_rk
+    return n_rk is not None
 
 
 def _split_fault(fault: Any) -> tuple[Any, Any]:
@@ -670,7 +670,7 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
                                                                               law.d_min, law.d_max)
     fp[ke.FP_L_TAU] = law.tau
     ip[ke.IP_NIN], ip[ke.IP_N] = n_in, N
-    ip[ke.IP_NSUB] = round(cascade.Td / plant.model.h)
+    ip[ke.IP_NSUB] = rk4_count(cascade.Td, plant.model.h) or 0  # (run() checked it)
     ip[ke.IP_NW], ip[ke.IP_REFLEN] = cfg.mhe.N, len(ref)
     mc = cfg.mpc
     ip[ke.IP_SLIP], ip[ke.IP_TANGENT] = mc.slip_aware, mc.tangent_heading
@@ -990,8 +990,7 @@ def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_desi
     K = K if max_steps is None else min(K, int(max_steps))
     plant: Any = default_plant(cfg, scenario)  # a VehiclePlant, or the ActuatedPlant around one
     vp = plant if scenario.actuators is None else plant.plant  # the VehiclePlant
-    n_sub = round(Td / vp.model.h)
-    if vp.model._kern is None or abs(n_sub * vp.model.h - Td) > 1e-9 * max(1.0, Td):
+    if vp.model._kern is None or rk4_count(Td, vp.model.h) is None:  # (VehiclePlant.step raises)
         return None
     x0 = _start_state(ref, scenario.initial_error)
     plant.reset(x0)

@@ -15,14 +15,8 @@ from tsmpc._exports import lazy_exports
 if TYPE_CHECKING:
     from tsmpc.vehicle.actuators import ActuatedPlant, Actuators, ForceLag, SteeringServo
     from tsmpc.vehicle.commonroad import CommonRoadPlant, commonroad_config
-    from tsmpc.vehicle.plant import (
-        INPUT_NAMES,
-        STATE_NAMES,
-        PlantParams,
-        VehiclePlant,
-        plant_params,
-        plant_rhs,
-    )
+    from tsmpc.vehicle.plant import INPUT_NAMES, STATE_NAMES, VehiclePlant
+    from tsmpc.vehicle.single_track import PlantParams, plant_params, plant_rhs
 
 #: public name → the submodule that defines it
 _EXPORTS = {
@@ -31,13 +25,13 @@ _EXPORTS = {
     "CommonRoadPlant": "commonroad",
     "ForceLag": "actuators",
     "INPUT_NAMES": "plant",
-    "PlantParams": "plant",
+    "PlantParams": "single_track",
     "STATE_NAMES": "plant",
     "SteeringServo": "actuators",
     "VehiclePlant": "plant",
     "commonroad_config": "commonroad",
-    "plant_params": "plant",
-    "plant_rhs": "plant",
+    "plant_params": "single_track",
+    "plant_rhs": "single_track",
 }
 
 __all__ = [

@@ -31,6 +31,12 @@ F_res sin α of α̇ (the paper's resistance acts along the velocity and leaves 
 force's normal component F_res sin α as lateral force: ≈ 0.4 m/s² at α = 0.05 on dry asphalt,
 lateral grip that no tyre provides). μ_t is μ_tyre, or μ(road) μ_tyre / μ_dry with
 ``tyre.scale_grip_with_road``: on a μ = 0.3 road the car then holds at most ≈ 0.3 g.
+
+One definition (issue 34): the right-hand side, the RK4 steps and the friction force are the
+``@jitable`` blocks of :mod:`tsmpc.vehicle.single_track`, which :class:`Plant` and
+:class:`VehiclePlant` call as Python and the compiled kernels compile
+(:func:`tsmpc.kernels.plant.rk4_block`, the run engine); :func:`rk4_count` is the step count both
+the plant and the engine use.
 """
 
 from __future__ import annotations
@@ -42,10 +48,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tsmpc.config import TyreModel, TyreParams, VehicleParams
+from tsmpc.config import TyreParams, VehicleParams
 from tsmpc.errors import ConfigError, NonFiniteError
 
-__all__ = ["INPUT_NAMES", "STATE_NAMES", "Plant", "PlantConstants", "VehiclePlant"]
+__all__ = [
+    "INPUT_NAMES",
+    "STATE_NAMES",
+    "Plant",
+    "PlantConstants",
+    "VehiclePlant",
+    "rk4_count",
+]
 
 STATE_NAMES = ("X", "Y", "theta", "v", "alpha", "omega")
 INPUT_NAMES = ("F_xR", "delta")
@@ -59,6 +72,14 @@ class PlantConstants:
 
     v_floor: float = 0.5  #: speed floor of every 1/v [m/s]
     v_eps: float = 0.05  #: speed scale of the resistance tanh [m/s]
+
+
+def rk4_count(dt: float, h: float) -> int | None:
+    """The number of RK4 steps of ``h`` in ``dt``; None when ``dt`` is no positive multiple of h."""
+    n = round(dt / h)
+    if n < 1 or abs(n * h - dt) > 1e-9 * max(1.0, dt):
+        return None
+    return n
 
 
 class Plant:
@@ -90,10 +111,12 @@ class Plant:
         self.tyre = tyre
         self.h = float(h)
         self.constants = constants
-        fzf, fzr = vehicle.static_loads
-        self._fz = (fzf, fzr)
-        self._linear = tyre.model == TyreModel.LINEAR
-        self._rhs = self._make_rhs()
+        # the model's blocks (numba is imported with them: by simulating code, not by this module)
+        import tsmpc.vehicle.single_track as single_track
+
+        self._blocks = single_track
+        self.params = single_track.plant_params(vehicle, tyre, constants.v_floor, constants.v_eps)
+        self._linear = self.params.linear
         self._kern: Any = None  # the compiled block (tsmpc.kernels.load("plant")), or None
         if jit is None or jit:
             from tsmpc import kernels
@@ -109,61 +132,9 @@ class Plant:
                     self._kern = None  # the model changed without the kernel: numpy only
 
     # ------------------------------------------------------------------ model
-    def _make_rhs(self):
-        """Build ẋ = f(x, u, μ) as a closure over local float constants (no attribute look-ups:
-        this function is evaluated 4 times per 1 ms step)."""
-        p, t, k = self.vehicle, self.tyre, self.constants
-        M, I, g, a, b = p.mass, p.inertia, p.g, p.a, p.b
-        Cf, Cr, kd = p.C_f, p.C_r, p.drag_factor
-        v_floor, v_eps = k.v_floor, k.v_eps
-        Mg = M * g
-        fzf, fzr = self._fz
-        cc, ee = t.shape_c, t.curvature_e
-        mu_t0 = t.mu_tyre
-        scale = mu_t0 / t.mu_dry if t.scale_grip_with_road else 0.0
-        linear = self._linear
-        combined = t.combined_slip and not linear
-        sin, cos, atan, atan2, tanh, sqrt = math.sin, math.cos, math.atan, math.atan2, math.tanh, math.sqrt
-
-        def rhs(th, v, al, om, F, d, mu):
-            ve = v if v > v_floor else v_floor
-            sa, ca = sin(al), cos(al)
-            f_res = mu * Mg * tanh(v / v_eps)
-            if linear:
-                fyf = Cf * (d - al - a * om / ve)
-                fyr = Cr * (b * om / ve - al)
-            else:
-                vx, vy = ve * ca, ve * sa
-                mu_t = mu * scale if scale else mu_t0
-                Df, Dr = mu_t * fzf, mu_t * fzr
-                if Df > 0.0:
-                    bs = Cf / (cc * Df) * (atan2(vy + a * om, vx) - d)
-                    fyf = -Df * sin(cc * atan(bs - ee * (bs - atan(bs))))
-                    bs = Cr / (cc * Dr) * atan2(vy - b * om, vx)
-                    fyr = -Dr * sin(cc * atan(bs - ee * (bs - atan(bs))))
-                else:
-                    fyf = fyr = 0.0
-                if combined:  # friction ellipse of the driven (rear) tyre; see the module docstring
-                    ft = F - f_res
-                    if Dr > 0.0:
-                        ft = -Dr if ft < -Dr else (Dr if ft > Dr else ft)
-                        rr = ft / Dr
-                        fyr *= sqrt(1.0 - rr * rr)
-                    else:
-                        ft = 0.0
-                    F = ft  # the body sees the traction; the resistance is inside it
-                    f_res = 0.0
-            sda, cda = sin(d - al), cos(d - al)
-            vdot = (F * ca - fyf * sda + fyr * sa - kd * v * v - f_res) / M
-            adot = (-F * sa + fyf * cda + fyr * ca) / (M * ve) - om
-            wdot = (a * fyf * cos(d) - b * fyr) / I
-            return v * cos(th + al), v * sin(th + al), om, vdot, adot, wdot
-
-        return rhs
-
     def _kernel_agrees(self) -> bool:
-        """The compiled block reproduces the float closure on two probe states (guards against a
-        model edited on one side only)."""
+        """The compiled block reproduces :meth:`_step_floats` on two probe states (the same
+        functions: this guards a subclass that changed the Python side only)."""
         for xp in ((0.0, 0.0, 0.3, 8.0, 0.02, 0.1), (1.0, -2.0, -1.0, 0.3, -0.05, -0.4)):
             x = np.array(xp)
             ref = self._step_floats(x, (1500.0, 0.05), 0.7, 3)  # not step(): callers may wrap it
@@ -175,7 +146,8 @@ class Plant:
     def derivatives(self, x: ArrayLike, u: ArrayLike, mu_road: float) -> NDArray[np.float64]:
         """ẋ (6,) at state x (6,), input u = [F_xR, δ] and road friction μ(road)."""
         xs, (F, d), mu = self._checked(x, u, mu_road)
-        return np.array(self._rhs(xs[2], xs[3], xs[4], xs[5], F, d, mu))
+        rhs = self._blocks.plant_rhs
+        return np.array(rhs(self.params, xs[2], xs[3], xs[4], xs[5], F, d, mu, math.cos(d)))
 
     # ------------------------------------------------------------ integration
     def _checked(
@@ -217,24 +189,10 @@ class Plant:
     def _step_floats(
         self, x: ArrayLike, u: ArrayLike, mu_road: float, n_steps: int
     ) -> NDArray[np.float64]:
-        """The float-closure RK4 of :meth:`step` (the kernel's oracle)."""
+        """:meth:`step` by :func:`rk4_steps` as Python (no compiled kernels)."""
         (X, Y, th, v, al, om), (F, d), mu = self._checked(x, u, mu_road)
-        h = self.h
-        h2 = 0.5 * h
-        h6 = h / 6.0
-        f = self._rhs
-        for _ in range(n_steps):
-            # Classical RK4, unrolled on floats (the position does not feed back into f).
-            a1, b1, c1, d1, e1, g1 = f(th, v, al, om, F, d, mu)
-            a2, b2, c2, d2, e2, g2 = f(th + h2 * c1, v + h2 * d1, al + h2 * e1, om + h2 * g1, F, d, mu)
-            a3, b3, c3, d3, e3, g3 = f(th + h2 * c2, v + h2 * d2, al + h2 * e2, om + h2 * g2, F, d, mu)
-            a4, b4, c4, d4, e4, g4 = f(th + h * c3, v + h * d3, al + h * e3, om + h * g3, F, d, mu)
-            X += h6 * (a1 + 2.0 * (a2 + a3) + a4)
-            Y += h6 * (b1 + 2.0 * (b2 + b3) + b4)
-            th += h6 * (c1 + 2.0 * (c2 + c3) + c4)
-            v += h6 * (d1 + 2.0 * (d2 + d3) + d4)
-            al += h6 * (e1 + 2.0 * (e2 + e3) + e4)
-            om += h6 * (g1 + 2.0 * (g2 + g3) + g4)
+        X, Y, th, v, al, om = self._blocks.rk4_steps(self.params, X, Y, th, v, al, om, F, d, mu, n_steps,
+                                                     self.h)
         xs = (X, Y, th, v, al, om)
         if not all(map(_isfinite, xs)):
             raise NonFiniteError(f"plant: integration diverged to {xs}")
@@ -266,7 +224,7 @@ class VehiclePlant:
     ) -> None:
         self.model = Plant(vehicle, tyre, h, constants)
         self.vehicle = vehicle
-        self._mg = vehicle.mass * vehicle.g
+        self._mg = self.model.params.mg
         self._x = np.zeros(6)
         self._u = np.zeros(2)
         self._f: float | None = None
@@ -285,11 +243,11 @@ class VehiclePlant:
     def step(self, u: ArrayLike, dt: float, mu_road: float) -> NDArray[np.float64]:
         """Hold ``u`` for ``dt`` (a whole number of RK4 steps h); returns the new state.
         Raises :class:`NonFiniteError` on a non-finite input or state."""
-        n = round(dt / self.model.h)
-        if n < 1 or abs(n * self.model.h - dt) > 1e-9 * max(1.0, dt):
+        n = rk4_count(dt, self.model.h)
+        if n is None:
             raise ValueError(f"VehiclePlant: dt = {dt} must be a positive multiple of h = {self.model.h}")
         self._u = np.asarray(u, dtype=float).reshape(2).copy()
-        self._f = (float(mu_road) - self.vehicle.mu_nominal) * self._mg
+        self._f = self.model._blocks.friction_force(self.vehicle.mu_nominal, self._mg, float(mu_road))
         self._x = self.model.step(self._x, self._u, mu_road, n)
         return self._x.copy()
 
