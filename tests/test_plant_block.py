@@ -95,6 +95,9 @@ def test_pacejka_force_grip_scale_and_ellipse(way) -> None:
     assert big[3] == pytest.approx((3200.0 - 0.5 * v * v) / 1000.0, rel=1e-13)
     brake = f(comb, 0.0, v, 0.0, 0.0, -1e6, 0.0, 0.0, 1.0)
     assert brake[3] == pytest.approx((-3200.0 - 0.5 * v * v) / 1000.0, rel=1e-13)
+    # no grip at all (the road's μ = 0 with the grip following it): no traction, drag only
+    none = f(comb._replace(grip_scale=1.0), 0.0, v, 0.0, 0.0, 1e4, 0.0, 0.0, 1.0)
+    assert none[3] == -0.5 * v * v / 1000.0
 
 
 def test_one_rk4_step_by_hand(way) -> None:
