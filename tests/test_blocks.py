@@ -205,6 +205,25 @@ def test_blind_stop_by_hand() -> None:
     assert gates.blind_stop(-1.0, 0.1, 683.0, -2.0, -2000.0, 10000.0) == (0.0, 0.1)
 
 
+def test_gates_take_their_bounds_inclusive() -> None:
+    """Each gate's bound is the largest accepted value (mutation checks: a `<` for a `<=` survived
+    the tests above, which stop 0.01 short of each bound)."""
+    assert gates.plausible_speeds(G, 40.0, 4.0) and gates.plausible_speeds(G, -1.0, -4.0)
+    assert gates.pose_consistent(G, 1.05, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # 1 m + 0 + 0.05 m exactly
+    # heading: the wrapped difference of 0.31 rad is 0.31000000000000005 in floats; a dt of 6e-17 s
+    # makes the allowance 0.3 + 0.5 dt + 0.01 exactly that (found by search, asserted here)
+    dth = (0.31 + math.pi) % (2.0 * math.pi) - math.pi
+    assert gates.HEADING_JUMP_RAD + gates.HEADING_DRIFT_RAD_PER_S * 6e-17 + 0.01 == dth
+    assert gates.pose_consistent(G, 0.0, 0.0, 0.31, 0.0, 0.0, 0.0, 6e-17)
+
+
+def test_a_jump_run_is_judged_over_the_time_since_its_last_pose() -> None:
+    """jump_run compares a pose with the run's last one over t − lt (not t + lt, a mutation that
+    survived): 5 m in 0.1 s at t = 100 s is a new run, 5 m in 2 s continues it."""
+    assert gates.jump_run(G, 1.0, 99.0, 0.0, 0.0, 0.0, 99.9, 5.0, 0.0, 0.0, 100.0) == (False, 100.0)
+    assert gates.jump_run(G, 1.0, 98.0, 0.0, 0.0, 0.0, 98.0, 5.0, 0.0, 0.0, 100.0) == (True, 98.0)
+
+
 def test_nearest_sample_by_hand() -> None:
     """The nearest sample within [k_lo, k_hi] (both ends included), the first of equals."""
     x = np.array([0.0, 1.0, 2.0, 3.0, 2.0, 1.0])
@@ -213,6 +232,9 @@ def test_nearest_sample_by_hand() -> None:
     assert gates.nearest_sample(x, y, 3, 5, 2.1, 0.0) == 4
     assert gates.nearest_sample(x, y, 3, 5, 1.0, 0.0) == 5  # the last sample of the range
     assert gates.nearest_sample(x, y, 2, 2, 0.0, 9.0) == 2
+    # both coordinates count, as squares that add, away from the origin (mutations survived with y ≡ 0)
+    assert gates.nearest_sample(np.array([0.0, 1.0]), np.array([3.0, 0.0]), 0, 1, 0.0, 0.0) == 1
+    assert gates.nearest_sample(np.array([0.0, 0.0]), np.array([4.0, -4.0]), 0, 1, 0.0, 5.0) == 0
 
 
 def test_rate_limit_without_grip_estimate() -> None:
