@@ -73,11 +73,13 @@ def generalisation_blocks(out: Path, *, workers: int = 2, steps: int | None = No
                             f"  {done}/{total} {rec['params']['case']} {rec['params']['controller']}: "
                             f"{rec['status']}", file=sys.stderr, flush=True))
         wall = time.perf_counter() - t0
-        took.append(f"{label}: {res.n_runs} runs ({res.executed} run now) in {wall:.0f} s")
-        print(took[-1], file=sys.stderr)
         table = aggregate(out / sub, [t.id for t in expand(spec)])
         if table.empty:
             raise SystemExit(f"{out / sub}: no run records")
+        # the runs' own time from their records (a resumed sweep's wall is only what it ran now)
+        took.append(f"{label}: {res.n_runs} runs, {table['elapsed_s'].sum():.0f} s of run time summed "
+                    f"over the runs ({res.executed} run in this call, {wall:.0f} s wall)")
+        print(took[-1], file=sys.stderr)
         results = draw_results(table, list(spec.grid.case or []))
         rows.append((label, distribution(results)))
         ds = _draws_of(spec_path)

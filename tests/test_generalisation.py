@@ -165,7 +165,7 @@ def test_a_default_run_that_does_not_complete_is_an_infinite_ratio_and_fails() -
     ds = draws(35, 10)
     text = worst_table(res, ds, k=2)
     lines = text.splitlines()
-    assert len(lines) == 4 and lines[2].startswith("| d10 | ∞ |") and "**diverged**" in lines[2]
+    assert len(lines) == 4 and lines[2].startswith("| d10 | ∞ | — |") and "**diverged**" in lines[2]
     d = ds[0]  # a row names the draw's parameters in the table's units
     assert (f"| d01 | 1.20 | y [m] | {d.omega_bias:+.4f} | {d.v_bias:+.3f} | {d.v_scale:.4f} | "
             f"{math.degrees(d.steering_offset_rad):+.2f} |") in lines[3]

@@ -289,8 +289,9 @@ def worst_table(results: list[DrawResult], ds: list[Draw], k: int = 5) -> str:
     for x in top:
         d = by_name[x.case]
         status = "completed" if x.completed else f"**{x.default_status}**"
+        column = _label(x.worst_column) if x.completed else "—"  # ∞ in every column
         lines.append(
-            f"| {x.case} | {_x(x.worst_ratio)} | {_label(x.worst_column)} | {d.omega_bias:+.4f} | "
+            f"| {x.case} | {_x(x.worst_ratio)} | {column} | {d.omega_bias:+.4f} | "
             f"{d.v_bias:+.3f} | {d.v_scale:.4f} | {math.degrees(d.steering_offset_rad):+.2f} | "
             f"{d.cornering_front_scale:.2f} | {d.cornering_rear_scale:.2f} | {d.mass_scale:.2f} | "
             f"{d.inertia_scale:.2f} | {100.0 * d.cog_shift:+.1f} | {d.pose_rate_hz:.1f} | {status} |")
