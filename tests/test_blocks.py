@@ -224,6 +224,16 @@ def test_a_jump_run_is_judged_over_the_time_since_its_last_pose() -> None:
     assert gates.jump_run(G, 1.0, 98.0, 0.0, 0.0, 0.0, 98.0, 5.0, 0.0, 0.0, 100.0) == (True, 98.0)
 
 
+def test_ramps_and_the_ripple_by_hand() -> None:
+    """_ramp's two ramps over spans other than 1 s (the paper's ramps are 1 s long, where a product
+    for the quotient survived), and the sign of the paper profile's ripple."""
+    assert _ramp(1.0, 0.0, 2.0, 5.0, 9.0, 1.0, 3.0) == 2.0  # half-way up a 2 s ramp
+    assert _ramp(7.0, 0.0, 2.0, 5.0, 9.0, 1.0, 3.0) == 2.0  # half-way down a 4 s ramp
+    assert _ramp(3.0, 0.0, 2.0, 5.0, 9.0, 1.0, 3.0) == 3.0
+    t = math.pi  # sin(t / 2) = 1, outside every event of the profile
+    assert paper_mu(t, 0.9, 0.05, 0.5, 0.1, 0.6) == pytest.approx(0.95, abs=1e-15)
+
+
 def test_nearest_sample_by_hand() -> None:
     """The nearest sample within [k_lo, k_hi] (both ends included), the first of equals."""
     x = np.array([0.0, 1.0, 2.0, 3.0, 2.0, 1.0])
