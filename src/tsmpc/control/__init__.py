@@ -1,4 +1,4 @@
-"""Controllers (SPEC §6–7, §10): the guidance cascade of paper Fig. 1 as one object with
+"""Controllers: the guidance cascade of paper Fig. 1 as one object with
 ``step()`` (:class:`Cascade`), its outer TS-MPC and inner TS-LQR, the NL-MPC of the paper's
 comparison, the speed governor and the outer-loop baselines (pure pursuit, Stanley, kinematic LQR,
 LTV-MPC).

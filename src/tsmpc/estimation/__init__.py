@@ -1,4 +1,4 @@
-"""State and disturbance estimation (SPEC §9; paper §4): the TS-MHE-UIO of the slip, yaw rate,
+"""State and disturbance estimation: the TS-MHE-UIO of the slip, yaw rate,
 speed and friction force, the paper's UIO form of it, and the measurement fusion beyond the paper.
 
 What users import is re-exported here, by name (``from tsmpc.estimation import …``); the submodules

@@ -1,6 +1,6 @@
-"""Control-oriented vehicle models (SPEC §2–3; paper §2): the kinematic error model and its
-exact TS form (eq. 1–4), the dynamic model, its TS form, ZOH discretisation and the Apkarian
-augmentation (eq. 5–9), and the scheduling boxes of the TS polytopes.
+"""Control-oriented vehicle models (the paper's kinematic error model and dynamic model): the
+kinematic error model and its exact TS form, the dynamic model, its TS form, ZOH discretisation
+and the Apkarian augmentation, and the scheduling boxes of the TS polytopes.
 
 What users import is re-exported here, by name (``from tsmpc.models import …``); the submodules
 load on first use. The modules not re-exported are implementation.

@@ -1,4 +1,4 @@
-"""References (SPEC §11): the planner from waypoints to a timed reference, the built-in circuit,
+"""References: the planner from waypoints to a timed reference, the built-in circuit,
 the paper's reference format, TUMFTM race tracks, and the plan's feasibility check and re-timing.
 
 What users import is re-exported here, by name (``from tsmpc.planning import …``); the submodules

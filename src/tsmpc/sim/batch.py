@@ -53,8 +53,8 @@ def _load_kernel() -> Any:
     are unavailable."""
     if "mod" in _KERNEL:
         return _KERNEL["mod"]
+    import tsmpc.sim.engine as eng
     from tsmpc import kernels
-    from tsmpc.sim import engine as eng
 
     mod: Any = None  # the kernel module, once loaded (numba's dispatchers: untyped)
     if eng._load_kernel() is not None:  # the engine and the blocks (and NUMBA_CACHE_DIR) first
@@ -144,8 +144,8 @@ def _set_up(index: int, cfg: Config, method: Method, scenario: Scenario, designs
             max_steps: int | None, ke: Any) -> _Lane | str:
     """The engine's preparation of one run (as :func:`tsmpc.sim.engine.run` does it, without
     running it), or why the engine would decline it."""
+    import tsmpc.sim.engine as eng
     from tsmpc.control.cascade import Cascade
-    from tsmpc.sim import engine as eng
     from tsmpc.sim.start import _start_state, default_plant, tracked_steps
 
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=designs[0],
@@ -192,8 +192,8 @@ def simulate_batch(cfg: Config, method: Method | str, scenarios: Scenario | Sequ
     controller (``cfg`` but its seed) and so the designs are shared. ``exact_plant``: integrate
     the plant with the engine's scalar kernel (bit-identical logs, slower). Returns the logs in
     the runs' order."""
+    import tsmpc.sim.engine as eng
     from tsmpc.blas import limit_blas_threads
-    from tsmpc.sim import engine as eng
     from tsmpc.sim.simulator import simulate
 
     limit_blas_threads()
@@ -261,7 +261,7 @@ def simulate_batch(cfg: Config, method: Method | str, scenarios: Scenario | Sequ
 def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant: bool
                ) -> list[RunLog | None]:
     """Step one group of lanes (equal signatures) to the end; their logs (None: fell back)."""
-    from tsmpc.sim import engine as eng
+    import tsmpc.sim.engine as eng
 
     fields = list(lanes[0].run.a.__dataclass_fields__)
     B = len(lanes)
@@ -371,8 +371,8 @@ def warmup() -> bool:
     """Compile (or load from numba's cache) the batch kernel's machine code now, by one step of
     one default run on the built-in circuit (``tsmpc warmup``, and a local sweep before its
     workers start). True when batched runs are available."""
+    import tsmpc.sim.engine as eng
     from tsmpc.planning.circuit import builtin_circuit
-    from tsmpc.sim import engine as eng
 
     if not eng.enabled() or _load_kernel() is None:
         return False

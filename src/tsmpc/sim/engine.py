@@ -127,7 +127,7 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
 #: steps aside (the Python loop runs) until kernels/engine.py follows the change and this table is
 #: refreshed (``python -m tsmpc.sim.engine`` prints it; tests/test_engine.py checks it).
 _PORTED: dict[str, str] = {
-    "tsmpc.sim.simulator:simulate": "dc420a749e929087",
+    "tsmpc.sim.simulator:simulate": "010fe22d7a4f334e",
     "tsmpc.sim.start:_start_state": "2e35ad3de46ce500",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
     "tsmpc.sim.start:default_plant": "0088c937e0241d8b",

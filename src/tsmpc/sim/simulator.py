@@ -132,7 +132,7 @@ def simulate(
     from tsmpc.blas import limit_blas_threads
 
     limit_blas_threads()
-    from tsmpc.sim import engine as eng  # (imports this module: not at the top)
+    import tsmpc.sim.engine as eng  # (imports this module: not at the top)
 
     if (eng.enabled() if engine is None else engine) and eng.applicability(
             cfg, method, scenario, oracle=oracle, plant=plant) is None:

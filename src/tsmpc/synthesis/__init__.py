@@ -1,4 +1,4 @@
-"""LMI designs (SPEC §4–5; paper eq. 18–27): the kinematic TS-MPC's terminal ingredients and the
+"""LMI designs (the paper's LMI designs): the kinematic TS-MPC's terminal ingredients and the
 dynamic TS-LQR's gains, each returned with certificates recomputed outside the solver, and the
 design cache that solves a design once per parameter set.
 

@@ -1,4 +1,4 @@
-"""The vehicle a controller drives (SPEC §8): tsmpc's nonlinear single-track plant with its
+"""The vehicle a controller drives: tsmpc's nonlinear single-track plant with its
 tyre models, the actuator dynamics in front of it, and CommonRoad's vehicle models (the
 ``[commonroad]`` extra, loaded on first use).
 
