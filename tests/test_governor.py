@@ -45,6 +45,7 @@ def test_grip_estimate_from_the_friction_force() -> None:
     assert grip_estimate(-1000.0, 1000.0, 0.5, 10.0, 1.5) == pytest.approx(0.6, abs=1e-15)
     assert grip_estimate(-1e6, 1000.0, 0.5, 10.0, 1.0) == 0.0  # never negative
     assert math.isnan(grip_estimate(math.nan, 1000.0, 0.5, 10.0, 1.0))
+    assert math.isnan(grip_estimate(100.0, 0.0, 0.5, 10.0, 1.0))  # no mass, no reading (not ∞)
 
 
 def test_spin_grip_by_hand() -> None:
@@ -87,6 +88,9 @@ def test_grip_inputs_follow_the_configs_tyre_model() -> None:
     assert (grip, spin, fpk) == (pytest.approx(0.4, abs=1e-15), False, pytest.approx(6.0, abs=1e-12))
     assert governor_inputs(coupled, -1000.0, True, 1250.0, False, 5000.0, math.nan)[0::2] == (
         pytest.approx(0.42, abs=1e-15), pytest.approx(3.8, abs=1e-12))
+    # grip through a tyre with 1.5 times the road's grip: 0.4 · 1.5 (a product, not a quotient)
+    assert governor_inputs(GP._replace(grip_per_road=1.5), -1000.0, True, 1000.0, False, 5000.0,
+                           math.nan)[0] == pytest.approx(0.6, abs=1e-15)
     for p in (GP, coupled):
         grip, spin, fpk = governor_inputs(p, -1000.0, False, 1000.0, False, 5000.0, math.nan)
         assert math.isnan(grip) and not spin and fpk == pytest.approx(5.0, abs=1e-12)
