@@ -35,19 +35,24 @@ def _forget_stale_entries() -> None:
     from pathlib import Path
 
     from tsmpc import kernels
+    from tsmpc.errors import TsmpcError
+    from tsmpc.textfile import read_bytes, read_text
 
     source = Path(__file__).resolve().parents[1] / "vehicle" / "single_track.py"
     try:
-        digest = hashlib.sha256(source.read_bytes()).hexdigest()
+        digest = hashlib.sha256(read_bytes(source, "kernel source")).hexdigest()
         folder = kernels._tree_folder(kernels.numba_cache_dir())
         stamp = folder / "plant.blocks-sha256"
-        if stamp.is_file() and stamp.read_text().strip() == digest:
-            return
+        try:
+            if read_text(stamp, "plant cache stamp", limit=1024).strip() == digest:
+                return
+        except TsmpcError:  # no stamp yet, or not a readable one: compile afresh
+            pass
         folder.mkdir(parents=True, exist_ok=True)
         for entry in folder.glob("plant.*.nb[ic]"):
             entry.unlink()
         stamp.write_text(digest)
-    except OSError:  # an unwritable cache: numba refuses it too (tsmpc.kernels.cache_problem)
+    except (OSError, TsmpcError):  # an unwritable cache: numba refuses it too (kernels.cache_problem)
         pass
 
 
