@@ -12,6 +12,7 @@ random states of every tyre variant."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -187,3 +188,28 @@ def test_vehicle_plant_reports_the_blocks(cfg: Config) -> None:
     assert vp.friction_force == friction_force(cfg.vehicle.mu_nominal, cfg.vehicle.mass * cfg.vehicle.g, 0.6)
     with pytest.raises(ValueError, match="multiple of h"):
         vp.step((800.0, 0.01), 0.0105, 0.6)
+
+
+def test_the_plant_kernels_cache_entries_follow_the_block_source(tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """numba keys kernels/plant.py's entries by that file only, yet they contain
+    vehicle/single_track.py's arithmetic: entries stamped with another version of it are deleted,
+    entries of this version are kept (the stamp read through tsmpc.textfile)."""
+    import hashlib
+
+    from tsmpc.kernels import plant as kplant
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    folder = kernels._tree_folder(tmp_path)
+    folder.mkdir(parents=True)
+    entry = folder / "plant.rk4_block-1.py311.nbi"
+    entry.write_bytes(b"old")
+    (folder / "plant.blocks-sha256").write_text("another version\n")
+    kplant._forget_stale_entries()
+    assert not entry.exists()
+    source = Path(kplant.__file__).resolve().parents[1] / "vehicle" / "single_track.py"
+    digest = hashlib.sha256(source.read_bytes()).hexdigest()
+    assert (folder / "plant.blocks-sha256").read_text() == digest
+    entry.write_bytes(b"current")
+    kplant._forget_stale_entries()
+    assert entry.read_bytes() == b"current"
