@@ -11,6 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from _paths import need_data
 from tsmpc.errors import ConfigError
 from tsmpc.sweep import dry_run, expand, load_sweep, run_sweep
 
@@ -256,3 +257,17 @@ def test_cli_sweep_refuses_a_full_out_folder_before_any_design_work(tmp_path: Pa
     res = CliRunner().invoke(app, ["sweep", str(sweep), "--out", str(fresh)])
     assert res.exit_code == 2 and "infeasible (injected)" in res.output and len(calls) == 1
     assert not fresh.exists()
+
+
+def test_a_track_may_be_a_dataset_name(tmp_path: Path) -> None:
+    """``track = ["paper"]`` (or a track's name, ``monza``) is the fetched dataset, as on the command
+    line (tsmpc.datasets); a name that is neither a dataset nor a file is still refused."""
+    from tsmpc import datasets
+    from tsmpc.sweep import _track_path
+
+    need_data("paper")
+    spec = load_sweep(_write(tmp_path, "[grid]\ntrack = ['paper']\nmethod = ['ref']\n"))
+    assert _track_path("paper", spec) == datasets.resolve("paper")
+    assert [t.params.track for t in expand(spec)] == ["paper"]
+    with pytest.raises(ConfigError, match="neither 'builtin', a dataset name nor a readable file"):
+        load_sweep(_write(tmp_path, "[grid]\ntrack = ['paperr']\n", "bad.toml"))

@@ -439,8 +439,17 @@ def _track_path(track: str, spec: SweepSpec, source: str = "sweep") -> Path | No
         return None
     p = Path(track)
     p = p if p.is_absolute() else Path(spec.root) / p
+    if not p.is_file() and not os.path.lexists(p):
+        from tsmpc import datasets
+
+        if datasets.is_dataset_name(track):  # "paper", "monza": the fetched data (tsmpc.datasets)
+            try:
+                return datasets.resolve(track)
+            except datasets.DataNotFoundError as err:
+                raise ConfigError(f"{source}: track: {err}") from None
     if not p.is_file():
-        raise ConfigError(f"{source}: track: {track!r} is neither 'builtin' nor a readable file ({p})")
+        raise ConfigError(f"{source}: track: {track!r} is neither 'builtin', a dataset name nor a readable "
+                          f"file ({p})")
     return p
 
 
