@@ -6,6 +6,8 @@ from __future__ import annotations
 from types import ModuleType
 from typing import Any
 
+import pytest
+
 _COMPILED: dict[tuple[str, str], Any] = {}
 
 
@@ -30,3 +32,16 @@ class Blocks:
 
     def __getattr__(self, name: str) -> Any:  # (for the type checkers: the blocks are set above)
         raise AttributeError(name)
+
+
+@pytest.fixture(params=["python", "compiled"])
+def way(request: pytest.FixtureRequest) -> Any:
+    """A block as its Python caller runs it (``TSMPC_NO_JIT`` or a Python class) or compiled, as the
+    engine runs it: ``way(fn)``. Import it into a test module to parametrise its tests both ways."""
+    if request.param == "python":
+        return lambda fn: fn
+    from tsmpc import kernels
+
+    if kernels.load("plant") is None:
+        pytest.skip("compiled kernels unavailable")
+    return compiled

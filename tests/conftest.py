@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from _blocks import way  # noqa: F401  (fixture: a block test runs Python and compiled)
 from _compile_once import STAGES, wait_for
 from _paths import need_data, tooling_on_path
 from tsmpc.config import Config

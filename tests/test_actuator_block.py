@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 import pytest
-from numpy.typing import ArrayLike, NDArray
 
+from test_actuators import _Recorder as _Inputs  # a plant that records its inputs
 from tsmpc import kernels
 from tsmpc.vehicle.actuators import (
     ActuatedPlant,
@@ -33,17 +33,6 @@ from tsmpc.vehicle.actuators import (
 #: gains 0.25 (force) and 0.5 (steering), a rate limit of 0.01 rad per sub-step, 4 sub-steps
 P = ActuatorParams(force_gain=0.25, steer_gain=0.5, max_steer_step=0.01, steering_offset=0.0, substeps=4)
 
-
-@pytest.fixture(params=["python", "compiled"])
-def way(request):
-    """The block functions as ActuatedPlant calls them (Python) or as the engine does (compiled)."""
-    if request.param == "python":
-        return lambda fn: fn
-    if kernels.load("plant") is None:
-        pytest.skip("compiled kernels unavailable")
-    from tests._blocks import compiled
-
-    return compiled
 
 
 def test_lag_gain_by_hand(way) -> None:
@@ -98,21 +87,6 @@ def test_compiled_equals_python_to_the_bit() -> None:
         assert nb_mean(p, s) == applied_mean(p, s)
 
 
-class _Inputs:
-    """A plant that records the inputs it receives (state unchanged)."""
-
-    def __init__(self) -> None:
-        self.inputs: list[tuple[float, float]] = []
-
-    def reset(self, x0: ArrayLike) -> None:
-        self.inputs = []
-
-    def step(self, u: ArrayLike, dt: float, mu_road: float) -> NDArray[np.float64]:
-        self.inputs.append(tuple(float(c) for c in u))  # type: ignore[arg-type]
-        return np.zeros(6)
-
-    applied_input = np.zeros(2)
-    friction_force = None
 
 
 def test_actuated_plant_runs_the_law() -> None:

@@ -29,17 +29,6 @@ LIN = PlantParams(1000.0, 2000.0, 1.0, 1.5, 40000.0, 0.5, 0.5, 0.05, 10000.0, 60
 PAC = LIN._replace(linear=False)
 
 
-@pytest.fixture(params=["python", "compiled"])
-def way(request):
-    """The block as Plant calls it without kernels (Python) or as rk4_block does (compiled)."""
-    if request.param == "python":
-        return lambda fn: fn
-    if kernels.load("plant") is None:
-        pytest.skip("compiled kernels unavailable")
-    from tests._blocks import compiled
-
-    return compiled
-
 
 def test_linear_tyre_right_hand_side_by_hand(way) -> None:
     f = way(plant_rhs)
