@@ -1017,6 +1017,13 @@ class FusionSettings(_Frozen):
         "(the integrated measured yaw rate against the measured heading's change over chords of 1 s; "
         "needs the pose's heading, else the estimate holds its prior 0) and removed from omega before "
         "the MHE, the inner loop and the course fusion")
+    steering_offset: _Flag = Field(
+        default=True, description="the wheels' steering-angle offset (a misalignment of the steering) is "
+        "estimated as a slow state, fitted from the steady yaw balance of the MHE's single-track model "
+        "(the measured yaw rate, bias removed, against the steering sent; least squares with forgetting, "
+        "frozen below 2 m/s, above 4 m/s^2 of lateral acceleration and while the sample, the MHE or the "
+        "inner loop is unusable), and subtracted from the steering command: a bias correction without "
+        "feedback into its own fit")
     stiffness_estimate: _Flag = Field(
         default=True, description="the axle cornering stiffnesses of the MHE's and the inner loop's models "
         "are fitted online (least squares F_y = C alpha per axle, the slip from the course over "
@@ -1183,7 +1190,8 @@ T = TypeVar("T", bound=BaseModel)
 
 #: Every switch of :class:`FusionSettings` off (the paper has none of them).
 _FUSION_OFF = {"reject_repeated_samples": False, "predict_pose": False, "course_slip": False,
-               "course_speed": False, "gyro_bias": False, "stiffness_estimate": False,
+               "course_speed": False, "gyro_bias": False, "steering_offset": False,
+               "stiffness_estimate": False,
                "mass_estimate": False}
 
 #: Named configurations: overrides of ``Config()`` (beyond the paper). Select with ``Config.preset(name)``,

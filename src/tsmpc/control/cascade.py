@@ -59,6 +59,7 @@ from tsmpc.control.governor import Governor, GovernorParams, GripParams, governe
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep
+from tsmpc.estimation.fusion import steer_command
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.planning.reference import Reference
@@ -130,7 +131,8 @@ class Command:
 
     Attributes:
         F_xR: rear drive force [N] (after feed-forward, friction compensation, saturation).
-        delta: front steering [rad].
+        delta: front steering sent to the servo [rad]: the inner loop's, less the estimated
+            steering offset in force (``fusion.steering_offset``), within the steering limits.
         saturated: an inner-loop saturation was active.
         v_ref: the outer loop's speed reference in force [m/s].
         omega_ref: the outer loop's yaw-rate reference in force [rad/s].
@@ -310,6 +312,10 @@ class Cascade:
         self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
         self._u_applied = np.zeros(2)
         self._low_applied = 0.0  # lqr.low_speed_resistance's part of the applied force
+        # fusion.steering_offset: the offset estimate the last command took off, and the angle sent
+        # (_u_applied[1] is the wheels' intended angle, sent + offset: what the MHE's model sees)
+        self._steer_offset = 0.0
+        self._steer_sent = 0.0
         # recovery (gates.py): the last accepted speed / yaw-rate sample, the blind stop, the
         # reference time offset, the run of poses rejected as jumps
         self._t_meas: float | None = None
@@ -408,6 +414,7 @@ class Cascade:
         C = self._fusion.course.stiffness_update(self._stiffness_applied)
         if C is not None:
             _apply_stiffness_to((self.mhe, self.lqr), C, self._stiffness_applied)
+            self._fusion.set_stiffness(C[0], C[1])  # the steering-offset fit's balance too
 
     def _fresh(self, t: float, m: Measurement) -> bool:
         if m.stamp is None:
@@ -536,9 +543,22 @@ class Cascade:
             self._fusion.course.sample(pose_ok and speeds_ok, th, v, float(est.x[1]),
                                        float(est.x[0] * est.x[2]), om, float(u_model[1]),
                                        float(u_model[0]))
+        # fusion.steering_offset: the steady yaw balance of the MHE's model, the bias-free ω against
+        # the angle last sent; frozen while the sample, the MHE or the inner loop is unusable
+        last = self._last
+        self._fusion.steer_sample(fresh and speeds_ok and est.status == EstimatorStatus.OK
+                                  and self._blind_since is None
+                                  and not (last is not None and last.saturated),
+                                  float(est.x[0]), om, self._steer_sent)
         F, delta, sat, low = self._inner(self._compensated(m, est, v_ref), est, v_ref, w_ref)
         t3 = time.perf_counter()
-        self._u_applied = np.array([F, delta])
+        # the servo gets the wheels' angle less the offset in force (held while blind: the fit is
+        # frozen then), within the steering limits; _u_applied keeps the wheels' intended angle
+        off, wheels = self._fusion.steer_offset(), delta
+        if self.cfg.fusion.steering_offset:  # (off, the command is the inner loop's, unclipped)
+            delta, wheels = steer_command(delta, off, -self.cfg.lqr.delta_max, self.cfg.lqr.delta_max)
+        self._steer_offset, self._steer_sent = off, delta
+        self._u_applied = np.array([F, wheels])
         self._low_applied = low
         ev = self._events
         ev["mhe_rejected"] += est.status == EstimatorStatus.REJECTED
@@ -737,7 +757,8 @@ class Cascade:
         u_mhe = self._u_applied
         if m.force is not None or m.steering is not None:
             u_mhe = np.array([self._u_applied[0] if m.force is None else float(m.force),
-                              self._u_applied[1] if m.steering is None else float(m.steering)])
+                              self._u_applied[1] if m.steering is None
+                              else float(m.steering) + self._steer_offset])  # the wheels' intended
         # lqr.low_speed_resistance: the MHE's model has the clipped resistance, so it sees the force
         # net of the part the law added for it (ts_lqr.py)
         u_model = u_mhe if self._low_applied == 0.0 else u_mhe - np.array([self._low_applied, 0.0])

@@ -85,13 +85,33 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
   changes slowly and drops out; forgetting over ``MASS_MEMORY_S``), above ``MASS_MIN_SPEED``
   (below, the model's low-speed clipping makes F̂ meaningless). The compensation then gets
   F̂ − ΔM̂ ā and the speed feedback (M + ΔM̂)(v_ref − v̂)/τ.
+* :func:`steer_sample` (``steering_offset``) — the wheels stand at δ_servo + δ₀ (a toe or steering
+  sensor misalignment nothing else sees: the MHE explains its yaw moment as slip, the TS-LQR's
+  integrator works against it, and the car tracks with a lateral offset). δ₀ is a slow state
+  fitted from the steady yaw balance of the MHE's single-track model (α̇ = ω̇ = 0):
+  δ_eq = g(v) ω (:func:`steer_gain`, g ≈ L / v + K_us v), so the residual
+  r = g(v) ω_f − δ_f = δ₀ + ΔK v ω_f + e of the bias-free measured yaw rate and the steering sent
+  (both filtered over ``STEER_FILTER_S``) is regressed on (1, a_y) — ΔK, an understeer-gradient
+  error (C_f, C_r, CoG), is a nuisance regressor so a curve is not read as an offset — by
+  information-form least squares with forgetting over ``STEER_MEMORY_S`` towards the prior
+  (0 with σ ``STEER_PRIOR_SIGMA``, ``STEER_K_PRIOR_SIGMA``); a moving steering (a transient)
+  weighs less. **Observable** whenever the car moves faster than ``STEER_V_MIN`` with the tyres
+  in their linear range (|a_y| ≤ ``STEER_AY_MAX``), straights included (there r = −δ_f directly).
+  **Frozen** — the state held, nothing forgotten — on a missing or rejected sample, a failed
+  MHE, a saturated or blind inner loop, below ``STEER_V_MIN`` or above ``STEER_AY_MAX``. The
+  estimate less ``STEER_DEADBAND`` is subtracted from the servo command (clipped to the servo's
+  limits) and added to the steering the MHE's model gets: a bias correction without feedback
+  into its own data (the fit reads the angle sent, whatever was subtracted). It holds during a
+  blind stop (the wheels' offset does not go away). When the stiffness fit gives the MHE new
+  C_f, C_r, g(v) uses them.
 
 Each estimator's per-step logic is a block's one definition (:mod:`tsmpc.kernels.jit`): pure
 ``@jitable`` functions over ``NamedTuple`` records, the new state returned — :func:`repeat_check`;
 :func:`course_sample`, :func:`course_close` (with :func:`course_chord`'s fits) and the outputs
 :func:`slip_correction`, :func:`speed_offset`, :func:`noise_scale`, :func:`stiffness`,
 :func:`stiffness_update`; :func:`gyro_sample` and :func:`gyro_bias`; :func:`mass_update`,
-:func:`delta_mass`, :func:`inertia_force`. The
+:func:`delta_mass`, :func:`inertia_force`; :func:`steer_sample`, :func:`steer_correction` and
+:func:`steer_command`. The
 classes below hold the records for :class:`~tsmpc.control.cascade.Cascade` and call them as
 Python; the run engine (:mod:`tsmpc.kernels.engine`) and the batch compile the same functions. The
 arithmetic is scalar (no numpy), so both run the same operations in the same order on any machine
@@ -112,10 +132,12 @@ from tsmpc.kernels.jit import exact_hypot, jitable
 __all__ = [
     "BASELINE", "MASS_START", "NO_INTERVAL", "REPEAT_START", "CourseFusion", "CourseParams", "CourseState",
     "Fusion", "GyroFit", "GyroParams", "GyroState", "Interval", "MassEstimator", "MassParams", "MassState",
-    "RepeatGuard", "RepeatState", "SlipFit", "SpeedFit", "StiffFit", "course_chord", "course_close",
-    "course_params", "course_sample", "course_start", "delta_mass", "gyro_bias", "gyro_params",
-    "gyro_sample", "gyro_start", "inertia_force", "mass_update", "model_changed", "noise_scale",
-    "repeat_check", "slip_correction", "speed_offset", "stiffness", "stiffness_update",
+    "RepeatGuard", "RepeatState", "SlipFit", "SpeedFit", "SteerParams", "SteerState", "StiffFit",
+    "course_chord", "course_close", "course_params", "course_sample", "course_start", "delta_mass",
+    "gyro_bias", "gyro_params", "gyro_sample", "gyro_start", "inertia_force", "mass_update", "model_changed",
+    "noise_scale", "repeat_check", "slip_correction", "speed_offset", "steer_command", "steer_correction",
+    "steer_gain", "steer_offset", "steer_params", "steer_sample", "steer_sigma", "steer_start",
+    "steer_stiffness", "stiffness", "stiffness_update",
 ]
 
 #: MPC steps spanned by the chord of the course fusion.
@@ -1016,6 +1038,214 @@ class MassEstimator:
         return inertia_force(self.params, self.state, v_hat, v_ref)
 
 
+# ============================================================================ steering offset
+#: Prior σ of the steering-angle offset δ₀ [rad]: 1°, the class of issue 35 (a toe or steering
+#: sensor misalignment; beyond a few degrees a car would be repaired, not estimated).
+STEER_PRIOR_SIGMA = math.radians(1.0)
+#: Prior σ of the understeer-gradient error ΔK [rad per m/s²], a nuisance regressor: C_f, C_r and
+#: CoG errors change the steady steering at a given lateral acceleration (δ_eq grows by ΔK a_y),
+#: and without it every curve would be read as an offset.
+STEER_K_PRIOR_SIGMA = 0.01
+#: Memory of the fit [s] (forgetting towards the prior's information).
+STEER_MEMORY_S = 25.0
+#: σ of the steady-state residual over one second of correlated samples [rad] (sensor noise, the
+#: transients the quasi-steady balance does not model).
+STEER_RESID_SIGMA = math.radians(0.5)
+#: Time constant of the first-order filter on ω and on the steering sent [s]: both see the same
+#: lag, so a transient's lag does not bias the balance.
+STEER_FILTER_S = 0.3
+#: The lateral dynamics' lag [s]: a moving steering inflates the residual's variance by
+#: (lag · δ̇_f / STEER_RESID_SIGMA)², so transients count for little.
+STEER_LAG_S = 0.3
+#: Below this speed [m/s] the yaw balance says nothing (standstill, start-up): the fit holds.
+STEER_V_MIN = 2.0
+#: Above this |a_y| [m/s²] the tyres leave their linear range (the balance's model): it holds.
+STEER_AY_MAX = 4.0
+#: Bound of the estimate [rad] (3 σ of the prior).
+STEER_MAX = math.radians(3.0)
+#: Dead band of the applied correction [rad]: the fit's wander on a run without offset (±2e-4 rad
+#: on the paper reference) is not applied, only what exceeds it.
+STEER_DEADBAND = 3e-4
+
+
+class SteerParams(NamedTuple):
+    """Parameters of the steering-offset fit (:func:`steer_params` builds them; every tunable is a
+    field, so the run engine gets them all through its float parameters).
+
+    Attributes:
+        Td: call period T_d [s] (one sample).
+        C_f, C_r: axle cornering stiffnesses of the balance's model [N/rad] (the stiffness fit's
+            when ``stiffness_estimate`` has replaced the config's: :func:`steer_stiffness`).
+        a, b: distances of the CoG to the front and rear axles [m].
+        M: mass [kg].
+        I: yaw inertia [kg m²].
+        lam: forgetting per T_d, exp(−T_d / ``STEER_MEMORY_S``).
+        beta: the filters' gain per T_d, 1 − exp(−T_d / ``STEER_FILTER_S``).
+        var_r: variance of one T_d residual [rad²] (``STEER_RESID_SIGMA``² × 1 s / T_d).
+        w0: prior information of δ₀, 1 / ``STEER_PRIOR_SIGMA``² [1/rad²].
+        wk: prior information of ΔK, 1 / ``STEER_K_PRIOR_SIGMA``².
+        resid_sigma: ``STEER_RESID_SIGMA`` [rad].
+        lag: ``STEER_LAG_S`` [s].
+        v_min: ``STEER_V_MIN`` [m/s].
+        ay_max: ``STEER_AY_MAX`` [m/s²].
+        max_offset: ``STEER_MAX`` [rad].
+        deadband: ``STEER_DEADBAND`` [rad].
+    """
+
+    Td: float
+    C_f: float
+    C_r: float
+    a: float
+    b: float
+    M: float
+    I: float
+    lam: float
+    beta: float
+    var_r: float
+    w0: float
+    wk: float
+    resid_sigma: float
+    lag: float
+    v_min: float
+    ay_max: float
+    max_offset: float
+    deadband: float
+
+
+class SteerState(NamedTuple):
+    """State of the steering-offset fit: the filtered ω and δ, and the information form of the
+    two-parameter least squares (δ₀, ΔK).
+
+    Attributes:
+        init: the filters run (they restart at the next usable sample when False).
+        om_f: the filtered bias-free yaw rate [rad/s].
+        de_f: the filtered steering sent [rad].
+        dd_f: the rate of ``de_f`` [rad/s].
+        s11, s12, s22: the information matrix (the prior's included).
+        b1, b2: the information vector (the prior's mean is 0).
+        n: samples fitted since the reset.
+    """
+
+    init: bool
+    om_f: float
+    de_f: float
+    dd_f: float
+    s11: float
+    s12: float
+    s22: float
+    b1: float
+    b2: float
+    n: int
+
+
+@jitable
+def steer_params(Td: float, C_f: float, C_r: float, a: float, b: float, M: float, I: float) -> SteerParams:
+    """The parameters from T_d and the MHE's vehicle (C_f, C_r, a, b, M, I)."""
+    return SteerParams(Td, C_f, C_r, a, b, M, I, math.exp(-Td / STEER_MEMORY_S),
+                       1.0 - math.exp(-Td / STEER_FILTER_S),
+                       STEER_RESID_SIGMA * STEER_RESID_SIGMA / Td,
+                       1.0 / (STEER_PRIOR_SIGMA * STEER_PRIOR_SIGMA),
+                       1.0 / (STEER_K_PRIOR_SIGMA * STEER_K_PRIOR_SIGMA),
+                       STEER_RESID_SIGMA, STEER_LAG_S, STEER_V_MIN, STEER_AY_MAX, STEER_MAX, STEER_DEADBAND)
+
+
+@jitable
+def steer_stiffness(p: SteerParams, C_f: float, C_r: float) -> SteerParams:
+    """``p`` with the axle stiffnesses C_f, C_r (those the stiffness fit gave the MHE)."""
+    return SteerParams(p.Td, C_f, C_r, p.a, p.b, p.M, p.I, p.lam, p.beta, p.var_r, p.w0, p.wk,
+                       p.resid_sigma, p.lag, p.v_min, p.ay_max, p.max_offset, p.deadband)
+
+
+@jitable
+def steer_start(p: SteerParams) -> SteerState:
+    """The state after a reset: δ₀ = ΔK = 0 with the priors' information, the filters off."""
+    return SteerState(False, 0.0, 0.0, 0.0, p.w0, 0.0, p.wk, 0.0, 0.0, 0)
+
+
+@jitable
+def steer_gain(p: SteerParams, v: float) -> float:
+    """g(v) = δ_eq / ω [s] of the model's steady turn at speed v > 0: the α̇ = ω̇ = 0 rows of the
+    single-track model (paper eq. "dynamic model", the MHE's; cos δ ≈ 1),
+    [A22 B22; A32 B32] [α; δ] = −[A23; A33] ω, solved for δ. It is the familiar
+    δ_eq ≈ (L / v + K_us v) ω with the understeer gradient K_us of the model."""
+    A22 = -(p.C_r + p.C_f) / (p.M * v)
+    A23 = (p.C_r * p.b - p.C_f * p.a) / (p.M * v * v) - 1.0
+    A32 = (p.C_r * p.b - p.C_f * p.a) / p.I
+    A33 = -(p.C_f * p.a * p.a + p.C_r * p.b * p.b) / (p.I * v)
+    B22 = p.C_f / (p.M * v)
+    B32 = p.C_f * p.a / p.I
+    det = A22 * B32 - B22 * A32
+    return (A32 * A23 - A22 * A33) / det
+
+
+@jitable
+def steer_sample(p: SteerParams, s: SteerState, ok: bool, v: float, omega: float,
+                 delta_sent: float) -> SteerState:
+    """One T_d sample: v the estimated speed [m/s], ω the bias-free measured yaw rate [rad/s], δ
+    the steering the servo was sent [rad] (the wheels stand at δ + δ₀).
+
+    ``ok`` False (a missing or rejected sample, a failed MHE, a saturated or blind inner loop) or a
+    non-finite input: the state is returned unchanged (filters and fit hold, nothing is
+    forgotten). v < ``v_min`` or |v ω| > ``ay_max``: the fit holds, the filters restart at the
+    next usable sample. Else the filtered residual of the steady yaw balance,
+    r = g(v) ω_f − δ_f = δ₀ + ΔK v ω_f + e, enters the information-form least squares with
+    forgetting ``lam`` towards the prior; the sample's variance grows with the filtered steering's
+    rate (a transient is no steady state)."""
+    if not (ok and math.isfinite(v) and math.isfinite(omega) and math.isfinite(delta_sent)):
+        return s
+    if v < p.v_min or abs(v * omega) > p.ay_max:
+        return SteerState(False, omega, delta_sent, 0.0, s.s11, s.s12, s.s22, s.b1, s.b2, s.n)
+    if not s.init:  # the filters start at the sample
+        return SteerState(True, omega, delta_sent, 0.0, s.s11, s.s12, s.s22, s.b1, s.b2, s.n)
+    om_f = s.om_f + p.beta * (omega - s.om_f)
+    de_f = s.de_f + p.beta * (delta_sent - s.de_f)
+    dd_f = (de_f - s.de_f) / p.Td
+    r = steer_gain(p, v) * om_f - de_f
+    x2 = v * om_f
+    z = p.lag * dd_f / p.resid_sigma
+    var = p.var_r * (1.0 + z * z)
+    lam, q = p.lam, 1.0 - p.lam
+    s11 = lam * s.s11 + q * p.w0 + 1.0 / var
+    s12 = lam * s.s12 + x2 / var
+    s22 = lam * s.s22 + q * p.wk + x2 * x2 / var
+    b1 = lam * s.b1 + r / var
+    b2 = lam * s.b2 + x2 * r / var
+    return SteerState(True, om_f, de_f, dd_f, s11, s12, s22, b1, b2, s.n + 1)
+
+
+@jitable
+def steer_offset(p: SteerParams, s: SteerState) -> float:
+    """The estimated δ₀ [rad] (the wheels' angle less the servo's), within ±``max_offset``."""
+    det = s.s11 * s.s22 - s.s12 * s.s12
+    d0 = (s.s22 * s.b1 - s.s12 * s.b2) / det
+    return min(max(d0, -p.max_offset), p.max_offset)
+
+
+@jitable
+def steer_sigma(s: SteerState) -> float:
+    """The estimate's σ [rad] (from the information matrix; samples taken as independent, so it is
+    optimistic by the residual's correlation)."""
+    det = s.s11 * s.s22 - s.s12 * s.s12
+    return math.sqrt(max(s.s22 / det, 0.0))
+
+
+@jitable
+def steer_correction(p: SteerParams, s: SteerState) -> float:
+    """The offset removed from the steering command [rad]: the estimate less the dead band."""
+    d = steer_offset(p, s)
+    return math.copysign(max(abs(d) - p.deadband, 0.0), d)
+
+
+@jitable
+def steer_command(delta: float, offset: float, d_min: float, d_max: float) -> tuple[float, float]:
+    """(the angle sent to the servo, the wheels' intended angle) for the inner loop's ``delta``
+    [rad] with the correction ``offset`` [rad] in force: δ − offset within the servo's limits
+    [d_min, d_max] (the inner loop's); the wheels' angle is ``delta`` itself unless that clip
+    acted (then what the clipped command gives, sent + offset)."""
+    sent = min(max(delta - offset, d_min), d_max)
+    return sent, (delta if sent == delta - offset else sent + offset)
+
+
 class Fusion:
     """The switches of ``cfg.fusion`` as one object the cascade calls (each part idle when its
     switch is off)."""
@@ -1030,6 +1260,10 @@ class Fusion:
         self.mass = MassEstimator(cfg.vehicle.mass, self.Td, cfg.mhe.N, self.tau, self.speed_feedback)
         nz = cfg.noise
         self.gyro = GyroFit(self.Td, nz.theta * nz.scale, nz.omega * nz.scale)
+        veh = cfg.vehicle
+        self._steer_p0 = steer_params(self.Td, veh.C_f, veh.C_r, veh.a, veh.b, veh.mass, veh.inertia)
+        self.steer_p = self._steer_p0
+        self.steer = steer_start(self.steer_p)
 
     def reset(self, pose: NDArray[np.float64] | None) -> None:
         """Start over from ``pose`` (None: the first measured one)."""
@@ -1037,6 +1271,8 @@ class Fusion:
         self.course.reset()
         self.mass.reset()
         self.gyro.reset()
+        self.steer_p = self._steer_p0  # (the cascade's reset gives the blocks the config's stiffnesses)
+        self.steer = steer_start(self.steer_p)
 
     @property
     def any_course(self) -> bool:
@@ -1056,6 +1292,21 @@ class Fusion:
     def gyro_bias(self) -> float:
         """The yaw-rate sensor's bias to remove (0 with ``gyro_bias`` off)."""
         return gyro_bias(self.gyro.state) if self.settings.gyro_bias else 0.0
+
+    def steer_sample(self, ok: bool, v: float, omega: float, delta_sent: float) -> None:
+        """One T_d sample into the steering-offset fit (:func:`steer_sample`; idle with
+        ``steering_offset`` off)."""
+        if self.settings.steering_offset:
+            self.steer = steer_sample(self.steer_p, self.steer, ok, v, omega, delta_sent)
+
+    def steer_offset(self) -> float:
+        """The steering offset to remove from the command (:func:`steer_correction`: the estimate
+        less its dead band; 0 with ``steering_offset`` off)."""
+        return steer_correction(self.steer_p, self.steer) if self.settings.steering_offset else 0.0
+
+    def set_stiffness(self, C_f: float, C_r: float) -> None:
+        """The stiffness fit gave the MHE (C_f, C_r): the steering-offset fit's balance uses them."""
+        self.steer_p = steer_stiffness(self._steer_p0, float(C_f), float(C_r))
 
     def slip_correction(self, a_y: float) -> float:
         """The correction added to α̂ for the outer loop (0 with ``course_slip`` off)."""

@@ -69,6 +69,8 @@ from tsmpc.estimation.fusion import (
     RepeatState,
     SlipFit,
     SpeedFit,
+    SteerParams,
+    SteerState,
     StiffFit,
     course_close,
     course_params,
@@ -81,6 +83,10 @@ from tsmpc.estimation.fusion import (
     repeat_check,
     slip_correction,
     speed_offset,
+    steer_command,
+    steer_correction,
+    steer_sample,
+    steer_stiffness,
     stiffness_update,
 )
 from tsmpc.kernels.jit import cpython_hypot
@@ -124,15 +130,17 @@ N_EVENTS = 19
  FP_G_G, FP_G_TC, FP_G_ALPHA, FP_G_VMIN, FP_G_MUNOM, FP_G_MUDRY, FP_G_GPR, FP_G_REAR, FP_G_FMAX,
  FP_G_DT, FP_G_MDT) = range(55)
 FP_GYRO = 55  # the yaw-rate bias fit's GyroParams (Td, var_theta, var_omega, prior_w)
-FP_SENS = 59  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
+FP_STEER = 59  # the steering-offset fit's SteerParams (N_STEER_P fields, in their order)
+N_STEER_P = 18
+FP_SENS = FP_STEER + N_STEER_P  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
 N_FP = FP_SENS + N_SP
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
  IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV,
- IP_GOV, IP_G_ORACLE, IP_G_PREVIEW, IP_GYRO, IP_DEFER) = range(32)
-N_IP = 32
+ IP_GOV, IP_G_ORACLE, IP_G_PREVIEW, IP_GYRO, IP_DEFER, IP_STEER) = range(33)
+N_IP = 33
 # ---------------------------------------------------------------------------- MHE parameters
 # mp = [q(3), r(2), p(3), p_F, x_min(3), x_max(3), box lo(3), box hi(3), M, I, C_f, C_r, a, b, μ_o g,
 #       drag, T_d]: MHEUIO's kernel arguments in its order (C_f, C_r change with the stiffness fit)
@@ -148,8 +156,10 @@ N_MP = 30
  SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM, _FREE2, _FREE3, SF_N2,
  SF_N1, SF_JUMP, _J1, _J2, _J3, SF_JT0,
  SF_TOFF, SF_GRATE, SF_GGRIP, SF_GHOLD,
- SF_GYTH0, SF_GYINT, SF_GYWLAST, SF_GYSB, SF_GYSW) = range(75)  # SF_GY*: the GyroState's floats
-SF_SENS = 75  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
+ SF_GYTH0, SF_GYINT, SF_GYWLAST, SF_GYSB, SF_GYSW,  # SF_GY*: the GyroState's floats
+ SF_STOMF, SF_STDEF, SF_STDDF, SF_STS11, SF_STS12, SF_STS22, SF_STB1, SF_STB2,  # the SteerState's floats
+ SF_STOFF, SF_STSENT) = range(85)  # the steering offset in force, the angle last sent (Cascade)
+SF_SENS = 85  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
 N_SF = SF_SENS + N_SS
 # ---------------------------------------------------------------------------- integer state
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_MASSRUN, SI_NCHORDS,
@@ -157,8 +167,9 @@ N_SF = SF_SENS + N_SS
  SI_FRESH, SI_SPOK, SI_POSEOK, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
  SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, SI_FSN, SI_FSSINCE,
  SI_GACT, SI_GSTEPS, SI_GWIN,
- SI_GYOPEN, SI_GYN, SI_GYGAP, SI_GYCHORDS) = range(41)  # SI_GY*: the GyroState's flags and counts
-N_SI = 41
+ SI_GYOPEN, SI_GYN, SI_GYGAP, SI_GYCHORDS,  # SI_GY*: the GyroState's flags and counts
+ SI_STINIT, SI_STN) = range(43)  # the SteerState's flag and count
+N_SI = 43
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
@@ -421,6 +432,47 @@ def _gyro_step(gp, has_heading, theta, has_omega, omega, sf, si):
 def _gyro_now(ip, sf, si):
     """``Fusion.gyro_bias``: the yaw-rate bias to remove (0 with ``fusion.gyro_bias`` off)."""
     return gyro_bias(_gyro_load(sf, si)) if ip[IP_GYRO] != 0 else 0.0
+
+
+@njit(cache=True, fastmath=False)
+def _steer_load(sf, si):
+    """The :class:`~tsmpc.estimation.fusion.SteerState` of the engine's slots."""
+    return SteerState(si[SI_STINIT] != 0, sf[SF_STOMF], sf[SF_STDEF], sf[SF_STDDF], sf[SF_STS11],
+                      sf[SF_STS12], sf[SF_STS22], sf[SF_STB1], sf[SF_STB2], si[SI_STN])
+
+
+@njit(cache=True, fastmath=False)
+def _steer_params(fp, sf, si):
+    """``Fusion.steer_p``: the SteerParams of the slots, with the stiffnesses the stiffness fit
+    gave the MHE once it has (``Fusion.set_stiffness``)."""
+    p = SteerParams(fp[FP_STEER], fp[FP_STEER + 1], fp[FP_STEER + 2], fp[FP_STEER + 3], fp[FP_STEER + 4],
+                    fp[FP_STEER + 5], fp[FP_STEER + 6], fp[FP_STEER + 7], fp[FP_STEER + 8],
+                    fp[FP_STEER + 9], fp[FP_STEER + 10], fp[FP_STEER + 11], fp[FP_STEER + 12],
+                    fp[FP_STEER + 13], fp[FP_STEER + 14], fp[FP_STEER + 15], fp[FP_STEER + 16],
+                    fp[FP_STEER + 17])
+    if si[SI_HASAPPLIED] != 0:
+        return steer_stiffness(p, sf[SF_APPLIED], sf[SF_APPLIED + 1])
+    return p
+
+
+@njit(cache=True, fastmath=False)
+def _steer_step(fp, ok, v, omega, sf, si):
+    """``Fusion.steer_sample`` (:func:`steer_sample`) of the angle last sent, on the engine's slots."""
+    s = steer_sample(_steer_params(fp, sf, si), _steer_load(sf, si), ok, v, omega, sf[SF_STSENT])
+    si[SI_STINIT], si[SI_STN] = 1 if s.init else 0, s.n
+    sf[SF_STOMF], sf[SF_STDEF], sf[SF_STDDF] = s.om_f, s.de_f, s.dd_f
+    sf[SF_STS11], sf[SF_STS12], sf[SF_STS22], sf[SF_STB1], sf[SF_STB2] = s.s11, s.s12, s.s22, s.b1, s.b2
+
+
+@njit(cache=True, fastmath=False)
+def _steer_out(fp, sf, si, delta):
+    """The steering command of the inner loop's ``delta`` (Cascade._step): the angle sent (the
+    offset estimate in force taken off, :func:`steer_correction`, within the steering limits,
+    :func:`steer_command`) and the wheels' intended angle."""
+    off = steer_correction(_steer_params(fp, sf, si), _steer_load(sf, si))
+    sent, wheels = steer_command(delta, off, fp[FP_L_DMIN], fp[FP_L_DMAX])
+    sf[SF_STOFF], sf[SF_STSENT] = off, sent
+    return sent, wheels
 
 
 @njit(cache=True, fastmath=False)
@@ -842,7 +894,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             else:
                 sc[SC_YM], sc[SC_YM + 1] = math.nan, math.nan
             u0 = sf[SF_PLANTU] if ip[IP_MFORCE] != 0 else sf[SF_UAPP]
-            u1 = sf[SF_PLANTU + 1] if ip[IP_MSTEER] != 0 else sf[SF_UAPP + 1]
+            # (a measured steering is the servo's: the wheels' intended angle adds the offset in force)
+            u1 = sf[SF_PLANTU + 1] + sf[SF_STOFF] if ip[IP_MSTEER] != 0 else sf[SF_UAPP + 1]
             if sf[SF_LOW] != 0.0:  # lqr.low_speed_resistance: the MHE sees the force net of it
                 u0 = u0 - sf[SF_LOW]
             si[SI_TICK0] = _ticks()
@@ -861,6 +914,10 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             if ip[IP_ANYCOURSE] != 0:
                 _course_sample(si[SI_POSEOK] != 0 and si[SI_SPOK] != 0, y[2], y[3], ev1, ev0 * ev2,
                                y[4] - _gyro_now(ip, sf, si), sc[SC_UMHE + 1], sc[SC_UMHE], cur)
+            if ip[IP_STEER] != 0:  # fusion.steering_offset: the yaw balance of the angle last sent
+                _steer_step(fp, si[SI_FRESH] != 0 and si[SI_SPOK] != 0 and si[SI_ESTSTAT] == ST_OK
+                            and not (si[SI_HASLAST] != 0 and si[SI_SAT] != 0), ev0,
+                            y[4] - _gyro_now(ip, sf, si), sf, si)
             F_in, Fr_in = sc[SC_ESTF], sc[SC_ESTFR]
             F_c = F_in  # the compensated window estimate (lqr.friction_step)
             if ip[IP_FSTEP] != 0:
@@ -883,7 +940,10 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             phase = PH_POST_LQR
         if phase == PH_POST_LQR:
             # the command's bookkeeping (Cascade), the inner log and the plant (simulate)
-            sf[SF_UAPP], sf[SF_UAPP + 1] = sc[SC_OF], sc[SC_OD]
+            wheels = sc[SC_OD]
+            if ip[IP_STEER] != 0:  # the servo gets the angle less the steering offset in force
+                sc[SC_OD], wheels = _steer_out(fp, sf, si, sc[SC_OD])
+            sf[SF_UAPP], sf[SF_UAPP + 1] = sc[SC_OF], wheels
             st = si[SI_ESTSTAT]
             ev[EV_MHE_REJ] += 1 if st == ST_REJECTED else 0
             ev[EV_MHE_FAIL] += 1 if st == ST_FAILED else 0

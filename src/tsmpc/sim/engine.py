@@ -134,9 +134,9 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
     "tsmpc.control.cascade:Cascade.__init__": "0824875cc4d52255",
-    "tsmpc.control.cascade:Cascade.reset": "5add1caa7458313d",
+    "tsmpc.control.cascade:Cascade.reset": "6e1809c2dd2f6d57",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "a7272f45fbec86d8",
+    "tsmpc.control.cascade:Cascade._step": "b2786e3c23bc6de6",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "748ed28374e52348",
     "tsmpc.control.cascade:Cascade._outer": "c3f0fb3dc4ccf2ab",
@@ -147,7 +147,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade.reference_row": "257f90494b63c8c2",
     "tsmpc.control.governor:governed_window": "cadafab2efb735cb",
     "tsmpc.control.governor:Governor.step": "12200cfb7c1bc640",
-    "tsmpc.control.cascade:Cascade._estimate": "6741a91ddeef6f00",
+    "tsmpc.control.cascade:Cascade._estimate": "ae82eb831df2ef47",
     "tsmpc.control.cascade:Cascade._compensated": "7bfaf70f34cf6d62",
     "tsmpc.control.cascade:Cascade._inner": "3a018d7e1029a195",
     "tsmpc.control.cascade:Cascade._plausible_speeds": "4b22de6905cbdf56",
@@ -156,7 +156,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade._watch_samples": "7a7df27fe2b75dfc",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
-    "tsmpc.control.cascade:Cascade._apply_stiffness": "46da19951b5e07db",
+    "tsmpc.control.cascade:Cascade._apply_stiffness": "fe7618eb687caf00",
     "tsmpc.control.cascade:_apply_stiffness_to": "3dd6d16df1ce959c",
     "tsmpc.control.slip_aware:outer_loop_errors": "3775c2395e80851d",
     "tsmpc.control.slip_aware:velocity_frame_errors": "b81a30dfed8c53bb",
@@ -680,6 +680,9 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     ip[ke.IP_STIFF], ip[ke.IP_MASSEST] = fs.stiffness_estimate, fs.mass_estimate
     ip[ke.IP_GYRO] = fs.gyro_bias
     fp[ke.FP_GYRO:ke.FP_GYRO + 4] = fu.gyro.params
+    ip[ke.IP_STEER] = fs.steering_offset
+    assert len(fu.steer_p) == ke.N_STEER_P  # (the kernel rebuilds the record from these slots)
+    fp[ke.FP_STEER:ke.FP_STEER + ke.N_STEER_P] = fu.steer_p
     ip[ke.IP_SPEEDFB], ip[ke.IP_LQR_SFB] = fu.speed_feedback, law.speed_feedback
     inner = lqr._inner
     ip[ke.IP_COMP], ip[ke.IP_UIO], ip[ke.IP_LOWRES] = inner.compensation, inner.raw_estimate, inner.low_speed
@@ -741,6 +744,12 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     si[ke.SI_GYOPEN], si[ke.SI_GYN], si[ke.SI_GYGAP], si[ke.SI_GYCHORDS] = gs.open, gs.n, gs.gap, gs.n_chords
     sf[ke.SF_GYTH0], sf[ke.SF_GYINT], sf[ke.SF_GYWLAST] = gs.th0, gs.integ, gs.w_last
     sf[ke.SF_GYSB], sf[ke.SF_GYSW] = gs.sb, gs.sw
+    st = cascade._fusion.steer  # the steering-offset fit (a reset cascade: its prior)
+    si[ke.SI_STINIT], si[ke.SI_STN] = st.init, st.n
+    sf[ke.SF_STOMF], sf[ke.SF_STDEF], sf[ke.SF_STDDF] = st.om_f, st.de_f, st.dd_f
+    sf[ke.SF_STS11], sf[ke.SF_STS12], sf[ke.SF_STS22] = st.s11, st.s12, st.s22
+    sf[ke.SF_STB1], sf[ke.SF_STB2] = st.b1, st.b2
+    sf[ke.SF_STOFF], sf[ke.SF_STSENT] = cascade._steer_offset, cascade._steer_sent
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
     sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival
