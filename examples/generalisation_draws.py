@@ -24,8 +24,8 @@ ROOT = Path(__file__).resolve().parents[1]
 #: (file, sweep name, seed, number of draws, case-name prefix)
 SETS = (("generalisation.toml", "generalisation", 35, 50, "d"),
         ("generalisation_heldback.toml", "generalisation-heldback", 9035, 50, "h"))
-#: The paper's reference, relative to the sweep file (read from ../shared, never bundled).
-TRACK = "../../shared/data/paper/planner_references_100ms.csv"
+#: The paper's reference, a dataset name (``tsmpc data fetch paper``; the file is never bundled).
+TRACK = "paper"
 
 HEADER = """\
 # The generalisation benchmark (issue 35){held}: {n} random draws, each from the whole class of

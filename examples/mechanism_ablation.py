@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from tsmpc.datasets import label as track_label
 from tsmpc.sweep import aggregate, expand, load_sweep, run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,8 +52,8 @@ PAYS = 1.05
 
 
 def _track_name(t: Any) -> str:
-    stem = Path(str(t)).stem
-    return "paper ref." if stem.startswith("planner_references") else stem
+    name = track_label(str(t))
+    return "paper ref." if name == "paper reference" else name
 
 
 def verdicts(table: Any) -> list[dict[str, Any]]:

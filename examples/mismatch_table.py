@@ -19,6 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from tsmpc.datasets import label
 from tsmpc.report.mismatch import acceptance, figure, reference_table, verdict_table
 from tsmpc.sweep import aggregate, expand, load_sweep, run_sweep
 
@@ -54,8 +55,8 @@ def mismatch_blocks(out: Path, *, spec_path: Path = ROOT / "examples" / "mismatc
     verdicts = acceptance(table, tracks[0], cases)
     blocks["acceptance"] = verdict_table(verdicts)
     n_ok = sum(v.passed for v in verdicts)
-    blocks["summary"] = (f"{len(table)} runs ({', '.join(Path(t).stem for t in tracks)}); on "
-                         f"{Path(tracks[0]).stem}, {n_ok} of {len(verdicts)} cases meet the criteria.")
+    blocks["summary"] = (f"{len(table)} runs ({', '.join(label(t) for t in tracks)}); on the "
+                         f"{label(tracks[0])}, {n_ok} of {len(verdicts)} cases meet the criteria.")
     if img is not None:
         figure(table, tracks, cases, ctrls, img)
     return blocks

@@ -57,6 +57,7 @@ __all__ = [
     "fetch_command",
     "find",
     "is_dataset_name",
+    "label",
     "names",
     "path_or_dataset",
     "resolve",
@@ -187,6 +188,18 @@ def is_dataset_name(text: str | os.PathLike[str]) -> bool:
     except KeyError:
         return False
     return True
+
+
+def label(track: str | os.PathLike[str]) -> str:
+    """A reference's name for tables and figures: ``paper`` (the dataset name or a path to its
+    file) -> ``paper reference``, ``monza`` -> ``Monza`` (the file's stem), any other path -> its
+    stem. Needs no data on disk."""
+    s = os.fspath(track)
+    rel = None
+    if is_dataset_name(s):
+        rel = _lookup(s)[1]
+    stem = Path(rel if rel is not None else s).stem
+    return "paper reference" if stem == Path(PAPER_FILE).stem else stem
 
 
 def dataset_of(name: str) -> str:

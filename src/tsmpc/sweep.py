@@ -435,10 +435,17 @@ def _track_values(spec: SweepSpec) -> list[str]:
 
 
 def _track_path(track: str, spec: SweepSpec, source: str = "sweep") -> Path | None:
+    return track_file(track, spec.root, source)
+
+
+def track_file(track: str, root: str | Path, source: str = "sweep") -> Path | None:
+    """The file a sweep's ``track`` value names (None for ``builtin``): a path relative to the sweep
+    file's folder ``root``, else a dataset name (``paper``, ``monza``) resolved by
+    :func:`tsmpc.datasets.resolve` as on the command line. Raises :class:`ConfigError`."""
     if track == "builtin":
         return None
     p = Path(track)
-    p = p if p.is_absolute() else Path(spec.root) / p
+    p = p if p.is_absolute() else Path(root) / p
     if not p.is_file() and not os.path.lexists(p):
         from tsmpc import datasets
 
@@ -680,7 +687,8 @@ def _prepare(task: RunTask) -> _Prepared:
     if p.track == "builtin":
         sc = Scenario("builtin-circuit", builtin_circuit(dt=Tc), meta={"reference": "builtin-circuit"})
     else:
-        path = Path(p.track) if Path(p.track).is_absolute() else Path(task.root) / p.track
+        path = track_file(p.track, task.root)
+        assert path is not None  # "builtin" is handled above
         if is_tumftm(path):
             track = load_tumftm(path)
             ref = plan_track(track, cfg.planner, dt=Tc, tail_s=(N + 1) * Tc)

@@ -35,7 +35,9 @@ BOUNDS = {"rmse_y": 0.04, "max_abs_lateral_m": 0.25, "rmse_v": 0.15}
 
 
 def _ref_name(track: str) -> str:
-    return Path(str(track)).stem
+    from tsmpc.datasets import label
+
+    return label(str(track))
 
 
 def reference_table(table: Any, track: str, cases: list[str], controllers: list[str]) -> str:
