@@ -1166,7 +1166,7 @@ def steer_start(p: SteerParams) -> SteerState:
 def steer_gain(p: SteerParams, v: float) -> float:
     """g(v) = δ_eq / ω [s] of the model's steady turn at speed v > 0: the α̇ = ω̇ = 0 rows of the
     single-track model (paper eq. "dynamic model", the MHE's; cos δ ≈ 1),
-    [A22 B22; A32 B32] [α; δ] = −[A23; A33] ω, solved for δ. It is the familiar
+    ``[A22 B22; A32 B32] [α; δ] = −[A23; A33] ω``, solved for δ. It is the familiar
     δ_eq ≈ (L / v + K_us v) ω with the understeer gradient K_us of the model."""
     A22 = -(p.C_r + p.C_f) / (p.M * v)
     A23 = (p.C_r * p.b - p.C_f * p.a) / (p.M * v * v) - 1.0
