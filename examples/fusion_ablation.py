@@ -8,7 +8,7 @@ plus the issue's single-number acceptance checks (docs/mismatch.md shows this sc
 :func:`fusion_blocks` is the docs generator's section ``fusion-ablation``.
 
 REFERENCE defaults to the paper's file (not bundled: ``tsmpc data fetch paper``; found by
-:func:`tsmpc.datasets.resolve`). 88 whole runs of 127 s (REF, seed 0): 3–5 minutes on two shared cores.
+:func:`tsmpc.datasets.resolve`). 108 whole runs of 127 s (REF, seed 0): 3–5 minutes on two shared cores.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from tsmpc.sim import experiment
 
 ROOT = Path(__file__).resolve().parents[1]
 SWITCHES = ("reject_repeated_samples", "predict_pose", "course_slip", "course_speed", "gyro_bias",
-            "stiffness_estimate", "mass_estimate")
+            "steering_offset", "stiffness_estimate", "mass_estimate")
 #: (label, config assignments, robustness scenario) — the conditions of the issue.
 CASES = (
     ("nominal", [], "nominal"),
@@ -37,6 +37,7 @@ CASES = (
     ("speed sensor +0.2 m/s", ["scenario.sensors.v_bias=0.2"], "nominal"),
     ("GNSS noise x10", ["scenario.sensors.gnss_noise_scale=10"], "nominal"),
     ("yaw-rate sensor +0.01 rad/s", ["scenario.sensors.omega_bias=0.01"], "nominal"),
+    ("steering offset +1°", ["scenario.plant.steering_offset_rad=0.017453"], "nominal"),
 )
 KEYS = ("x", "y", "theta", "v", "omega")
 

@@ -1,14 +1,14 @@
 """Which mechanisms pay (issue 34 item 3): runs the sweep of examples/mechanisms.toml (or finishes
-it: runs already on disk are kept) — every default-on switch off alone, on the mismatch benchmark's
-15 cases, a stalled bus and a biased gyro, on the paper's reference and two race tracks — and
-prints, per switch, the largest gain it brings on any case and column, and the cases that complete
-only with it (docs/mismatch.md shows this script's output).
+it: runs already on disk are kept) — every default-on switch off alone, on the mismatch
+benchmark's 15 cases, a stalled bus, a biased gyro and a steering offset, on the paper's reference
+and two race tracks — and prints, per switch, the largest gain it brings on any case and column,
+and the cases that complete only with it (docs/mismatch.md shows this script's output).
 
     python examples/mechanism_ablation.py [--out results/mechanisms] [--workers 1]
 
 The rule: a switch stays when some case is better by 5 % or more with it in some column (RMSE x, y,
 θ, v, ω or max |e_y|), or completes only with it; else it is removed, not switched off.
-:func:`mechanism_blocks` is the docs generator's section ``mechanisms``. 816 whole runs: ≈ 50 min
+:func:`mechanism_blocks` is the docs generator's section ``mechanisms``. 918 whole runs: ≈ 55 min
 with one worker on two shared cores.
 """
 
@@ -41,6 +41,7 @@ MECHANISMS = {
     "no-course-slip": ("fusion.course_slip", "slip corrected by the course over ground"),
     "no-course-speed": ("fusion.course_speed", "speed offset from the speed over ground"),
     "no-gyro-bias": ("fusion.gyro_bias", "yaw-rate sensor bias from the measured heading"),
+    "no-steering-offset": ("fusion.steering_offset", "steering-angle offset from the yaw balance"),
     "no-stiffness": ("fusion.stiffness_estimate", "cornering stiffness fit"),
     "no-mass": ("fusion.mass_estimate", "mass-error inertia out of the friction estimate"),
     "no-governor": ("governor.enabled", "speed governor (the plan re-timed to the grip)"),

@@ -1205,7 +1205,7 @@ def generalisation(ctx: Context) -> Produced:
 def fusion_ablation(ctx: Context) -> Produced:
     """Each fusion switch off in turn under the conditions that motivated it (docs/mismatch.md)."""
     p = Produced()
-    ctx.progress("examples/fusion_ablation.py (88 runs)")
+    ctx.progress("examples/fusion_ablation.py (108 runs)")
     for name, body in _example(ctx, "fusion_ablation").fusion_blocks(ctx.paper_reference,
                                                                       ctx.max_steps).items():
         p.add("fusion-ablation", name, body)
@@ -1213,7 +1213,7 @@ def fusion_ablation(ctx: Context) -> Produced:
 
 
 def mechanisms(ctx: Context) -> Produced:
-    """Which default-on mechanisms pay (examples/mechanisms.toml, 816 runs; docs/mismatch.md)."""
+    """Which default-on mechanisms pay (examples/mechanisms.toml, 918 runs; docs/mismatch.md)."""
     p = Produced()
     ctx.progress("examples/mechanism_ablation.py (the sweep of examples/mechanisms.toml)")
     for name, body in _example(ctx, "mechanism_ablation").mechanism_blocks(
@@ -1391,8 +1391,8 @@ PRODUCERS: tuple[Producer, ...] = (
     Producer("mismatch", mismatch, "the mismatch benchmark: 135 runs, 10–20 min"),
     Producer("generalisation", generalisation, "the generalisation benchmark: 100 draws × 2 "
              "controllers, 100 oracle-tuned designs"),
-    Producer("fusion-ablation", fusion_ablation, "the fusion switches' ablation (88 runs)"),
-    Producer("mechanisms", mechanisms, "which default-on mechanisms pay (816 runs, ≈ 50 min)"),
+    Producer("fusion-ablation", fusion_ablation, "the fusion switches' ablation (108 runs)"),
+    Producer("mechanisms", mechanisms, "which default-on mechanisms pay (918 runs, ≈ 55 min)"),
     Producer("race-speeds", race_speeds, "the public tracks at 22 and 25 m/s, S-bends"),
     Producer("baselines", baselines, "the baselines against the TS-MPC on five cases (6 compares)"),
     Producer("baseline-tuning", baseline_tuning, "the baselines' tuning search (≈ 700 runs)"),

@@ -1074,9 +1074,11 @@ class SteerParams(NamedTuple):
 
     Attributes:
         Td: call period T_d [s] (one sample).
-        C_f, C_r: axle cornering stiffnesses of the balance's model [N/rad] (the stiffness fit's
+        C_f: front axle cornering stiffness of the balance's model [N/rad] (the stiffness fit's
             when ``stiffness_estimate`` has replaced the config's: :func:`steer_stiffness`).
-        a, b: distances of the CoG to the front and rear axles [m].
+        C_r: rear axle cornering stiffness of the balance's model [N/rad] (likewise).
+        a: distance of the CoG to the front axle [m].
+        b: distance of the CoG to the rear axle [m].
         M: mass [kg].
         I: yaw inertia [kg m²].
         lam: forgetting per T_d, exp(−T_d / ``STEER_MEMORY_S``).
@@ -1121,8 +1123,11 @@ class SteerState(NamedTuple):
         om_f: the filtered bias-free yaw rate [rad/s].
         de_f: the filtered steering sent [rad].
         dd_f: the rate of ``de_f`` [rad/s].
-        s11, s12, s22: the information matrix (the prior's included).
-        b1, b2: the information vector (the prior's mean is 0).
+        s11: the information matrix's (δ₀, δ₀) entry (the prior's included).
+        s12: its (δ₀, ΔK) entry.
+        s22: its (ΔK, ΔK) entry (the prior's included).
+        b1: the information vector's δ₀ entry (the prior's mean is 0).
+        b2: its ΔK entry.
         n: samples fitted since the reset.
     """
 

@@ -744,11 +744,11 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     si[ke.SI_GYOPEN], si[ke.SI_GYN], si[ke.SI_GYGAP], si[ke.SI_GYCHORDS] = gs.open, gs.n, gs.gap, gs.n_chords
     sf[ke.SF_GYTH0], sf[ke.SF_GYINT], sf[ke.SF_GYWLAST] = gs.th0, gs.integ, gs.w_last
     sf[ke.SF_GYSB], sf[ke.SF_GYSW] = gs.sb, gs.sw
-    st = cascade._fusion.steer  # the steering-offset fit (a reset cascade: its prior)
-    si[ke.SI_STINIT], si[ke.SI_STN] = st.init, st.n
-    sf[ke.SF_STOMF], sf[ke.SF_STDEF], sf[ke.SF_STDDF] = st.om_f, st.de_f, st.dd_f
-    sf[ke.SF_STS11], sf[ke.SF_STS12], sf[ke.SF_STS22] = st.s11, st.s12, st.s22
-    sf[ke.SF_STB1], sf[ke.SF_STB2] = st.b1, st.b2
+    so = cascade._fusion.steer  # the steering-offset fit (a reset cascade: its prior)
+    si[ke.SI_STINIT], si[ke.SI_STN] = so.init, so.n
+    sf[ke.SF_STOMF], sf[ke.SF_STDEF], sf[ke.SF_STDDF] = so.om_f, so.de_f, so.dd_f
+    sf[ke.SF_STS11], sf[ke.SF_STS12], sf[ke.SF_STS22] = so.s11, so.s12, so.s22
+    sf[ke.SF_STB1], sf[ke.SF_STB2] = so.b1, so.b2
     sf[ke.SF_STOFF], sf[ke.SF_STSENT] = cascade._steer_offset, cascade._steer_sent
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
