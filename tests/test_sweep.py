@@ -263,11 +263,11 @@ def test_a_track_may_be_a_dataset_name(tmp_path: Path) -> None:
     """``track = ["paper"]`` (or a track's name, ``monza``) is the fetched dataset, as on the command
     line (tsmpc.datasets); a name that is neither a dataset nor a file is still refused."""
     from tsmpc import datasets
-    from tsmpc.sweep import _track_path
+    from tsmpc.sweep import track_file
 
     need_data("paper")
     spec = load_sweep(_write(tmp_path, "[grid]\ntrack = ['paper']\nmethod = ['ref']\n"))
-    assert _track_path("paper", spec) == datasets.resolve("paper")
+    assert track_file("paper", spec.root) == datasets.resolve("paper")
     assert [t.params.track for t in expand(spec)] == ["paper"]
     with pytest.raises(ConfigError, match="neither 'builtin', a dataset name nor a readable file"):
         load_sweep(_write(tmp_path, "[grid]\ntrack = ['paperr']\n", "bad.toml"))

@@ -390,7 +390,7 @@ def _check_track(track: str, spec: SweepSpec, cfg: Config, source: str) -> None:
     from tsmpc.planning.tracks import is_tumftm, load_tumftm, plan_track
     from tsmpc.sim.compare import check_trackable, load_scenario
 
-    path = _track_path(track, spec, source=source)
+    path = track_file(track, spec.root, source=source)
     if path is None:
         return
     try:
@@ -432,10 +432,6 @@ def _track_values(spec: SweepSpec) -> list[str]:
     if spec.random is not None:
         vals += [str(v) for v in spec.random.choices.get("track", [])]
     return vals
-
-
-def _track_path(track: str, spec: SweepSpec, source: str = "sweep") -> Path | None:
-    return track_file(track, spec.root, source)
 
 
 def track_file(track: str, root: str | Path, source: str = "sweep") -> Path | None:

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from tsmpc.datasets import label as ref_name
+
 __all__ = ["COLUMNS", "Verdict", "acceptance", "figure", "reference_table", "verdict_table"]
 
 #: (aggregate column, label, format) of the result tables.
@@ -32,12 +34,6 @@ SAT_RATIO = 1.2
 PHYSICS_FACTOR = 2.0
 #: Absolute bounds where the loss is not physics.
 BOUNDS = {"rmse_y": 0.04, "max_abs_lateral_m": 0.25, "rmse_v": 0.15}
-
-
-def _ref_name(track: str) -> str:
-    from tsmpc.datasets import label
-
-    return label(str(track))
 
 
 def reference_table(table: Any, track: str, cases: list[str], controllers: list[str]) -> str:
@@ -163,7 +159,7 @@ def figure(table: Any, tracks: list[str], cases: list[str], controllers: list[st
             ax.set_yscale("log")
             ax.set_xticks(x, cases, rotation=60, ha="right", fontsize=8)
             ax.set_ylabel(label)
-            ax.set_title(f"{_ref_name(track)}: {label} (hatched: diverged)", fontsize=9)
+            ax.set_title(f"{ref_name(str(track))}: {label} (hatched: diverged)", fontsize=9)
             ax.grid(axis="y", alpha=0.3, which="both")
     # one legend above the panels: inside a panel it covered bars
     handles, labels = axs[0, 0].get_legend_handles_labels()
