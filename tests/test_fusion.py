@@ -157,16 +157,22 @@ def test_the_stiffness_fit_ignores_a_car_weaving_on_a_straight(cfg: Config) -> N
     assert f.stiffness == pytest.approx((model.C_f, model.C_r))
 
 
-def test_a_missing_pose_spoils_its_chords_only() -> None:
-    f = CourseFusion(0.1, 0.0)
-    f.close(np.array([0.0, 0.0, 0.0]), 10.0)
-    for k in range(1, 12):
-        for _ in range(10):
-            f.sample(True, 0.0, 10.0, 0.0, 0.0)
-        f.close(None if k == 3 else np.array([1.0 * k, 0.0, 0.0]), 10.0)
-    # a chord spans 5 measured intervals: those ending at steps 5…8 contain the gap at step 3,
-    # the first whole one runs from step 4 to 9
-    assert f.n_chords == 3
+def test_a_missing_pose_ends_no_interval_and_a_missing_speed_spoils_its_chords() -> None:
+    """MPC steps 1…11 on a straight at 10 m/s. A pose missing at step 3 ends nothing: the interval
+    from step 2 runs on to step 4 (its heading from the yaw rate), and chords of 5 T_c end at steps
+    5…11 (7), as without the gap. A speed sample missing in step 3's interval instead spoils it:
+    only the chords that begin after it (steps 8…11) remain."""
+    counts = []
+    for missing in ("pose", "speed"):
+        f = CourseFusion(0.1, 0.0)
+        f.close(np.array([0.0, 0.0, 0.0]), 10.0)
+        for k in range(1, 12):
+            for i in range(10):
+                ok = not (missing == "speed" and k == 3 and i == 4)
+                f.sample(ok, 0.0, 10.0, 0.0, 0.0)
+            f.close(None if (missing == "pose" and k == 3) else np.array([1.0 * k, 0.0, 0.0]), 10.0)
+        counts.append(f.n_chords)
+    assert counts == [7, 4]
 
 
 def test_mass_estimate_separates_inertia_from_a_drifting_friction_force() -> None:

@@ -23,6 +23,7 @@ from tsmpc.estimation.fusion import (
     MASS_MEMORY_S,
     NO_INTERVAL,
     REPEAT_START,
+    RING,
     SLIP_PRIOR,
     STIFF_CORRELATION,
     STIFF_MEMORY_S,
@@ -49,8 +50,9 @@ def b(request) -> _Blocks:
 
 
 def _params(b: _Blocks, Tc: float = 0.1, sigma: float = 0.01, C: tuple[float, float] = (50000.0, 50000.0)):
-    """A car with round numbers: M 1000 kg, I_z 1500 kg m², a = 1, b = 1.5 m, g = 10 m/s²."""
-    return b.course_params(Tc, sigma, True, C[0], C[1], 1000.0, 1500.0, 1.0, 1.5, 10.0)
+    """A car with round numbers: M 1000 kg, I_z 1500 kg m², a = 1, b = 1.5 m, g = 10 m/s²; 10
+    calls of T_c / 10 per MPC period."""
+    return b.course_params(Tc, sigma, True, C[0], C[1], 1000.0, 1500.0, 1.0, 1.5, 10.0, Tc / 10, 10)
 
 
 def _records(x):
@@ -70,9 +72,9 @@ def _drive_arc(b: _Blocks, p, v: float, w: float, seconds: float, v_sensor: floa
     for k in range(round(seconds / Td) + 1):
         th = w * k * Td
         if k % n_in == 0:
-            s, cur = b.course_close(p, s, cur, True, R * math.sin(th), R * (1.0 - math.cos(th)), th,
+            s, cur = b.course_close(p, s, cur, True, True, R * math.sin(th), R * (1.0 - math.cos(th)), th,
                                     v + v_sensor, w, v * w)
-        cur = b.course_sample(cur, True, th, v + v_sensor, 0.0, v * w, w, 0.0, 0.0)
+        cur = b.course_sample(p, cur, True, True, th, v + v_sensor, 0.0, v * w, w, 0.0, 0.0)
     return s, cur
 
 
@@ -96,12 +98,12 @@ def test_repeat_guard_by_hand(b: _Blocks) -> None:
 def test_an_interval_sums_by_the_trapezoid(b: _Blocks) -> None:
     """Opening pose, samples at v = 10 and 12 m/s, closing at 14 m/s: Σ v = 10/2 + 12 + 14/2 =
     24 (the opening and closing samples count half), Σ v in full 22; the first sample's ω and v
-    are kept; a missing sample spoils the interval."""
+    are kept; a missing speed sample spoils the interval, a missing pose does not end it."""
     p = _params(b)
-    s, cur = b.course_close(p, fu.course_start(p), NO_INTERVAL, True, 0.0, 0.0, 0.0, 10.0, 0.0, 0.3)
+    s, cur = b.course_close(p, fu.course_start(p), NO_INTERVAL, True, True, 0.0, 0.0, 0.0, 10.0, 0.0, 0.3)
     assert cur.open and cur.ok and cur.n == 0 and cur.ay_ref == 0.3 and math.isnan(cur.v_first)
-    cur = b.course_sample(cur, True, 0.0, 10.0, 0.01, 1.0, 0.1, 0.02, 500.0)
-    cur = b.course_sample(cur, True, 0.2, 12.0, 0.03, 2.0, 0.2, 0.04, 700.0)
+    cur = b.course_sample(p, cur, True, True, 0.0, 10.0, 0.01, 1.0, 0.1, 0.02, 500.0)
+    cur = b.course_sample(p, cur, True, True, 0.2, 12.0, 0.03, 2.0, 0.2, 0.04, 700.0)
     assert cur.n == 2 and cur.w_first == 0.1 and cur.v_first == 10.0
     assert cur.sv == pytest.approx(5.0 + 12.0) and cur.sv_full == pytest.approx(22.0)
     assert cur.sv_dth == pytest.approx(12.0 * 0.2)  # v (θ − θ_start), the first counting half
@@ -109,16 +111,40 @@ def test_an_interval_sums_by_the_trapezoid(b: _Blocks) -> None:
     assert cur.sv_ay == pytest.approx(10.0 * 1.0 + 12.0 * 2.0)
     assert cur.s_delta == pytest.approx(0.06) and cur.s_F == pytest.approx(1200.0)
     assert cur.s_w_v == pytest.approx(0.1 / 10.0 + 0.2 / 12.0) and cur.s_vw == pytest.approx(1.0 + 2.4)
-    s, nxt = b.course_close(p, s, cur, True, 2.2, 0.0, 0.4, 14.0, 0.0, -0.2)
+    s, nxt = b.course_close(p, s, cur, True, True, 2.2, 0.0, 0.4, 14.0, 0.0, -0.2)
     last = s.ring[-1]
     assert s.n_iv == 1 and last.ok and last.ay_ref == 0.2  # the smaller |v_d ω_d| of both ends
     assert last.sv == pytest.approx(24.0) and last.sv_dth == pytest.approx(12.0 * 0.2 + 7.0 * 0.4)
-    assert nxt.open and (nxt.sx, nxt.sy, nxt.sth) == (2.2, 0.0, 0.4)
-    spoilt = b.course_sample(nxt, False, 0.4, 14.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    assert nxt.open and (nxt.sx, nxt.sy, nxt.sth) == (2.2, 0.0, 0.4) and s.since == 0
+    spoilt = b.course_sample(p, nxt, False, True, 0.4, 14.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     assert not spoilt.ok and spoilt.n == 0
-    assert b.course_sample(NO_INTERVAL, True, 0.4, 14.0, 0.0, 0.0, 0.0, 0.0, 0.0) == NO_INTERVAL
-    s, none = b.course_close(p, s, spoilt, False, math.nan, math.nan, math.nan, 14.0, 0.0, 0.0)
-    assert not none.open and not s.ring[-1].ok and s.n_iv == 2
+    assert b.course_sample(p, NO_INTERVAL, True, True, 0.4, 14.0, 0.0, 0.0, 0.0, 0.0, 0.0) == NO_INTERVAL
+    # no pose, even at an MPC step: nothing ends (the interval goes on, the calls are counted)
+    s, same = b.course_close(p, s, spoilt, True, False, math.nan, math.nan, math.nan, 14.0, 0.0, 0.0)
+    assert _records(same) == _records(spoilt) and s.n_iv == 1 and s.since == 1
+    # a pose between MPC steps ends nothing before the interval has lasted a T_c (10 calls) ...
+    s, same = b.course_close(p, s, spoilt, False, True, 3.0, 0.0, 0.4, 14.0, 0.0, 0.0)
+    assert _records(same) == _records(spoilt) and s.n_iv == 1 and s.since == 2
+    s = s._replace(since=9)
+    # ... then it does; a pose without a speed closes the interval spoilt and opens none
+    s, none = b.course_close(p, s, spoilt, False, True, 4.0, 0.0, 0.4, math.nan, 0.0, 0.0)
+    assert not none.open and not s.ring[-1].ok and s.n_iv == 2 and s.since == 0
+
+
+def test_between_poses_the_heading_is_the_gyros_integral(b: _Blocks) -> None:
+    """A sample without a pose takes the last sample's heading plus the trapezoid integral of ω
+    over T_d (0.01 s here); a pose's heading replaces it. The opening sample is the pose's own."""
+    p = _params(b)
+    _, cur = b.course_close(p, fu.course_start(p), NO_INTERVAL, True, True, 0.0, 0.0, 0.1, 10.0, 0.2, 0.0)
+    cur = b.course_sample(p, cur, True, False, math.nan, 10.0, 0.0, 0.0, 0.2, 0.0, 0.0)
+    assert cur.ok and cur.th_last == 0.1 and cur.w_last == 0.2 and cur.sv_dth == 0.0
+    cur = b.course_sample(p, cur, True, False, math.nan, 10.0, 0.0, 0.0, 0.4, 0.0, 0.0)
+    assert cur.th_last == pytest.approx(0.1 + 0.5 * (0.2 + 0.4) * 0.01, rel=1e-15)
+    assert cur.sv_dth == pytest.approx(10.0 * 0.003, rel=1e-12)
+    cur = b.course_sample(p, cur, True, True, 0.5, 10.0, 0.0, 0.0, 0.4, 0.0, 0.0)  # a pose: its θ
+    assert cur.ok and cur.th_last == 0.5 and cur.sv_dth == pytest.approx(10.0 * (0.003 + 0.4), rel=1e-12)
+    # a missing yaw rate between poses spoils the interval (no heading to integrate)
+    assert not b.course_sample(p, cur, True, False, math.nan, 10.0, 0.0, 0.0, math.nan, 0.0, 0.0).ok
 
 
 def test_the_speed_over_ground_is_the_arc_not_the_chord(b: _Blocks) -> None:
@@ -146,10 +172,14 @@ def _corner_ring(p, alpha_hat: float = -0.01, ay_ref: float = 5.0, v_first: floa
     their start, but the noise measured at half the configured level (the configured σ stays the
     floor: the noise scale is 1)."""
     iv = Interval(True, True, 0.0, 0.0, 0.0, 10, 100.0, 0.0, 100.0 * alpha_hat, 500.0, 100.0, 1.1, 0.5,
-                  50.0, 0.0, 0.5, ay_ref, v_first)
+                  50.0, 0.0, 0.5, ay_ref, v_first, 0.0, 0.5)
     s = fu.course_start(p)
     slip = s.slip._replace(n2=0.25 * fu.NOISE_PRIOR_CHORDS)
-    return CourseState((iv,) * BASELINE, BASELINE, 0.5, 10.0, 0, slip, s.speed, s.stiff)
+    return CourseState((NO_INTERVAL,) * (RING - BASELINE) + (iv,) * BASELINE, BASELINE, 0.5, 10.0, 0, slip,
+                       s.speed, s.stiff, 0)
+
+
+K0 = RING - BASELINE  #: the ring index of :func:`_corner_ring`'s first interval
 
 
 def test_one_cornering_chord_in_the_slip_and_stiffness_fits(b: _Blocks) -> None:
@@ -159,7 +189,7 @@ def test_one_cornering_chord_in_the_slip_and_stiffness_fits(b: _Blocks) -> None:
     α_R = b ω/v = 0.075 rad, each weighed against the model's prior (relative σ STIFF_PRIOR_REL):
     Ĉ = (C / REL)² + w F²) / ((C / REL)² / C + w F α)."""
     p = _params(b)
-    s = b.course_chord(p, _corner_ring(p), 5.0, 0.0, 0.0)
+    s = b.course_chord(p, _corner_ring(p), K0, 5.0, 0.0, 0.0)
     assert s.n_chords == 1
     sig = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4  # the chord's slip noise (noise scale 1)
     lam = 1.0 - 0.1 / fu.SLIP_MEMORY_S
@@ -179,7 +209,7 @@ def test_one_cornering_chord_in_the_slip_and_stiffness_fits(b: _Blocks) -> None:
     assert s.stiff.has_prev and s.stiff.alpha_prev == pytest.approx(-0.01)
     # the next chord: α̇ from the α̂ of consecutive chords, forgetting towards the prior
     s2 = b.course_chord(p, CourseState(_corner_ring(p, -0.02).ring, BASELINE, 0.5, 10.0, 1, s.slip, s.speed,
-                                       s.stiff), 5.0, 0.0, 0.0)
+                                       s.stiff, 0), K0, 5.0, 0.0, 0.0)
     g2 = 1.0 - 0.1 / STIFF_MEMORY_S
     S = 1000.0 * (5.0 + 10.0 * (-0.01 / 0.1))  # M (v ω + v α̇), α̇ = −0.01 rad / T_c: 4000 N
     F_f = 1.5 * S / 2.5  # 2400 N on α_F = 0.06: 40000 N/rad, plausible; the rear's 1600 N on
@@ -196,7 +226,7 @@ def test_the_stiffness_fit_takes_only_steady_corners(b: _Blocks) -> None:
     straight the slip fit's innovation measures the chords' noise instead."""
     p = _params(b)
     start = fu.course_start(p).stiff
-    straight = b.course_chord(p, _corner_ring(p, alpha_hat=-0.05, ay_ref=0.1), 5.0, 0.0, 0.0)
+    straight = b.course_chord(p, _corner_ring(p, alpha_hat=-0.05, ay_ref=0.1), K0, 5.0, 0.0, 0.0)
     assert straight.stiff == start and straight.n_chords == 1
     sig0 = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4
     g_n = 1.0 - 0.1 / fu.NOISE_MEMORY_S
@@ -205,15 +235,15 @@ def test_the_stiffness_fit_takes_only_steady_corners(b: _Blocks) -> None:
     scale = math.sqrt(straight.slip.n2 / straight.slip.n1)  # 0.05 rad of innovation: 2.6× the σ
     assert b.noise_scale(straight.slip) == pytest.approx(scale) and scale > 2.0
     # 0.1 g over the chord's 0.5 s is 0.5 m/s: 0.49 passes, 0.51 does not
-    assert b.course_chord(p, _corner_ring(p, v_first=10.0 - 0.49), 5.0, 0.0, 0.0).stiff != start
-    assert b.course_chord(p, _corner_ring(p, v_first=10.0 - 0.51), 5.0, 0.0, 0.0).stiff == start
+    assert b.course_chord(p, _corner_ring(p, v_first=10.0 - 0.49), K0, 5.0, 0.0, 0.0).stiff != start
+    assert b.course_chord(p, _corner_ring(p, v_first=10.0 - 0.51), K0, 5.0, 0.0, 0.0).stiff == start
     stiff_car = _params(b, C=(200000.0, 200000.0))  # the chord's F / α is below 0.5 C: out
-    s = b.course_chord(stiff_car, _corner_ring(stiff_car), 5.0, 0.0, 0.0)
+    s = b.course_chord(stiff_car, _corner_ring(stiff_car), K0, 5.0, 0.0, 0.0)
     assert b.stiffness(stiff_car, s.stiff) == pytest.approx((200000.0, 200000.0), rel=1e-12)
-    assert b.course_chord(p, _corner_ring(p), 1.9, 0.0, 0.0) == _corner_ring(p)  # < MIN_CHORD_M
+    assert b.course_chord(p, _corner_ring(p), K0, 1.9, 0.0, 0.0) == _corner_ring(p)  # < MIN_CHORD_M
     r = _corner_ring(p)
     still = CourseState(tuple(iv._replace(sv=0.0) for iv in r.ring), *r[1:])  # no speed: no chord
-    assert b.course_chord(p, still, 5.0, 0.0, 0.0) == still
+    assert b.course_chord(p, still, K0, 5.0, 0.0, 0.0) == still
 
 
 def test_stiffness_bounds_prior_and_application(b: _Blocks) -> None:
@@ -228,7 +258,7 @@ def test_stiffness_bounds_prior_and_application(b: _Blocks) -> None:
     assert b.stiffness(p, far) == (2.0 * 40000.0, 2.0 * 60000.0)
     assert b.stiffness(p, fu.StiffFit(1.0, 1.0, 1.0, 1.0, 0.0, False)) == (0.5 * 40000.0, 0.5 * 60000.0)
     slip = SlipFit(0.003, 0.002, 1e-5, 2e-6, 2e-6, 3e-4, 12.0, 11.0)
-    s = CourseState(s0.ring, 0, 0.0, math.nan, 0, slip, s0.speed, s0.stiff)
+    s = CourseState(s0.ring, 0, 0.0, math.nan, 0, slip, s0.speed, s0.stiff, 0)
     give, cf, cr, s1 = b.stiffness_update(p, s, False, 0.0, 0.0)  # none given yet: give, κ kept
     assert give and (cf, cr) == pytest.approx((40000.0, 60000.0)) and s1.slip == slip
     give, _, _, s1 = b.stiffness_update(p, s, True, 40000.0 * 1.0099, 60000.0 / 1.0099)
@@ -327,13 +357,18 @@ def test_compiled_blocks_equal_python_to_the_bit_on_a_random_drive() -> None:
             sample = tuple(math.nan if i == 1 else c for i, c in enumerate(sample))
         for i, blk in enumerate((py, nb)):
             _, gs[i] = blk.repeat_check(gs[i], *sample)
+            # every call: a pose ends an interval at MPC steps (and, at the low rate of the second
+            # half, a T_c after the last end); the heading is integrated between poses
+            low = k >= 1500
+            has_pose = k % 470 != 0 and (not low or k % 37 == 0)
+            states[i], curs[i] = blk.course_close(p, states[i], curs[i], k % 10 == 0, has_pose,
+                                                  sample[0], sample[1], th, v, w, v * w)
             if k % 10 == 0:
-                states[i], curs[i] = blk.course_close(p, states[i], curs[i], k % 470 != 0, sample[0],
-                                                      sample[1], th, v, w, v * w)
                 give, cf, cr, states[i] = blk.stiffness_update(p, states[i], *applied[i])
                 if give:
                     applied[i] = (True, cf, cr)
-            curs[i] = blk.course_sample(curs[i], k % 397 != 0, th, v, alpha, v * w, w, 0.05 * w, 300.0)
+            curs[i] = blk.course_sample(p, curs[i], k % 397 != 0, has_pose, th, v, alpha, v * w, w, 0.05 * w,
+                                        300.0)
             ms[i] = blk.mass_update(mp, ms[i], rings[i], v if k % 53 else math.nan, 800.0 + 90.0 * v)
         assert _records(states[0]) == _records(states[1]), k
         assert _records(curs[0]) == _records(curs[1]) and _records(gs[0]) == _records(gs[1]), k

@@ -527,9 +527,16 @@ class Cascade:
         # ω less the bias (the MHE, hence ω̂ for the TS-LQR and the dead reckoning; the course fits)
         self._fusion.gyro_sample(pose_ok, th, fresh and speeds_ok, om)
         om = om - self._fusion.gyro_bias()
+        mpc_step = self._calls % self.n_inner == 0
+        if self._fusion.any_course:  # an accepted pose may end the course fusion's interval
+            kc = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(self.reference) - 1)
+            self._fusion.course.close(np.array([X, Y, th]) if pose_ok else None,
+                                      v if fresh and speeds_ok else math.nan,
+                                      om if fresh and speeds_ok else math.nan,
+                                      float(self.reference.v[kc] * self.reference.omega[kc]), mpc_step)
         plan = e_meas = None
         t_mpc = 0.0
-        if self._calls % self.n_inner == 0:
+        if mpc_step:
             plan, e_meas, t_mpc = self._outer(t, X, Y, th, v, om, fresh, speeds_ok, pose_ok)
         # (_u_prev and _pose are set by _start_from above; ignores, not asserts: the syntax tree
         # of these methods is fingerprinted for the run engine, tsmpc.sim.engine._PORTED)
@@ -539,10 +546,11 @@ class Cascade:
         t2 = time.perf_counter()
         self._dead_reckon(est)
         if self._fusion.any_course:
-            # only samples the gates accepted: a rejected heading or speed is garbage
-            self._fusion.course.sample(pose_ok and speeds_ok, th, v, float(est.x[1]),
+            # only samples the gates accepted: a rejected speed is garbage, a rejected or missing
+            # heading is the gyro's integral since the last accepted one
+            self._fusion.course.sample(fresh and speeds_ok, th, v, float(est.x[1]),
                                        float(est.x[0] * est.x[2]), om, float(u_model[1]),
-                                       float(u_model[0]))
+                                       float(u_model[0]), pose_ok)
         # fusion.steering_offset: the steady yaw balance of the MHE's model, the bias-free ω against
         # the angle last sent; frozen while the sample, the MHE or the inner loop is unusable
         last = self._last
@@ -602,14 +610,8 @@ class Cascade:
         ev, fu, fs = self._events, self._fusion, self.cfg.fusion
         if not pose_ok:  # the MPC never sees NaN nor a jump: the dead-reckoned pose
             ev["pose_rejected"] += 1
-        if fu.any_course:  # an MPC step closes the course fusion's interval
-            kc = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(self.reference) - 1)
-            fu.course.close(np.array([X, Y, th]) if pose_ok else None,
-                            v if fresh and speeds_ok else math.nan,
-                            om if fresh and speeds_ok else math.nan,
-                            float(self.reference.v[kc] * self.reference.omega[kc]))
-            if fs.stiffness_estimate:
-                self._apply_stiffness()
+        if fu.any_course and fs.stiffness_estimate:  # the course fits' stiffnesses (_step closed)
+            self._apply_stiffness()
         if self._reanchor and pose_ok:
             self._reanchored(t, X, Y, v, om)
         elif self._catch_up:

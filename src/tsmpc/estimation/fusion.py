@@ -16,10 +16,24 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
   ahead of a frozen car: one lost MPC sample at 13 m/s is a 1.3 m jump of e_x, which the MPC
   answers with a full-throttle v_ref (issue 21: 795 saturated inner steps at 5 % random dropouts).
 * :class:`CourseFusion` (``course_slip``, ``course_speed``) — the measured positions give the
-  course and the speed over ground without any model: over a chord of the last ``BASELINE`` MPC
-  poses the chord's direction is the (speed-weighted) mean of the velocity heading θ + α, and its
+  course and the speed over ground without any model: over a chord between two measured poses
+  the chord's direction is the (speed-weighted) mean of the velocity heading θ + α, and its
   length over the time is the mean speed (arc/chord corrected for the turn). Two least-squares fits
   with forgetting use them:
+
+  - **any pose rate** (issue 35: the pose at 1–10 Hz, speed and yaw rate at every T_d): an
+    accepted pose ends the open interval at an MPC step, and between MPC steps once the interval
+    has lasted a T_c; a chord is the shortest run of the latest intervals that lasts ``BASELINE``
+    T_c (0.5 s), at most ``CHORD_MAX_S``, and its time span is the calls it counts, whatever the
+    rate. Between poses the samples need only a speed and a yaw rate: the heading is the last
+    accepted pose's plus the integral of the bias-free yaw rate (θ̇ = ω, exact kinematics; the
+    gyro fit below removes the bias first), so a missing or rejected pose does not spoil the
+    interval. Each chord adds the time of its last interval to the fits' memories (forgetting per
+    second, not per chord), and the stiffness fit counts a chord as one independent slip
+    measurement per ``STIFF_CORRELATION`` T_c of new data. With a pose at every call the intervals
+    are the MPC periods and the chords those of ``BASELINE`` of them, as before issue 35 (the
+    results are the same to the bit); below 10 Hz no chord used to complete and every fit stayed
+    at its prior;
 
   - the slip: ᾱ_course − ᾱ̂ = κ ā_y + β (ā_y = v̂ ω̂ the lateral acceleration). A stiffness or mass
     error biases the MHE's α̂ in proportion to the lateral force (steady state of the single-track
@@ -42,7 +56,8 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     fitted per axle (least squares through the origin on the compliance 1/C, Bayesian: the
     model's C as prior with a relative σ of ``STIFF_PRIOR_REL``, each chord weighted by its slip
     noise, forgetting over ``STIFF_MEMORY_S``), from chords where the reference turns
-    (``CORNER_ACCEL``) and the car neither accelerates nor brakes (``STIFF_MAX_ACCEL``), per axle
+    (``CORNER_ACCEL``) and the car neither accelerates nor brakes (``STIFF_MAX_ACCEL``) over at most
+    ``STIFF_MAX_SPAN_S``, per axle
     only where the chord's own F / slip is a plausible stiffness (``STIFF_RANGE``). The
     fitted C_f, C_r replace the model's in the MHE and in the inner loop's reference gain N̄ (the
     LMI gains stay): with them α̂ and the steering feed-forward are right (issue 21: the stiffness
@@ -130,9 +145,9 @@ from tsmpc.config import Config, FusionSettings, VehicleParams
 from tsmpc.kernels.jit import exact_hypot, jitable
 
 __all__ = [
-    "BASELINE", "MASS_START", "NO_INTERVAL", "REPEAT_START", "CourseFusion", "CourseParams", "CourseState",
-    "Fusion", "GyroFit", "GyroParams", "GyroState", "Interval", "MassEstimator", "MassParams", "MassState",
-    "RepeatGuard", "RepeatState", "SlipFit", "SpeedFit", "SteerParams", "SteerState", "StiffFit",
+    "BASELINE", "MASS_START", "NO_INTERVAL", "REPEAT_START", "RING", "CourseFusion", "CourseParams",
+    "CourseState", "Fusion", "GyroFit", "GyroParams", "GyroState", "Interval", "MassEstimator", "MassParams",
+    "MassState", "RepeatGuard", "RepeatState", "SlipFit", "SpeedFit", "SteerParams", "SteerState", "StiffFit",
     "course_chord", "course_close", "course_params", "course_sample", "course_start", "delta_mass",
     "gyro_bias", "gyro_params", "gyro_sample", "gyro_start", "inertia_force", "mass_update", "model_changed",
     "noise_scale", "repeat_check", "slip_correction", "speed_offset", "steer_command", "steer_correction",
@@ -140,8 +155,19 @@ __all__ = [
     "steer_stiffness", "stiffness", "stiffness_update",
 ]
 
-#: MPC steps spanned by the chord of the course fusion.
+#: Shortest chord of the course fusion, in MPC periods T_c (0.5 s at the default rates): at the
+#: nominal sensors exactly ``BASELINE`` MPC intervals between measured poses.
 BASELINE = 5
+#: Intervals held for the chords (a chord is the shortest run of the latest ones lasting
+#: ``BASELINE`` T_c; more than ``BASELINE`` where missing poses made some shorter than T_c).
+RING = 8
+#: Longest chord [s]. The chord's direction is the speed-weighted mean of θ + α only to second
+#: order in the course's spread over the chord: on a curve whose curvature changes, the residual
+#: grows with the cube of the turn (≈ 0.3 mrad for the 0.15 rad of 0.5 s at 0.3 rad/s, ≈ 8 mrad
+#: for 1.5 s), and between poses the heading is the gyro's integral, whose error grows with the
+#: time. 1.5 s keeps every pose rate from 0.67 Hz up (a 1 Hz pose gives 1 s chords); a chord
+#: longer than this (poses lost at a low rate) is not fitted.
+CHORD_MAX_S = 1.5
 #: Shortest chord [m] the course and the speed over ground are measured on.
 MIN_CHORD_M = 2.0
 #: Memory of the slip fit [s] (forgetting factor 1 − T_c / memory per MPC step).
@@ -212,6 +238,11 @@ GYRO_MAX_GAP_S = 0.5
 #: Smallest heading σ [rad] the fit's weights assume (a noiseless configuration would give a
 #: chord an infinite weight).
 GYRO_HEADING_FLOOR = 1e-5
+#: Longest chord [s] the stiffness fit takes. The fit is quasi-steady: α̇ comes from consecutive
+#: chords and the forces from chord means, so a long chord through a corner's entry or exit mixes
+#: the transient into the means (the slip and speed fits are linear in their means and take chords
+#: up to ``CHORD_MAX_S``). 1.0 s admits the chords of a 1 Hz pose.
+STIFF_MAX_SPAN_S = 1.0
 #: Largest longitudinal acceleration of the car over a chord [g] for it to count in the stiffness
 #: fit. The fit is a pure-slip, constant-speed single-track fit; under traction or braking the
 #: tyres' lateral stiffness drops (combined slip) and load moves between the axles (ΔF_z / F_z ≈
@@ -283,10 +314,11 @@ class RepeatGuard:
 
 # ============================================================================ course fusion
 class Interval(NamedTuple):
-    """Sums of one MPC interval (speed-weighted where the course needs it)."""
+    """Sums of one interval between two measured poses (speed-weighted where the course needs it):
+    at the nominal sensors one MPC period (see :func:`course_close` for where intervals end)."""
 
     open: bool  #: an interval is open (a measured pose started it); False: no interval
-    ok: bool  #: every sample measured and finite
+    ok: bool  #: every sample's speed and yaw rate measured and finite
     sx: float  #: measured pose at the interval's start
     sy: float
     sth: float
@@ -303,18 +335,20 @@ class Interval(NamedTuple):
     w_first: float  #: ω of the opening sample
     ay_ref: float  #: smallest |v_d ω_d| of the reference at the interval's ends
     v_first: float  #: measured speed at the interval's first sample [m/s]
+    th_last: float  #: heading of the last sample (measured, or the gyro's integral since) [rad]
+    w_last: float  #: ω of the last sample [rad/s]
 
 
-#: No interval open (before the first measured pose, after a missing one).
+#: No interval open (before the first measured pose, after a measured pose without a speed).
 NO_INTERVAL = Interval(False, False, 0.0, 0.0, 0.0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                       0.0, 0.0)
+                       0.0, 0.0, 0.0, 0.0)
 
 
 class CourseParams(NamedTuple):
     """Parameters of the course fusion (:func:`course_params` builds them).
 
     Attributes:
-        Tc: MPC period T_c [s] (one interval).
+        Tc: MPC period T_c [s] (one interval at the nominal sensors).
         sigma: configured position noise σ [m] (at least 0.1 mm).
         has_vehicle: a model vehicle is given (without one: no stiffness fit).
         C_f: the model's front axle cornering stiffness [N/rad] (1 without a vehicle).
@@ -329,6 +363,12 @@ class CourseParams(NamedTuple):
         prior_num_r: the same for the rear axle.
         prior_den_f: the front compliance fit's prior Σ w F²: (C / REL)².
         prior_den_r: the same for the rear axle.
+        Td: call period T_d [s] (the gyro's integration step between poses).
+        n_inner: calls per MPC period (the cascade's ``n_inner``): a chord of n calls lasts
+            (n / n_inner) T_c.
+        chord_min: calls of the shortest chord, ``BASELINE`` × ``n_inner``.
+        chord_max: calls of the longest chord (``CHORD_MAX_S``).
+        stiff_max: calls of the longest chord the stiffness fit takes (``STIFF_MAX_SPAN_S``).
     """
 
     Tc: float
@@ -345,6 +385,11 @@ class CourseParams(NamedTuple):
     prior_num_r: float
     prior_den_f: float
     prior_den_r: float
+    Td: float
+    n_inner: int
+    chord_min: int
+    chord_max: int
+    stiff_max: int
 
 
 class SlipFit(NamedTuple):
@@ -381,17 +426,18 @@ class StiffFit(NamedTuple):
 
 
 class CourseState(NamedTuple):
-    """State of the course fusion between MPC steps (the open interval is its own record).
+    """State of the course fusion between calls (the open interval is its own record).
 
     Attributes:
-        ring: the last ``BASELINE`` closed intervals, oldest first (only the last ``n_iv`` are real).
-        n_iv: closed intervals held (at most ``BASELINE``).
-        omega_now: measured yaw rate at the last MPC step [rad/s].
-        v_now: measured speed at the last MPC step [m/s].
+        ring: the last ``RING`` closed intervals, oldest first (only the last ``n_iv`` are real).
+        n_iv: closed intervals held (at most ``RING``).
+        omega_now: measured yaw rate at the last interval's end [rad/s].
+        v_now: measured speed at the last interval's end [m/s].
         n_chords: chords fitted.
         slip: the slip fit.
         speed: the speed-offset fit.
         stiff: the stiffness fit.
+        since: calls since the last interval ended (a measured pose that ends no interval counts).
     """
 
     ring: tuple[Interval, ...]
@@ -402,17 +448,20 @@ class CourseState(NamedTuple):
     slip: SlipFit
     speed: SpeedFit
     stiff: StiffFit
+    since: int
 
 
 @jitable
 def course_params(Tc: float, position_sigma: float, has_vehicle: bool, C_f: float, C_r: float, mass: float,
-                  inertia: float, a: float, b: float, g: float) -> CourseParams:
-    """The parameters from the rates, the configured position σ and the model vehicle (without
-    one, C_f = C_r = 1 for the prior's arithmetic)."""
+                  inertia: float, a: float, b: float, g: float, Td: float, n_inner: int) -> CourseParams:
+    """The parameters from the rates (T_c, T_d and the calls per MPC period), the configured
+    position σ and the model vehicle (without one, C_f = C_r = 1 for the prior's arithmetic)."""
     qf, qr = C_f / STIFF_PRIOR_REL, C_r / STIFF_PRIOR_REL
     den_f, den_r = qf * qf, qr * qr
+    per_s = n_inner / Tc  # calls per second
     return CourseParams(Tc, max(position_sigma, 1e-4), has_vehicle, C_f, C_r, mass, inertia, a, b, g,
-                        den_f / C_f, den_r / C_r, den_f, den_r)
+                        den_f / C_f, den_r / C_r, den_f, den_r, Td, n_inner, BASELINE * n_inner,
+                        math.floor(CHORD_MAX_S * per_s + 1e-6), math.floor(STIFF_MAX_SPAN_S * per_s + 1e-6))
 
 
 def course_start(p: CourseParams) -> CourseState:
@@ -421,46 +470,68 @@ def course_start(p: CourseParams) -> CourseState:
     slip = SlipFit(0.0, 0.0, SLIP_PRIOR[0] * SLIP_PRIOR[0], 0.0, 0.0, SLIP_PRIOR[1] * SLIP_PRIOR[1],
                    NOISE_PRIOR_CHORDS, NOISE_PRIOR_CHORDS)
     stiff = StiffFit(p.prior_num_f, p.prior_num_r, p.prior_den_f, p.prior_den_r, 0.0, False)
-    return CourseState((NO_INTERVAL,) * BASELINE, 0, 0.0, math.nan, 0, slip, SpeedFit(0.0, 0.0), stiff)
+    return CourseState((NO_INTERVAL,) * RING, 0, 0.0, math.nan, 0, slip, SpeedFit(0.0, 0.0), stiff,
+                       p.n_inner)
 
 
 @jitable
-def course_sample(cur: Interval, ok: bool, theta: float, v: float, alpha_hat: float, a_y: float,
-                  omega: float, delta: float, force: float) -> Interval:
-    """One T_d sample into the open interval: measured heading θ, speed v (raw) and yaw rate ω,
+def course_sample(p: CourseParams, cur: Interval, ok: bool, has_pose: bool, theta: float, v: float,
+                  alpha_hat: float, a_y: float, omega: float, delta: float, force: float) -> Interval:
+    """One T_d sample into the open interval: speed v (raw) and yaw rate ω (bias-free) measured,
     the estimate's α̂ and â_y = v̂ ω̂, the applied steering δ and force F_xR; ``ok`` False for a
-    missing or rejected sample (spoils the interval). No interval open: unchanged."""
+    missing or rejected speed sample (spoils the interval). The heading θ is the measured one when
+    an accepted pose came (``has_pose``), else the last sample's plus the trapezoid integral of ω
+    over T_d (θ̇ = ω: a missing or rejected pose does not spoil the interval). No interval open:
+    unchanged."""
     if not cur.open:
         return cur
-    if not (ok and math.isfinite(theta) and math.isfinite(v) and math.isfinite(alpha_hat)
+    if has_pose and math.isfinite(theta):
+        th = theta
+    elif cur.n == 0:  # (the opening sample is the opening pose's)
+        th = cur.sth
+    else:  # between poses: the gyro's integral from the last sample's heading
+        th = cur.th_last + 0.5 * (cur.w_last + omega) * p.Td
+    if not (ok and math.isfinite(th) and math.isfinite(v) and math.isfinite(alpha_hat)
             and math.isfinite(a_y) and math.isfinite(omega) and math.isfinite(delta)
             and math.isfinite(force)):
         return Interval(cur.open, False, cur.sx, cur.sy, cur.sth, cur.n, cur.sv, cur.sv_dth, cur.sv_alpha,
                         cur.sv_ay, cur.sv_full, cur.s_delta, cur.s_w_v, cur.s_vw, cur.s_F, cur.w_first,
-                        cur.ay_ref, cur.v_first)
-    dth = _wrap(theta - cur.sth)
+                        cur.ay_ref, cur.v_first, cur.th_last, cur.w_last)
+    dth = _wrap(th - cur.sth)
     first = cur.n == 0
     w = 0.5 if first else 1.0  # trapezoid: the opening sample counts half
     return Interval(cur.open, cur.ok, cur.sx, cur.sy, cur.sth, cur.n + 1, cur.sv + w * v,
                     cur.sv_dth + w * v * dth, cur.sv_alpha + v * alpha_hat, cur.sv_ay + v * a_y,
                     cur.sv_full + v, cur.s_delta + delta, cur.s_w_v + omega / max(v, 1.0),
                     cur.s_vw + v * omega, cur.s_F + force, omega if first else cur.w_first, cur.ay_ref,
-                    v if first else cur.v_first)
+                    v if first else cur.v_first, th, omega)
 
 
 @jitable
-def course_close(p: CourseParams, s: CourseState, cur: Interval, has_pose: bool, X: float, Y: float,
-                 theta: float, v: float, omega: float, ay_ref: float) -> tuple[CourseState, Interval]:
-    """An MPC step: the open interval is closed on the measured pose (X, Y, θ) now (``has_pose``
-    False: missing, no chord ends here) and speed ``v`` (the closing sample; NaN: missing), a
-    chord over the last ``BASELINE`` intervals is fitted (:func:`course_chord`) when they are all
-    measured, and the next interval opens. ``omega``: measured yaw rate now, ``ay_ref``: the
-    reference's lateral acceleration v_d ω_d now. Returns (the state, the open interval)."""
+def course_close(p: CourseParams, s: CourseState, cur: Interval, mpc_step: bool, has_pose: bool, X: float,
+                 Y: float, theta: float, v: float, omega: float,
+                 ay_ref: float) -> tuple[CourseState, Interval]:
+    """One call, before its sample (:func:`course_sample`): does an interval end at the measured
+    pose (X, Y, θ) now (``has_pose`` False: none came or it was rejected — nothing ends)?
+
+    An accepted pose ends the open interval at an MPC step (``mpc_step``; at the nominal sensors
+    every interval is one MPC period) and, between MPC steps, once the interval has lasted a T_c
+    (``n_inner`` calls: a pose at any rate ends intervals at its own pace, at most one per T_c).
+    The interval is closed on the pose and the speed ``v`` (the closing sample, counted half;
+    NaN: missing — the interval is spoilt and none opens until the next end), a chord is fitted
+    (:func:`course_chord`) over the shortest run of the latest closed intervals that lasts
+    ``BASELINE`` T_c, when they are all measured and it lasts at most ``CHORD_MAX_S``, and the
+    next interval opens. ``omega``: measured yaw rate now, ``ay_ref``: the reference's lateral
+    acceleration v_d ω_d now. Returns (the state, the open interval)."""
+    since = s.since + 1
+    good_pose = has_pose and math.isfinite(X) and math.isfinite(Y) and math.isfinite(theta)
+    if not (good_pose and (mpc_step or since >= p.n_inner)):  # no interval ends here
+        return CourseState(s.ring, s.n_iv, s.omega_now, s.v_now, s.n_chords, s.slip, s.speed, s.stiff,
+                           since), cur
     ay = abs(ay_ref) if math.isfinite(ay_ref) else 0.0
-    good = (has_pose and math.isfinite(X) and math.isfinite(Y) and math.isfinite(theta)
-            and math.isfinite(v))
+    good = math.isfinite(v)
     ring, n_iv = s.ring, s.n_iv
-    chord = False
+    k0 = -1  # the chord's first interval in the ring (-1: no chord)
     if cur.open:
         sv, sv_dth, ok = cur.sv, cur.sv_dth, cur.ok
         if good and cur.n > 0 and ok:  # the closing sample, counted half
@@ -471,36 +542,57 @@ def course_close(p: CourseParams, s: CourseState, cur: Interval, has_pose: bool,
             ok = False
         closed = Interval(cur.open, ok, cur.sx, cur.sy, cur.sth, cur.n, sv, sv_dth, cur.sv_alpha,
                           cur.sv_ay, cur.sv_full, cur.s_delta, cur.s_w_v, cur.s_vw, cur.s_F, cur.w_first,
-                          min(cur.ay_ref, ay), cur.v_first)
+                          min(cur.ay_ref, ay), cur.v_first, cur.th_last, cur.w_last)
         ring = ring[1:] + (closed,)  # noqa: RUF005 (numba has no starred tuples) the oldest drops out
-        n_iv = min(n_iv + 1, BASELINE)
-        chord = good and n_iv == BASELINE
-        for iv in ring:
-            chord = chord and iv.ok
-    s = CourseState(ring, n_iv, omega, v, s.n_chords, s.slip, s.speed, s.stiff)
-    if chord:
-        s = course_chord(p, s, X, Y, theta)
+        n_iv = min(n_iv + 1, RING)
+        if good:
+            k0 = _chord_start(p, ring, n_iv)
+    s = CourseState(ring, n_iv, omega, v, s.n_chords, s.slip, s.speed, s.stiff, 0)
+    if k0 >= 0:
+        s = course_chord(p, s, k0, X, Y, theta)
     if not good:
         return s, NO_INTERVAL
     return s, Interval(True, True, X, Y, theta, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ay,
-                       math.nan)
+                       math.nan, theta, 0.0)
 
 
 @jitable
-def course_chord(p: CourseParams, s: CourseState, ex: float, ey: float, eth: float) -> CourseState:
-    """The slip, speed-offset and stiffness fits on the chord of the ``BASELINE`` closed intervals
-    of ``s`` ending at the measured pose (ex, ey, eth) (see the module docstring); a chord shorter
-    than ``MIN_CHORD_M`` or without speed changes nothing."""
+def _chord_start(p: CourseParams, ring: tuple[Interval, ...], n_iv: int) -> int:
+    """The ring index of the chord's first interval: the shortest run of the latest ``n_iv``
+    closed intervals of ``ring`` that lasts at least ``chord_min`` calls, if they are all measured
+    and last at most ``chord_max``; −1 when there is none."""
+    steps = 0
+    i = RING - 1
+    while i >= RING - n_iv:
+        iv = ring[i]
+        if not iv.ok:
+            return -1
+        steps += iv.n
+        if steps >= p.chord_min:
+            return i if steps <= p.chord_max else -1
+        i -= 1
+    return -1
+
+
+@jitable
+def course_chord(p: CourseParams, s: CourseState, k0: int, ex: float, ey: float, eth: float) -> CourseState:
+    """The slip, speed-offset and stiffness fits on the chord of the closed intervals ``k0`` … of
+    ``s.ring`` ending at the measured pose (ex, ey, eth) (see the module docstring); a chord
+    shorter than ``MIN_CHORD_M`` or without speed changes nothing. The chord lasts its calls
+    D = (n / ``n_inner``) T_c (``BASELINE`` T_c at the nominal sensors); each chord adds the time of
+    its last interval, dt, to the fits' memories (their forgetting is per second, whatever the
+    pose rate)."""
     ring = s.ring
-    first = ring[0]
+    first = ring[k0]
+    last = ring[RING - 1]
     dx, dy = ex - first.sx, ey - first.sy
     chord = exact_hypot(dx, dy)
     if chord < MIN_CHORD_M:
         return s
     # speed-weighted means over the chord (θ relative to the chord's first pose)
     sv = 0.0
-    for iv in ring:
-        sv += iv.sv
+    for i in range(k0, RING):
+        sv += ring[i].sv
     if sv <= 0.0:
         return s
     sv_th = 0.0
@@ -513,7 +605,8 @@ def course_chord(p: CourseParams, s: CourseState, ex: float, ey: float, eth: flo
     s_wv = 0.0
     s_d = 0.0
     ay_min = first.ay_ref
-    for iv in ring:
+    for i in range(k0, RING):
+        iv = ring[i]
         sv_th += iv.sv_dth + _wrap(iv.sth - first.sth) * iv.sv
         n += iv.n
         sv_full += iv.sv_full
@@ -528,49 +621,51 @@ def course_chord(p: CourseParams, s: CourseState, ex: float, ey: float, eth: flo
     a_course = _wrap(math.atan2(dy, dx) - th_mean)
     alpha_hat = s_alpha / sv_full
     a_y = s_ay / sv_full
-    Tc = p.Tc
-    slip, noise_sig = _slip_fit(s.slip, Tc, a_course - alpha_hat, a_y, chord, p.sigma, ay_min >= CORNER_ACCEL)
+    D = (n / p.n_inner) * p.Tc  # the chord's time span
+    dt = (last.n / p.n_inner) * p.Tc  # the time it adds (T_c at the nominal sensors)
+    slip, noise_sig = _slip_fit(s.slip, dt, a_course - alpha_hat, a_y, chord, p.sigma, ay_min >= CORNER_ACCEL)
     # speed over ground: the arc of the chord (turn Δχ ≈ Δθ) over its time span
     turn = abs(_wrap(eth - first.sth))
     arc = chord * ((0.5 * turn) / math.sin(0.5 * turn) if turn > 1e-6 else 1.0)
-    v_ground = arc / (BASELINE * Tc)
+    v_ground = arc / D
     v_meas = sv / n  # the trapezoid mean of the measured speed over the chord's time
     w = (chord / (2.0 * p.sigma)) ** 2
-    g = 1.0 - Tc / SPEED_MEMORY_S
+    g = 1.0 - dt / SPEED_MEMORY_S
     speed = SpeedFit(g * s.speed.sv + w * (v_meas - v_ground), g * s.speed.sw + w)
     stiff = s.stiff
     # axle stiffnesses from the course's slip (quasi-steady single track), only where the reference
-    # turns (a straight carries no information on C, only the traces of a lightly damped yaw motion)
-    # and at nearly constant speed (pure slip: STIFF_MAX_ACCEL); a NaN speed fails the test
-    a_x = (s.v_now - first.v_first) / (BASELINE * Tc)
-    steady = p.has_vehicle and abs(a_x) <= STIFF_MAX_ACCEL * p.g
+    # turns (a straight carries no information on C, only the traces of a lightly damped yaw motion),
+    # at nearly constant speed (pure slip: STIFF_MAX_ACCEL) and over at most STIFF_MAX_SPAN_S (a
+    # longer chord's means mix a corner's transient in); a NaN speed fails the test
+    a_x = (s.v_now - first.v_first) / D
+    steady = p.has_vehicle and abs(a_x) <= STIFF_MAX_ACCEL * p.g and n <= p.stiff_max
     if p.has_vehicle and math.isfinite(s.omega_now) and ay_min >= CORNER_ACCEL and steady:
         # α̇ from the model's α̂ over consecutive chords (smooth; the course's own α would put its
-        # noise through a 1/T_c difference into the force)
-        al_dot = (alpha_hat - stiff.alpha_prev) / Tc if stiff.has_prev else 0.0
+        # noise through a 1/dt difference into the force)
+        al_dot = (alpha_hat - stiff.alpha_prev) / dt if stiff.has_prev else 0.0
         stiff = _stiffness_fit(p, stiff, a_course, alpha_hat, al_dot, s_vw / n, v_meas, s_F / n,
-                               s.omega_now - first.w_first, s_wv / n, s_d / n, noise_sig)
-    return CourseState(ring, s.n_iv, s.omega_now, s.v_now, s.n_chords + 1, slip, speed, stiff)
+                               s.omega_now - first.w_first, s_wv / n, s_d / n, noise_sig, D, last.n)
+    return CourseState(ring, s.n_iv, s.omega_now, s.v_now, s.n_chords + 1, slip, speed, stiff, s.since)
 
 
 @jitable
-def _slip_fit(f: SlipFit, Tc: float, z: float, a_y: float, chord: float, sigma: float,
+def _slip_fit(f: SlipFit, dt: float, z: float, a_y: float, chord: float, sigma: float,
               cornering: bool) -> tuple[SlipFit, float]:
     """One chord in the slip fit z = ᾱ_course − ᾱ̂ = κ ā_y + β (recursive least squares with
     forgetting, φ = [ā_y, 1]), weighted by the chord's noise (positions at both ends, scaled by the
     noise level measured on straights, which a chord where the reference runs straight updates:
-    there the slip and the model's error in it are ≈ 0, so the innovation is noise). Returns (the
-    fit, the chord's slip noise σ)."""
+    there the slip and the model's error in it are ≈ 0, so the innovation is noise); the chord adds
+    ``dt`` seconds to the memories. Returns (the fit, the chord's slip noise σ)."""
     sig0 = 2.0 * math.sqrt(2.0) * sigma / chord + 2e-4
     innov = z - (a_y * f.kappa + f.beta)
     n2, n1 = f.n2, f.n1
     if not cornering:
-        g_n = 1.0 - Tc / NOISE_MEMORY_S
+        g_n = 1.0 - dt / NOISE_MEMORY_S
         r = innov / sig0
         n2 = g_n * n2 + r * r
         n1 = g_n * n1 + 1.0
     sig = sig0 * noise_scale(SlipFit(f.kappa, f.beta, f.P00, f.P01, f.P10, f.P11, n2, n1))
-    lam = 1.0 - Tc / SLIP_MEMORY_S
+    lam = 1.0 - dt / SLIP_MEMORY_S
     P00, P01, P10, P11 = f.P00 / lam, f.P01 / lam, f.P10 / lam, f.P11 / lam
     Pp0 = P00 * a_y + P01  # P φ
     Pp1 = P10 * a_y + P11
@@ -597,24 +692,27 @@ def _axle_pair(C0: float, force: float, slip: float) -> tuple[float, float]:
 @jitable
 def _stiffness_fit(p: CourseParams, f: StiffFit, a_course: float, alpha_hat: float, al_dot: float,
                    vw: float, v_meas: float, F_x: float, d_omega: float, w_v: float, delta: float,
-                   sig: float) -> StiffFit:
+                   sig: float, span: float, n_last: int) -> StiffFit:
     """One cornering chord in the compliance fits. Lateral force S = M (v ω + v α̇) + F_x α and
     yaw moment T = I ω̇ give F_yF = (b S + T)/L, F_yR = (a S − T)/L; slips α_F = δ − α − a ω/v,
     α_R = b ω/v − α (chord means: ``vw`` of v ω, ``w_v`` of ω / v, ``delta``, ``F_x``; ``d_omega``
     the change of ω over the chord). The fit is of the compliance 1/C with the force as regressor
     (slip = F / C): the forces come from v, ω (precise), the slips carry the course's noise — as
     the response, noise does not bias the fit (as a regressor it would pull C towards 0 on every
-    straight). Each chord weighs by its slip noise ``sig`` (or the fit's own floor), shared with the
-    neighbouring chords (``STIFF_CORRELATION``); forgetting is towards the prior (a fit without
-    excitation returns to the model)."""
+    straight). The chord lasts ``span`` seconds and adds its last interval's ``n_last`` calls. Each
+    chord weighs by its slip noise ``sig`` (or the fit's own floor), shared with the chords within
+    the residual's correlation time (``STIFF_CORRELATION`` T_c: one chord per T_c shares it with
+    ``STIFF_CORRELATION`` − 1 others, one per second with none); forgetting is per second,
+    towards the prior (a fit without excitation returns to the model)."""
     S = p.mass * (vw + v_meas * al_dot) + F_x * a_course
-    T = p.inertia * d_omega / (BASELINE * p.Tc)
+    T = p.inertia * d_omega / span
     L = p.a + p.b
     F_f, a_f = _axle_pair(p.C_f, (p.b * S + T) / L, delta - a_course - p.a * w_v)
     F_r, a_r = _axle_pair(p.C_r, (p.a * S - T) / L, p.b * w_v - a_course)
     s_slip = max(sig, STIFF_SLIP_FLOOR)
-    w_c = 1.0 / (STIFF_CORRELATION * s_slip * s_slip)
-    g2 = 1.0 - p.Tc / STIFF_MEMORY_S
+    corr = max(1.0, STIFF_CORRELATION * p.n_inner / n_last)  # chords per independent one
+    w_c = 1.0 / (corr * s_slip * s_slip)
+    g2 = 1.0 - ((n_last / p.n_inner) * p.Tc) / STIFF_MEMORY_S
     return StiffFit(g2 * f.num_f + (1.0 - g2) * p.prior_num_f + w_c * (F_f * a_f),
                     g2 * f.num_r + (1.0 - g2) * p.prior_num_r + w_c * (F_r * a_r),
                     g2 * f.den_f + (1.0 - g2) * p.prior_den_f + w_c * (F_f * F_f),
@@ -683,24 +781,29 @@ def stiffness_update(p: CourseParams, s: CourseState, has_applied: bool, C_f: fl
         return False, cf, cr, s
     if has_applied:
         s = CourseState(s.ring, s.n_iv, s.omega_now, s.v_now, s.n_chords, model_changed(s.slip), s.speed,
-                        s.stiff)
+                        s.stiff, s.since)
     return True, cf, cr, s
 
 
 class CourseFusion:
     """Course and speed over ground from the measured positions, fitted against the model
     (see the module docstring; the online wrapper of :func:`course_sample`, :func:`course_close`
-    and the fits' outputs). Call :meth:`sample` every T_d and :meth:`close` at every MPC step,
-    before the MPC runs."""
+    and the fits' outputs). Every T_d call: :meth:`close` (before the MPC runs, at an MPC step),
+    then :meth:`sample`. ``Td`` and ``n_inner`` are the calls' period and the calls per MPC period
+    (the defaults: 10 calls of T_c / 10)."""
 
-    def __init__(self, Tc: float, position_sigma: float, vehicle: VehicleParams | None = None) -> None:
+    def __init__(self, Tc: float, position_sigma: float, vehicle: VehicleParams | None = None, *,
+                 Td: float | None = None, n_inner: int = 10) -> None:
         self.Tc = float(Tc)
+        self.Td = self.Tc / n_inner if Td is None else float(Td)
         self.vehicle = vehicle
         p = vehicle
+        n_in = int(n_inner)
         self.params = (course_params(self.Tc, float(position_sigma), False, 1.0, 1.0, math.nan, math.nan,
-                                     math.nan, math.nan, math.nan) if p is None else
+                                     math.nan, math.nan, math.nan, self.Td, n_in) if p is None else
                        course_params(self.Tc, float(position_sigma), True, float(p.C_f), float(p.C_r),
-                                     float(p.mass), float(p.inertia), float(p.a), float(p.b), float(p.g)))
+                                     float(p.mass), float(p.inertia), float(p.a), float(p.b), float(p.g),
+                                     self.Td, n_in))
         self.sigma = self.params.sigma
         self.reset()
 
@@ -754,21 +857,24 @@ class CourseFusion:
         return (cf, cr) if give else None
 
     def sample(self, ok: bool, theta: float, v: float, alpha_hat: float, a_y: float,
-               omega: float = 0.0, delta: float = 0.0, force: float = 0.0) -> None:
-        """One T_d sample (:func:`course_sample`)."""
-        self.cur = course_sample(self.cur, ok, theta, v, alpha_hat, a_y, omega, delta, force)
+               omega: float = 0.0, delta: float = 0.0, force: float = 0.0, has_pose: bool = True) -> None:
+        """One T_d sample (:func:`course_sample`): ``ok`` the speed and yaw rate were accepted,
+        ``has_pose`` a pose was (θ its heading; else the gyro's integral is used)."""
+        self.cur = course_sample(self.params, self.cur, ok, has_pose, theta, v, alpha_hat, a_y, omega, delta,
+                                 force)
 
     def close(self, pose: NDArray[np.float64] | None, v: float, omega: float = 0.0,
-              ay_ref: float = 0.0) -> None:
-        """An MPC step (:func:`course_close`): ``pose`` the measured pose now (None if missing: no
-        chord ends here), ``v`` and ``omega`` the measured speed and yaw rate now, ``ay_ref`` the
-        reference's lateral acceleration v_d ω_d now."""
+              ay_ref: float = 0.0, mpc_step: bool = True) -> None:
+        """One call before its sample (:func:`course_close`): ``pose`` the accepted pose now (None
+        if missing or rejected: nothing ends here), ``v`` and ``omega`` the measured speed and yaw
+        rate now, ``ay_ref`` the reference's lateral acceleration v_d ω_d now, ``mpc_step`` the
+        call is an MPC step."""
         if pose is None:
             X = Y = th = math.nan
         else:
             X, Y, th = float(pose[0]), float(pose[1]), float(pose[2])
-        self.state, self.cur = course_close(self.params, self.state, self.cur, pose is not None, X, Y, th,
-                                            float(v), float(omega), float(ay_ref))
+        self.state, self.cur = course_close(self.params, self.state, self.cur, bool(mpc_step),
+                                            pose is not None, X, Y, th, float(v), float(omega), float(ay_ref))
 
 
 # ============================================================================ yaw-rate bias
@@ -1261,7 +1367,8 @@ class Fusion:
         self.tau = cfg.lqr.speed_time_constant
         self.speed_feedback = cfg.lqr.speed_feedback
         self.guard = RepeatGuard()
-        self.course = CourseFusion(self.Tc, cfg.noise.position * cfg.noise.scale, cfg.vehicle)
+        self.course = CourseFusion(self.Tc, cfg.noise.position * cfg.noise.scale, cfg.vehicle, Td=self.Td,
+                                   n_inner=cfg.rates.inner_per_outer)
         self.mass = MassEstimator(cfg.vehicle.mass, self.Td, cfg.mhe.N, self.tau, self.speed_feedback)
         nz = cfg.noise
         self.gyro = GyroFit(self.Td, nz.theta * nz.scale, nz.omega * nz.scale)

@@ -59,7 +59,7 @@ from tsmpc.estimation.friction_step import (
     friction_step_update,
 )
 from tsmpc.estimation.fusion import (
-    BASELINE,
+    RING,
     CourseState,
     GyroParams,
     GyroState,
@@ -168,8 +168,9 @@ N_SF = SF_SENS + N_SS
  SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, SI_FSN, SI_FSSINCE,
  SI_GACT, SI_GSTEPS, SI_GWIN,
  SI_GYOPEN, SI_GYN, SI_GYGAP, SI_GYCHORDS,  # SI_GY*: the GyroState's flags and counts
- SI_STINIT, SI_STN) = range(43)  # the SteerState's flag and count
-N_SI = 43
+ SI_STINIT, SI_STN,  # the SteerState's flag and count
+ SI_CSINCE) = range(44)  # the CourseState's calls since its last interval ended
+N_SI = 44
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
@@ -177,8 +178,9 @@ N_SI = 43
 N_SC = 30
 # ---------------------------------------------------------------------------- course intervals
 (IV_OPEN, IV_OK, IV_SX, IV_SY, IV_STH, IV_N, IV_SV, IV_SVDTH, IV_SVALPHA, IV_SVAY, IV_SVFULL,
- IV_SDELTA, IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST) = range(18)  # Interval's fields
-N_IV = 18
+ IV_SDELTA, IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST, IV_THLAST,
+ IV_WLAST) = range(20)  # Interval's fields
+N_IV = 20
 # ---------------------------------------------------------------------------- inner log columns
 (LI_X, _LX1, _LX2, _LX3, _LX4, _LX5, LI_EST, _LE1, _LE2, LI_MEAS, _LM1, LI_FHAT, LI_FRAW,
  LI_FTRUE, LI_MU, LI_CMD, _LC1, LI_TMHE, LI_TLQR) = range(19)
@@ -315,7 +317,7 @@ def _pose_errors(X, Y, th, xd, yd, thd, out):
 # ============================================================================ fusion
 # The fusion's blocks are tsmpc.estimation.fusion's (one definition); here their records are
 # loaded from and stored to the engine's state slots around each call.
-assert BASELINE == 5  # _course_load lists the ring's intervals one by one
+assert RING == 8  # _course_load lists the ring's intervals one by one
 
 
 @njit(cache=True, fastmath=False)
@@ -335,7 +337,8 @@ def _iv_load(a):
     """The :class:`~tsmpc.estimation.fusion.Interval` of a row of ``cur`` / ``ivs``."""
     return Interval(a[IV_OPEN] != 0.0, a[IV_OK] != 0.0, a[IV_SX], a[IV_SY], a[IV_STH], int(a[IV_N]),
                     a[IV_SV], a[IV_SVDTH], a[IV_SVALPHA], a[IV_SVAY], a[IV_SVFULL], a[IV_SDELTA],
-                    a[IV_SWV], a[IV_SVW], a[IV_SF], a[IV_WFIRST], a[IV_AYREF], a[IV_VFIRST])
+                    a[IV_SWV], a[IV_SVW], a[IV_SF], a[IV_WFIRST], a[IV_AYREF], a[IV_VFIRST], a[IV_THLAST],
+                    a[IV_WLAST])
 
 
 @njit(cache=True, fastmath=False)
@@ -346,6 +349,7 @@ def _iv_store(iv, a):
     a[IV_SV], a[IV_SVDTH], a[IV_SVALPHA], a[IV_SVAY] = iv.sv, iv.sv_dth, iv.sv_alpha, iv.sv_ay
     a[IV_SVFULL], a[IV_SDELTA], a[IV_SWV], a[IV_SVW] = iv.sv_full, iv.s_delta, iv.s_w_v, iv.s_vw
     a[IV_SF], a[IV_WFIRST], a[IV_AYREF], a[IV_VFIRST] = iv.s_F, iv.w_first, iv.ay_ref, iv.v_first
+    a[IV_THLAST], a[IV_WLAST] = iv.th_last, iv.w_last
 
 
 @njit(cache=True, fastmath=False)
@@ -358,20 +362,21 @@ def _slip_load(sf):
 @njit(cache=True, fastmath=False)
 def _course_load(sf, si, ivs):
     """The :class:`~tsmpc.estimation.fusion.CourseState` of the engine's slots."""
-    ring = (_iv_load(ivs[0]), _iv_load(ivs[1]), _iv_load(ivs[2]), _iv_load(ivs[3]), _iv_load(ivs[4]))
+    ring = (_iv_load(ivs[0]), _iv_load(ivs[1]), _iv_load(ivs[2]), _iv_load(ivs[3]), _iv_load(ivs[4]),
+            _iv_load(ivs[5]), _iv_load(ivs[6]), _iv_load(ivs[7]))
     slip = _slip_load(sf)
     stiff = StiffFit(sf[SF_CNUM], sf[SF_CNUM + 1], sf[SF_CDEN], sf[SF_CDEN + 1], sf[SF_AHPREV],
                      si[SI_HASAH] != 0)
     return CourseState(ring, si[SI_IVN], sf[SF_OMNOW], sf[SF_VNOW], si[SI_NCHORDS], slip,
-                       SpeedFit(sf[SF_SV], sf[SF_SW]), stiff)
+                       SpeedFit(sf[SF_SV], sf[SF_SW]), stiff, si[SI_CSINCE])
 
 
 @njit(cache=True, fastmath=False)
 def _course_store(s, sf, si, ivs):
     """A course state into the engine's slots."""
-    for r in range(BASELINE):
+    for r in range(RING):
         _iv_store(s.ring[r], ivs[r])
-    si[SI_IVN], si[SI_NCHORDS] = s.n_iv, s.n_chords
+    si[SI_IVN], si[SI_NCHORDS], si[SI_CSINCE] = s.n_iv, s.n_chords, s.since
     sf[SF_OMNOW], sf[SF_VNOW] = s.omega_now, s.v_now
     f = s.slip
     sf[SF_THETA], sf[SF_THETA + 1] = f.kappa, f.beta
@@ -385,29 +390,35 @@ def _course_store(s, sf, si, ivs):
 
 
 @njit(cache=True, fastmath=False)
-def _course_step(cp, has_pose, X, Y, th, v, omega, ay_ref, stiff, cur, ivs, sf, si, mp, prm):
-    """An MPC step of the course fusion (``Cascade._outer``): :func:`course_close`, then with the
-    stiffness fit :func:`stiffness_update` (``Cascade._apply_stiffness``): the fitted (Ĉ_f, Ĉ_r)
-    to the MHE's model and the TS-LQR's N̄ when they moved by over 1 %."""
-    s, c = course_close(cp, _course_load(sf, si, ivs), _iv_load(cur), has_pose, X, Y, th, v, omega,
-                        ay_ref)
-    if stiff:
-        give, C0, C1, s = stiffness_update(cp, s, si[SI_HASAPPLIED] != 0, sf[SF_APPLIED],
-                                           sf[SF_APPLIED + 1])
-        if give:
-            prm[2], prm[3] = C0, C1
-            mp[MP_CF], mp[MP_CR] = C0, C1
-            sf[SF_APPLIED], sf[SF_APPLIED + 1] = C0, C1
-            si[SI_HASAPPLIED] = 1
+def _course_step(cp, mpc_step, has_pose, X, Y, th, v, omega, ay_ref, cur, ivs, sf, si):
+    """Every call, before its sample (``Cascade._step``): :func:`course_close` (an accepted pose
+    may end the open interval and a chord)."""
+    s, c = course_close(cp, _course_load(sf, si, ivs), _iv_load(cur), mpc_step, has_pose, X, Y, th, v,
+                        omega, ay_ref)
     _course_store(s, sf, si, ivs)
     _iv_store(c, cur)
 
 
 @njit(cache=True, fastmath=False)
-def _course_sample(ok, theta, v, alpha_hat, a_y, omega, delta, force, cur):
+def _course_stiffness(cp, ivs, sf, si, mp, prm):
+    """An MPC step with the stiffness fit (``Cascade._apply_stiffness``, :func:`stiffness_update`):
+    the fitted (Ĉ_f, Ĉ_r) to the MHE's model and the TS-LQR's N̄ when they moved by over 1 %."""
+    give, C0, C1, s = stiffness_update(cp, _course_load(sf, si, ivs), si[SI_HASAPPLIED] != 0,
+                                       sf[SF_APPLIED], sf[SF_APPLIED + 1])
+    if give:
+        prm[2], prm[3] = C0, C1
+        mp[MP_CF], mp[MP_CR] = C0, C1
+        sf[SF_APPLIED], sf[SF_APPLIED + 1] = C0, C1
+        si[SI_HASAPPLIED] = 1
+        _course_store(s, sf, si, ivs)  # (κ restarted when they replaced given ones)
+
+
+@njit(cache=True, fastmath=False)
+def _course_sample(cp, ok, has_pose, theta, v, alpha_hat, a_y, omega, delta, force, cur):
     """One T_d sample into the open interval ``cur`` (:func:`course_sample`)."""
     if cur[IV_OPEN] != 0.0:
-        _iv_store(course_sample(_iv_load(cur), ok, theta, v, alpha_hat, a_y, omega, delta, force), cur)
+        _iv_store(course_sample(cp, _iv_load(cur), ok, has_pose, theta, v, alpha_hat, a_y, omega, delta,
+                                force), cur)
 
 
 @njit(cache=True, fastmath=False)
@@ -707,7 +718,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     gmw = np.empty(N + 1)
     gates = GateParams(fp[FP_V_LO], fp[FP_V_HI], fp[FP_W_LIM], fp[FP_POSE_NOISE], fp[FP_HEAD_NOISE], Td)
     cpar = course_params(Tc, fp[FP_COURSE_SIGMA], True, fp[FP_CF0], fp[FP_CR0], fp[FP_VM], fp[FP_VI],
-                         fp[FP_VA], fp[FP_VB], fp[FP_VG])
+                         fp[FP_VA], fp[FP_VB], fp[FP_VG], Td, n_in)
     mpar = MassParams(fp[FP_VM], Td, ip[IP_NW], fp[FP_TAU], ip[IP_SPEEDFB] != 0)
     gpar = GyroParams(fp[FP_GYRO], fp[FP_GYRO + 1], fp[FP_GYRO + 2], fp[FP_GYRO + 3])
     sens = unpack_params(fp[FP_SENS:FP_SENS + N_SP])
@@ -787,18 +798,19 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 gb = _gyro_step(gpar, pose_ok, th, fresh and speeds_ok, omv, sf, si)
             omv = omv - gb
             mpc_step = si[SI_CALLS] % n_in == 0
+            kr = math.floor((t - sf[SF_TOFF]) / Tc + 1e-6)
+            kw = kr if kr > 0 else 0
+            kc = kw if kw < ip[IP_REFLEN] - 1 else ip[IP_REFLEN] - 1
+            if ip[IP_ANYCOURSE] != 0:  # an accepted pose may end the course fusion's interval
+                meas_ok = fresh and speeds_ok
+                _course_step(cpar, mpc_step, pose_ok, X, Y, th, v if meas_ok else math.nan,
+                             omv if meas_ok else math.nan, ref_v[kc] * ref_w[kc], cur, ivs, sf, si)
             phase = PH_MHE
             if mpc_step:
                 if not pose_ok:
                     ev[EV_POSE_REJ] += 1
-                kr = math.floor((t - sf[SF_TOFF]) / Tc + 1e-6)
-                kw = kr if kr > 0 else 0
-                kc = kw if kw < ip[IP_REFLEN] - 1 else ip[IP_REFLEN] - 1
-                if ip[IP_ANYCOURSE] != 0:
-                    meas_ok = fresh and speeds_ok
-                    _course_step(cpar, pose_ok, X, Y, th, v if meas_ok else math.nan,
-                                 omv if meas_ok else math.nan, ref_v[kc] * ref_w[kc], ip[IP_STIFF] != 0,
-                                 cur, ivs, sf, si, mp, prm)
+                if ip[IP_ANYCOURSE] != 0 and ip[IP_STIFF] != 0:
+                    _course_stiffness(cpar, ivs, sf, si, mp, prm)
                 if pose_ok:
                     for i in range(3):
                         sf[SF_HELD + i] = sf[SF_POSE + i]
@@ -912,8 +924,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2] = dead_reckon(
                 gates, sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], ev0, ev1, ev2)
             if ip[IP_ANYCOURSE] != 0:
-                _course_sample(si[SI_POSEOK] != 0 and si[SI_SPOK] != 0, y[2], y[3], ev1, ev0 * ev2,
-                               y[4] - _gyro_now(ip, sf, si), sc[SC_UMHE + 1], sc[SC_UMHE], cur)
+                _course_sample(cpar, si[SI_FRESH] != 0 and si[SI_SPOK] != 0, si[SI_POSEOK] != 0, y[2], y[3],
+                               ev1, ev0 * ev2, y[4] - _gyro_now(ip, sf, si), sc[SC_UMHE + 1], sc[SC_UMHE],
+                               cur)
             if ip[IP_STEER] != 0:  # fusion.steering_offset: the yaw balance of the angle last sent
                 _steer_step(fp, si[SI_FRESH] != 0 and si[SI_SPOK] != 0 and si[SI_ESTSTAT] == ST_OK
                             and not (si[SI_HASLAST] != 0 and si[SI_SAT] != 0), ev0,

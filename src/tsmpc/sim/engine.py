@@ -136,10 +136,10 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade.__init__": "0824875cc4d52255",
     "tsmpc.control.cascade:Cascade.reset": "6e1809c2dd2f6d57",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "b2786e3c23bc6de6",
+    "tsmpc.control.cascade:Cascade._step": "91054e77f230b78a",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "748ed28374e52348",
-    "tsmpc.control.cascade:Cascade._outer": "c3f0fb3dc4ccf2ab",
+    "tsmpc.control.cascade:Cascade._outer": "6153de103bbe0efc",
     "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
     "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
     "tsmpc.control.cascade:Cascade._govern": "5e06de8d6a2b15e0",
@@ -740,6 +740,7 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf[ke.SF_CNUM:ke.SF_CNUM + 2] = cs.stiff.num_f, cs.stiff.num_r
     sf[ke.SF_CDEN:ke.SF_CDEN + 2] = cs.stiff.den_f, cs.stiff.den_r
     sf[ke.SF_OMNOW], sf[ke.SF_VNOW] = cs.omega_now, cs.v_now
+    si[ke.SI_CSINCE] = cs.since
     gs = cascade._fusion.gyro.state  # the yaw-rate bias fit (a reset cascade: its prior)
     si[ke.SI_GYOPEN], si[ke.SI_GYN], si[ke.SI_GYGAP], si[ke.SI_GYCHORDS] = gs.open, gs.n, gs.gap, gs.n_chords
     sf[ke.SF_GYTH0], sf[ke.SF_GYINT], sf[ke.SF_GYWLAST] = gs.th0, gs.integ, gs.w_last
@@ -799,7 +800,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
         ref_x=_f64(ref.x), ref_y=_f64(ref.y), ref_th=_f64(ref.theta), ref_v=_f64(ref.v[ridx]),
         ref_w=_f64(ref.omega[ridx]), th_tan=_f64(cascade._theta_tangent), mv=mv, mw=mw,
         gate=cascade._slip_gate.poses.copy(), cur=np.zeros(ke.N_IV),
-        ivs=np.zeros((ke.BASELINE, ke.N_IV)), mass_v=np.zeros(cfg.mhe.N + 1),
+        ivs=np.zeros((ke.RING, ke.N_IV)), mass_v=np.zeros(cfg.mhe.N + 1),
         mY=mhe._Y, mW=mhe._W, mU=mhe._U, mXS=mhe._XS, mA=mhe._Ab, mB=mhe._Bb, mX=mhe._Xb, mp=mp,
         ls=lqr._s, Kv=Kv, zlo=zlo, zhi=zhi, bits=bits, prm=prm,
         mints=mpc._ints, mprm=mpc._prm, mPS=mpc._PS,
