@@ -222,8 +222,9 @@ def test_one_cornering_chord_in_the_slip_and_stiffness_fits(b: _Blocks) -> None:
 
 def test_the_stiffness_fit_takes_only_steady_corners(b: _Blocks) -> None:
     """No stiffness update where the reference runs straight (min |v_d ω_d| < CORNER_ACCEL), where
-    the car accelerates (|Δv| / span > STIFF_MAX_ACCEL g) or for an implausible F / α; on the
-    straight the slip fit's innovation measures the chords' noise instead."""
+    the car accelerates (|Δv| / span > STIFF_MAX_ACCEL g), after a step longer than
+    STIFF_MAX_STEP_S or for an implausible F / α; on the straight the slip fit's innovation
+    measures the chords' noise instead."""
     p = _params(b)
     start = fu.course_start(p).stiff
     straight = b.course_chord(p, _corner_ring(p, alpha_hat=-0.05, ay_ref=0.1), K0, 5.0, 0.0, 0.0)
@@ -237,6 +238,12 @@ def test_the_stiffness_fit_takes_only_steady_corners(b: _Blocks) -> None:
     # 0.1 g over the chord's 0.5 s is 0.5 m/s: 0.49 passes, 0.51 does not
     assert b.course_chord(p, _corner_ring(p, v_first=10.0 - 0.49), K0, 5.0, 0.0, 0.0).stiff != start
     assert b.course_chord(p, _corner_ring(p, v_first=10.0 - 0.51), K0, 5.0, 0.0, 0.0).stiff == start
+    # the step since the previous chord (the last interval) at most STIFF_MAX_STEP_S: 25 calls of
+    # 0.01 s pass, 26 do not
+    r = _corner_ring(p)
+    for n_last, moved in ((25, True), (26, False)):
+        ring = (*r.ring[:-1], r.ring[-1]._replace(n=n_last))
+        assert (b.course_chord(p, r._replace(ring=ring), K0, 5.0, 0.0, 0.0).stiff != start) == moved
     stiff_car = _params(b, C=(200000.0, 200000.0))  # the chord's F / α is below 0.5 C: out
     s = b.course_chord(stiff_car, _corner_ring(stiff_car), K0, 5.0, 0.0, 0.0)
     assert b.stiffness(stiff_car, s.stiff) == pytest.approx((200000.0, 200000.0), rel=1e-12)
