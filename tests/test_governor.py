@@ -120,13 +120,13 @@ def test_the_oracle_reads_the_true_road() -> None:
 
 def test_sample_demand_by_hand() -> None:
     """v = 10, ω = 0.3, a_d = 1.5, k = 2: sqrt(3² + (2 · 1.5)²) = sqrt(18); with drag 0.001 /m the
-    traction is 1.5 + 0.1 = 1.6: sqrt(9 + 3.2²) = sqrt(19.24). Braking counts for the whole car
-    (k = 1): sqrt(9 + 1.5²) = sqrt(11.25)."""
+    traction is 1.5 + 0.1 = 1.6: sqrt(9 + 3.2²) = sqrt(19.24). Braking counts at the rear axle too
+    (the car's one longitudinal force is the rear tyre's): sqrt(9 + (2 · 1.5)²) = sqrt(18)."""
     d, a_t = sample_demand(P, 10.0, 0.3, 1.5)
     assert (d, a_t) == (pytest.approx(math.sqrt(18.0), abs=1e-12), 1.5)
     d, a_t = sample_demand(P._replace(drag_per_kg=0.001), 10.0, 0.3, 1.5)
     assert (d, a_t) == (pytest.approx(math.sqrt(19.24), abs=1e-12), pytest.approx(1.6, abs=1e-12))
-    assert sample_demand(P, 10.0, 0.3, -1.5)[0] == pytest.approx(math.sqrt(11.25), abs=1e-12)
+    assert sample_demand(P, 10.0, 0.3, -1.5) == (pytest.approx(math.sqrt(18.0), abs=1e-12), -1.5)
 
 
 def test_preview_rate_by_hand() -> None:
@@ -140,6 +140,20 @@ def test_preview_rate_by_hand() -> None:
     assert preview_rate(P, 0.5, 100.0, v2, w2) == pytest.approx(math.sqrt(0.2), abs=1e-12)
     assert preview_rate(P, 0.5, 1.0, v2, w2) == pytest.approx(math.sqrt(0.1), abs=1e-12)
     assert preview_rate(P, 0.0, 100.0, v2, w2) == P.rate_min  # no grip at all: the floor
+
+
+def test_a_braking_zone_ahead_is_slowed_before_it() -> None:
+    """Three flat samples at 10 m/s, then the plan brakes at 3 m/s² (the rear tyre, k = 2: 6 m/s²
+    against 4 allowed at μ̂ = 0.5): the braking zone is carried at r² = 4/6. Inside it the rear
+    tyre has no room left for a falling r (4/2 − r² · 3 = 0: lowering r is braking too), so the
+    slow-down is credited over the samples before it only: 0.15 /s on the first two (room 4/2 / 10
+    = 0.2 /s), 0.1 /s on the last, whose acceleration (the central difference, −1.5 m/s²) leaves
+    room 2 − 1 = 1: r* = sqrt(2/3) + 0.015 + 0.015 + 0.01. Counted for the whole car (k = 1, before)
+    the braking needed nothing (r* = 1): the built-in circuit's braking at 45 s on μ 0.5 then locked
+    the rear wheel (the car left the road at 49.3 s)."""
+    v = np.concatenate([np.full(3, 10.0), 10.0 - 0.3 * np.arange(1, 11)])
+    w = np.zeros(v.size)
+    assert preview_rate(P, 0.5, 100.0, v, w) == pytest.approx(math.sqrt(2.0 / 3.0) + 0.04, abs=1e-12)
 
 
 def test_rate_limits_count_the_rate_change_itself() -> None:
@@ -374,9 +388,11 @@ def test_a_mu_drop_the_scenario_declares_is_read(paper_reference_path, car: str)
     (``scenario.plant.grip_scales_with_road``; the config's tyre says nothing). The governor reads
     the drop from the resistance and slows before the next demanding stretch: both cars complete,
     max |e_y| at most 0.5 m and within 1.5x of the μ-knowing oracle governor's (measured: nominal
-    0.0375 against 0.0364 m, 1.03x; mass +15 %, C_f −25 %, C_r −15 % 0.0605 against 0.0416 m,
-    1.45x; 3 and 2 actions, the first the start's spin). Read as tyre-only (the config's tyre
-    alone, before), the car left the road at 64.4 s, the first spin after the drop too late."""
+    0.0377 against 0.0716 m, 0.53x; mass +15 %, C_f −25 %, C_r −15 % 0.0791 against 0.0687 m,
+    1.15x; 7 and 5 actions, the first the start's spin; with braking counted for the whole car and
+    the old preview credit: 0.0377/0.0367 m and 0.0606/0.0416 m, 3 and 2 actions). Read as
+    tyre-only (the config's tyre alone, before), the car left the road at 64.4 s, the first spin
+    after the drop too late."""
     sets = [*_PAPER_DROP, *(_HEAVY if car == "heavy" else []), "scenario.plant.grip_scales_with_road=true"]
     log = _engine_run(sets, paper_reference_path, None)
     oracle = _engine_run([*sets, 'governor.grip_source="oracle"'], paper_reference_path, None)
@@ -384,6 +400,24 @@ def test_a_mu_drop_the_scenario_declares_is_read(paper_reference_path, car: str)
     assert log.events["governor_actions"] >= 2  # the start's spin, then the drop
     ey, ey_oracle = (float(np.max(np.abs(x.errors[:, 1]))) for x in (log, oracle))
     assert ey <= 0.5 and ey <= 1.5 * ey_oracle
+
+
+@pytest.mark.parametrize("source", ["estimate", "oracle"])
+def test_a_mu_drop_before_a_braking_zone(source: str) -> None:
+    """The built-in circuit, the same road (μ 0.9 → 0.5 at 30 s, combined slip, the grip following
+    the road): its plan brakes at 1.9 m/s² from 44.8 s, within the whole car's grip on μ 0.5
+    (4.9 m/s²) but at 92 % of the rear tyre's (0.42 of the weight, 2.1 m/s²), the one tyre that
+    brakes the car. The governor counts the braking at the rear axle and slows before the zone
+    (a falling r brakes too): both rows complete (measured over 55 s: max |e_y| 0.035 m, oracle
+    0.013 m; 2 actions, 3.3 s behind the plan). With braking counted for the whole car, both left
+    the road at 49.3 s, the rear wheel locked."""
+    sets = ["scenario.plant.combined_slip=true", "scenario.plant.grip_scales_with_road=true",
+            "scenario.base_mu=0.9", "scenario.friction=[{at_s = 30.0, mu = 0.5}]",
+            f'governor.grip_source="{source}"']
+    log = _engine_run(sets, None, 55.0)
+    assert log.termination == "completed"
+    assert log.events["governor_actions"] >= 1
+    assert float(np.max(np.abs(log.errors[:, 1]))) <= 0.5
 
 
 def test_the_tyre_only_model_holds_through_a_resistance_drop(paper_reference_path) -> None:

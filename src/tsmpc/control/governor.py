@@ -51,25 +51,45 @@ the true μ(road) through the same declared coupling.
 
 Demand of a reference sample (v_d, ω_d, a_d = dv_d/dτ) at rate 1, as an acceleration [m/s²]::
 
-    d = sqrt((v_d ω_d)² + (k a_t)²),   a_t = a_d + c_d v_d² / M,   k = (a + b) / (a η) if a_t > 0 else 1
+    d = sqrt((v_d ω_d)² + (k a_t)²),   a_t = a_d + c_d v_d² / M,   k = (a + b) / (a η)
 
 a_t is the force per kg the driven rear tyre must transmit (acceleration plus the drag c_d v²;
-:mod:`tsmpc.vehicle.plant`); the rear axle carries a/(a+b) of the weight, so it reaches its grip
-(a+b)/a times sooner than the whole car, and the reference may use a share η
-(``traction_margin``, 0.5) of it: the speed loop's transients ask about twice the reference's own
-acceleration (the μ drop on the paper reference: at 0.8 of the axle's grip the car spun as the
-governed speed rose again). Braking counts for the whole car (k = 1): the plan's braking is the
-plan check's (:mod:`tsmpc.planning.feasibility`), and counting it at the rear axle made the
-governor want slow-downs it could not make inside a braking zone (a μ 0.3 patch in a corner
-before one: the run left the road with it, not without). At rate r the demand is r² d; the
-sample can be carried when
-r² d ≤ margin μ̂_t g, and its traction needs at most the force budget,
-r² (a_t) ≤ (F_max − μ̂(road) M̂ g) / M̂. The largest such rate r_j of each preview sample j is
-reachable from now if the governor can lower r by r_j within the time the car takes to get
-there: the target is r* = min_j (r_j + ρ_down j T_c) over the preview (the MPC's horizon N and
-the samples a braking from 1 to r_min at ρ_down needs), and r follows r* within −ρ_down T_c and
-+ρ_up T_c per MPC step. So it slows before a stretch the grip cannot carry and returns to the plan
-smoothly (rate-limited) when the grip returns.
+:mod:`tsmpc.vehicle.plant`), driving or braking: F_xR is the car's one longitudinal force, a rear
+one, and on the friction-ellipse tyre the road's resistance passes through the rear tyre too. The
+rear axle carries a/(a+b) of the weight, so it reaches its grip (a+b)/a times sooner than the
+whole car, and the reference may use a share η (``traction_margin``, 0.5) of it: the speed loop's
+transients ask about twice the reference's own acceleration (the μ drop on the paper reference: at
+0.8 of the axle's grip the car spun as the governed speed rose again). Braking counted for the
+whole car (k = 1, before) let the built-in circuit's braking at 45 s (1.9 m/s², within the whole
+car's grip on μ 0.5 but 92 % of the rear tyre's) through unslowed: the rear wheel locked and the
+car left the road at 49.3 s, the μ-knowing oracle row too. In the preview a_d is the central
+difference of the plan's speeds (the forward one at the first sample): a single-sample jump of the
+plan's speed (the published reference has them) would read as twice the plan's acceleration for
+one sample, and the governor slowed down — itself a braking — for a demand the car never follows.
+At rate r the demand is r² d; the sample can be carried when r² d ≤ margin μ̂_t g, and its
+traction needs at most the force budget, r² (a_t) ≤ (F_max − μ̂(road) M̂ g) / M̂: the largest
+such rate r_j of each preview sample j.
+
+A slow-down is itself a braking: a falling r decelerates the car by v_d dr/dt on top of r² a_t,
+and the rear tyre carries both. So r_j is reachable from a sample before it only by the falls the
+tyre has room for on the way, a speed planner's backward pass over the preview (the MPC's horizon
+N and the samples a braking from 1 to r_min at ρ_down needs)::
+
+    r*_j = min(r_j, r*_{j+1} + T_c min(ρ_down, room_j / max(v_j, 1))),   r = r*_{j+1},
+    room_j = max(sqrt((margin μ̂_t g)² − (r² v_j ω_j)²) / k − max(−r² a_t,j, 0), 0)
+
+and the target is r*_0. Inside a braking zone that already uses the tyre's share (room 0) the
+governor cannot slow down, so it slows before it: the old credit, ρ_down T_c for every sample
+ahead, assumed a fall the tyre cannot make there. The pass credits the tyre's share only, never a
+sample's acceleration (which the governed car, at another rate and a few samples of the speed
+loop later, need not have); :func:`rate_limit`, at the current sample, counts the plan's
+acceleration both ways. r follows r* within −ρ_down T_c and +ρ_up T_c per MPC step, and within the
+room :func:`rate_limit` leaves. So it slows before a stretch the grip cannot carry and returns to
+the plan smoothly (rate-limited) when the grip returns. A wheel that locks the moment μ drops
+inside a braking zone is beyond it: the inner loop's speed transient after the drop asks more than
+the tyre has before any rate change counts (a μ 0.3 patch from 45 s on the built-in circuit, a μ
+0.4 drop at 60 s inside Monza's first braking zone: both leave the road, the oracle row too). There
+the car would have to brake less than the plan, r > 1, which the governor never asks.
 
 It never acts while μ̂_t ≥ (1 − deadband) μ_tyre: a plan checked for the vehicle's grip and force
 budget before the run (:mod:`tsmpc.planning.retime`) needs nothing from it, and the nominal run is
@@ -240,31 +260,42 @@ def governor_inputs(p: GripParams, F_fr: float, usable: bool, mass: float, satur
 
 @jitable
 def sample_demand(p: GovernorParams, v: float, omega: float, a_d: float) -> tuple[float, float]:
-    """(grip demand [m/s²], traction per kg [m/s²]) of a reference sample at rate 1."""
+    """(grip demand [m/s²], traction per kg [m/s²]) of a reference sample at rate 1: driving and
+    braking both at the rear tyre (k = ``traction_factor``)."""
     a_t = a_d + p.drag_per_kg * v * v
     a_lat = v * omega
-    kt = p.traction_factor * a_t if a_t > 0.0 else a_t
+    kt = p.traction_factor * a_t
     return math.sqrt(a_lat * a_lat + kt * kt), a_t
 
 
 @jitable
 def preview_rate(p: GovernorParams, grip: float, force_per_kg: float, v: NDArray[np.float64],
                  omega: NDArray[np.float64]) -> float:
-    """The target rate r* = min over the preview samples j of (r_j + ρ_down j T_c), r_j the
-    largest rate at which sample j needs at most margin·grip·g and its traction at most
-    ``force_per_kg`` (the force budget left after the road resistance, per kg); within
-    [rate_min, 1]. ``v``, ``omega``: the reference's samples from the governed time on."""
+    """The target rate r*: the backward pass r*_j = min(r_j, r*_{j+1} + T_c min(ρ_down,
+    room_j / v_j)) over the preview, r_j the largest rate at which sample j needs at most
+    margin·grip·g and its traction at most ``force_per_kg`` (the force budget left after the road
+    resistance, per kg), room_j what the rear tyre has left at sample j, beside its lateral demand
+    and the plan's braking, for the braking a falling r adds (module docstring); r*_0 within
+    [rate_min, 1]. ``v``, ``omega``: the reference's samples
+    from the governed time on; the plan's acceleration at a sample is the central difference."""
     allowed = p.margin * grip * p.g
     target = 1.0
     n = v.size - 1
-    for j in range(n):
-        d, a_t = sample_demand(p, v[j], omega[j], (v[j + 1] - v[j]) / p.Tc)
+    for j in range(n - 1, -1, -1):
+        i = max(j - 1, 0)
+        d, a_t = sample_demand(p, v[j], omega[j], (v[j + 1] - v[i]) / ((j + 1 - i) * p.Tc))
         r2 = 1.0
         if d > allowed:
             r2 = allowed / d if allowed > 0.0 else 0.0
         if a_t > force_per_kg and a_t > 0.0:
             r2 = min(r2, max(force_per_kg, 0.0) / a_t)
-        target = min(target, math.sqrt(r2) + p.rate_down * j * p.Tc)
+        # how far r can fall over sample j on the way to the rate sample j + 1 needs: the braking
+        # a falling r adds, v_j dr/dt, and the sample's own braking share the rear tyre's grip
+        r = min(target, 1.0)
+        a_lat = r * r * v[j] * omega[j]
+        room = math.sqrt(max(allowed * allowed - a_lat * a_lat, 0.0)) / p.traction_factor
+        fall = min(p.rate_down, max(room - max(-r * r * a_t, 0.0), 0.0) / max(v[j], 1.0)) * p.Tc
+        target = min(math.sqrt(r2), target + fall)
     return min(max(target, p.rate_min), 1.0)
 
 
