@@ -351,243 +351,282 @@ def _euler_lanes(s, k):
 @njit(**_INL)
 def _forward(s, k, first, has_prev, has_next):
     """Row k of banded_solve's forward elimination for every lane (its operations, its order;
-    the uniform conditions are literal at each call site, so every variant is a plain loop)."""
+    the uniform conditions are literal at each call site, so every variant is a plain loop).
+    The lane's diagonal block D and right-hand sides G (lower triangle, two columns) accumulate
+    as a tuple through the terms below, in banded_solve's order; the helpers are inlined."""
     op, o, _ = _rows(k)
     for lane in range(LANES):
-        q0, q1, q2 = s[MH_Q * LANES + lane], s[(MH_Q + 1) * LANES + lane], s[(MH_Q + 2) * LANES + lane]
-        d00 = 0.0
-        d10 = 0.0
-        d11 = 0.0
-        d20 = 0.0
-        d21 = 0.0
-        d22 = 0.0
-        g00 = 0.0
-        g10 = 0.0
-        g20 = 0.0
-        g01 = 0.0
-        g11 = 0.0
-        g21 = 0.0
+        terms = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         if first:
-            p0, p1, p2 = s[MH_P * LANES + lane], s[(MH_P + 1) * LANES + lane], s[(MH_P + 2) * LANES + lane]
-            d00 += p0
-            d11 += p1
-            d22 += p2
-            g00 += p0 * s[MH_ARR * LANES + lane]
-            g10 += p1 * s[(MH_ARR + 1) * LANES + lane]
-            g20 += p2 * s[(MH_ARR + 2) * LANES + lane]
-        wk = s[o + MR_W * LANES + lane]
-        r0, r1 = s[MH_R * LANES + lane], s[(MH_R + 1) * LANES + lane]
-        d00 += wk * r0
-        d22 += wk * r1
-        g00 += wk * r0 * s[o + MR_Y * LANES + lane]
-        g20 += wk * r1 * s[o + (MR_Y + 1) * LANES + lane]
-        if has_prev:  # stage k−1
-            u0, u1 = s[op + MR_U * LANES + lane], s[op + (MR_U + 1) * LANES + lane]
-            b00, b01 = s[op + MR_B * LANES + lane], s[op + (MR_B + 1) * LANES + lane]
-            b10, b11 = s[op + (MR_B + 2) * LANES + lane], s[op + (MR_B + 3) * LANES + lane]
-            b20, b21 = s[op + (MR_B + 4) * LANES + lane], s[op + (MR_B + 5) * LANES + lane]
-            d00 += q0
-            g00 += q0 * (b00 * u0 + b01 * u1)
-            g01 += q0 * b00
-            d11 += q1
-            g10 += q1 * (b10 * u0 + b11 * u1)
-            g11 += q1 * b10
-            d22 += q2
-            g20 += q2 * (b20 * u0 + b21 * u1)
-            g21 += q2 * b20
-        if has_next:  # stage k
-            pa = o + MR_A * LANES + lane
-            a00, a01, a02 = s[pa], s[pa + LANES], s[pa + 2 * LANES]
-            a10, a11, a12 = s[pa + 3 * LANES], s[pa + 4 * LANES], s[pa + 5 * LANES]
-            a20, a21, a22 = s[pa + 6 * LANES], s[pa + 7 * LANES], s[pa + 8 * LANES]
-            u0, u1 = s[o + MR_U * LANES + lane], s[o + (MR_U + 1) * LANES + lane]
-            pb = o + MR_B * LANES + lane
-            b00, b01 = s[pb], s[pb + LANES]
-            b10, b11 = s[pb + 2 * LANES], s[pb + 3 * LANES]
-            b20, b21 = s[pb + 4 * LANES], s[pb + 5 * LANES]
-            # D_ij += Σ_l A_li q_l A_lj (the lower triangle, which the Cholesky reads)
-            acc = 0.0
-            acc += a00 * q0 * a00
-            acc += a10 * q1 * a10
-            acc += a20 * q2 * a20
-            d00 += acc
-            acc = 0.0
-            acc += a01 * q0 * a00
-            acc += a11 * q1 * a10
-            acc += a21 * q2 * a20
-            d10 += acc
-            acc = 0.0
-            acc += a01 * q0 * a01
-            acc += a11 * q1 * a11
-            acc += a21 * q2 * a21
-            d11 += acc
-            acc = 0.0
-            acc += a02 * q0 * a00
-            acc += a12 * q1 * a10
-            acc += a22 * q2 * a20
-            d20 += acc
-            acc = 0.0
-            acc += a02 * q0 * a01
-            acc += a12 * q1 * a11
-            acc += a22 * q2 * a21
-            d21 += acc
-            acc = 0.0
-            acc += a02 * q0 * a02
-            acc += a12 * q1 * a12
-            acc += a22 * q2 * a22
-            d22 += acc
-            bl0 = b00 * u0 + b01 * u1
-            bl1 = b10 * u0 + b11 * u1
-            bl2 = b20 * u0 + b21 * u1
-            ab = 0.0
-            ab += a00 * q0 * bl0
-            ab += a10 * q1 * bl1
-            ab += a20 * q2 * bl2
-            ae = 0.0
-            ae += a00 * q0 * (-b00)
-            ae += a10 * q1 * (-b10)
-            ae += a20 * q2 * (-b20)
-            g00 -= ab
-            g01 += ae
-            ab = 0.0
-            ab += a01 * q0 * bl0
-            ab += a11 * q1 * bl1
-            ab += a21 * q2 * bl2
-            ae = 0.0
-            ae += a01 * q0 * (-b00)
-            ae += a11 * q1 * (-b10)
-            ae += a21 * q2 * (-b20)
-            g10 -= ab
-            g11 += ae
-            ab = 0.0
-            ab += a02 * q0 * bl0
-            ab += a12 * q1 * bl1
-            ab += a22 * q2 * bl2
-            ae = 0.0
-            ae += a02 * q0 * (-b00)
-            ae += a12 * q1 * (-b10)
-            ae += a22 * q2 * (-b20)
-            g20 -= ab
-            g21 += ae
-            hff = s[MH_HFF * LANES + lane]
-            gf = s[MH_GF * LANES + lane]
-            e = -b00
-            hff += e * q0 * e
-            gf -= e * q0 * bl0
-            e = -b10
-            hff += e * q1 * e
-            gf -= e * q1 * bl1
-            e = -b20
-            hff += e * q2 * e
-            gf -= e * q2 * bl2
-            s[MH_HFF * LANES + lane] = hff
-            s[MH_GF * LANES + lane] = gf
-        if has_prev:  # elimination of block k−1
-            py = op + MR_YK * LANES + lane
-            y00, y01, y02 = s[py], s[py + LANES], s[py + 2 * LANES]
-            y10, y11, y12 = s[py + 3 * LANES], s[py + 4 * LANES], s[py + 5 * LANES]
-            y20, y21, y22 = s[py + 6 * LANES], s[py + 7 * LANES], s[py + 8 * LANES]
-            pv = op + MR_G * LANES + lane
-            v00, v01 = s[pv], s[pv + LANES]
-            v10, v11 = s[pv + 2 * LANES], s[pv + 3 * LANES]
-            v20, v21 = s[pv + 4 * LANES], s[pv + 5 * LANES]
-            acc = 0.0
-            acc += y00 * y00
-            acc += y10 * y10
-            acc += y20 * y20
-            d00 -= acc
-            acc = 0.0
-            acc += y01 * y00
-            acc += y11 * y10
-            acc += y21 * y20
-            d10 -= acc
-            acc = 0.0
-            acc += y01 * y01
-            acc += y11 * y11
-            acc += y21 * y21
-            d11 -= acc
-            acc = 0.0
-            acc += y02 * y00
-            acc += y12 * y10
-            acc += y22 * y20
-            d20 -= acc
-            acc = 0.0
-            acc += y02 * y01
-            acc += y12 * y11
-            acc += y22 * y21
-            d21 -= acc
-            acc = 0.0
-            acc += y02 * y02
-            acc += y12 * y12
-            acc += y22 * y22
-            d22 -= acc
-            acc = 0.0
-            acc += y00 * v00
-            acc += y10 * v10
-            acc += y20 * v20
-            g00 -= acc
-            acc = 0.0
-            acc += y00 * v01
-            acc += y10 * v11
-            acc += y20 * v21
-            g01 -= acc
-            acc = 0.0
-            acc += y01 * v00
-            acc += y11 * v10
-            acc += y21 * v20
-            g10 -= acc
-            acc = 0.0
-            acc += y01 * v01
-            acc += y11 * v11
-            acc += y21 * v21
-            g11 -= acc
-            acc = 0.0
-            acc += y02 * v00
-            acc += y12 * v10
-            acc += y22 * v20
-            g20 -= acc
-            acc = 0.0
-            acc += y02 * v01
-            acc += y12 * v11
-            acc += y22 * v21
-            g21 -= acc
-        # 3×3 Cholesky (kernels.mhe._chol3); a non-positive pivot marks the lane, no early exit
-        ok = d00 > 0.0
-        l00 = math.sqrt(d00)
-        l10 = d10 / l00
-        l20 = d20 / l00
-        t = d11 - l10 * l10
-        ok = ok & (t > 0.0)
-        l11 = math.sqrt(t)
-        l21 = (d21 - l20 * l10) / l11
-        t = d22 - l20 * l20 - l21 * l21
-        ok = ok & (t > 0.0)
-        l22 = math.sqrt(t)
-        s[MH_BAD * LANES + lane] = s[MH_BAD * LANES + lane] if ok else 1.0
-        pl = o + MR_L * LANES + lane
-        s[pl], s[pl + LANES], s[pl + 2 * LANES] = l00, l10, l20
-        s[pl + 3 * LANES], s[pl + 4 * LANES], s[pl + 5 * LANES] = l11, l21, l22
-        pv = o + MR_G * LANES + lane
-        v0 = g00 / l00
-        v1 = (g10 - l10 * v0) / l11
-        v2 = (g20 - l20 * v0 - l21 * v1) / l22
-        s[pv], s[pv + 2 * LANES], s[pv + 4 * LANES] = v0, v1, v2
-        v0 = g01 / l00
-        v1 = (g11 - l10 * v0) / l11
-        v2 = (g21 - l20 * v0 - l21 * v1) / l22
-        s[pv + LANES], s[pv + 3 * LANES], s[pv + 5 * LANES] = v0, v1, v2
-        if has_next:  # Y_k = L_k⁻¹ O_k, column j of O_k = −A_k[j, :] q_j
-            pa = o + MR_A * LANES + lane
-            py = o + MR_YK * LANES + lane
-            for j in range(3):
-                qj = s[(MH_Q + j) * LANES + lane]
-                o0 = -s[pa + (3 * j) * LANES] * qj
-                o1 = -s[pa + (3 * j + 1) * LANES] * qj
-                o2 = -s[pa + (3 * j + 2) * LANES] * qj
-                y0 = o0 / l00
-                y1 = (o1 - l10 * y0) / l11
-                y2 = (o2 - l20 * y0 - l21 * y1) / l22
-                s[py + j * LANES], s[py + (3 + j) * LANES], s[py + (6 + j) * LANES] = y0, y1, y2
+            terms = _arrival_terms(s, lane, terms)
+        terms = _measurement_terms(s, lane, o, terms)
+        if has_prev:
+            terms = _previous_stage_terms(s, lane, op, terms)
+        if has_next:
+            terms = _next_stage_terms(s, lane, o, terms)
+        if has_prev:
+            terms = _eliminate_previous(s, lane, op, terms)
+        _factor_row(s, lane, o, has_next, terms)
+
+
+@njit(**_INL)
+def _arrival_terms(s, lane, terms):
+    """The arrival cost of the window's first state (row 0)."""
+    d00, d10, d11, d20, d21, d22, g00, g10, g20, g01, g11, g21 = terms
+    p0, p1, p2 = s[MH_P * LANES + lane], s[(MH_P + 1) * LANES + lane], s[(MH_P + 2) * LANES + lane]
+    d00 += p0
+    d11 += p1
+    d22 += p2
+    g00 += p0 * s[MH_ARR * LANES + lane]
+    g10 += p1 * s[(MH_ARR + 1) * LANES + lane]
+    g20 += p2 * s[(MH_ARR + 2) * LANES + lane]
+    return (d00, d10, d11, d20, d21, d22, g00, g10, g20, g01, g11, g21)
+
+
+@njit(**_INL)
+def _measurement_terms(s, lane, o, terms):
+    """The measurement weight of row k (speed and yaw rate)."""
+    d00, d10, d11, d20, d21, d22, g00, g10, g20, g01, g11, g21 = terms
+    wk = s[o + MR_W * LANES + lane]
+    r0, r1 = s[MH_R * LANES + lane], s[(MH_R + 1) * LANES + lane]
+    d00 += wk * r0
+    d22 += wk * r1
+    g00 += wk * r0 * s[o + MR_Y * LANES + lane]
+    g20 += wk * r1 * s[o + (MR_Y + 1) * LANES + lane]
+    return (d00, d10, d11, d20, d21, d22, g00, g10, g20, g01, g11, g21)
+
+
+@njit(**_INL)
+def _previous_stage_terms(s, lane, op, terms):
+    """Stage k−1: the state noise weight q and its input term B u."""
+    d00, d10, d11, d20, d21, d22, g00, g10, g20, g01, g11, g21 = terms
+    q0, q1, q2 = s[MH_Q * LANES + lane], s[(MH_Q + 1) * LANES + lane], s[(MH_Q + 2) * LANES + lane]
+    u0, u1 = s[op + MR_U * LANES + lane], s[op + (MR_U + 1) * LANES + lane]
+    b00, b01 = s[op + MR_B * LANES + lane], s[op + (MR_B + 1) * LANES + lane]
+    b10, b11 = s[op + (MR_B + 2) * LANES + lane], s[op + (MR_B + 3) * LANES + lane]
+    b20, b21 = s[op + (MR_B + 4) * LANES + lane], s[op + (MR_B + 5) * LANES + lane]
+    d00 += q0
+    g00 += q0 * (b00 * u0 + b01 * u1)
+    g01 += q0 * b00
+    d11 += q1
+    g10 += q1 * (b10 * u0 + b11 * u1)
+    g11 += q1 * b10
+    d22 += q2
+    g20 += q2 * (b20 * u0 + b21 * u1)
+    g21 += q2 * b20
+    return (d00, d10, d11, d20, d21, d22, g00, g10, g20, g01, g11, g21)
+
+
+@njit(**_INL)
+def _next_stage_terms(s, lane, o, terms):
+    """Stage k: Aᵀ q A into D, Aᵀ q (B u) and the F column into G, the F row into HFF, GF."""
+    d00, d10, d11, d20, d21, d22, g00, g10, g20, g01, g11, g21 = terms
+    q0, q1, q2 = s[MH_Q * LANES + lane], s[(MH_Q + 1) * LANES + lane], s[(MH_Q + 2) * LANES + lane]
+    pa = o + MR_A * LANES + lane
+    a00, a01, a02 = s[pa], s[pa + LANES], s[pa + 2 * LANES]
+    a10, a11, a12 = s[pa + 3 * LANES], s[pa + 4 * LANES], s[pa + 5 * LANES]
+    a20, a21, a22 = s[pa + 6 * LANES], s[pa + 7 * LANES], s[pa + 8 * LANES]
+    u0, u1 = s[o + MR_U * LANES + lane], s[o + (MR_U + 1) * LANES + lane]
+    pb = o + MR_B * LANES + lane
+    b00, b01 = s[pb], s[pb + LANES]
+    b10, b11 = s[pb + 2 * LANES], s[pb + 3 * LANES]
+    b20, b21 = s[pb + 4 * LANES], s[pb + 5 * LANES]
+    # D_ij += Σ_l A_li q_l A_lj (the lower triangle, which the Cholesky reads)
+    acc = 0.0
+    acc += a00 * q0 * a00
+    acc += a10 * q1 * a10
+    acc += a20 * q2 * a20
+    d00 += acc
+    acc = 0.0
+    acc += a01 * q0 * a00
+    acc += a11 * q1 * a10
+    acc += a21 * q2 * a20
+    d10 += acc
+    acc = 0.0
+    acc += a01 * q0 * a01
+    acc += a11 * q1 * a11
+    acc += a21 * q2 * a21
+    d11 += acc
+    acc = 0.0
+    acc += a02 * q0 * a00
+    acc += a12 * q1 * a10
+    acc += a22 * q2 * a20
+    d20 += acc
+    acc = 0.0
+    acc += a02 * q0 * a01
+    acc += a12 * q1 * a11
+    acc += a22 * q2 * a21
+    d21 += acc
+    acc = 0.0
+    acc += a02 * q0 * a02
+    acc += a12 * q1 * a12
+    acc += a22 * q2 * a22
+    d22 += acc
+    bl0 = b00 * u0 + b01 * u1
+    bl1 = b10 * u0 + b11 * u1
+    bl2 = b20 * u0 + b21 * u1
+    ab = 0.0
+    ab += a00 * q0 * bl0
+    ab += a10 * q1 * bl1
+    ab += a20 * q2 * bl2
+    ae = 0.0
+    ae += a00 * q0 * (-b00)
+    ae += a10 * q1 * (-b10)
+    ae += a20 * q2 * (-b20)
+    g00 -= ab
+    g01 += ae
+    ab = 0.0
+    ab += a01 * q0 * bl0
+    ab += a11 * q1 * bl1
+    ab += a21 * q2 * bl2
+    ae = 0.0
+    ae += a01 * q0 * (-b00)
+    ae += a11 * q1 * (-b10)
+    ae += a21 * q2 * (-b20)
+    g10 -= ab
+    g11 += ae
+    ab = 0.0
+    ab += a02 * q0 * bl0
+    ab += a12 * q1 * bl1
+    ab += a22 * q2 * bl2
+    ae = 0.0
+    ae += a02 * q0 * (-b00)
+    ae += a12 * q1 * (-b10)
+    ae += a22 * q2 * (-b20)
+    g20 -= ab
+    g21 += ae
+    hff = s[MH_HFF * LANES + lane]
+    gf = s[MH_GF * LANES + lane]
+    e = -b00
+    hff += e * q0 * e
+    gf -= e * q0 * bl0
+    e = -b10
+    hff += e * q1 * e
+    gf -= e * q1 * bl1
+    e = -b20
+    hff += e * q2 * e
+    gf -= e * q2 * bl2
+    s[MH_HFF * LANES + lane] = hff
+    s[MH_GF * LANES + lane] = gf
+    return (d00, d10, d11, d20, d21, d22, g00, g10, g20, g01, g11, g21)
+
+
+@njit(**_INL)
+def _eliminate_previous(s, lane, op, terms):
+    """Elimination of block k−1: D −= Y_{k−1}ᵀ Y_{k−1}, G −= Y_{k−1}ᵀ V_{k−1}."""
+    d00, d10, d11, d20, d21, d22, g00, g10, g20, g01, g11, g21 = terms
+    py = op + MR_YK * LANES + lane
+    y00, y01, y02 = s[py], s[py + LANES], s[py + 2 * LANES]
+    y10, y11, y12 = s[py + 3 * LANES], s[py + 4 * LANES], s[py + 5 * LANES]
+    y20, y21, y22 = s[py + 6 * LANES], s[py + 7 * LANES], s[py + 8 * LANES]
+    pv = op + MR_G * LANES + lane
+    v00, v01 = s[pv], s[pv + LANES]
+    v10, v11 = s[pv + 2 * LANES], s[pv + 3 * LANES]
+    v20, v21 = s[pv + 4 * LANES], s[pv + 5 * LANES]
+    acc = 0.0
+    acc += y00 * y00
+    acc += y10 * y10
+    acc += y20 * y20
+    d00 -= acc
+    acc = 0.0
+    acc += y01 * y00
+    acc += y11 * y10
+    acc += y21 * y20
+    d10 -= acc
+    acc = 0.0
+    acc += y01 * y01
+    acc += y11 * y11
+    acc += y21 * y21
+    d11 -= acc
+    acc = 0.0
+    acc += y02 * y00
+    acc += y12 * y10
+    acc += y22 * y20
+    d20 -= acc
+    acc = 0.0
+    acc += y02 * y01
+    acc += y12 * y11
+    acc += y22 * y21
+    d21 -= acc
+    acc = 0.0
+    acc += y02 * y02
+    acc += y12 * y12
+    acc += y22 * y22
+    d22 -= acc
+    acc = 0.0
+    acc += y00 * v00
+    acc += y10 * v10
+    acc += y20 * v20
+    g00 -= acc
+    acc = 0.0
+    acc += y00 * v01
+    acc += y10 * v11
+    acc += y20 * v21
+    g01 -= acc
+    acc = 0.0
+    acc += y01 * v00
+    acc += y11 * v10
+    acc += y21 * v20
+    g10 -= acc
+    acc = 0.0
+    acc += y01 * v01
+    acc += y11 * v11
+    acc += y21 * v21
+    g11 -= acc
+    acc = 0.0
+    acc += y02 * v00
+    acc += y12 * v10
+    acc += y22 * v20
+    g20 -= acc
+    acc = 0.0
+    acc += y02 * v01
+    acc += y12 * v11
+    acc += y22 * v21
+    g21 -= acc
+    return (d00, d10, d11, d20, d21, d22, g00, g10, g20, g01, g11, g21)
+
+
+@njit(**_INL)
+def _factor_row(s, lane, o, has_next, terms):
+    """Row k's 3×3 Cholesky factor L_k, V_k = L_k⁻¹ G and, with a next stage, Y_k."""
+    d00, d10, d11, d20, d21, d22, g00, g10, g20, g01, g11, g21 = terms
+    # 3×3 Cholesky (kernels.mhe._chol3); a non-positive pivot marks the lane, no early exit
+    ok = d00 > 0.0
+    l00 = math.sqrt(d00)
+    l10 = d10 / l00
+    l20 = d20 / l00
+    t = d11 - l10 * l10
+    ok = ok & (t > 0.0)
+    l11 = math.sqrt(t)
+    l21 = (d21 - l20 * l10) / l11
+    t = d22 - l20 * l20 - l21 * l21
+    ok = ok & (t > 0.0)
+    l22 = math.sqrt(t)
+    s[MH_BAD * LANES + lane] = s[MH_BAD * LANES + lane] if ok else 1.0
+    pl = o + MR_L * LANES + lane
+    s[pl], s[pl + LANES], s[pl + 2 * LANES] = l00, l10, l20
+    s[pl + 3 * LANES], s[pl + 4 * LANES], s[pl + 5 * LANES] = l11, l21, l22
+    pv = o + MR_G * LANES + lane
+    v0 = g00 / l00
+    v1 = (g10 - l10 * v0) / l11
+    v2 = (g20 - l20 * v0 - l21 * v1) / l22
+    s[pv], s[pv + 2 * LANES], s[pv + 4 * LANES] = v0, v1, v2
+    v0 = g01 / l00
+    v1 = (g11 - l10 * v0) / l11
+    v2 = (g21 - l20 * v0 - l21 * v1) / l22
+    s[pv + LANES], s[pv + 3 * LANES], s[pv + 5 * LANES] = v0, v1, v2
+    if has_next:  # Y_k = L_k⁻¹ O_k, column j of O_k = −A_k[j, :] q_j
+        pa = o + MR_A * LANES + lane
+        py = o + MR_YK * LANES + lane
+        for j in range(3):
+            qj = s[(MH_Q + j) * LANES + lane]
+            o0 = -s[pa + (3 * j) * LANES] * qj
+            o1 = -s[pa + (3 * j + 1) * LANES] * qj
+            o2 = -s[pa + (3 * j + 2) * LANES] * qj
+            y0 = o0 / l00
+            y1 = (o1 - l10 * y0) / l11
+            y2 = (o2 - l20 * y0 - l21 * y1) / l22
+            s[py + j * LANES], s[py + (3 + j) * LANES], s[py + (6 + j) * LANES] = y0, y1, y2
 
 
 @njit(**_INL)
@@ -856,67 +895,9 @@ def advance(m_end, exact_plant, state, need, tally, pw, mws, akey, asin, acos, l
                 state[b], need[b] = FINISHED, code
             else:
                 state[b], need[b] = NEEDS_PYTHON, code
-        # the MHE windows, LANES lanes of equal window length at a time
-        b0 = 0
-        while b0 < B:
-            n_sel = 0
-            n = -1
-            for b in range(b0, B):
-                if state[b] == AT_MHE and (n < 0 or si[b, ke.SI_MHEN] == n):
-                    n = si[b, ke.SI_MHEN]
-                    lanes[n_sel] = b
-                    n_sel += 1
-                    if n_sel == LANES:
-                        break
-            if n_sel == 0:
-                break
-            t0 = ke._ticks()
-            for j in range(n_sel):
-                b = lanes[j]
-                _mhe_gather(mws, j, n, mY[b], mW[b], mU[b], mXS[b], mp[b], sf[b], si[b],
-                            akey[b], asin[b], acos[b])
-            mhe_window_lanes(mws, n)
-            for j in range(n_sel):
-                b = lanes[j]
-                if _mhe_finish(mws, j, n, mXS[b], mA[b], mB[b], mp[b], sf[b], si[b], sc[b]):
-                    state[b] = READY
-                else:
-                    state[b], need[b] = NEEDS_PYTHON, ke.NEED_MHE
-            dt = ke._ticks() - t0
-            tally[0] += n_sel
-            tally[2] += dt
-            for j in range(n_sel):  # each lane's share of the batched solve
-                b = lanes[j]
-                li[b, si[b, ke.SI_M], ke.LI_TMHE] = float(dt) / n_sel
-        # the plant
-        t0 = ke._ticks()
-        n_sel = 0
-        for b in range(B):
-            if state[b] != AT_PLANT:
-                continue
-            if exact_plant or not _vector_plant_ok(x[b], sc[b]) or (
-                    n_sel > 0 and (ip[b, ke.IP_NSUB] != ip[lanes[0], ke.IP_NSUB]
-                                   or fp[b, ke.FP_H] != fp[lanes[0], ke.FP_H])):
-                xn, ok = kplant.rk4_block(x[b], sc[b, ke.SC_OF], sc[b, ke.SC_OD], sc[b, ke.SC_MU],
-                                          ip[b, ke.IP_NSUB], fp[b, ke.FP_H], cst[b])
-                if ok:
-                    x[b, :] = xn
-                    sf[b, ke.SF_PLANTU], sf[b, ke.SF_PLANTU + 1] = sc[b, ke.SC_OF], sc[b, ke.SC_OD]
-                    state[b] = READY
-                else:
-                    state[b], need[b] = NEEDS_PYTHON, ke.NEED_PLANT
-                continue
-            _plant_gather(pw, n_sel, x[b], sc[b], cst[b])
-            lanes[n_sel] = b
-            n_sel += 1
-            if n_sel == LANES:
-                _plant_group(pw, n_sel, lanes, x, sf, sc, ip, fp, state, need)
-                tally[1] += n_sel
-                n_sel = 0
-        if n_sel > 0:
-            _plant_group(pw, n_sel, lanes, x, sf, sc, ip, fp, state, need)
-            tally[1] += n_sel
-        tally[3] += ke._ticks() - t0
+        _mhe_groups(state, need, tally, mws, lanes, akey, asin, acos, sf, si, sc, li, mY, mW, mU, mXS,
+                    mA, mB, mp)
+        _plant_lanes(exact_plant, state, need, tally, pw, lanes, x, fp, ip, sf, sc, cst)
         waiting = 0
         running = 0
         for b in range(B):
@@ -926,6 +907,81 @@ def advance(m_end, exact_plant, state, need, tally, pw, mws, akey, asin, acos, l
                 running += 1
         if waiting > 0 or running == 0:
             return waiting
+
+
+@njit(**_NJ)
+def _mhe_groups(state, need, tally, mws, lanes, akey, asin, acos, sf, si, sc, li, mY, mW, mU, mXS,
+                mA, mB, mp):
+    """advance()'s MHE windows: the lanes waiting AT_MHE, LANES of equal window length at a
+    time, gathered, solved together and finished (READY, or NEEDS_PYTHON when the dense QP
+    must decide)."""
+    B = state.shape[0]
+    b0 = 0
+    while b0 < B:
+        n_sel = 0
+        n = -1
+        for b in range(b0, B):
+            if state[b] == AT_MHE and (n < 0 or si[b, ke.SI_MHEN] == n):
+                n = si[b, ke.SI_MHEN]
+                lanes[n_sel] = b
+                n_sel += 1
+                if n_sel == LANES:
+                    break
+        if n_sel == 0:
+            break
+        t0 = ke._ticks()
+        for j in range(n_sel):
+            b = lanes[j]
+            _mhe_gather(mws, j, n, mY[b], mW[b], mU[b], mXS[b], mp[b], sf[b], si[b],
+                        akey[b], asin[b], acos[b])
+        mhe_window_lanes(mws, n)
+        for j in range(n_sel):
+            b = lanes[j]
+            if _mhe_finish(mws, j, n, mXS[b], mA[b], mB[b], mp[b], sf[b], si[b], sc[b]):
+                state[b] = READY
+            else:
+                state[b], need[b] = NEEDS_PYTHON, ke.NEED_MHE
+        dt = ke._ticks() - t0
+        tally[0] += n_sel
+        tally[2] += dt
+        for j in range(n_sel):  # each lane's share of the batched solve
+            b = lanes[j]
+            li[b, si[b, ke.SI_M], ke.LI_TMHE] = float(dt) / n_sel
+
+
+@njit(**_NJ)
+def _plant_lanes(exact_plant, state, need, tally, pw, lanes, x, fp, ip, sf, sc, cst):
+    """advance()'s plant steps: the lanes waiting AT_PLANT through the vector RK4, LANES at a
+    time (the scalar block where a lane's inputs are not for the vector kernel)."""
+    B = state.shape[0]
+    t0 = ke._ticks()
+    n_sel = 0
+    for b in range(B):
+        if state[b] != AT_PLANT:
+            continue
+        if exact_plant or not _vector_plant_ok(x[b], sc[b]) or (
+                n_sel > 0 and (ip[b, ke.IP_NSUB] != ip[lanes[0], ke.IP_NSUB]
+                               or fp[b, ke.FP_H] != fp[lanes[0], ke.FP_H])):
+            xn, ok = kplant.rk4_block(x[b], sc[b, ke.SC_OF], sc[b, ke.SC_OD], sc[b, ke.SC_MU],
+                                      ip[b, ke.IP_NSUB], fp[b, ke.FP_H], cst[b])
+            if ok:
+                x[b, :] = xn
+                sf[b, ke.SF_PLANTU], sf[b, ke.SF_PLANTU + 1] = sc[b, ke.SC_OF], sc[b, ke.SC_OD]
+                state[b] = READY
+            else:
+                state[b], need[b] = NEEDS_PYTHON, ke.NEED_PLANT
+            continue
+        _plant_gather(pw, n_sel, x[b], sc[b], cst[b])
+        lanes[n_sel] = b
+        n_sel += 1
+        if n_sel == LANES:
+            _plant_group(pw, n_sel, lanes, x, sf, sc, ip, fp, state, need)
+            tally[1] += n_sel
+            n_sel = 0
+    if n_sel > 0:
+        _plant_group(pw, n_sel, lanes, x, sf, sc, ip, fp, state, need)
+        tally[1] += n_sel
+    tally[3] += ke._ticks() - t0
 
 
 @njit(**_NJ)
