@@ -219,9 +219,9 @@ def test_the_speed_governor_runs_alike(source: str, car: list[str], steps: int |
     engine's friction program); a governed run — the reference sampled at the governed time,
     the errors logged against it, the MPC's window re-timed — equal to the Python loop's bit for
     bit, counters and meta included. The nominal estimate row runs whole (the governed run's end
-    on the reference's last samples, all 3 governor actions); the other two the first 60 s: the
-    start's spin and the drop at 30 s, 2 governor actions each (the whole run's third comes after
-    60 s and takes the same path)."""
+    on the reference's last samples, every governor action); the other two the first 60 s: the
+    start's spin and the drop at 30 s, at least 2 governor actions each (the later ones take the
+    same path)."""
     cfg = apply_overrides(Config(), [*_MU_DROP, *car, f'governor.grip_source="{source}"'])
     exp = prepare(cfg, ["ref"], reference=paper_reference_path)
     assert eng.applicability(exp.config, "REF", exp.scenario) is None

@@ -855,6 +855,55 @@ def plan_feasibility(ctx: Context) -> Produced:
     return p
 
 
+# -- the speed governor (docs/configuration.md, [governor]) -----------------------------------
+
+#: μ(road) 0.9 → 0.5 at 30 s on the friction-ellipse tyre whose grip follows the road (issue 36's
+#: acceptance case), and a μ 0.3 patch inside a braking zone (a case it does not carry).
+_GRIP_ROAD = ["scenario.plant.combined_slip=true", "scenario.plant.grip_scales_with_road=true",
+              "scenario.base_mu=0.9"]
+_GOVERNOR_CASES = (("μ 0.9 → 0.5 at 30 s", ["scenario.friction=[{at_s = 30.0, mu = 0.5}]"]),
+                   ("μ 0.3 for 10 s from 45 s", ["scenario.friction=[{at_s = 45.0, mu = 0.3, "
+                                                 "duration_s = 10.0}]"]))
+_HEAVY = ["scenario.plant.mass_scale=1.15", "scenario.plant.cornering_front_scale=0.75",
+          "scenario.plant.cornering_rear_scale=0.85"]
+
+
+def governor(ctx: Context) -> Produced:
+    """The speed governor on a road that loses grip, with its estimate and with the oracle that
+    knows μ(t), on the built-in circuit and the paper reference, nominal car and a heavier car
+    with softer tyres (docs/configuration.md)."""
+    from tsmpc.config import Config, apply_overrides
+
+    p = Produced()
+    rows = []
+    for ref_label, ref in (("built-in circuit", None), ("paper reference", ctx.paper_reference)):
+        for case, sets in _GOVERNOR_CASES:
+            if case.startswith("μ 0.3") and ref is not None:
+                continue
+            for car, extra in (("nominal", []), ("mass +15 %, C_f −25 %, C_r −15 %", _HEAVY)):
+                runs = {}
+                for source in ("estimate", "oracle"):
+                    cfg = apply_overrides(Config(), [*_GRIP_ROAD, *sets, *extra,
+                                                     f'governor.grip_source="{source}"'])
+                    runs[source] = _experiment(ctx, f"governor {ref_label} {case} {car} {source}", cfg,
+                                               ["ref"], reference=ref).metrics["methods"]["REF"]
+                est, orc = runs["estimate"], runs["oracle"]
+
+                def cell(m: dict[str, Any]) -> str:
+                    if m["status"] == "diverged":
+                        return f"left the road at {_diverged_at(m['termination'])}"
+                    return f"{_d(m['max_abs_lateral_m'], 3)} m"
+                done = est["status"] != "diverged" and orc["status"] != "diverged"
+                ratio = _d(est["max_abs_lateral_m"] / orc["max_abs_lateral_m"], 2) + "×" if done else "—"
+                rows.append([ref_label, case, car, cell(est), cell(orc), ratio,
+                             str(est["events"].get("governor_actions", 0)),
+                             _d(est.get("plan_delay_s", 0.0), 1)])
+    p.add("governor", "table", _table(
+        ["reference", "road", "car", "max \\|e_y\\| (estimate)", "max \\|e_y\\| (oracle)", "ratio",
+         "actions", "behind plan [s]"], rows))
+    return p
+
+
 # -- recovery (docs/configuration.md, [recovery]) ---------------------------------------------
 
 #: The recovery experiment: seconds of all-NaN samples from the start (one run each), the run's
@@ -1383,6 +1432,7 @@ PRODUCERS: tuple[Producer, ...] = (
     Producer("envelope", envelope, "Monza beyond the default box"),
     Producer("plan-feasibility", plan_feasibility, "the tracks at 30 m/s and 8 m/s² capped; force "
              "limits per kg; a degraded run (7 runs)"),
+    Producer("governor", governor, "the speed governor on a road that loses grip (12 runs, ≈ 15 s)"),
     Producer("recovery", recovery, "the restart after all-NaN samples ([recovery], 10 Python-loop "
              "runs of 30 s, ≈ 12 s of CPU)"),
     Producer("robustness", robustness, "the robustness scenarios (docs/sweeps.md)"),
