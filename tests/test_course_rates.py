@@ -83,20 +83,17 @@ def test_slip_and_speed_offset_are_fitted_at_a_low_pose_rate(hz: float) -> None:
     assert f.speed_offset == pytest.approx(0.2, abs=0.01)
 
 
-def test_the_stiffnesses_are_fitted_from_4_hz_up(cfg: Config) -> None:
-    """A car whose tyres are 30 % off the model's: with the pose at 5 Hz the compliance fits reach
-    them (the chords' α̇ and forgetting per second, not per chord); at 3 Hz the step between chords
-    (0.33 s) exceeds STIFF_MAX_STEP_S and the fit holds the model's stiffnesses (its α̇ would lag)."""
+@pytest.mark.parametrize("hz", [1.0, 3.0, 5.0])
+def test_the_stiffnesses_are_fitted_at_a_low_pose_rate(hz: float, cfg: Config) -> None:
+    """A car whose tyres are 30 % off the model's, pose at 1–5 Hz: the compliance fits reach them
+    (the chords' α̇ and forgetting per second, not per chord)."""
     model = cfg.vehicle
     true = replace(model, cornering_stiffness_front=0.7 * model.C_f, cornering_stiffness_rear=1.3 * model.C_r)
     f = CourseFusion(0.1, 0.0, model)
-    _drive(f, SEGMENTS * 3, pose_hz=5.0, true_vehicle=true)
+    _drive(f, SEGMENTS * 3, pose_hz=hz, true_vehicle=true)
     C = f.stiffness
     assert C is not None
-    assert C[0] == pytest.approx(true.C_f, rel=0.05) and C[1] == pytest.approx(true.C_r, rel=0.05)
-    g = CourseFusion(0.1, 0.0, model)
-    _drive(g, SEGMENTS * 3, pose_hz=3.0, true_vehicle=true)
-    assert g.n_chords > 150 and g.stiffness == pytest.approx((model.C_f, model.C_r), rel=1e-12)
+    assert C[0] == pytest.approx(true.C_f, rel=0.02) and C[1] == pytest.approx(true.C_r, rel=0.02)
 
 
 def test_the_heading_between_poses_is_the_gyros_integral() -> None:

@@ -30,7 +30,8 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     gyro fit below removes the bias first), so a missing or rejected pose does not spoil the
     interval. Each chord adds the time of its last interval to the fits' memories (forgetting per
     second, not per chord), and the stiffness fit counts a chord as one independent slip
-    measurement per ``STIFF_CORRELATION`` T_c of new data. With a pose at every call the intervals
+    measurement per ``STIFF_CORRELATION`` T_c of new data, its α̇ term's lag beyond T_c as noise
+    (:func:`_stiffness_fit`). With a pose at every call the intervals
     are the MPC periods and the chords those of ``BASELINE`` of them, as before issue 35 (the
     results are the same to the bit); below 10 Hz no chord used to complete and every fit stayed
     at its prior;
@@ -56,9 +57,8 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     fitted per axle (least squares through the origin on the compliance 1/C, Bayesian: the
     model's C as prior with a relative σ of ``STIFF_PRIOR_REL``, each chord weighted by its slip
     noise, forgetting over ``STIFF_MEMORY_S``), from chords where the reference turns
-    (``CORNER_ACCEL``) and the car neither accelerates nor brakes (``STIFF_MAX_ACCEL``), over at most
-    ``STIFF_MAX_SPAN_S`` and at most ``STIFF_MAX_STEP_S`` after the previous chord (a pose rate
-    below 4 Hz leaves the stiffnesses at the model's), per axle
+    (``CORNER_ACCEL``) and the car neither accelerates nor brakes (``STIFF_MAX_ACCEL``) over at most
+    ``STIFF_MAX_SPAN_S``, per axle
     only where the chord's own F / slip is a plausible stiffness (``STIFF_RANGE``). The
     fitted C_f, C_r replace the model's in the MHE and in the inner loop's reference gain N̄ (the
     LMI gains stay): with them α̂ and the steering feed-forward are right (issue 21: the stiffness
@@ -244,15 +244,6 @@ GYRO_HEADING_FLOOR = 1e-5
 #: the transient into the means (the slip and speed fits are linear in their means and take chords
 #: up to ``CHORD_MAX_S``). 1.0 s admits the chords of a 1 Hz pose.
 STIFF_MAX_SPAN_S = 1.0
-#: Longest step [s] between consecutive chords the stiffness fit takes (the time the chord adds,
-#: its last interval: T_c at the nominal sensors, 1 / rate at a lower pose rate). A chord's α̇ is
-#: the change of the mean α̂ since the previous chord over that step, so it lags the chord by about
-#: half the step; beyond the lateral dynamics' own time constant (0.1–0.2 s) the fit takes a
-#: corner's entry or exit for stiffness. Measured on the paper reference (nominal car, REF, seed
-#: 1): with a 2 Hz pose the fit went 3–4 % below the model's stiffnesses and max |e_y| rose from
-#: 0.021 to 0.033 m (0.019 m without the fit); at 5 Hz (0.2 s steps) it stays within 2 % and
-#: costs nothing. 0.25 s takes every pose rate from 4 Hz up; below, the fit holds its prior.
-STIFF_MAX_STEP_S = 0.25
 #: Largest longitudinal acceleration of the car over a chord [g] for it to count in the stiffness
 #: fit. The fit is a pure-slip, constant-speed single-track fit; under traction or braking the
 #: tyres' lateral stiffness drops (combined slip) and load moves between the axles (ΔF_z / F_z ≈
@@ -379,7 +370,6 @@ class CourseParams(NamedTuple):
         chord_min: calls of the shortest chord, ``BASELINE`` × ``n_inner``.
         chord_max: calls of the longest chord (``CHORD_MAX_S``).
         stiff_max: calls of the longest chord the stiffness fit takes (``STIFF_MAX_SPAN_S``).
-        stiff_step: calls of the longest step between chords it takes (``STIFF_MAX_STEP_S``).
     """
 
     Tc: float
@@ -401,7 +391,6 @@ class CourseParams(NamedTuple):
     chord_min: int
     chord_max: int
     stiff_max: int
-    stiff_step: int
 
 
 class SlipFit(NamedTuple):
@@ -473,8 +462,7 @@ def course_params(Tc: float, position_sigma: float, has_vehicle: bool, C_f: floa
     per_s = n_inner / Tc  # calls per second
     return CourseParams(Tc, max(position_sigma, 1e-4), has_vehicle, C_f, C_r, mass, inertia, a, b, g,
                         den_f / C_f, den_r / C_r, den_f, den_r, Td, n_inner, BASELINE * n_inner,
-                        math.floor(CHORD_MAX_S * per_s + 1e-6), math.floor(STIFF_MAX_SPAN_S * per_s + 1e-6),
-                        math.floor(STIFF_MAX_STEP_S * per_s + 1e-6))
+                        math.floor(CHORD_MAX_S * per_s + 1e-6), math.floor(STIFF_MAX_SPAN_S * per_s + 1e-6))
 
 
 def course_start(p: CourseParams) -> CourseState:
@@ -648,12 +636,10 @@ def course_chord(p: CourseParams, s: CourseState, k0: int, ex: float, ey: float,
     stiff = s.stiff
     # axle stiffnesses from the course's slip (quasi-steady single track), only where the reference
     # turns (a straight carries no information on C, only the traces of a lightly damped yaw motion),
-    # at nearly constant speed (pure slip: STIFF_MAX_ACCEL), over at most STIFF_MAX_SPAN_S (a
-    # longer chord's means mix a corner's transient in) and at most STIFF_MAX_STEP_S after the
-    # previous chord (its α̇ lags by half the step); a NaN speed fails the test
+    # at nearly constant speed (pure slip: STIFF_MAX_ACCEL) and over at most STIFF_MAX_SPAN_S (a
+    # longer chord's means mix a corner's transient in); a NaN speed fails the test
     a_x = (s.v_now - first.v_first) / D
-    steady = (p.has_vehicle and abs(a_x) <= STIFF_MAX_ACCEL * p.g and n <= p.stiff_max
-              and last.n <= p.stiff_step)
+    steady = p.has_vehicle and abs(a_x) <= STIFF_MAX_ACCEL * p.g and n <= p.stiff_max
     if p.has_vehicle and math.isfinite(s.omega_now) and ay_min >= CORNER_ACCEL and steady:
         # α̇ from the model's α̂ over consecutive chords (smooth; the course's own α would put its
         # noise through a 1/dt difference into the force)
@@ -717,8 +703,13 @@ def _stiffness_fit(p: CourseParams, f: StiffFit, a_course: float, alpha_hat: flo
     straight). The chord lasts ``span`` seconds and adds its last interval's ``n_last`` calls. Each
     chord weighs by its slip noise ``sig`` (or the fit's own floor), shared with the chords within
     the residual's correlation time (``STIFF_CORRELATION`` T_c: one chord per T_c shares it with
-    ``STIFF_CORRELATION`` − 1 others, one per second with none); forgetting is per second,
-    towards the prior (a fit without excitation returns to the model)."""
+    ``STIFF_CORRELATION`` − 1 others, one per second with none), plus, per axle, the error of its
+    α̇ term: α̇ is the change of the mean α̂ since the previous chord, which lags the chord by half
+    the step between them; the part of the step beyond T_c (none at the nominal sensors, 80 % of
+    it at a 2 Hz pose) makes that share of M v α̇ force noise, slip noise F / C on each axle
+    (a pose at 1–3 Hz drove the fit 3–4 % below the nominal car's stiffnesses without it, and max
+    |e_y| from 0.021 to 0.033 m on the paper reference). Forgetting is per second, towards the
+    prior (a fit without excitation returns to the model)."""
     S = p.mass * (vw + v_meas * al_dot) + F_x * a_course
     T = p.inertia * d_omega / span
     L = p.a + p.b
@@ -726,12 +717,18 @@ def _stiffness_fit(p: CourseParams, f: StiffFit, a_course: float, alpha_hat: flo
     F_r, a_r = _axle_pair(p.C_r, (p.a * S - T) / L, p.b * w_v - a_course)
     s_slip = max(sig, STIFF_SLIP_FLOOR)
     corr = max(1.0, STIFF_CORRELATION * p.n_inner / n_last)  # chords per independent one
-    w_c = 1.0 / (corr * s_slip * s_slip)
+    # the α̇ term's error: the part of the step beyond T_c of M v α̇, per axle as slip (F / C)
+    lag = max(n_last - p.n_inner, 0) / n_last
+    e_S = p.mass * v_meas * abs(al_dot) * lag
+    e_f = (p.b / L) * e_S / p.C_f
+    e_r = (p.a / L) * e_S / p.C_r
+    w_f = 1.0 / (corr * s_slip * s_slip + corr * e_f * e_f)
+    w_r = 1.0 / (corr * s_slip * s_slip + corr * e_r * e_r)
     g2 = 1.0 - ((n_last / p.n_inner) * p.Tc) / STIFF_MEMORY_S
-    return StiffFit(g2 * f.num_f + (1.0 - g2) * p.prior_num_f + w_c * (F_f * a_f),
-                    g2 * f.num_r + (1.0 - g2) * p.prior_num_r + w_c * (F_r * a_r),
-                    g2 * f.den_f + (1.0 - g2) * p.prior_den_f + w_c * (F_f * F_f),
-                    g2 * f.den_r + (1.0 - g2) * p.prior_den_r + w_c * (F_r * F_r),
+    return StiffFit(g2 * f.num_f + (1.0 - g2) * p.prior_num_f + w_f * (F_f * a_f),
+                    g2 * f.num_r + (1.0 - g2) * p.prior_num_r + w_r * (F_r * a_r),
+                    g2 * f.den_f + (1.0 - g2) * p.prior_den_f + w_f * (F_f * F_f),
+                    g2 * f.den_r + (1.0 - g2) * p.prior_den_r + w_r * (F_r * F_r),
                     alpha_hat, True)
 
 
