@@ -31,10 +31,9 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     interval. Each chord adds the time of its last interval to the fits' memories (forgetting per
     second, not per chord), and the stiffness fit counts a chord as one independent slip
     measurement per ``STIFF_CORRELATION`` T_c of new data, its α̇ term's lag beyond T_c as noise
-    (:func:`_stiffness_fit`). With a pose at every call the intervals
-    are the MPC periods and the chords those of ``BASELINE`` of them, as before issue 35 (the
-    results are the same to the bit); below 10 Hz no chord used to complete and every fit stayed
-    at its prior;
+    (:func:`_stiffness_fit`). With a pose at every call the intervals are the MPC periods and the
+    chords those of ``BASELINE`` of them, as before issue 35 (the results are the same to the
+    bit); below 10 Hz no chord used to complete and every fit stayed at its prior;
 
   - the slip: ᾱ_course − ᾱ̂ = κ ā_y + β (ā_y = v̂ ω̂ the lateral acceleration). A stiffness or mass
     error biases the MHE's α̂ in proportion to the lateral force (steady state of the single-track
