@@ -246,8 +246,6 @@ MAX_FUNCTION_LINES = 100
 #: Each entry must still be over the limit (a stale entry fails the test).
 LONG_KERNELS = {
     "kernels/engine.py::run",  # the whole-run engine's step loop (issue 34 replaces it by the blocks)
-    "kernels/batch.py::_forward",  # mhe._eliminate (banded_solve's forward elimination) for every lane
-    "kernels/batch.py::advance",  # the batch's lane scheduler around the engine's steps
 }
 
 
