@@ -46,6 +46,13 @@ def test_grip_estimate_from_the_friction_force() -> None:
     assert grip_estimate(-1e6, 1000.0, 0.5, 10.0, 1.0) == 0.0  # never negative
     assert math.isnan(grip_estimate(math.nan, 1000.0, 0.5, 10.0, 1.0))
     assert math.isnan(grip_estimate(100.0, 0.0, 0.5, 10.0, 1.0))  # no mass, no reading (not ∞)
+    # a mass error found by the mass estimate: the whole resistance over the estimated weight. A
+    # plant 15 % heavier on μ 0.5 shows F̂ = 0.5 · 1150 · 10 − 0.5 · 1000 · 10 = 750 N
+    assert grip_estimate(750.0, 1150.0, 0.5, 10.0, 1.0, 1000.0) == pytest.approx(0.5, abs=1e-15)
+    assert grip_estimate(750.0, 1150.0, 0.5, 10.0, 1.0) == pytest.approx(0.5 + 750.0 / 11500.0)
+    # at the model's mass the reading is μ_o + F̂ / (M g), to the bit
+    assert grip_estimate(-1000.0, 1000.0, 0.5, 10.0, 1.0, 1000.0) == grip_estimate(-1000.0, 1000.0, 0.5, 10.0,
+                                                                                   1.0)
 
 
 def test_spin_grip_by_hand() -> None:
@@ -79,15 +86,16 @@ GP = GripParams(oracle=False, mu_nominal=0.5, mu_dry=0.9, mu_tyre=0.9, grip_per_
 def test_grip_inputs_follow_the_configs_tyre_model() -> None:
     """μ̂(road) 0.4 (F̂ = −1000 N): the tyre-only model keeps its prior 0.9, the coupled one reads
     0.4 · 0.9 / 0.9 = 0.4; both count the same force budget (10000 − 0.4 · 1000 · 10) / 1000 = 6 m/s²
-    (at M̂ 1250 kg: μ̂(road) 0.42, (10000 − 5250) / 1250 = 3.8). An unusable reading: no grip
-    sample (NaN: the last one stands) and the budget at μ_o."""
+    (at M̂ 1250 kg the whole resistance 0.5 · 1000 · 10 − 1000 = 4000 N over the estimated weight:
+    μ̂(road) 0.32, (10000 − 4000) / 1250 = 4.8). An unusable reading: no grip sample (NaN: the
+    last one stands) and the budget at μ_o."""
     assert governor_inputs(GP, -1000.0, True, 1000.0, False, 5000.0, math.nan) == (
         0.9, False, pytest.approx(6.0, abs=1e-12))
     coupled = GP._replace(grip_per_road=1.0)
     grip, spin, fpk = governor_inputs(coupled, -1000.0, True, 1000.0, False, 5000.0, math.nan)
     assert (grip, spin, fpk) == (pytest.approx(0.4, abs=1e-15), False, pytest.approx(6.0, abs=1e-12))
     assert governor_inputs(coupled, -1000.0, True, 1250.0, False, 5000.0, math.nan)[0::2] == (
-        pytest.approx(0.42, abs=1e-15), pytest.approx(3.8, abs=1e-12))
+        pytest.approx(0.32, abs=1e-15), pytest.approx(4.8, abs=1e-12))
     # grip through a tyre with 1.5 times the road's grip: 0.4 · 1.5 (a product, not a quotient)
     assert governor_inputs(GP._replace(grip_per_road=1.5), -1000.0, True, 1000.0, False, 5000.0,
                            math.nan)[0] == pytest.approx(0.6, abs=1e-15)

@@ -16,7 +16,8 @@ config's tyre (``tyre.scale_grip_with_road``) or the scenario's
 
 - *The tyres' grip follows the road* (either flag). The friction force the MHE-UIO estimates (its
   unknown input, :mod:`tsmpc.estimation.mhe_uio`) is F̂_fr = (μ(road) − μ_o) M g, so
-  μ̂(road) = μ_o + F̂_fr / (M̂ g) (M̂: the mass estimate of ``fusion.mass_estimate`` when on), and
+  μ̂(road) = (μ_o M g + F̂_fr) / (M̂ g) — the whole resistance over the estimated weight (M̂: the mass
+  estimate of ``fusion.mass_estimate`` when on, M the model's), and
   the grip is μ̂_t = μ̂(road) μ_tyre / μ_dry.
 - *Tyre-only* (neither, the default). The grip holds its prior μ_tyre and is lowered only by what
   the tyre itself shows: a spin (below). Why not read it from the resistance: before the wheel
@@ -211,12 +212,20 @@ class GovernorState(NamedTuple):
 
 
 @jitable
-def grip_estimate(F_fr: float, mass: float, mu_nominal: float, g: float, grip_per_road: float) -> float:
-    """μ̂_t from the friction force estimate: (μ_o + F̂_fr / (M g)) μ_tyre / μ_dry
-    (``grip_per_road`` = μ_tyre / μ_dry); NaN for a non-finite estimate."""
+def grip_estimate(F_fr: float, mass: float, mu_nominal: float, g: float, grip_per_road: float,
+                  model_mass: float = math.nan) -> float:
+    """μ̂_t from the friction force estimate: the road's whole resistance, the model's μ_o M g plus
+    the unknown input F̂_fr, over the estimated weight M̂ g — μ̂(road) = (μ_o M g + F̂_fr) / (M̂ g) =
+    μ_o + F̂_fr / (M̂ g) + μ_o (M − M̂) / M̂ — times μ_tyre / μ_dry (``grip_per_road``). ``mass``:
+    M̂; ``model_mass``: the model's M (NaN: M̂, the term vanishes). Read as μ_o + F̂_fr / (M̂ g), a
+    mass error the mass estimate has found still counted μ_o ΔM g as road: 7 % too much grip on
+    dry asphalt with 15 % more mass (the estimate right to 0.3 %). NaN for a non-finite estimate."""
     if not (math.isfinite(F_fr) and mass > 0.0):
         return math.nan
-    return max(mu_nominal + F_fr / (mass * g), 0.0) * grip_per_road
+    mu = mu_nominal + F_fr / (mass * g)
+    if math.isfinite(model_mass) and model_mass != mass:
+        mu += mu_nominal * (model_mass - mass) / mass
+    return max(mu, 0.0) * grip_per_road
 
 
 @jitable
@@ -236,16 +245,16 @@ def governor_inputs(p: GripParams, F_fr: float, usable: bool, mass: float, satur
     ``mass``: M̂, the mass the resistance is read with; ``saturated``: the inner loop's last step
     saturated; ``F_applied``: the drive force applied [N]; ``road_mu``: the true μ(road) (oracle).
 
-    μ̂(road) = μ_o + F̂_fr / (M̂ g) (the oracle: the true μ). The grip: μ̂(road) ``grip_per_road``
-    when the tyres follow the road, else the prior μ_tyre while a reading is usable (tyre-only: the
-    resistance says nothing about the tyre). A resistance at the model's mass above every road,
-    (1 + deadband) μ_dry, while the inner loop saturates is a spin: the grip is then the traction
-    the rear tyre delivers (:func:`spin_grip`; the oracle knows the grip and ignores it). The force
-    budget: (F_max − μ̂(road) M̂ g) / M̂ (μ_o without a reading)."""
+    μ̂(road) = (μ_o M g + F̂_fr) / (M̂ g) (:func:`grip_estimate`; the oracle: the true μ). The grip:
+    μ̂(road) ``grip_per_road`` when the tyres follow the road, else the prior μ_tyre while a reading
+    is usable (tyre-only: the resistance says nothing about the tyre). A resistance at the model's
+    mass above every road, (1 + deadband) μ_dry, while the inner loop saturates is a spin: the grip
+    is then the traction the rear tyre delivers (:func:`spin_grip`; the oracle knows the grip and
+    ignores it). The force budget: (F_max − μ̂(road) M̂ g) / M̂ (μ_o without a reading)."""
     if p.oracle:
         mu_road = road_mu
     else:
-        mu_road = grip_estimate(F_fr if usable else math.nan, mass, p.mu_nominal, p.g, 1.0)
+        mu_road = grip_estimate(F_fr if usable else math.nan, mass, p.mu_nominal, p.g, 1.0, p.mass)
     grip = math.nan
     if math.isfinite(mu_road):
         grip = mu_road * p.grip_per_road if p.grip_per_road > 0.0 else p.mu_tyre
