@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from _motion import arc_step
 from tsmpc.config import Config, replace
 from tsmpc.control.ts_lqr import equilibrium
 from tsmpc.estimation.fusion import CourseFusion
@@ -50,15 +51,7 @@ def _drive(f: CourseFusion, segments, *, pose_hz: float | None, kappa: float = 0
                 f.close(pose, v + v_offset, w, v * w, mpc)
             f.sample(True, th if pose is not None else math.nan, v + v_offset, alpha_hat, v * w, w, delta,
                      0.0, pose is not None)
-            chi0 = th + alpha
-            th += w * Td
-            chi1 = th + alpha
-            if abs(w) > 1e-12:
-                X += v / w * (math.sin(chi1) - math.sin(chi0))
-                Y += -v / w * (math.cos(chi1) - math.cos(chi0))
-            else:
-                X += v * math.cos(chi0) * Td
-                Y += v * math.sin(chi0) * Td
+            X, Y, th = arc_step(X, Y, th, v, w, alpha, Td)  # exact motion over T_d
             k += 1
 
 

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from _motion import arc_step
 from tsmpc.config import Config, replace
 from tsmpc.control.ts_lqr import equilibrium
 from tsmpc.estimation.fusion import CourseFusion, MassEstimator, RepeatGuard
@@ -50,16 +51,7 @@ def _drive(fusion: CourseFusion, segments, *, kappa: float, beta: float, v_offse
                              v + v_offset, w, v * w)
                 first = False
             fusion.sample(True, th, v + v_offset, alpha_hat, v * w, w, delta, 0.0)
-            # exact motion over T_d: heading θ + α of the velocity turns at ω (α constant)
-            chi0 = th + alpha
-            th += w * Td
-            chi1 = th + alpha
-            if abs(w) > 1e-12:
-                X += v / w * (math.sin(chi1) - math.sin(chi0))
-                Y += -v / w * (math.cos(chi1) - math.cos(chi0))
-            else:
-                X += v * math.cos(chi0) * Td
-                Y += v * math.sin(chi0) * Td
+            X, Y, th = arc_step(X, Y, th, v, w, alpha, Td)  # exact motion over T_d
     assert not first
 
 
