@@ -106,3 +106,37 @@ def test_a_signal_during_the_console_scripts_imports_ends_128_plus_signal(sig: i
     p.send_signal(sig)
     _, err = p.communicate(timeout=60)
     assert p.returncode == 128 + sig and "Traceback" not in err, (p.returncode, err[-2000:])
+
+
+_LATE_SIGNAL = """
+import atexit, os, signal, sys
+import tsmpc.cli as cli
+
+real_app = cli.app
+
+def app():
+    # an exit function of the command (registered after the entry point's, so it runs before
+    # the entry point's last check): the signal arrives during the interpreter's shutdown
+    atexit.register(lambda: os.kill(os.getpid(), signal.SIG))
+    real_app()
+
+cli.app = app
+sys.argv = ["tsmpc", "data", "--help"]
+cli.main()
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_during_the_interpreters_shutdown_still_ends_128_plus_signal(sig: int) -> None:
+    """A command that succeeded (``tsmpc data --help``, exit 0) and a signal that arrives after the
+    entry point's own check, during the shutdown's exit functions with the signals blocked: the
+    exit is 128 + signal (``_common.final_signal_check``), not 0 (the signal was dropped at the
+    exit before)."""
+    import os
+    import subprocess
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")])}
+    code = _LATE_SIGNAL.replace("signal.SIG)", f"signal.{signal.Signals(sig).name})")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert p.returncode == 128 + sig and "Traceback" not in p.stderr, (p.returncode, p.stderr[-2000:])
+    assert "Usage" in p.stdout  # the command itself ran to its end

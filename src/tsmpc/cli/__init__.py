@@ -21,6 +21,7 @@ def main() -> None:
     """The ``tsmpc`` entry point: ``app`` with SIGINT/SIGTERM handled from the first moment (an
     interrupt at any time exits 128 + signal, never 0 or 1) and a closed or full stdout reported
     in one line (never a second error at interpreter exit)."""
+    import atexit
     import contextlib
     import os
     import signal
@@ -29,6 +30,8 @@ def main() -> None:
     from tsmpc.cli import _common, _memory, _watchdog
 
     _common.install_signal_handlers()
+    # registered first, run last of the exit functions: a signal during the shutdown still counts
+    atexit.register(_common.final_signal_check)
     _watchdog.enable()  # a signal ends the command within a bounded time (docs/outputs.md)
     problem = _memory.early_problem(sys.argv[1:])  # a ulimit -v too low for the imports: refuse
     if problem is not None:
@@ -91,7 +94,13 @@ def main() -> None:
             with contextlib.suppress(Exception):
                 sys.stderr.write("error: cannot write to stdout (closed or full)\n")
             code = 1
-    sys.exit(code)
+    if code is None:
+        code = 0
+    elif not isinstance(code, int):  # sys.exit("message"): Python prints it and exits 1
+        with contextlib.suppress(Exception):
+            sys.stderr.write(f"{code}\n")
+        code = 1
+    _common.exit_with(code)
 
 
 __all__ = ["app", "main"]

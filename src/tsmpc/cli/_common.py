@@ -426,6 +426,41 @@ def deferred_interrupts() -> Iterator[None]:
     check_interrupted()
 
 
+_exit_code: list[int] = [0]  # the code the entry point exits with (final_signal_check)
+
+
+def exit_with(code: int) -> NoReturn:
+    """The entry point's exit: ``code``, read again by :func:`final_signal_check` during the
+    interpreter's shutdown."""
+    _exit_code[0] = code
+    sys.exit(code)
+
+
+def final_signal_check() -> None:
+    """The process's last look at SIGINT/SIGTERM (an ``atexit`` function the entry point registers
+    first, so it runs after every other one a command registered: the cluster's, the thread
+    pools'): a signal that arrived after the entry point's own check — during the interpreter's
+    shutdown, with the signals blocked — would be dropped at the exit and the command would exit 0.
+    It ends the process with 128 + signal instead (the folder's files are complete, marked as in
+    :func:`late_interrupt`). What remains is the interpreter's last module clean-up after this."""
+    if _exit_code[0] >= 128:
+        return
+    pending: set[int] = set()
+    with contextlib.suppress(AttributeError, OSError, ValueError):
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+        pending = {int(s) for s in signal.sigpending()}
+    sig = first_signal() or (min(pending) if pending else None)
+    if sig is None:
+        return
+    with contextlib.suppress(Exception):
+        late_interrupt(sig)
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            if stream is not None:
+                stream.flush()
+    os._exit(128 + sig)
+
+
 def record_signals_only() -> None:
     """From now on the handlers record signals and raise nothing (the entry point's last steps)."""
     _raised[0] = True
