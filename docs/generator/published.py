@@ -12,6 +12,7 @@ its printed digits; timings are machine-dependent and marked so the drift check 
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import os
 import shutil
@@ -901,7 +902,51 @@ def governor(ctx: Context) -> Produced:
     p.add("governor", "table", _table(
         ["reference", "road", "car", "max \\|e_y\\| (estimate)", "max \\|e_y\\| (oracle)", "ratio",
          "actions", "behind plan [s]"], rows))
+    if not ctx.quick:
+        p.add("governor", "class", _governor_class(ctx))
     return p
+
+
+#: The class the governor is checked on (measured, never tuned on): μ(road) 0.9 → μ at a time, for
+#: 5 s or for good, nominal and heavy car, each with the estimate and the oracle governor.
+GOVERNOR_CLASS_MU = (0.3, 0.4, 0.5)
+GOVERNOR_CLASS_AT_S = (20.0, 40.0, 60.0)
+GOVERNOR_CLASS_FOR_S = (5.0, None)
+
+
+def _governor_class(ctx: Context) -> str:
+    """Per reference and μ: how many of the 12 cases (3 times × 2 durations × 2 cars) each governor
+    carries (completed, max |e_y| ≤ 0.5 m), and in how many of those both carry the estimate is
+    within 1.5× of the oracle."""
+    from tsmpc.config import Config, apply_overrides
+
+    rows = []
+    for ref_label, ref in (("built-in circuit", None), ("paper reference", ctx.paper_reference)):
+        for mu in GOVERNOR_CLASS_MU:
+            ok = {"estimate": 0, "oracle": 0}
+            both = near = 0
+            worst = 0.0
+            for at, dur, (car, extra) in itertools.product(
+                    GOVERNOR_CLASS_AT_S, GOVERNOR_CLASS_FOR_S, (("nominal", []), ("heavy", _HEAVY))):
+                drop = f"at_s = {at}, mu = {mu}" + ("" if dur is None else f", duration_s = {dur}")
+                m = {}
+                for source in ("estimate", "oracle"):
+                    cfg = apply_overrides(Config(), [*_GRIP_ROAD, f"scenario.friction=[{{{drop}}}]", *extra,
+                                                     f'governor.grip_source="{source}"'])
+                    m[source] = _experiment(ctx, f"governor class {ref_label} {drop} {car} {source}", cfg,
+                                            ["ref"], reference=ref).metrics["methods"]["REF"]
+                good = {k: v["status"] != "diverged" and v["max_abs_lateral_m"] <= 0.5 for k, v in m.items()}
+                for k in ok:
+                    ok[k] += good[k]
+                if good["estimate"]:
+                    worst = max(worst, m["estimate"]["max_abs_lateral_m"])
+                if good["estimate"] and good["oracle"]:
+                    both += 1
+                    near += m["estimate"]["max_abs_lateral_m"] <= 1.5 * m["oracle"]["max_abs_lateral_m"]
+            rows.append([ref_label, f"0.9 → {mu}", f"{ok['estimate']} / 12", f"{ok['oracle']} / 12",
+                         f"{near} / {both}", f"{_d(worst, 3)} m"])
+    return _table(["reference", "μ(road)", "carried (estimate)", "carried (oracle)",
+                   "estimate within 1.5× of the oracle", "largest max \\|e_y\\| carried (estimate)"], rows)
 
 
 # -- recovery (docs/configuration.md, [recovery]) ---------------------------------------------
@@ -1432,7 +1477,7 @@ PRODUCERS: tuple[Producer, ...] = (
     Producer("envelope", envelope, "Monza beyond the default box"),
     Producer("plan-feasibility", plan_feasibility, "the tracks at 30 m/s and 8 m/s² capped; force "
              "limits per kg; a degraded run (7 runs)"),
-    Producer("governor", governor, "the speed governor on a road that loses grip (12 runs, ≈ 15 s)"),
+    Producer("governor", governor, "the speed governor on a road that loses grip (156 runs, ≈ 1–3 min)"),
     Producer("recovery", recovery, "the restart after all-NaN samples ([recovery], 10 Python-loop "
              "runs of 30 s, ≈ 12 s of CPU)"),
     Producer("robustness", robustness, "the robustness scenarios (docs/sweeps.md)"),
