@@ -74,6 +74,29 @@ def test_the_capped_plan_brakes_before_a_corner_no_harder_than_the_plan(cfg: Con
     assert out.v[0] > cap + 3.0  # the straight starts fast: it brakes along it, not at the corner
 
 
+def test_braking_inside_a_corner_shares_the_grip_with_the_corner(cfg: Config) -> None:
+    """The friction circle: on the 20 m circle, 10 m/s (5.0 m/s² lateral, within the 5.3 m/s²
+    margin) braking at 2.5 m/s² to 8 m/s, then 8 m/s: together 5.6 m/s², beyond it. The check names
+    the combined grip; the capped plan keeps sqrt(lateral² + longitudinal²) within the margin on
+    every sample (without the friction circle in the re-timing it kept the corner's braking)."""
+    c = _circle(300)
+    v = np.concatenate([np.linspace(10.0, 8.0, 9), np.full(291, 8.0)])  # 0.25 m/s per 0.1 s step
+    s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * 0.1)])
+    ang = s / R  # the same circle, driven at these speeds
+    ref = Reference(np.arange(v.size) * 0.1, R * np.sin(ang), R - R * np.cos(ang), ang, v, v / R,
+                    np.full(v.size, 1.0 / R))
+    a_lat = GRIP_MARGIN * cfg.tyre.mu_tyre * cfg.vehicle.g
+    check = check_plan(ref, cfg.vehicle, cfg.tyre, cfg.lqr, paper_friction_profile())
+    assert check.limit == "combined grip" and check.demand == pytest.approx(np.hypot(5.0, 2.5), rel=1e-3)
+    out, _, line = _feasible(ref, cfg)
+    assert line.startswith("plan capped") and "combined grip" in line
+    lat = out.v * out.v * np.abs(path_curvature(out))
+    along = np.diff(out.v) / out.dt
+    assert np.hypot(lat[:-1], along).max() <= a_lat * 1.02
+    assert check_plan(out, cfg.vehicle, cfg.tyre, cfg.lqr, paper_friction_profile()).ok
+    assert out.v.max() < 10.0 and c.kappa[0] == pytest.approx(1.0 / R)
+
+
 class _Patch:
     """μ(road) 0.9 with 0.3 on 60 m ≤ s < 100 m of the path (and 0.1 for 0.5 s at t = 5 s)."""
 
@@ -190,6 +213,8 @@ def test_plan_caps_with_one_line_or_refuses(tracks_dir: Path, tmp_path: Path) ->
     assert len(capped) == 1 and "lateral grip" in capped[0], res.output
     ref = Reference.from_csv(out)
     assert (ref.v**2 * np.abs(path_curvature(ref))).max() <= GRIP_MARGIN * 0.9 * 9.81 * 1.01
+    # the file it wrote passes the check `run` makes again (capped once, not twice)
+    assert check_plan(ref, Config().vehicle, Config().tyre, Config().lqr, paper_friction_profile()).ok
     # it slows down before a capped corner, no harder than the planner's limits (2.6, 3 m/s²)
     dv = np.diff(ref.v) / ref.dt
     assert dv.max() <= 2.6 * 1.01 and dv.min() >= -3.0 * 1.01

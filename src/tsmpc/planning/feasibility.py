@@ -10,6 +10,13 @@ vehicle's limits, sample by sample:
   distance) and when (the plan's own time) the sample is driven, its dips shorter than
   :data:`SUSTAINED_S` filled. A plan capped for a time-based drop arrives later than its own
   timing says: the online speed governor covers what the plan cannot;
+* the lateral and longitudinal acceleration together, ``sqrt(a_lat² + a_long²)``, against the same
+  ``GRIP_MARGIN × μ g`` (the friction circle of a speed planner's g-g diagram: a tyre that brakes
+  has less left for the corner; named "combined grip" only where the lateral acceleration alone is
+  within its margin). Without it, the TUMFTM tracks capped at 30 m/s braked at the planner's
+  3 m/s² into corners already at the lateral margin, 6.1 m/s² together, and the car's yaw rate
+  overshot at the turn-in: of 20 further tracks (not tuned on), Suzuka, Brands Hatch and
+  Catalunya left the 0.5 m bound (0.90, 0.77, 0.55 m);
 * acceleration against the force budget ``(η F_max − μ M g − drag)/M`` and braking against
   ``(η |F_min| + μ M g + drag)/M`` (:mod:`tsmpc.planning.retime`, headroom
   η = :data:`~tsmpc.planning.retime.FORCE_HEADROOM`; the highest μ(road) of the run for the
@@ -31,8 +38,9 @@ own limits, all five stay well within 0.5 m (docs/planning.md, generated).
 
 :func:`feasible_plan` acts on the result: a plan within the limits is returned unchanged; one
 beyond them is re-timed along the same path (:func:`tsmpc.planning.retime.retime`: the lateral cap
-``v ≤ sqrt(GRIP_MARGIN μ g / |κ|)``, then the forward acceleration and backward braking passes, no
-harder than the budgets nor than the plan itself accelerates and brakes) and one line says by how
+``v ≤ sqrt(GRIP_MARGIN μ g / |κ|)``, then the forward acceleration and backward braking passes
+within the friction circle, no harder than the budgets nor than the plan itself accelerates and
+brakes) and one line says by how
 much and which limit; ``strict`` refuses it instead (:class:`ConfigError`,
 exit 2 on the command line), naming the limit.
 
@@ -79,6 +87,9 @@ STYLE_FLOOR = 0.5
 #: A demand counts as beyond a limit only past this relative tolerance: a capped plan resampled at
 #: its period (linear interpolation of v and κ) keeps peaks a few per mille above the cap.
 _TOL = 0.01
+#: The re-timing's friction circle, as a share of the lateral margin's: inside it by enough that the
+#: resampled plan passes :func:`check_plan` within :data:`_TOL`.
+_CIRCLE_AIM = 0.98
 
 
 @dataclass(frozen=True)
@@ -87,7 +98,8 @@ class PlanCheck:
 
     Attributes:
         limit: the limit exceeded most (by the ratio demand / allowed): "lateral grip",
-            "force budget" (acceleration) or "braking budget"; "" when none is.
+            "combined grip" (lateral and longitudinal together, the friction circle), "force
+            budget" (acceleration) or "braking budget"; "" when none is.
         ratio: that largest demand / allowed (> 1: beyond the limit).
         demand: the demand there [m/s²].
         allowed: the limit there [m/s²].
@@ -113,6 +125,8 @@ class PlanCheck:
         """The exceeded limit and by how much, for one line."""
         what = {"lateral grip": f"lateral acceleration {self.demand:.2f} m/s² > {self.allowed:.2f} m/s² "
                                 f"({GRIP_MARGIN:g} x mu {self.mu_grip:.3g} x g)",
+                "combined grip": f"lateral and longitudinal acceleration together {self.demand:.2f} m/s² > "
+                                 f"{self.allowed:.2f} m/s² ({GRIP_MARGIN:g} x mu {self.mu_grip:.3g} x g)",
                 "force budget": f"acceleration {self.demand:.2f} m/s² > {self.allowed:.2f} m/s² (the "
                                 f"force budget, {FORCE_HEADROOM:.0%} of the force limit)",
                 "braking budget": f"deceleration {self.demand:.2f} m/s² > {self.allowed:.2f} m/s² (the "
@@ -200,7 +214,11 @@ def _measure(ref: Reference, lim: _Limits) -> PlanCheck:
     dec_allowed = np.array([lim.dec(float(x)) for x in v[1:]])
     worst = ("", 0.0, 0.0, 0.0, 0.0)
     kl = 0  # the lateral check's worst sample: its grip goes into the line
+    # the friction circle: the change into sample k+1 with sample k's lateral acceleration (named
+    # only when the lateral acceleration alone is within its margin: that is the plain message)
+    combined = np.hypot(lat[:-1], dv)
     cases = (("lateral grip", lat, lim.a_lat, t),
+             ("combined grip", combined, lim.a_lat[:-1], t[:-1]),
              ("force budget", dv, acc_allowed, t[1:]),
              ("braking budget", -dv, dec_allowed, t[1:]))
     for name, demand, allowed, tt in cases:
@@ -210,7 +228,10 @@ def _measure(ref: Reference, lim: _Limits) -> PlanCheck:
             r = np.where(allowed > 0, demand / np.where(allowed > 0, allowed, 1.0),
                          np.where(demand > 0, np.inf, 0.0))
         k = int(np.argmax(r))
-        kl = k if name == "lateral grip" else kl
+        if name == "combined grip" and worst[0] == "lateral grip":
+            continue
+        if name == "lateral grip" or (name == "combined grip" and r[k] > 1.0 + _TOL):
+            kl = k
         if r[k] > 1.0 + _TOL and r[k] > worst[1]:
             worst = (name, float(r[k]), float(demand[k]), float(allowed[k]), float(tt[k]))
     return PlanCheck(worst[0], worst[1], worst[2], worst[3], worst[4], float(lim.mu_grip[kl]),
@@ -244,7 +265,11 @@ def feasible_plan(ref: Reference, vehicle: VehicleParams, tyre: TyreParams, lqr:
                           "to cap its speed profile")
     acc, dec = _in_style(ref, lim)
     # each sample's cap from the grip where (and when, along the plan's own timing) it is driven
-    capped = retime(ref, acc, v_cap=lateral_speed_cap(ref, lim.a_lat), d_max=dec)
+    # the friction circle aimed _CIRCLE_AIM inside: the resampled plan's samples (linear in time)
+    # land between the re-timing's, a per cent or two beyond its corners (measured on the TUMFTM
+    # tracks); re-checked, a capped plan must pass (`tsmpc plan` then `tsmpc run`: capped once)
+    capped = retime(ref, acc, v_cap=lateral_speed_cap(ref, lim.a_lat), d_max=dec,
+                    a_grip=lim.a_lat * _CIRCLE_AIM)
     v0, v1 = float(np.max(ref.v)), float(np.max(capped.v))
     return capped, check, (f"plan capped to the vehicle's limits: {check.describe()}; speed profile "
                            f"re-timed along the same path (max v {v0:.1f} -> {v1:.1f} m/s, duration "

@@ -21,6 +21,7 @@ first, then the forward pass, then a backward pass ``w_k = min(w_k, sqrt(w_{k+1}
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -101,18 +102,47 @@ def lateral_speed_cap(ref: Reference, a_lat: float | np.ndarray) -> np.ndarray:
         return np.where(k > 1e-9, np.sqrt(a_lat / np.maximum(k, 1e-12)), np.inf)
 
 
+def _grip_left(a_grip: np.ndarray | None, kappa: np.ndarray, k: int, v: float) -> float:
+    """What the friction circle of sample k leaves along the path at speed v [m/s²]:
+    sqrt(a_grip² − (v² κ)²), 0 beyond it; inf without ``a_grip``."""
+    if a_grip is None:
+        return math.inf
+    lat = v * v * abs(float(kappa[k]))
+    return math.sqrt(max(float(a_grip[k]) ** 2 - lat * lat, 0.0))
+
+
+def _braked_from(nxt: float, ds: float, dec: float, a_grip: np.ndarray | None, kappa: np.ndarray,
+                 k: int) -> float:
+    """The highest speed at sample k from which the car reaches ``nxt`` at sample k+1, ``ds`` on,
+    braking at most ``dec`` and, with ``a_grip``, within sample k's friction circle at that speed:
+    (w² − nxt²) / (2 ds) ≤ sqrt(a_grip² − (w² κ_k)²), solved for u = w² — the quadratic
+    (1 + c) u² − 2 nxt² u + nxt⁴ − 4 ds² a_grip² = 0, c = 4 ds² κ_k², its larger root."""
+    u = nxt * nxt + 2.0 * dec * ds
+    if a_grip is not None:
+        A, c, n2 = float(a_grip[k]), 4.0 * ds * ds * float(kappa[k]) ** 2, nxt * nxt
+        if math.isfinite(A):
+            disc = n2 * n2 - (1.0 + c) * (n2 * n2 - 4.0 * ds * ds * A * A)
+            u = min(u, (n2 + math.sqrt(max(disc, 0.0))) / (1.0 + c))
+    return math.sqrt(max(u, nxt * nxt))
+
+
 def retime(ref: Reference, a_max: Callable[[float], float], v_cap: np.ndarray | None = None,
-           d_max: Callable[[float], float] | None = None) -> Reference:
+           d_max: Callable[[float], float] | None = None, a_grip: np.ndarray | None = None) -> Reference:
     """``ref``'s path with its speed profile lowered where accelerating from sample k−1 to k would
     need more than ``a_max(speed)``; resampled at ``ref.dt`` (the result is longer in time). A
     reference that already complies is returned unchanged. Closed laps are re-timed cyclically.
 
     ``v_cap`` (n,): a speed cap per sample applied first (:func:`lateral_speed_cap`); ``d_max``:
     a deceleration limit for a backward pass after the forward one, so the speed comes down to a
-    cap before it (without it, the original's braking is kept: w only meets v from below)."""
+    cap before it (without it, the original's braking is kept: w only meets v from below).
+    ``a_grip`` (n,): the friction circle per sample [m/s²]: the acceleration from sample k−1 and
+    the braking from sample k use at most what that sample's lateral acceleration leaves of it,
+    sqrt(a_grip² − (v² κ)²) (the g-g diagram of a speed planner; at the lateral cap nothing is
+    left, so the braking ends before the corner and the acceleration waits for its exit)."""
     x, y = np.asarray(ref.x), np.asarray(ref.y)
     v = np.maximum(np.asarray(ref.v, dtype=float), 0.0)
     n = v.size
+    kappa = path_curvature(ref) if a_grip is not None else v
     # ds[k]: the step into sample k (ds[0]: from the last sample, a closed lap's wrap)
     ds = np.hypot(np.diff(x, prepend=x[-1]), np.diff(y, prepend=y[-1]))
     top = v if v_cap is None else np.minimum(v, np.maximum(np.asarray(v_cap, dtype=float), 0.0))
@@ -120,12 +150,13 @@ def retime(ref: Reference, a_max: Callable[[float], float], v_cap: np.ndarray | 
     order = [k % n for k in range(1, 2 * n)] if ref.closed else list(range(1, n))
     for k in order:  # a closed lap twice round, so its start sees the end of the lap
         prev = w[k - 1]
-        w[k] = min(top[k], float(np.sqrt(prev * prev + 2.0 * a_max(prev) * ds[k])))
+        acc = min(a_max(prev), _grip_left(a_grip, kappa, k - 1, prev))
+        w[k] = min(top[k], float(np.sqrt(prev * prev + 2.0 * acc * ds[k])))
     if d_max is not None:  # backward: w_k may exceed w_{k+1} by what braking over Δs_{k+1} takes off
         back = [k % n for k in range(2 * n - 2, -1, -1)] if ref.closed else list(range(n - 2, -1, -1))
         for k in back:
             nxt = w[(k + 1) % n]
-            w[k] = min(w[k], float(np.sqrt(nxt * nxt + 2.0 * d_max(nxt) * ds[(k + 1) % n])))
+            w[k] = min(w[k], _braked_from(nxt, float(ds[(k + 1) % n]), d_max(nxt), a_grip, kappa, k))
     if np.all(w >= v - 1e-9):
         return ref
     # Time of each step: the original T where neither end changed (so the unchanged stretches keep
