@@ -6,29 +6,46 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
+import secrets
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_savefig", "atomic_write_bytes", "atomic_write_text", "open_lock_file",
+__all__ = ["atomic_savefig", "atomic_write_bytes", "atomic_write_text", "new_private_file", "open_lock_file",
            "overwrite_in_place"]
 
 
+def new_private_file(folder: Path, prefix: str, suffix: str, tmp: list[Path]) -> int:
+    """Create a new file ``folder/prefix<random>suffix`` (``O_EXCL``, mode 0666 & ~umask, as
+    ``open()`` gives a data file) and return its descriptor. Its path goes into ``tmp`` *before*
+    it is created, so a caller's clean-up (``try``/``except BaseException``) knows the file
+    whatever moment an interrupt arrives (``tempfile.mkstemp`` returns the name only after
+    creating the file: a SIGINT inside it left the file behind)."""
+    for _ in range(100):
+        tmp[:] = [folder / f"{prefix}{secrets.token_hex(6)}{suffix}"]
+        try:
+            return os.open(tmp[0], os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666)
+        except FileExistsError:  # someone else's file: not ours to remove
+            tmp.clear()
+            continue
+    raise FileExistsError(f"{folder}: no free temporary name after 100 tries")
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically (temporary file in the same folder + rename)."""
+    """Write ``data`` to ``path`` atomically (temporary file in the same folder + rename); an
+    interrupt at any moment leaves the previous file and no temporary file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp: list[Path] = []
     try:
-        # mkstemp creates 0600; a data file gets the mode open() would give it (0666 & ~umask).
-        os.fchmod(fd, 0o666 & ~_umask())
+        fd = new_private_file(path.parent, f".{path.name}.", ".tmp", tmp)
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        os.replace(tmp[0], path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        if tmp:
+            tmp[0].unlink(missing_ok=True)
         raise
 
 

@@ -16,6 +16,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from tsmpc.io import new_private_file
+
 __all__ = ["cache_root", "folder_problem", "private_fallback"]
 
 _NOTED: set[str] = set()
@@ -33,10 +35,13 @@ def folder_problem(path: Path, *, create: bool = True) -> str | None:
         return f"invalid path ({err})"
     if not stat.S_ISDIR(st.st_mode):
         return "it is not a folder"
+    tmp: list[Path] = []
     try:
-        fd, tmp = tempfile.mkstemp(dir=path, prefix=".tsmpc-probe-")
-        os.close(fd)
-        os.unlink(tmp)
+        try:  # (the probe's name is known before it exists: an interrupt cannot leave it behind)
+            os.close(new_private_file(path, ".tsmpc-probe-", "", tmp))
+        finally:
+            if tmp:
+                tmp[0].unlink(missing_ok=True)
     except OSError as err:
         return f"cannot write there ({err.strerror or err})"
     return None

@@ -30,7 +30,6 @@ import math
 import os
 import signal
 import sys
-import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -40,6 +39,7 @@ import typer
 
 from tsmpc.config import Config, load_config
 from tsmpc.errors import ConfigError, DesignError, TsmpcError
+from tsmpc.io import new_private_file
 
 __all__ = [
     "EXIT_DEGRADED",
@@ -280,10 +280,13 @@ def check_path_text(path: Path, option: str) -> None:
 
 
 def _probe_writable(folder: Path, option: str) -> None:
+    tmp: list[Path] = []
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tsmpc-probe-")
-        os.close(fd)
-        os.unlink(tmp)
+        try:  # (the probe's name is known before it exists: an interrupt cannot leave it behind)
+            os.close(new_private_file(folder, ".tsmpc-probe-", "", tmp))
+        finally:
+            if tmp:
+                tmp[0].unlink(missing_ok=True)
     except OSError as err:
         fail(ConfigError(f"{option} {folder}: cannot write there ({err.strerror or err})"))
 
