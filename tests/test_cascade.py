@@ -154,10 +154,8 @@ def test_a_user_plant_runs_through_simulate(cfg: Config) -> None:
     assert log.termination == "completed" and log.n_outer == 80
     assert np.all(np.isnan(log.F_fr_true))
     # No resistance on this car (the models expect μ_o M g): the UIO absorbs the difference and
-    # the loop tracks the first 8 s within a few decimetres (0.32 m with the default MHE's yaw-rate
-    # covariance, issue 35; 0.19 m with the paper's: a car without tyres is far outside the yaw
-    # model the MHE trusts less now).
-    assert np.max(np.abs(log.errors[:, 1])) < 0.4
+    # the loop tracks the first 8 s within a few decimetres.
+    assert np.max(np.abs(log.errors[:, 1])) < 0.3
 
 
 def test_default_plant_is_tsmpc_vehicle_plant_and_identical_when_passed(cfg: Config) -> None:
