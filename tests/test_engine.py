@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from tsmpc.conditions import EventFriction, ResolvedEvent, apply_conditions
-from tsmpc.config import PAPER_MHE_Q, Config, apply_overrides, replace
+from tsmpc.config import Config, apply_overrides, replace
 from tsmpc.planning.reference import Reference
 from tsmpc.robustness import apply_robustness
 from tsmpc.scenarios import ConstantFriction
@@ -116,9 +116,6 @@ def test_slow_paths_friction_events_and_mismatch(cfg: Config, paper_reference_pa
     run's), so it runs 150, not the whole reference (the matrix above runs whole references)."""
     base = load_scenario(cfg, paper_reference_path)
     c, s = apply_robustness("offset_start", cfg, base)
-    # with the paper's MHE Q (the default's larger yaw-rate covariance, issue 35, starts more
-    # smoothly: 4 MPC QPs), the start still takes the slow paths this test is about
-    c = replace(c, mhe=replace(c.mhe, Q=PAPER_MHE_Q))
     le, lp = _both(c, "REF", s, max_steps=150)
     _assert_same(le, lp)
     slow = eng.LAST_RUN["slow_paths"]

@@ -676,29 +676,13 @@ class LQRSettings(_Frozen):
         return lo, hi
 
 
-#: The paper's MHE process covariances Q (diag [v, α, ω]); the ``paper`` presets keep them.
-PAPER_MHE_Q = (10.0, 10.0, 2.0)
-#: The default's yaw-rate process covariance (issue 35, a design margin): 2.5 × the paper's, so a
-#: yaw inertia or CoG unlike the model's (the class: I_z ±30 %, CoG ±10 % of the wheelbase) is
-#: taken up as process noise of the MHE's yaw equation instead of being explained as slip α̂. With
-#: the paper's 2 the MHE with too large an I_z drove the inner loop into a 2.5 Hz yaw oscillation
-#: at 13 m/s (generalisation draws d01, d30, d44; d35 diverged, d36 80x in max |e_y|). Measured on
-#: the generalisation main set (default / oracle-tuned, worst-column ratio): 2 → 49/50 complete,
-#: p90 6.38, worst inf; 3 → 50/50, 3.39, 47.9; 4 → 50/50, 2.49, 4.43; 5 → 50/50, 2.34, 4.14;
-#: 20 → 1.92, 3.34. The cost: the paper reference's nominal max |e_y| 0.0210 → 0.0220 m (+4.8 %),
-#: RMSE y 0.0046 → 0.0047 m.
-DEFAULT_MHE_Q_OMEGA = 5.0
-
-
 class MHESettings(_Frozen):
     """TS-MHE-UIO (the paper's TS-MHE-UIO)."""
 
     N: StrictInt = Field(default=30, ge=2, le=300, description="estimation horizon [inner steps], 2 to 300 "
                          "(N·Td <= 10 s)")
-    Q: tuple[FiniteFloat, ...] = Field(
-        default=(10.0, 10.0, DEFAULT_MHE_Q_OMEGA), description="diag process covariance [v, alpha, omega] "
-        "(the QP weights are the inverses), entries in [1e-8, 1e8]; the paper's (10, 10, 2) in the paper "
-        "presets, omega's 5 by default (a margin for a yaw inertia / CoG unlike the model's)")
+    Q: tuple[FiniteFloat, ...] = Field(default=(10.0, 10.0, 2.0), description="diag process weight, entries "
+                                       "in [1e-8, 1e8]")
     R: tuple[FiniteFloat, ...] = Field(default=(0.033, 0.033), description="diag measurement weight, "
                                        "entries in [1e-8, 1e8]")
     P: tuple[FiniteFloat, ...] = Field(default=(2.0, 2.0, 2.0), description="diag arrival-cost weight, "
@@ -1222,7 +1206,6 @@ PRESETS: dict[str, dict[str, Any]] = {
     "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio", "low_speed_resistance": False,
                       "friction_step": False, "force_min": -2000.0, "force_max": 10000.0},
               "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False},
-              "mhe": {"Q": PAPER_MHE_Q},
               "fusion": _FUSION_OFF, "recovery": {"enabled": False}, "governor": {"enabled": False}},
     # The paper as it was run (the published run): the ``paper`` preset plus every quirk of the published
     # simulation, each its own switch. Quirks of that run, not recommendations; never the default.
@@ -1241,7 +1224,6 @@ PRESETS: dict[str, dict[str, Any]] = {
                 "law": "as-run", "steering_bias_rad": 0.5236, "scheduling_speed_shift": 2.0,
                 "extrapolate_memberships": True, "initial_filter_state": (4355.15, 0.52466)},
         "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False},
-        "mhe": {"Q": PAPER_MHE_Q},
         "noise": {"scale": 0.0},  # the noise model existed but was not called
         "metrics": {"paper_run_rmse": True},
         "fusion": _FUSION_OFF,
