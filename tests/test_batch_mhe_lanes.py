@@ -48,14 +48,14 @@ def _scalar(d: dict, n: int) -> tuple[np.ndarray, float]:
 
 
 def _gather(ws: np.ndarray, slot: int, d: dict, n: int) -> None:
-    mp, sf, si = np.zeros(ke.N_MP), np.zeros(ke.N_SF), np.zeros(ke.N_SI, dtype=np.int64)
-    mp[ke.MP_TD] = d["Td"]
-    for k, name in ((ke.MP_M, "M"), (ke.MP_I, "I"), (ke.MP_CF, "Cf"), (ke.MP_CR, "Cr"), (ke.MP_A, "a"),
-                    (ke.MP_B, "b"), (ke.MP_MUG, "mug"), (ke.MP_KD, "kd")):
+    mp, sf, si = np.zeros(km.N_MP), np.zeros(ke.N_SF), np.zeros(ke.N_SI, dtype=np.int64)
+    mp[km.MP_TD] = d["Td"]
+    for k, name in ((km.MP_M, "M"), (km.MP_I, "I"), (km.MP_CF, "Cf"), (km.MP_CR, "Cr"), (km.MP_A, "a"),
+                    (km.MP_B, "b"), (km.MP_MUG, "mug"), (km.MP_KD, "kd")):
         mp[k] = d[name]
-    mp[ke.MP_Q:ke.MP_Q + 3], mp[ke.MP_R:ke.MP_R + 2], mp[ke.MP_P:ke.MP_P + 3] = d["q"], d["r"], d["p"]
-    mp[ke.MP_PF] = d["pF"]
-    mp[ke.MP_LO:ke.MP_LO + 2], mp[ke.MP_HI:ke.MP_HI + 2] = d["lo"], d["hi"]
+    mp[km.MP_Q:km.MP_Q + 3], mp[km.MP_R:km.MP_R + 2], mp[km.MP_P:km.MP_P + 3] = d["q"], d["r"], d["p"]
+    mp[km.MP_PF] = d["pF"]
+    mp[km.MP_LO:km.MP_LO + 2], mp[km.MP_HI:km.MP_HI + 2] = d["lo"], d["hi"]
     sf[ke.SF_ARR:ke.SF_ARR + 3], sf[ke.SF_MF] = d["arrival"], d["F_prior"]
     si[ke.SI_MHEFULL] = int(d["full"])
     key, sn, cs = np.full(n + 1, np.nan), np.zeros(n + 1), np.zeros(n + 1)

@@ -44,6 +44,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tsmpc._records import quick_init
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
 from tsmpc.control.gates import (
     GateParams,
@@ -125,6 +126,7 @@ class Measurement:
         return cls((float(a[0]), float(a[1]), float(a[2])), float(a[3]), float(a[4]), **kwargs)
 
 
+@quick_init
 @dataclass(frozen=True)
 class Command:
     """The plant input for the next T_d and what produced it.
@@ -187,7 +189,10 @@ def build_outer_controller(
 
 
 def _finite(*xs: float) -> bool:
-    return all(math.isfinite(x) for x in xs)
+    for x in xs:  # (a loop: all() over a generator costs 0.3 µs more a call)
+        if not math.isfinite(x):
+            return False
+    return True
 
 
 class Cascade:
@@ -232,6 +237,8 @@ class Cascade:
         self.reference = ref
         # the path's tangent at each sample, from the geometry (any sample period; slip_aware.py)
         self._theta_tangent = ref.tangent_heading()
+        # the reference's lateral acceleration v_d ω_d at each sample (the course fusion's, every call)
+        self._ay_ref: list[float] = (ref.v * ref.omega).tolist()
         # what the MPC's steps see: the planner's samples (paper) or each T_c step's averages
         self._mpc_reference = ref.step_averages() if cfg.mpc.step_average_reference else ref
         kd = kinematic_design or load_or_design_kinematic(cfg)
@@ -310,7 +317,7 @@ class Cascade:
         self._pose_t = 0.0  # time of the last accepted pose
         self._pose_fresh = False
         self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
-        self._u_applied = np.zeros(2)
+        self._u_applied = (0.0, 0.0)  # [F_xR, δ] the plant got over the last T_d
         self._low_applied = 0.0  # lqr.low_speed_resistance's part of the applied force
         # fusion.steering_offset: the offset estimate the last command took off, and the angle sent
         # (_u_applied[1] is the wheels' intended angle, sent + offset: what the MHE's model sees)
@@ -443,8 +450,8 @@ class Cascade:
         With ``recovery``: the first pose after a blind stop is, and so is one that ends
         ``pose_reinit_s`` of consistent jump rejections (gates.py)."""
         p = self._pose
-        if p is None or self._pose_free or pose_consistent(
-                self._gates, X, Y, th, float(p[0]), float(p[1]), float(p[2]), t - self._pose_t):
+        if p is None or self._pose_free or pose_consistent(self._gates, X, Y, th, *p.tolist(),
+                                                           t - self._pose_t):
             self._pose_free, self._jump_t0 = False, math.nan
             return True
         rc = self._recovery
@@ -507,18 +514,20 @@ class Cascade:
         if _finite(v, om):
             self._u_prev = np.array([max(v, 0.0), om])
 
-    def _dead_reckon(self, est: Estimate) -> None:
-        """Advance the pose by one T_d on the estimate (until the next accepted measurement)."""
+    def _dead_reckon(self, v: float, alpha: float, omega: float) -> None:
+        """Advance the pose by one T_d on the estimate (v̂, α̂, ω̂) (until the next accepted
+        measurement)."""
         p = self._pose
         if p is None:
             return
-        self._pose = np.array(dead_reckon(self._gates, float(p[0]), float(p[1]), float(p[2]),
-                                          float(est.x[0]), float(est.x[1]), float(est.x[2])))
+        X, Y, th = p.tolist()
+        self._pose = np.array(dead_reckon(self._gates, X, Y, th, v, alpha, omega))
 
     def _step(self, t: float, m: Measurement) -> Command:
         """One call: the block diagram of paper Fig. 1 (gates → outer MPC every T_c/T_d calls →
         MHE-UIO → friction compensation → TS-LQR), each block a method below."""
-        X, Y, th = (float(c) for c in m.pose)
+        pX, pY, pth = m.pose
+        X, Y, th = float(pX), float(pY), float(pth)
         v, om = float(m.v), float(m.omega)
         if self._x0 is None:
             self._start_from(t, X, Y, th, v, om)
@@ -529,11 +538,9 @@ class Cascade:
         om = om - self._fusion.gyro_bias()
         mpc_step = self._calls % self.n_inner == 0
         if self._fusion.any_course:  # an accepted pose may end the course fusion's interval
-            kc = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(self.reference) - 1)
-            self._fusion.course.close(np.array([X, Y, th]) if pose_ok else None,
-                                      v if fresh and speeds_ok else math.nan,
-                                      om if fresh and speeds_ok else math.nan,
-                                      float(self.reference.v[kc] * self.reference.omega[kc]), mpc_step)
+            kc = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(self._ay_ref) - 1)
+            self._fusion.course.close_at(pose_ok, X, Y, th, v if fresh and speeds_ok else math.nan,
+                                         om if fresh and speeds_ok else math.nan, self._ay_ref[kc], mpc_step)
         plan = e_meas = None
         t_mpc = 0.0
         if mpc_step:
@@ -544,20 +551,20 @@ class Cascade:
         t1 = time.perf_counter()
         est, u_model = self._estimate(m, v, om, fresh and speeds_ok, t1)
         t2 = time.perf_counter()
-        self._dead_reckon(est)
+        v_hat, a_hat, w_hat = est.x.tolist()
+        self._dead_reckon(v_hat, a_hat, w_hat)
         if self._fusion.any_course:
             # only samples the gates accepted: a rejected speed is garbage, a rejected or missing
             # heading is the gyro's integral since the last accepted one
-            self._fusion.course.sample(fresh and speeds_ok, th, v, float(est.x[1]),
-                                       float(est.x[0] * est.x[2]), om, float(u_model[1]),
-                                       float(u_model[0]), pose_ok)
+            self._fusion.course.sample(fresh and speeds_ok, th, v, a_hat, v_hat * w_hat, om,
+                                       float(u_model[1]), float(u_model[0]), pose_ok)
         # fusion.steering_offset: the steady yaw balance of the MHE's model, the bias-free ω against
         # the angle last sent; frozen while the sample, the MHE or the inner loop is unusable
         last = self._last
         self._fusion.steer_sample(fresh and speeds_ok and est.status == EstimatorStatus.OK
                                   and self._blind_since is None
                                   and not (last is not None and last.saturated),
-                                  float(est.x[0]), om, self._steer_sent)
+                                  v_hat, om, self._steer_sent)
         F, delta, sat, low = self._inner(self._compensated(m, est, v_ref), est, v_ref, w_ref)
         t3 = time.perf_counter()
         # the servo gets the wheels' angle less the offset in force (held while blind: the fit is
@@ -566,7 +573,7 @@ class Cascade:
         if self.cfg.fusion.steering_offset:  # (off, the command is the inner loop's, unclipped)
             delta, wheels = steer_command(delta, off, -self.cfg.lqr.delta_max, self.cfg.lqr.delta_max)
         self._steer_offset, self._steer_sent = off, delta
-        self._u_applied = np.array([F, wheels])
+        self._u_applied = (F, wheels)
         self._low_applied = low
         ev = self._events
         ev["mhe_rejected"] += est.status == EstimatorStatus.REJECTED
@@ -587,11 +594,12 @@ class Cascade:
               om: float) -> tuple[bool, bool, bool]:
         """The sample gates (gates.py): (fresh, speeds plausible, pose accepted)."""
         ev = self._events
-        fresh = self._fresh(t, m)
+        fresh = m.stamp is None or self._fresh(t, m)
         speeds_ok = self._plausible_speeds(v, om)
-        self._watch_samples(t, fresh and speeds_ok and _finite(v, om))
+        if self._recovery is not None:
+            self._watch_samples(t, fresh and speeds_ok and _finite(v, om))
         stamp = -math.inf if m.stamp is None else float(m.stamp)  # a new stamp is a new sample
-        if self.cfg.fusion.reject_repeated_samples and self._fusion.guard.repeated((X, Y, th, v, om, stamp)):
+        if self.cfg.fusion.reject_repeated_samples and self._fusion.guard.repeated_at(X, Y, th, v, om, stamp):
             fresh = False  # a stalled bus re-delivering the last sample: missing, like NaN
             ev["repeated_rejected"] += 1
         # The pose, every call: accepted when fresh, finite and where the car can be; else the
@@ -752,18 +760,18 @@ class Cascade:
         return outer_loop_errors(p, np.array([x_d, y_d, th]), a_hat)
 
     def _estimate(self, m: Measurement, v: float, om: float, speeds_ok: bool,
-                  t1: float) -> tuple[Estimate, NDArray[np.float64]]:
+                  t1: float) -> tuple[Estimate, tuple[float, float]]:
         """The MHE-UIO's step on the measured speeds (NaN when the gates refused them) and the
         input the plant received: (the estimate, that input as the MHE's model sees it)."""
-        y = np.array([v - self._fusion.speed_offset(), om]) if speeds_ok else np.full(2, np.nan)
-        u_mhe = self._u_applied
-        if m.force is not None or m.steering is not None:
-            u_mhe = np.array([self._u_applied[0] if m.force is None else float(m.force),
-                              self._u_applied[1] if m.steering is None
-                              else float(m.steering) + self._steer_offset])  # the wheels' intended
+        y = (v - self._fusion.speed_offset(), om) if speeds_ok else (math.nan, math.nan)
+        u0, u1 = self._u_applied
+        if m.force is not None:
+            u0 = float(m.force)
+        if m.steering is not None:
+            u1 = float(m.steering) + self._steer_offset  # the wheels' intended angle
         # lqr.low_speed_resistance: the MHE's model has the clipped resistance, so it sees the force
         # net of the part the law added for it (ts_lqr.py)
-        u_model = u_mhe if self._low_applied == 0.0 else u_mhe - np.array([self._low_applied, 0.0])
+        u_model = (u0, u1) if self._low_applied == 0.0 else (u0 - self._low_applied, u1)
         try:
             est = self.mhe.step(y, u_model)
         except Exception as err:  # e.g. a LinAlgError: keep the last estimate, flagged FAILED

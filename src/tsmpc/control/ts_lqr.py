@@ -57,6 +57,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from tsmpc._records import quick_init
 from tsmpc.config import FrictionEstimate, LQRSettings, VehicleParams
 from tsmpc.errors import ConfigError
 from tsmpc.kernels.jit import _numba_ready, jitable
@@ -70,6 +71,7 @@ __all__ = ["LQR_HELD", "LQR_NUMPY", "LQR_OK", "TSLQR", "InnerCommand", "InnerPar
            "compensated_friction", "equilibrium", "inner_step", "low_speed_force", "steady_states"]
 
 
+@quick_init
 @dataclass(frozen=True)
 class InnerCommand:
     """Plant input for the next T_d: rear force [N] and steering [rad] (after saturation)."""
@@ -211,6 +213,10 @@ def inner_step(p: InnerParams, law: LQRLaw | None, s: NDArray[np.float64], v: fl
     return InnerStep(F, d, sat, comp, low, LQR_OK)
 
 
+#: TSLQR._kernel_agrees's answers in this process, by the law's inputs
+_AGREES: dict[tuple[Any, ...], bool] = {}
+
+
 class TSLQR:
     """Gain-scheduled LQR with Apkarian filter, yaw-rate integrator and friction compensation.
 
@@ -277,7 +283,13 @@ class TSLQR:
             except (AttributeError, TypeError):  # parameters the kernel does not know: numpy
                 self._kern = None
         if self._kern is not None:
-            if not self._kernel_agrees():
+            # (once per law in a process: a batch builds one cascade per run)
+            key = (self.K.tobytes(), self.K.shape, repr(model.box), repr(model.params), model.Td,
+                   str(getattr(model, "method", "")), repr(vehicle), repr(settings), self.Td, self.bandwidth)
+            agrees = _AGREES.get(key)
+            if agrees is None:
+                agrees = _AGREES[key] = self._kernel_agrees()
+            if not agrees:
                 self._kern = None  # the law changed on the numpy side only: numpy it is
         self.reset()
 
@@ -392,7 +404,7 @@ class TSLQR:
         return low_speed_force(self._inner, v)
 
     def _step(self, estimate: Any, v_ref: float, omega_ref: float) -> InnerCommand:
-        v, al, om = (float(c) for c in estimate.x)
+        v, al, om = np.asarray(estimate.x, dtype=float).reshape(3).tolist()
         # the block decides (the compiled law inside it), or hands the step to the numpy law below
         out = inner_step(self._inner, self._law if self._kern is not None else None, self._s, v, al, om,
                          float(estimate.F_fr), float(estimate.F_fr_raw), float(v_ref), float(omega_ref))

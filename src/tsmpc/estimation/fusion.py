@@ -306,8 +306,11 @@ class RepeatGuard:
         """True (counted) when ``sample`` (X, Y, θ, v, ω[, stamp]) equals the previous finite
         sample in every number (no stamp: −inf)."""
         X, Y, th, v, om = sample[:5]
-        same, self.state = repeat_check(self.state, X, Y, th, v, om,
-                                        sample[5] if len(sample) > 5 else -math.inf)
+        return self.repeated_at(X, Y, th, v, om, sample[5] if len(sample) > 5 else -math.inf)
+
+    def repeated_at(self, X: float, Y: float, theta: float, v: float, omega: float, stamp: float) -> bool:
+        """:meth:`repeated` of the sample (X, Y, θ, v, ω) with its stamp (none: −inf)."""
+        same, self.state = repeat_check(self.state, X, Y, theta, v, omega, stamp)
         self.n_repeated += same
         return same
 
@@ -881,11 +884,19 @@ class CourseFusion:
         rate now, ``ay_ref`` the reference's lateral acceleration v_d ω_d now, ``mpc_step`` the
         call is an MPC step."""
         if pose is None:
-            X = Y = th = math.nan
+            self.close_at(False, math.nan, math.nan, math.nan, float(v), float(omega), float(ay_ref),
+                          bool(mpc_step))
         else:
-            X, Y, th = float(pose[0]), float(pose[1]), float(pose[2])
-        self.state, self.cur = course_close(self.params, self.state, self.cur, bool(mpc_step),
-                                            pose is not None, X, Y, th, float(v), float(omega), float(ay_ref))
+            self.close_at(True, float(pose[0]), float(pose[1]), float(pose[2]), float(v), float(omega),
+                          float(ay_ref), bool(mpc_step))
+
+    def close_at(self, has_pose: bool, X: float, Y: float, th: float, v: float, omega: float, ay_ref: float,
+                 mpc_step: bool) -> None:
+        """:meth:`close` on floats: ``has_pose`` an accepted pose (X, Y, θ) now, else NaNs."""
+        if not has_pose:
+            X = Y = th = math.nan
+        self.state, self.cur = course_close(self.params, self.state, self.cur, mpc_step, has_pose, X, Y, th,
+                                            v, omega, ay_ref)
 
 
 # ============================================================================ yaw-rate bias
@@ -1410,7 +1421,8 @@ class Fusion:
     def gyro_sample(self, has_heading: bool, theta: float, has_omega: bool, omega: float) -> None:
         """One T_d sample into the yaw-rate bias fit (idle with ``gyro_bias`` off)."""
         if self.settings.gyro_bias:
-            self.gyro.sample(has_heading, theta, has_omega, omega)
+            g = self.gyro  # (GyroFit.sample, one call less)
+            g.state = gyro_sample(g.params, g.state, has_heading, theta, has_omega, omega)
 
     def gyro_bias(self) -> float:
         """The yaw-rate sensor's bias to remove (0 with ``gyro_bias`` off)."""

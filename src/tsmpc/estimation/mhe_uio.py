@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 from scipy.linalg.lapack import dpotrf as _potrf  # pyright: ignore[reportAttributeAccessIssue]
 from scipy.linalg.lapack import dpotrs as _potrs  # pyright: ignore[reportAttributeAccessIssue]
 
+from tsmpc._records import quick_init
 from tsmpc.config import MHESettings, VehicleParams
 from tsmpc.control.qp import QPStatus, solve_daqp
 from tsmpc.errors import ConfigError
@@ -61,6 +62,7 @@ class EstimatorStatus(StrEnum):
     WARMUP = "warmup"  #: window not full yet (estimate from the samples so far)
 
 
+@quick_init
 @dataclass(frozen=True)
 class Estimate:
     """State and friction-force estimate delivered to the controller.
@@ -93,6 +95,9 @@ class WindowQP:
 
 
 _EYE3 = np.eye(3)
+#: EstimatorStatus of the compiled step's status codes (tsmpc.kernels.mhe.MHE_OK … MHE_WARMUP)
+_STATUS = (EstimatorStatus.FAILED, EstimatorStatus.OK, EstimatorStatus.REJECTED, EstimatorStatus.FAILED,
+           EstimatorStatus.WARMUP)
 
 
 class MHEUIO:
@@ -127,6 +132,10 @@ class MHEUIO:
         self._xmax = np.asarray(settings.x_max, dtype=float)
         self._sqrt_r = np.sqrt(self._r)
         self._tiles: dict[tuple[str, int], Any] = {}
+        # The estimator's state as the compiled step's records (tsmpc.kernels.mhe: ms = [x̂ (3), F̂,
+        # arrival (3)], mi = [samples in the window, rejected, failed]; _x, _F, … are their views).
+        self._ms, self._mi = np.zeros(7), np.zeros(3, dtype=np.int64)
+        self._uk = np.zeros(2)  # the input the window holds for this step (the block's scratch)
         self._kern: Any = None  # the compiled block (tsmpc.kernels.load("mhe")), or None
         if jit is None or jit:
             from tsmpc import kernels
@@ -154,6 +163,9 @@ class MHEUIO:
             if self._kargs[-1] and not self._kernel_model_agrees():
                 # The model is not the one the kernel evaluates: numpy evaluates it, the kernel solves.
                 self._kargs = (*self._kargs[:-1], False)
+            k = self._kargs  # the block's parameters mp (tsmpc.kernels.mhe.MP_*: the same values)
+            self._mp = np.array([*k[0], *k[1], *k[2], k[3], *k[4], *k[5], *k[6], *k[7], *k[8:17]],
+                                dtype=float)
         self.reset(x0)
 
     def _kernel_model_agrees(self) -> bool:
@@ -193,6 +205,7 @@ class MHEUIO:
             k = list(self._kargs)
             k[10], k[11] = float(C_f), float(C_r)  # phys = (M, I, C_f, C_r, a, b, μ_o g, d) from 8
             self._kargs = tuple(k)
+            self._mp[self._kern.MP_CF], self._mp[self._kern.MP_CR] = float(C_f), float(C_r)
 
     def reset(self, x0: NDArray[np.float64] | None = None) -> None:
         """Empty the window; start from ``x0`` (or rest) with F̂ = 0."""
@@ -208,6 +221,55 @@ class MHEUIO:
         self._arrival = self._x.copy()
         self._n_rejected = 0
         self._n_failed = 0
+
+    # the state, views of the block's records (_ms, _mi)
+    @property
+    def _x(self) -> NDArray[np.float64]:
+        return self._ms[0:3]
+
+    @_x.setter
+    def _x(self, value: Any) -> None:
+        self._ms[0:3] = value
+
+    @property
+    def _F(self) -> float:
+        return float(self._ms[3])
+
+    @_F.setter
+    def _F(self, value: float) -> None:
+        self._ms[3] = value
+
+    @property
+    def _arrival(self) -> NDArray[np.float64]:
+        return self._ms[4:7]
+
+    @_arrival.setter
+    def _arrival(self, value: Any) -> None:
+        self._ms[4:7] = value
+
+    @property
+    def _ny(self) -> int:
+        return int(self._mi[0])
+
+    @_ny.setter
+    def _ny(self, value: int) -> None:
+        self._mi[0] = value
+
+    @property
+    def _n_rejected(self) -> int:
+        return int(self._mi[1])
+
+    @_n_rejected.setter
+    def _n_rejected(self, value: int) -> None:
+        self._mi[1] = value
+
+    @property
+    def _n_failed(self) -> int:
+        return int(self._mi[2])
+
+    @_n_failed.setter
+    def _n_failed(self, value: int) -> None:
+        self._mi[2] = value
 
     @property
     def n_rejected(self) -> int:
@@ -309,9 +371,55 @@ class MHEUIO:
         """Add the measurement ``y = [v, ω]`` of this sample and the input ``u = [F_xR, δ]`` that the
         plant received over the previous interval (including any friction compensation: the
         model must see what the plant saw); return the estimate at this sample."""
+        y0, y1 = y if type(y) is tuple else np.asarray(y, dtype=float).reshape(2).tolist()
+        u0, u1 = u if type(u) is tuple else np.asarray(u, dtype=float).reshape(2).tolist()
+        return self.step_values(float(y0), float(y1), float(u0), float(u1))
+
+    def step_values(self, v: float, omega: float, F_xR: float, delta: float) -> Estimate:
+        """:meth:`step` of ``y = [v, omega]``, ``u = [F_xR, delta]`` (no arrays made): with the
+        kernel one compiled call (:func:`tsmpc.kernels.mhe.mhe_step`, the run engine's block)."""
         t0 = time.perf_counter()
-        y = np.asarray(y, dtype=float).reshape(2)
-        u = np.asarray(u, dtype=float).reshape(2)
+        k = self._kern
+        if k is None:
+            return self._step_numpy(np.array([v, omega]), np.array([F_xR, delta]), t0)
+        try:
+            if self._kargs[-1]:  # the model evaluated in the block (Euler)
+                st, F_raw, n, ok = k.mhe_step(v, omega, F_xR, delta, self.vehicle.mass, self._Y, self._W,
+                                              self._U, self._XS, self._Ab, self._Bb, self._Xb, self._mp,
+                                              self._ms, self._mi, self._uk, True, False)
+            else:
+                st, F_raw, n, ok = self._step_zoh(v, omega, F_xR, delta)
+        except (np.linalg.LinAlgError, ValueError, ArithmeticError) as err:
+            return self._failed(float("nan"), t0, f"{type(err).__name__}")
+        if st == k.MHE_DENSE:  # a state bound is active (or a pivot failed): the dense QP decides
+            try:
+                with np.errstate(all="ignore"):
+                    return self._step_dense(np.array([v, omega]), self._uk.copy(), ok, n,
+                                            n == self.settings.N, self._U[:n], self._XS[: n + 1],
+                                            (self._Ab[:n].copy(), self._Bb[:n].copy()), t0, F_raw)
+            except (np.linalg.LinAlgError, ValueError, ArithmeticError) as err:
+                return self._failed(float("nan"), t0, f"{type(err).__name__}")
+        return Estimate(self._ms[0:3].copy(), float(self._ms[3]), F_raw, _STATUS[st],
+                        time.perf_counter() - t0)
+
+    def _step_zoh(self, v: float, omega: float, F_xR: float, delta: float) -> tuple[int, float, int, bool]:
+        """The block's step with the model evaluated by numpy (ZOH) between the window's update
+        (:func:`~tsmpc.kernels.mhe.mhe_push`) and its solve (:func:`~tsmpc.kernels.mhe.mhe_solve`)."""
+        k = self._kern
+        st, n, ok, u0, u1 = k.mhe_push(v, omega, F_xR, delta, self._Y, self._W, self._U, self._XS, self._mp,
+                                       self._ms, self._mi)
+        self._uk[0], self._uk[1] = u0, u1
+        if st != k.MHE_DENSE:
+            return st, 0.0, n, ok
+        us, xs = self._U[:n], self._XS[: n + 1]
+        xs[n - 1] = self._x
+        self._Ab[:n], self._Bb[:n] = self.model.matrices(np.stack([us[:, 1], xs[:n, 0], xs[:n, 1]], axis=-1))
+        st, F_raw = k.mhe_solve(v, ok, n, self.vehicle.mass, self._Y, self._W, self._U, self._XS, self._Ab,
+                                self._Bb, self._Xb, self._mp, self._ms, self._mi, self._uk, False, False)
+        return st, F_raw, n, ok
+
+    def _step_numpy(self, y: NDArray[np.float64], u: NDArray[np.float64], t0: float) -> Estimate:
+        """The step without the kernel (numpy window update and dense QP: the tests' oracle)."""
         first = self._ny == 0
         ok = math.isfinite(y[0]) and math.isfinite(y[1])  # on floats: numpy's scalar test is slow
         if not (math.isfinite(u[0]) and math.isfinite(u[1])):
@@ -333,8 +441,6 @@ class MHEUIO:
         us, xs = self._U[:n], self._XS[: n + 1]
         full = n == self.settings.N
         try:
-            if self._kern is not None:  # compiled: no numpy warnings, non-finite results flagged
-                return self._step_kernel(y, u, ok, n, full, t0)
             with np.errstate(all="ignore"):  # overflow is detected below, not warned about
                 return self._step_dense(y, u, ok, n, full, us, xs, None, t0)
         except (np.linalg.LinAlgError, ValueError, ArithmeticError) as err:
@@ -349,33 +455,6 @@ class MHEUIO:
         self._x = x
         F_raw = F_raw if np.isfinite(F_raw) else 0.0
         return Estimate(self._x.copy(), self._F, F_raw, EstimatorStatus.FAILED, time.perf_counter() - t0)
-
-    def _step_kernel(self, y: NDArray[np.float64], u: NDArray[np.float64], ok: bool, n: int, full: bool,
-                     t0: float) -> Estimate:
-        """The compiled window step (model, prediction, banded solve, bounds check)."""
-        A, B = self._Ab[:n], self._Bb[:n]
-        us, xs = self._U[:n], self._XS[: n + 1]
-        eval_model = self._kargs[-1]
-        if not eval_model:  # ZOH: numpy evaluates the matrices, the kernel does the rest
-            xs[n - 1] = self._x
-            A[:], B[:] = self.model.matrices(np.stack([us[:, 1], xs[:n, 0], xs[:n, 1]], axis=-1))
-        code, F, pred_v = self._kern.window_step(
-            self._Y[: n + 1], self._W[: n + 1], us, xs, n, self._x, self._F, u, ok, full, self._arrival,
-            *self._kargs[:-1], eval_model, A, B, self._Xb[: n + 1], False)
-        F_raw = float((pred_v - y[0]) * self.vehicle.mass / self.Td) if ok else 0.0
-        if code == 3 or not math.isfinite(F_raw):
-            return self._failed(F_raw, t0)
-        if code == 2:
-            self._x = np.clip(xs[n], self._xmin, self._xmax)
-            status = EstimatorStatus.REJECTED if not ok else EstimatorStatus.WARMUP
-            return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)
-        if code == 1:  # a state bound is active (or a pivot failed): the dense QP decides
-            with np.errstate(all="ignore"):
-                return self._step_dense(y, u, ok, n, full, us, xs, (A.copy(), B.copy()), t0, F_raw)
-        self._x = xs[n].copy()
-        self._F = float(F)
-        status = EstimatorStatus.OK if full else EstimatorStatus.WARMUP
-        return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)
 
     def _predict(self, y: NDArray[np.float64], ok: bool, n: int, xs: NDArray[np.float64],
                  x_pred: NDArray[np.float64], F_raw: float, t0: float) -> Estimate | None:

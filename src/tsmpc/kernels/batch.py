@@ -39,6 +39,7 @@ from numba.core import types as nbtypes
 from numba.np.arrayobj import populate_array
 
 from tsmpc.kernels import engine as ke
+from tsmpc.kernels import mhe as km
 from tsmpc.kernels import plant as kplant
 from tsmpc.kernels.engine import intrinsic
 
@@ -768,20 +769,20 @@ def _angle_cache(U, n, lo0, hi0, key, sn, cs):
 def _mhe_gather(s, slot, n, mY, mW, mU, mXS, mp, sf, si, key, sn, cs):
     """One lane's window (waiting in the deferred solve) into workspace slot ``slot``."""
     full = si[ke.SI_MHEFULL] != 0
-    s[MH_TD * LANES + slot] = mp[ke.MP_TD]
-    for i, f in ((ke.MP_M, MH_M), (ke.MP_I, MH_I), (ke.MP_CF, MH_CF), (ke.MP_CR, MH_CR),
-                 (ke.MP_A, MH_AA), (ke.MP_B, MH_BB), (ke.MP_MUG, MH_MUG), (ke.MP_KD, MH_KD)):
+    s[MH_TD * LANES + slot] = mp[km.MP_TD]
+    for i, f in ((km.MP_M, MH_M), (km.MP_I, MH_I), (km.MP_CF, MH_CF), (km.MP_CR, MH_CR),
+                 (km.MP_A, MH_AA), (km.MP_B, MH_BB), (km.MP_MUG, MH_MUG), (km.MP_KD, MH_KD)):
         s[f * LANES + slot] = mp[i]
     for i in range(3):
-        s[(MH_Q + i) * LANES + slot] = mp[ke.MP_Q + i]
-        s[(MH_P + i) * LANES + slot] = mp[ke.MP_P + i]
+        s[(MH_Q + i) * LANES + slot] = mp[km.MP_Q + i]
+        s[(MH_P + i) * LANES + slot] = mp[km.MP_P + i]
         s[(MH_ARR + i) * LANES + slot] = mXS[0, i] if full else sf[ke.SF_ARR + i]
-    s[MH_R * LANES + slot] = mp[ke.MP_R]
-    s[(MH_R + 1) * LANES + slot] = mp[ke.MP_R + 1]
-    s[MH_PF * LANES + slot] = mp[ke.MP_PF]
+    s[MH_R * LANES + slot] = mp[km.MP_R]
+    s[(MH_R + 1) * LANES + slot] = mp[km.MP_R + 1]
+    s[MH_PF * LANES + slot] = mp[km.MP_PF]
     s[MH_FP * LANES + slot] = sf[ke.SF_MF]
-    _angle_cache(mU, n, mp[ke.MP_LO], mp[ke.MP_HI], key, sn, cs)
-    lo1, hi1 = mp[ke.MP_LO + 1], mp[ke.MP_HI + 1]
+    _angle_cache(mU, n, mp[km.MP_LO], mp[km.MP_HI], key, sn, cs)
+    lo1, hi1 = mp[km.MP_LO + 1], mp[km.MP_HI + 1]
     for k in range(n + 1):
         o = (k + 1) * MR * LANES + slot
         s[o + MR_Y * LANES] = mY[k, 0]
@@ -807,7 +808,7 @@ def _mhe_finish(s, slot, n, mXS, mA, mB, mp, sf, si, sc):
             o = (k + 1) * MR * LANES + slot
             for i in range(3):
                 v = s[o + (MR_X + i) * LANES]
-                if not (v >= mp[ke.MP_XMIN + i] - 1e-9 and v <= mp[ke.MP_XMAX + i] + 1e-9):
+                if not (v >= mp[km.MP_XMIN + i] - 1e-9 and v <= mp[km.MP_XMAX + i] + 1e-9):
                     good = False
     if not good:
         for k in range(n):

@@ -90,7 +90,22 @@ from tsmpc.estimation.fusion import (
     stiffness_update,
 )
 from tsmpc.kernels.jit import cpython_hypot
-from tsmpc.kernels.mhe import window_step
+from tsmpc.kernels.mhe import (  # the MHE's records and its step
+    MHE_DENSE,
+    MHE_FAILED,
+    MHE_OK,
+    MHE_REJECTED,
+    MHE_WARMUP,
+    MI_NFAIL,
+    MI_NREJ,
+    MP_CF,
+    MP_CR,
+    MS_ARR,
+    MS_F,
+    N_MI,
+    N_MS,
+    mhe_step,
+)
 from tsmpc.kernels.mpc import guarded_step
 from tsmpc.kernels.plant import rk4_block
 from tsmpc.scenarios import apply_events, paper_mu, patch_mu
@@ -112,7 +127,7 @@ DONE, NEED_MPC, NEED_MHE, NEED_LQR, NEED_PLANT, DIVERGED = range(6)
 # phases of a step (where a resumed call continues)
 PH_START, PH_PLAN, PH_MHE, PH_POST_MHE, PH_POST_LQR, PH_POST_PLANT = range(6)
 # MHE statuses (EstimatorStatus) and MPC statuses (MPCStatus) as codes
-ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP = 1, 2, 3, 4
+ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP = MHE_OK, MHE_REJECTED, MHE_FAILED, MHE_WARMUP
 MPC_OPTIMAL, MPC_SOFT, MPC_FALLBACK = 1, 2, 3
 # event counters, in the order of Cascade.events
 (EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_MHE_REJ, EV_MHE_FAIL, EV_SAT, EV_POSE_REJ, EV_TIME_REJ,
@@ -141,12 +156,6 @@ N_FP = FP_SENS + N_SP
  IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV,
  IP_GOV, IP_G_ORACLE, IP_G_PREVIEW, IP_GYRO, IP_DEFER, IP_STEER) = range(33)
 N_IP = 33
-# ---------------------------------------------------------------------------- MHE parameters
-# mp = [q(3), r(2), p(3), p_F, x_min(3), x_max(3), box lo(3), box hi(3), M, I, C_f, C_r, a, b, μ_o g,
-#       drag, T_d]: MHEUIO's kernel arguments in its order (C_f, C_r change with the stiffness fit)
-MP_Q, MP_R, MP_P, MP_PF, MP_XMIN, MP_XMAX, MP_LO, MP_HI = 0, 3, 5, 8, 9, 12, 15, 18
-MP_M, MP_I, MP_CF, MP_CR, MP_A, MP_B, MP_MUG, MP_KD, MP_TD = range(21, 30)
-N_MP = 30
 # ---------------------------------------------------------------------------- float state
 (SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, SF_HELD, _H1, _H2, SF_UPREV, _U1, SF_UAPP, _A1,
  SF_PLANTU, _PU1, SF_LASTA, SF_GUARD, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
@@ -171,6 +180,9 @@ N_SF = SF_SENS + N_SS
  SI_STINIT, SI_STN,  # the SteerState's flag and count
  SI_CSINCE) = range(44)  # the CourseState's calls since its last interval ended
 N_SI = 44
+# the MHE's state slots are its records' (kernels.mhe: ms = [x̂, F̂, x̄_0], mi = [samples, rejected, failed])
+assert SF_MF == SF_MX + MS_F and SF_ARR == SF_MX + MS_ARR
+assert SI_NREJ == SI_NY + MI_NREJ and SI_NFAIL == SI_NY + MI_NFAIL
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
@@ -572,92 +584,22 @@ def _friction_step(Fw, Fr, ok, sf, si, fp, ip, ev):
 
 @njit(cache=True, fastmath=False)
 def _mhe_begin(y0, y1, u0, u1, mass, mY, mW, mU, mXS, mA, mB, mX, mp, views, sf, si, sc, ip):
-    """``MHEUIO.step`` up to the window solve's answer. Returns 0 with the estimate in
+    """``MHEUIO.step`` up to the window solve's answer (:func:`~tsmpc.kernels.mhe.mhe_step`, its
+    one definition, on the estimator's slots). Returns 0 with the estimate in
     ``sc``/``si[SI_ESTSTAT]``, or 1 when the dense QP must decide (the window is ready for
-    ``MHEUIO._step_dense``; ``sc[SC_FRAW]`` holds F̂_raw). ``views``: the slices of ``mp``,
-    ``sf`` and ``sc`` the kernel takes, made once per call of run()."""
-    N = ip[IP_NW]
-    wq, wr, wp, xmin, xmax, blo, bhi, x, arrival, u = views
+    ``MHEUIO._step_dense``; ``sc[SC_FRAW]`` holds F̂_raw). ``views``: the slices of ``sf``,
+    ``si`` and ``sc`` the block takes, made once per call of run()."""
+    ms, mi, uk = views
     sc[SC_UMHE], sc[SC_UMHE + 1] = u0, u1  # what the cascade gave (the course fusion's δ, F)
-    first = si[SI_NY] == 0
-    ok = math.isfinite(y0) and math.isfinite(y1)
-    if not (math.isfinite(u0) and math.isfinite(u1)):
-        u0, u1 = 0.0, 0.0
-        ok = False
-    if not ok:
-        si[SI_NREJ] += 1
-    # _push
-    ny = si[SI_NY]
-    if ny == N + 1:
-        for r in range(N):
-            mY[r, 0], mY[r, 1] = mY[r + 1, 0], mY[r + 1, 1]
-            mW[r] = mW[r + 1]
-            mXS[r, 0], mXS[r, 1], mXS[r, 2] = mXS[r + 1, 0], mXS[r + 1, 1], mXS[r + 1, 2]
-        for r in range(N - 1):
-            mU[r, 0], mU[r, 1] = mU[r + 1, 0], mU[r + 1, 1]
-        ny -= 1
-    mY[ny, 0], mY[ny, 1] = (y0, y1) if ok else (0.0, 0.0)
-    mW[ny] = 1.0 if ok else 0.0
-    ny += 1
-    if not first:
-        mU[ny - 2, 0], mU[ny - 2, 1] = u0, u1
-    si[SI_NY] = ny
-    n = ny - 1
+    st, F_raw, n, ok = mhe_step(y0, y1, u0, u1, mass, mY, mW, mU, mXS, mA, mB, mX, mp, ms, mi, uk, True,
+                                ip[IP_DEFER] != 0)
     si[SI_MHEN] = n
     si[SI_MHEOK] = 1 if ok else 0
-    if first:
-        for i in range(3):
-            mXS[0, i] = sf[SF_MX + i]
-        if not ok:
-            _est_out(sf, sc, si, ST_REJECTED, 0.0)
-            return 0
-        mXS[0, 0], mXS[0, 2] = y0, y1
-        for i in range(3):
-            sf[SF_MX + i] = _npclip(mXS[0, i], xmin[i], xmax[i])
-        _est_out(sf, sc, si, ST_WARMUP, 0.0)
-        return 0
-    full = n == N
-    si[SI_MHEFULL] = 1 if full else 0
-    u[0], u[1] = u0, u1
-    if full:  # the whole arrays (the usual case): no views to make
-        code, F, pred_v = window_step(
-            mY, mW, mU, mXS, n, x, sf[SF_MF], u, ok, full, arrival, wq, wr, wp, mp[MP_PF], xmin,
-            xmax, blo, bhi, mp[MP_M], mp[MP_I], mp[MP_CF], mp[MP_CR], mp[MP_A], mp[MP_B],
-            mp[MP_MUG], mp[MP_KD], mp[MP_TD], True, mA, mB, mX, ip[IP_DEFER] != 0)
-    else:
-        code, F, pred_v = window_step(
-            mY[:n + 1], mW[:n + 1], mU[:n], mXS[:n + 1], n, x, sf[SF_MF], u, ok, full, arrival, wq,
-            wr, wp, mp[MP_PF], xmin, xmax, blo, bhi, mp[MP_M], mp[MP_I], mp[MP_CF], mp[MP_CR],
-            mp[MP_A], mp[MP_B], mp[MP_MUG], mp[MP_KD], mp[MP_TD], True, mA[:n], mB[:n], mX[:n + 1],
-            ip[IP_DEFER] != 0)
-    F_raw = (pred_v - y0) * mass / mp[MP_TD] if ok else 0.0
+    si[SI_MHEFULL] = 1 if n == ip[IP_NW] else 0
     sc[SC_FRAW] = F_raw
-    if code == 3 or not math.isfinite(F_raw):  # _failed
-        si[SI_NFAIL] += 1
-        finite = math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2])
-        if not finite:
-            for i in range(3):
-                xi = x[i]
-                if xi != xi:
-                    xi = 0.0
-                elif xi == math.inf:
-                    xi = 1.7976931348623157e308
-                elif xi == -math.inf:
-                    xi = -1.7976931348623157e308
-                x[i] = _npclip(xi, xmin[i], xmax[i])
-        _est_out(sf, sc, si, ST_FAILED, F_raw if math.isfinite(F_raw) else 0.0)
-        return 0
-    if code == 2:
-        for i in range(3):
-            x[i] = _npclip(mXS[n, i], xmin[i], xmax[i])
-        _est_out(sf, sc, si, ST_WARMUP if ok else ST_REJECTED, F_raw)
-        return 0
-    if code == 1:
+    if st == MHE_DENSE:
         return 1
-    for i in range(3):
-        x[i] = mXS[n, i]
-    sf[SF_MF] = F
-    _est_out(sf, sc, si, ST_OK if full else ST_WARMUP, F_raw)
+    _est_out(sf, sc, si, st, F_raw)
     return 0
 
 
@@ -728,9 +670,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     lqr_p = InnerParams(ip[IP_COMP] != 0, ip[IP_UIO] != 0, ip[IP_LOWRES] != 0, zlo[1], prm[6] * prm[0])
     law = LQRLaw(Kv, zlo, zhi, bits, prm, fp[FP_L_LAM], fp[FP_L_AF], fp[FP_L_TD], fp[FP_L_FMIN],
                  fp[FP_L_FMAX], fp[FP_L_DMIN], fp[FP_L_DMAX], ip[IP_LQR_SFB] != 0, fp[FP_L_TAU])
-    mhe_views = (mp[MP_Q:MP_Q + 3], mp[MP_R:MP_R + 2], mp[MP_P:MP_P + 3], mp[MP_XMIN:MP_XMIN + 3],
-                 mp[MP_XMAX:MP_XMAX + 3], mp[MP_LO:MP_LO + 3], mp[MP_HI:MP_HI + 3],
-                 sf[SF_MX:SF_MX + 3], sf[SF_ARR:SF_ARR + 3], sc[SC_UK:SC_UK + 2])
+    mhe_views = (sf[SF_MX:SF_MX + N_MS], si[SI_NY:SI_NY + N_MI], sc[SC_UK:SC_UK + 2])
     while si[SI_M] < m_end:
         m = si[SI_M]
         k = m // n_in

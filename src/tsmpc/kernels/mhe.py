@@ -25,7 +25,23 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["warm", "window_step"]
+__all__ = ["MHE_DENSE", "MHE_FAILED", "MHE_OK", "MHE_REJECTED", "MHE_WARMUP", "mhe_push", "mhe_solve",
+           "mhe_step", "warm", "window_step"]
+
+# ---------------------------------------------------------------------------- the estimator's records
+# mp = [q(3), r(2), p(3), p_F, x_min(3), x_max(3), box lo(3), box hi(3), M, I, C_f, C_r, a, b, μ_o g,
+#       drag, T_d]: the window's parameters (C_f, C_r change with the stiffness fit)
+MP_Q, MP_R, MP_P, MP_PF, MP_XMIN, MP_XMAX, MP_LO, MP_HI = 0, 3, 5, 8, 9, 12, 15, 18
+MP_M, MP_I, MP_CF, MP_CR, MP_A, MP_B, MP_MUG, MP_KD, MP_TD = range(21, 30)
+N_MP = 30
+# ms = [x̂ (3), F̂, the arrival prior x̄_0 (3)]: the estimator's float state
+MS_X, MS_F, MS_ARR = 0, 3, 4
+N_MS = 7
+# mi = [samples in the window, samples rejected, solver failures]: its integer state
+MI_NY, MI_NREJ, MI_NFAIL = 0, 1, 2
+N_MI = 3
+# what a step decided: the estimate's status (EstimatorStatus as a code), or the dense QP decides
+MHE_DENSE, MHE_OK, MHE_REJECTED, MHE_FAILED, MHE_WARMUP = 0, 1, 2, 3, 4
 
 
 @njit(cache=True, fastmath=False)
@@ -268,6 +284,124 @@ def window_step(Y, W, U, XS, n, x, F, u, ok, full, arrival, q, r, p, pF, xmin, x
     return 0, Fn, pred[0]
 
 
+@njit(cache=True, fastmath=False)
+def _npclip(x, lo, hi):
+    """``np.clip`` of one float (NaN stays NaN)."""
+    if x != x:
+        return x
+    y = x if x >= lo else lo
+    return y if y <= hi else hi
+
+
+@njit(cache=True, fastmath=False)
+def mhe_push(y0, y1, u0, u1, Y, W, U, XS, mp, ms, mi):
+    """``MHEUIO.step`` up to the model: the sample [v, ω] (non-finite: rejected, weight 0) and the
+    input [F_xR, δ] the plant received (non-finite: zero, the sample rejected) into the window
+    (full: its oldest sample and input dropped); the first sample starts the estimate.
+
+    Returns (status, n, ok, u0, u1): :data:`MHE_WARMUP` / :data:`MHE_REJECTED` for the first
+    sample (the estimate in ``ms``), else :data:`MHE_DENSE` (a window of n inputs to solve,
+    :func:`mhe_solve`); the input as the window holds it."""
+    N = U.shape[0]
+    first = mi[MI_NY] == 0
+    ok = math.isfinite(y0) and math.isfinite(y1)
+    if not (math.isfinite(u0) and math.isfinite(u1)):  # a caller bug upstream: never in the window
+        u0, u1 = 0.0, 0.0
+        ok = False
+    if not ok:
+        mi[MI_NREJ] += 1
+    ny = mi[MI_NY]
+    if ny == N + 1:  # full: drop the oldest sample and input
+        for r in range(N):
+            Y[r, 0], Y[r, 1] = Y[r + 1, 0], Y[r + 1, 1]
+            W[r] = W[r + 1]
+            XS[r, 0], XS[r, 1], XS[r, 2] = XS[r + 1, 0], XS[r + 1, 1], XS[r + 1, 2]
+        for r in range(N - 1):
+            U[r, 0], U[r, 1] = U[r + 1, 0], U[r + 1, 1]
+        ny -= 1
+    Y[ny, 0], Y[ny, 1] = (y0, y1) if ok else (0.0, 0.0)
+    W[ny] = 1.0 if ok else 0.0
+    ny += 1
+    if not first:
+        U[ny - 2, 0], U[ny - 2, 1] = u0, u1
+    mi[MI_NY] = ny
+    n = ny - 1
+    if not first:
+        return MHE_DENSE, n, ok, u0, u1
+    for i in range(3):
+        XS[0, i] = ms[MS_X + i]
+    if not ok:
+        return MHE_REJECTED, n, ok, u0, u1
+    XS[0, 0], XS[0, 2] = y0, y1
+    for i in range(3):
+        ms[MS_X + i] = _npclip(XS[0, i], mp[MP_XMIN + i], mp[MP_XMAX + i])
+    return MHE_WARMUP, n, ok, u0, u1
+
+
+@njit(cache=True, fastmath=False)
+def mhe_solve(y0, ok, n, mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, eval_model, defer):
+    """``MHEUIO.step`` from the model on, for a window of ``n`` ≥ 1 inputs after
+    :func:`mhe_push` (``uk`` [F_xR, δ] the last one): :func:`window_step`, then the estimate into
+    ``ms``. Returns (status, F̂_raw): :data:`MHE_OK` / :data:`MHE_WARMUP` (solved),
+    :data:`MHE_REJECTED` / :data:`MHE_WARMUP` (a rejected sample or a short window: the
+    prediction), :data:`MHE_FAILED` (a non-finite prediction: the last estimate kept) or
+    :data:`MHE_DENSE` (a state bound active or a pivot failed: the caller's dense QP decides,
+    the matrices in A, B). ``eval_model`` False: A, B hold the model at the window's scheduling."""
+    N = U.shape[0]
+    full = n == N
+    x = ms[MS_X:MS_X + 3]
+    q, r, p = mp[MP_Q:MP_Q + 3], mp[MP_R:MP_R + 2], mp[MP_P:MP_P + 3]
+    xmin, xmax = mp[MP_XMIN:MP_XMIN + 3], mp[MP_XMAX:MP_XMAX + 3]
+    lo, hi = mp[MP_LO:MP_LO + 3], mp[MP_HI:MP_HI + 3]
+    if full:  # the whole arrays (the usual case): no views to make
+        code, F, pred_v = window_step(
+            Y, W, U, XS, n, x, ms[MS_F], uk, ok, full, ms[MS_ARR:MS_ARR + 3], q, r, p, mp[MP_PF], xmin,
+            xmax, lo, hi, mp[MP_M], mp[MP_I], mp[MP_CF], mp[MP_CR], mp[MP_A], mp[MP_B], mp[MP_MUG],
+            mp[MP_KD], mp[MP_TD], eval_model, A, B, X, defer)
+    else:
+        code, F, pred_v = window_step(
+            Y[:n + 1], W[:n + 1], U[:n], XS[:n + 1], n, x, ms[MS_F], uk, ok, full, ms[MS_ARR:MS_ARR + 3],
+            q, r, p, mp[MP_PF], xmin, xmax, lo, hi, mp[MP_M], mp[MP_I], mp[MP_CF], mp[MP_CR], mp[MP_A],
+            mp[MP_B], mp[MP_MUG], mp[MP_KD], mp[MP_TD], eval_model, A[:n], B[:n], X[:n + 1], defer)
+    F_raw = (pred_v - y0) * mass / mp[MP_TD] if ok else 0.0
+    if code == 3 or not math.isfinite(F_raw):  # FAILED: the last estimate kept (made finite)
+        mi[MI_NFAIL] += 1
+        if not (math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2])):
+            for i in range(3):  # np.clip(np.nan_to_num(x), x_min, x_max)
+                xi = x[i]
+                if xi != xi:
+                    xi = 0.0
+                elif xi == math.inf:
+                    xi = 1.7976931348623157e308
+                elif xi == -math.inf:
+                    xi = -1.7976931348623157e308
+                x[i] = _npclip(xi, xmin[i], xmax[i])
+        return MHE_FAILED, (F_raw if math.isfinite(F_raw) else 0.0)
+    if code == 2:  # warm-up or a rejected sample: the prediction
+        for i in range(3):
+            x[i] = _npclip(XS[n, i], xmin[i], xmax[i])
+        return (MHE_WARMUP if ok else MHE_REJECTED), F_raw
+    if code == 1:
+        return MHE_DENSE, F_raw
+    for i in range(3):
+        x[i] = XS[n, i]
+    ms[MS_F] = F
+    return (MHE_OK if full else MHE_WARMUP), F_raw
+
+
+@njit(cache=True, fastmath=False)
+def mhe_step(y0, y1, u0, u1, mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, eval_model, defer):
+    """One ``MHEUIO.step`` with the model evaluated here (Euler): :func:`mhe_push` then
+    :func:`mhe_solve`. Returns (status, F̂_raw, n, ok); ``uk`` gets the input as the window
+    holds it."""
+    st, n, ok, u0, u1 = mhe_push(y0, y1, u0, u1, Y, W, U, XS, mp, ms, mi)
+    uk[0], uk[1] = u0, u1
+    if st != MHE_DENSE:
+        return st, 0.0, n, ok
+    st, F_raw = mhe_solve(y0, ok, n, mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, eval_model, defer)
+    return st, F_raw, n, ok
+
+
 def warm() -> None:
     """Compile (or load from the cache) the signatures the estimator uses."""
     n = 3
@@ -277,3 +411,12 @@ def warm() -> None:
     window_step(Y, W, U, XS, n, o3 * 5.0, 0.0, np.zeros(2), True, False, o3, o3, np.ones(2), o3, 1e-10,
                 -o3 * 100, o3 * 100, -o3, o3 * 20, 683.0, 560.0, 25000.0, 25000.0, 0.7, 1.0, 4.9, 0.4,
                 0.01, True, np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3)), False)
+    mp = np.concatenate([o3, np.ones(2), o3, [1e-10], -o3 * 100, o3 * 100, -o3, o3 * 20,
+                         [683.0, 560.0, 25000.0, 25000.0, 0.7, 1.0, 4.9, 0.4, 0.01]])
+    ms, mi = np.ones(N_MS) * 5.0, np.zeros(N_MI, dtype=np.int64)
+    for _ in range(2):
+        mhe_step(5.0, 0.1, 0.0, 0.0, 683.0, Y, W, U, XS, np.zeros((n, 3, 3)), np.zeros((n, 3, 2)),
+                 np.zeros((n + 1, 3)), mp, ms, mi, np.zeros(2), True, False)
+    _st, n1, ok, _u0, _u1 = mhe_push(5.0, 0.1, 0.0, 0.0, Y, W, U, XS, mp, ms, mi)
+    mhe_solve(5.0, ok, n1, 683.0, Y, W, U, XS, np.zeros((n, 3, 3)), np.zeros((n, 3, 2)),
+              np.zeros((n + 1, 3)), mp, ms, mi, np.zeros(2), False, False)

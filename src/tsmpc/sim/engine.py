@@ -133,12 +133,12 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
     "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
-    "tsmpc.control.cascade:Cascade.__init__": "0824875cc4d52255",
-    "tsmpc.control.cascade:Cascade.reset": "6e1809c2dd2f6d57",
+    "tsmpc.control.cascade:Cascade.__init__": "d84192eabbe0dd7d",
+    "tsmpc.control.cascade:Cascade.reset": "2627c65266eea2a0",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "91054e77f230b78a",
+    "tsmpc.control.cascade:Cascade._step": "140ffe0ef4b9ad2b",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
-    "tsmpc.control.cascade:Cascade._gate": "748ed28374e52348",
+    "tsmpc.control.cascade:Cascade._gate": "d9c505541bd394e7",
     "tsmpc.control.cascade:Cascade._outer": "6153de103bbe0efc",
     "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
     "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
@@ -147,12 +147,12 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade.reference_row": "257f90494b63c8c2",
     "tsmpc.control.governor:governed_window": "cadafab2efb735cb",
     "tsmpc.control.governor:Governor.step": "12200cfb7c1bc640",
-    "tsmpc.control.cascade:Cascade._estimate": "ae82eb831df2ef47",
+    "tsmpc.control.cascade:Cascade._estimate": "6008b3dd2bedaea5",
     "tsmpc.control.cascade:Cascade._compensated": "7bfaf70f34cf6d62",
     "tsmpc.control.cascade:Cascade._inner": "3a018d7e1029a195",
     "tsmpc.control.cascade:Cascade._plausible_speeds": "4b22de6905cbdf56",
-    "tsmpc.control.cascade:Cascade._accept_pose": "e64d04fe6f2a523d",
-    "tsmpc.control.cascade:Cascade._dead_reckon": "a357e386e2e7595b",
+    "tsmpc.control.cascade:Cascade._accept_pose": "94464b88332d50a0",
+    "tsmpc.control.cascade:Cascade._dead_reckon": "d73049a3445880ad",
     "tsmpc.control.cascade:Cascade._watch_samples": "7a7df27fe2b75dfc",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
@@ -163,11 +163,10 @@ _PORTED: dict[str, str] = {
     "tsmpc.models.kinematic:pose_to_errors": "21aace1283045776",
     "tsmpc.models.kinematic:wrap_angle": "84759ed30a2082e3",
     "tsmpc.estimation.mhe_uio:MHEUIO.reset": "91c37b33d40113cb",
-    "tsmpc.estimation.mhe_uio:MHEUIO.step": "8b50a38a7325cedc",
-    "tsmpc.estimation.mhe_uio:MHEUIO._push": "399bd3980e3d8a56",
-    "tsmpc.estimation.mhe_uio:MHEUIO._step_kernel": "b056cdd1bcc8ea2f",
+    "tsmpc.estimation.mhe_uio:MHEUIO.step": "1caf5cba8ba85e25",
+    "tsmpc.estimation.mhe_uio:MHEUIO.step_values": "cd60476bb9240171",
     "tsmpc.estimation.mhe_uio:MHEUIO._failed": "481c2d5e6c42c5f7",
-    "tsmpc.estimation.mhe_uio:MHEUIO.set_cornering_stiffness": "4c2e3c0b21b47861",
+    "tsmpc.estimation.mhe_uio:MHEUIO.set_cornering_stiffness": "b21e89a68616204d",
     "tsmpc.control.ts_lqr:TSLQR.reset": "87b87f561a20499d",
     "tsmpc.control.ts_lqr:TSLQR.set_cornering_stiffness": "2650a8e957df2414",
     "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
@@ -264,7 +263,7 @@ def _replaced_code() -> str | None:
             return f"{mod_name}.{name} was replaced (the Python loop runs the replacement)"
     if "mod" in _KERNEL and _KERNEL["mod"] is not None:
         ke = _KERNEL["mod"]
-        for block, fn in (("mpc", "guarded_step"), ("mhe", "window_step"), ("plant", "rk4_block")):
+        for block, fn in (("mpc", "guarded_step"), ("mhe", "mhe_step"), ("plant", "rk4_block")):
             if getattr(importlib.import_module(f"tsmpc.kernels.{block}"), fn) is not getattr(ke, fn):
                 return f"tsmpc.kernels.{block}.{fn} was replaced"
         ts_lqr = importlib.import_module("tsmpc.control.ts_lqr")  # its block calls the law
@@ -775,8 +774,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     law = lqr._law
     assert law is not None  # run() checked lqr._kern
     Kv, zlo, zhi, bits, prm = law.Kv, law.zlo, law.zhi, law.bits, law.prm
-    mp = np.array([*mhe._kargs[0], *mhe._kargs[1], *mhe._kargs[2], mhe._kargs[3], *mhe._kargs[4],
-                   *mhe._kargs[5], *mhe._kargs[6], *mhe._kargs[7], *mhe._kargs[8:17]], dtype=float)
+    mp = mhe._mp.copy()  # the MHE block's parameters (C_f, C_r change with the stiffness fit)
     u_drop, gnss, fifo = _fault_data(scenario.sensor_fault, M, fp, ip, sf, si)
     prog = _friction_program(scenario.friction)
     assert prog is not None
