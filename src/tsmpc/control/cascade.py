@@ -188,6 +188,12 @@ def build_outer_controller(
     return TSMPC(cfg.mpc, model, P, S, mode=method)
 
 
+def _xyz(p: NDArray[np.float64]) -> tuple[float, float, float]:
+    """The three floats of a pose array."""
+    x, y, th = p.tolist()
+    return x, y, th
+
+
 def _finite(*xs: float) -> bool:
     for x in xs:  # (a loop: all() over a generator costs 0.3 µs more a call)
         if not math.isfinite(x):
@@ -450,8 +456,7 @@ class Cascade:
         With ``recovery``: the first pose after a blind stop is, and so is one that ends
         ``pose_reinit_s`` of consistent jump rejections (gates.py)."""
         p = self._pose
-        if p is None or self._pose_free or pose_consistent(self._gates, X, Y, th, *p.tolist(),
-                                                           t - self._pose_t):
+        if p is None or self._pose_free or pose_consistent(self._gates, X, Y, th, *_xyz(p), t - self._pose_t):
             self._pose_free, self._jump_t0 = False, math.nan
             return True
         rc = self._recovery

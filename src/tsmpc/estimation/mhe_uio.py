@@ -100,6 +100,10 @@ _STATUS = (EstimatorStatus.FAILED, EstimatorStatus.OK, EstimatorStatus.REJECTED,
            EstimatorStatus.WARMUP)
 
 
+#: MHEUIO._kernel_model_agrees's answers in this process, by the model's inputs
+_AGREES: dict[tuple[Any, ...], bool] = {}
+
+
 class MHEUIO:
     """Moving-horizon estimator with an unknown-input (friction force) estimate.
 
@@ -160,13 +164,26 @@ class MHEUIO:
                 *phys, self.Td, euler,
             )
             self._Ab, self._Bb, self._Xb = np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3))
-            if self._kargs[-1] and not self._kernel_model_agrees():
+            if self._kargs[-1] and not self._model_agrees_once():
                 # The model is not the one the kernel evaluates: numpy evaluates it, the kernel solves.
                 self._kargs = (*self._kargs[:-1], False)
             k = self._kargs  # the block's parameters mp (tsmpc.kernels.mhe.MP_*: the same values)
             self._mp = np.array([*k[0], *k[1], *k[2], k[3], *k[4], *k[5], *k[6], *k[7], *k[8:17]],
                                 dtype=float)
         self.reset(x0)
+
+    def _model_agrees_once(self) -> bool:
+        """:meth:`_kernel_model_agrees`, answered once per model in a process (a batch builds one
+        estimator per run)."""
+        m = self.model
+        try:
+            key = (type(m), repr(m.box), repr(m.params), float(m.Td), str(m.method), self._kargs[8:17])
+        except AttributeError:
+            return self._kernel_model_agrees()
+        agrees = _AGREES.get(key)
+        if agrees is None:
+            agrees = _AGREES[key] = self._kernel_model_agrees()
+        return agrees
 
     def _kernel_model_agrees(self) -> bool:
         """The kernel's Euler matrices equal ``model.matrices`` at a few premise points (guards

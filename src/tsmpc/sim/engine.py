@@ -151,7 +151,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade._compensated": "7bfaf70f34cf6d62",
     "tsmpc.control.cascade:Cascade._inner": "3a018d7e1029a195",
     "tsmpc.control.cascade:Cascade._plausible_speeds": "4b22de6905cbdf56",
-    "tsmpc.control.cascade:Cascade._accept_pose": "94464b88332d50a0",
+    "tsmpc.control.cascade:Cascade._accept_pose": "d00e5362890189a2",
     "tsmpc.control.cascade:Cascade._dead_reckon": "d73049a3445880ad",
     "tsmpc.control.cascade:Cascade._watch_samples": "7a7df27fe2b75dfc",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
