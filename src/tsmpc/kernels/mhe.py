@@ -293,7 +293,7 @@ def _npclip(x, lo, hi):
     return y if y <= hi else hi
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, inline="always")  # (no call layers in the engine)
 def mhe_push(y0, y1, u0, u1, Y, W, U, XS, mp, ms, mi):
     """``MHEUIO.step`` up to the model: the sample [v, ω] (non-finite: rejected, weight 0) and the
     input [F_xR, δ] the plant received (non-finite: zero, the sample rejected) into the window
@@ -338,7 +338,7 @@ def mhe_push(y0, y1, u0, u1, Y, W, U, XS, mp, ms, mi):
     return MHE_WARMUP, n, ok, u0, u1
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, inline="always")  # (no call layers in the engine)
 def mhe_solve(y0, ok, n, mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, eval_model, defer):
     """``MHEUIO.step`` from the model on, for a window of ``n`` ≥ 1 inputs after
     :func:`mhe_push` (``uk`` [F_xR, δ] the last one): :func:`window_step`, then the estimate into
@@ -389,7 +389,7 @@ def mhe_solve(y0, ok, n, mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, eval_model,
     return (MHE_OK if full else MHE_WARMUP), F_raw
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, inline="always")  # (no call layers in the engine)
 def mhe_step(y0, y1, u0, u1, mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, eval_model, defer):
     """One ``MHEUIO.step`` with the model evaluated here (Euler): :func:`mhe_push` then
     :func:`mhe_solve`. Returns (status, F̂_raw, n, ok); ``uk`` gets the input as the window
