@@ -542,7 +542,8 @@ class Cascade:
         self._fusion.gyro_sample(pose_ok, th, fresh and speeds_ok, om)
         om = om - self._fusion.gyro_bias()
         mpc_step = self._calls % self.n_inner == 0
-        if self._fusion.any_course:  # an accepted pose may end the course fusion's interval
+        course = self._fusion.any_course
+        if course:  # an accepted pose may end the course fusion's interval
             kc = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(self._ay_ref) - 1)
             self._fusion.course.close_at(pose_ok, X, Y, th, v if fresh and speeds_ok else math.nan,
                                          om if fresh and speeds_ok else math.nan, self._ay_ref[kc], mpc_step)
@@ -558,7 +559,7 @@ class Cascade:
         t2 = time.perf_counter()
         v_hat, a_hat, w_hat = est.x.tolist()
         self._dead_reckon(v_hat, a_hat, w_hat)
-        if self._fusion.any_course:
+        if course:
             # only samples the gates accepted: a rejected speed is garbage, a rejected or missing
             # heading is the gyro's integral since the last accepted one
             self._fusion.course.sample(fresh and speeds_ok, th, v, a_hat, v_hat * w_hat, om,

@@ -1453,4 +1453,6 @@ class Fusion:
         feedback's missing mass)."""
         if not self.settings.mass_estimate:
             return 0.0
-        return self.mass.inertia_terms(v_hat, F_hat, v_ref)
+        m = self.mass  # (MassEstimator.inertia_terms, one call less)
+        m.state = mass_update(m.params, m.state, m._ring, v_hat, F_hat)
+        return inertia_force(m.params, m.state, v_hat, v_ref)

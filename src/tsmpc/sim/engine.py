@@ -136,7 +136,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade.__init__": "d84192eabbe0dd7d",
     "tsmpc.control.cascade:Cascade.reset": "2627c65266eea2a0",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "140ffe0ef4b9ad2b",
+    "tsmpc.control.cascade:Cascade._step": "de497bd0f93c876d",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "d9c505541bd394e7",
     "tsmpc.control.cascade:Cascade._outer": "6153de103bbe0efc",
