@@ -34,7 +34,6 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
 from llvmlite import ir
 from numba import njit
 from numba.core import cgutils, types
@@ -186,8 +185,8 @@ assert SI_NREJ == SI_NY + MI_NREJ and SI_NFAIL == SI_NY + MI_NFAIL
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
- SC_PU, _PU2, SC_UK, _UK1) = range(30)
-N_SC = 30
+ SC_PU, _PU2, SC_UK, _UK1, SC_TMP, _TM1, _TM2, SC_GROW, _GR1, _GR2, _GR3, _GR4) = range(38)
+N_SC = 38  # then the governed window's v and ω, N + 1 each (sc has N_SC + 2 (N + 1) slots)
 # ---------------------------------------------------------------------------- course intervals
 (IV_OPEN, IV_OK, IV_SX, IV_SY, IV_STH, IV_N, IV_SV, IV_SVDTH, IV_SVALPHA, IV_SVAY, IV_SVFULL,
  IV_SDELTA, IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST, IV_THLAST,
@@ -652,12 +651,13 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     N = ip[IP_N]
     y = sc[SC_Y:SC_Y + 5]
     e_meas = sc[SC_EMEAS:SC_EMEAS + 3]
-    tmp3 = np.empty(3)
-    noX = np.zeros((0, 3))  # "no previous plan" for guarded_step
-    noU = np.zeros((0, 2))
-    grow = np.empty(5)  # the governed reference sample, and the MPC's governed window
-    gmv = np.empty(N + 1)
-    gmw = np.empty(N + 1)
+    # scratch as views, not allocations: the batch calls run() for every lane at every step
+    tmp3 = sc[SC_TMP:SC_TMP + 3]
+    noX = prevX[:0]  # "no previous plan" for guarded_step
+    noU = prevU[:0]
+    grow = sc[SC_GROW:SC_GROW + 5]  # the governed reference sample, and the MPC's governed window
+    gmv = sc[N_SC:N_SC + N + 1]
+    gmw = sc[N_SC + N + 1:N_SC + 2 * (N + 1)]
     gates = GateParams(fp[FP_V_LO], fp[FP_V_HI], fp[FP_W_LIM], fp[FP_POSE_NOISE], fp[FP_HEAD_NOISE], Td)
     cpar = course_params(Tc, fp[FP_COURSE_SIGMA], True, fp[FP_CF0], fp[FP_CR0], fp[FP_VM], fp[FP_VI],
                          fp[FP_VA], fp[FP_VB], fp[FP_VG], Td, n_in)

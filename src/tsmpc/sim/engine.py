@@ -792,7 +792,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     ridx = np.arange(n_ref)
     ridx = ridx % len(ref) if ref.closed else np.minimum(ridx, len(ref) - 1)
     return _Arrays(
-        x=_f64(x0), fp=fp, ip=ip, sf=sf, si=si, sc=np.zeros(ke.N_SC),
+        x=_f64(x0), fp=fp, ip=ip, sf=sf, si=si, sc=np.zeros(ke.N_SC + 2 * (N + 1)),
         ev=np.zeros(ke.N_EVENTS, dtype=np.int64), noise=_noise(cfg, M), u_drop=_f64(u_drop),
         gnss=_f64(gnss), fifo=fifo, frb=frb, patches=_f64(patches), events=_f64(events),
         ref_x=_f64(ref.x), ref_y=_f64(ref.y), ref_th=_f64(ref.theta), ref_v=_f64(ref.v[ridx]),
