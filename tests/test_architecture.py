@@ -282,3 +282,15 @@ def test_no_function_over_100_lines_outside_the_numeric_kernels() -> None:
     assert set(long) <= LONG_KERNELS, {n: long[n] for n in sorted(set(long) - LONG_KERNELS)}
     stale = sorted(LONG_KERNELS - set(long))  # gone, or within the limit now: drop it from the list
     assert not stale, {n: lengths.get(n, "no such function") for n in stale}
+
+
+def test_the_cascade_step_reads_as_the_block_diagram() -> None:
+    """``Cascade._step`` (the body of ``Cascade.step``) is at most 40 lines and reads no config
+    switch: the mechanisms it runs are the blocks composed at construction (issue 34)."""
+    tree = ast.parse((SRC / "control" / "cascade.py").read_text(encoding="utf-8"))
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "Cascade")
+    step = next(n for n in cls.body if isinstance(n, ast.FunctionDef) and n.name == "_step")
+    assert step.end_lineno is not None and step.end_lineno - step.lineno + 1 <= 40
+    switches = [ast.unparse(n) for n in ast.walk(step)
+                if isinstance(n, ast.Attribute) and n.attr in ("cfg", "any_course", "settings")]
+    assert not switches, switches

@@ -289,6 +289,10 @@ class Cascade:
         from tsmpc.estimation.fusion import Fusion
 
         self._fusion = Fusion(cfg)  # beyond the paper: cfg.fusion's switches (issue 21)
+        # the blocks the config selects, composed once (the step has no feature switch): the
+        # course fusion or a block that does nothing; the servo with or without the offset
+        self._course: Any = self._fusion.course if self._fusion.any_course else _NoCourse()
+        self._servo = self._servo_offset if cfg.fusion.steering_offset else self._servo_plain
         # beyond the paper: the compensated friction may step within the MHE window
         self._friction_step = (FrictionStep(cfg.mhe.N, cfg.lqr.friction_step_threshold)
                                if cfg.lqr.friction_step else None)
@@ -530,62 +534,84 @@ class Cascade:
 
     def _step(self, t: float, m: Measurement) -> Command:
         """One call: the block diagram of paper Fig. 1 (gates → outer MPC every T_c/T_d calls →
-        MHE-UIO → friction compensation → TS-LQR), each block a method below."""
+        MHE-UIO → friction compensation → TS-LQR), each block a method below; the fusion's blocks
+        (gyro bias, course fusion, steering offset) around them."""
         pX, pY, pth = m.pose
         X, Y, th = float(pX), float(pY), float(pth)
         v, om = float(m.v), float(m.omega)
         if self._x0 is None:
             self._start_from(t, X, Y, th, v, om)
         fresh, speeds_ok, pose_ok = self._gate(t, m, X, Y, th, v, om)
-        # fusion.gyro_bias: the raw ω against the accepted poses' heading; every block below gets
-        # ω less the bias (the MHE, hence ω̂ for the TS-LQR and the dead reckoning; the course fits)
-        self._fusion.gyro_sample(pose_ok, th, fresh and speeds_ok, om)
-        om = om - self._fusion.gyro_bias()
+        ok = fresh and speeds_ok
+        om = self._gyro(pose_ok, th, ok, om)
         mpc_step = self._calls % self.n_inner == 0
-        course = self._fusion.any_course
-        if course:  # an accepted pose may end the course fusion's interval
-            kc = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(self._ay_ref) - 1)
-            self._fusion.course.close_at(pose_ok, X, Y, th, v if fresh and speeds_ok else math.nan,
-                                         om if fresh and speeds_ok else math.nan, self._ay_ref[kc], mpc_step)
-        plan = e_meas = None
-        t_mpc = 0.0
-        if mpc_step:
-            plan, e_meas, t_mpc = self._outer(t, X, Y, th, v, om, fresh, speeds_ok, pose_ok)
+        # an accepted pose may end the course fusion's interval
+        self._course.close_at(pose_ok, X, Y, th, v if ok else math.nan, om if ok else math.nan,
+                              self._ay_ref_at(t), mpc_step)
+        plan, e_meas, t_mpc = (self._outer(t, X, Y, th, v, om, fresh, speeds_ok, pose_ok) if mpc_step
+                               else (None, None, 0.0))
         # (_u_prev and _pose are set by _start_from above; ignores, not asserts: the syntax tree
         # of these methods is fingerprinted for the run engine, tsmpc.sim.engine._PORTED)
         v_ref, w_ref = float(self._u_prev[0]), float(self._u_prev[1])  # type: ignore[index]
         t1 = time.perf_counter()
-        est, u_model = self._estimate(m, v, om, fresh and speeds_ok, t1)
+        est, u_model = self._estimate(m, v, om, ok, t1)
         t2 = time.perf_counter()
         v_hat, a_hat, w_hat = est.x.tolist()
         self._dead_reckon(v_hat, a_hat, w_hat)
-        if course:
-            # only samples the gates accepted: a rejected speed is garbage, a rejected or missing
-            # heading is the gyro's integral since the last accepted one
-            self._fusion.course.sample(fresh and speeds_ok, th, v, a_hat, v_hat * w_hat, om,
-                                       float(u_model[1]), float(u_model[0]), pose_ok)
-        # fusion.steering_offset: the steady yaw balance of the MHE's model, the bias-free ω against
-        # the angle last sent; frozen while the sample, the MHE or the inner loop is unusable
-        last = self._last
-        self._fusion.steer_sample(fresh and speeds_ok and est.status == EstimatorStatus.OK
-                                  and self._blind_since is None
-                                  and not (last is not None and last.saturated),
-                                  v_hat, om, self._steer_sent)
+        # only samples the gates accepted: a rejected speed is garbage, a rejected or missing
+        # heading is the gyro's integral since the last accepted one
+        self._course.sample(ok, th, v, a_hat, v_hat * w_hat, om, float(u_model[1]), float(u_model[0]),
+                            pose_ok)
+        self._steer_fit(ok, est, v_hat, om)
         F, delta, sat, low = self._inner(self._compensated(m, est, v_ref), est, v_ref, w_ref)
         t3 = time.perf_counter()
-        # the servo gets the wheels' angle less the offset in force (held while blind: the fit is
-        # frozen then), within the steering limits; _u_applied keeps the wheels' intended angle
-        off, wheels = self._fusion.steer_offset(), delta
-        if self.cfg.fusion.steering_offset:  # (off, the command is the inner loop's, unclipped)
-            delta, wheels = steer_command(delta, off, -self.cfg.lqr.delta_max, self.cfg.lqr.delta_max)
-        self._steer_offset, self._steer_sent = off, delta
-        self._u_applied = (F, wheels)
-        self._low_applied = low
+        delta = self._servo(F, delta, low)
+        self._count(est, sat)
+        return Command(F, delta, sat, v_ref, w_ref, est, plan, e_meas, t_mpc, t2 - t1, t3 - t2)
+
+    def _gyro(self, pose_ok: bool, th: float, ok: bool, om: float) -> float:
+        """fusion.gyro_bias: the raw ω against the accepted poses' heading; ω less the bias for
+        every block after it (the MHE, hence ω̂ for the TS-LQR and the dead reckoning; the course
+        fits)."""
+        self._fusion.gyro_sample(pose_ok, th, ok, om)
+        return om - self._fusion.gyro_bias()
+
+    def _ay_ref_at(self, t: float) -> float:
+        """The reference's lateral acceleration v_d ω_d at the sample of time ``t``."""
+        kc = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(self._ay_ref) - 1)
+        return float(self._ay_ref[kc])
+
+    def _steer_fit(self, ok: bool, est: Estimate, v_hat: float, om: float) -> None:
+        """fusion.steering_offset's sample: the steady yaw balance of the MHE's model, the
+        bias-free ω against the angle last sent; frozen while the sample, the MHE or the inner loop
+        is unusable."""
+        last = self._last
+        self._fusion.steer_sample(ok and est.status == EstimatorStatus.OK and self._blind_since is None
+                                  and not (last is not None and last.saturated), v_hat, om, self._steer_sent)
+
+    def _servo_offset(self, F: float, delta: float, low: float) -> float:
+        """The angle sent: the wheels' angle less the steering offset in force (held while blind:
+        the fit is frozen then), within the steering limits; _u_applied keeps the wheels' intended
+        angle (fusion.steering_offset)."""
+        off, lim = self._fusion.steer_offset(), self.cfg.lqr.delta_max
+        sent, wheels = steer_command(delta, off, -lim, lim)
+        self._steer_offset, self._steer_sent = off, sent
+        self._u_applied, self._low_applied = (F, wheels), low
+        return sent
+
+    def _servo_plain(self, F: float, delta: float, low: float) -> float:
+        """The angle sent is the inner loop's, unclipped (fusion.steering_offset off)."""
+        self._steer_offset, self._steer_sent = self._fusion.steer_offset(), delta
+        self._u_applied, self._low_applied = (F, delta), low
+        return delta
+
+    def _count(self, est: Estimate, sat: bool) -> None:
+        """The step's events: the estimator's rejected and failed samples, the inner loop's
+        saturation."""
         ev = self._events
         ev["mhe_rejected"] += est.status == EstimatorStatus.REJECTED
         ev["mhe_failed"] += est.status == EstimatorStatus.FAILED
         ev["inner_saturated"] += sat
-        return Command(F, delta, sat, v_ref, w_ref, est, plan, e_meas, t_mpc, t2 - t1, t3 - t2)
 
     def _start_from(self, t: float, X: float, Y: float, th: float, v: float, om: float) -> None:
         """Start from the first measurement (its garbage made harmless)."""
@@ -822,6 +848,17 @@ class Cascade:
                               rc.stop_decel, *self._force_limits)
         self._events["blind_steps"] += 1
         return F, delta, False, 0.0
+
+
+class _NoCourse:
+    """The course fusion switched off (no ``fusion.course_slip``, ``course_speed`` nor
+    ``stiffness_estimate``): its per-step calls do nothing."""
+
+    def close_at(self, *args: Any) -> None:
+        """Nothing to close."""
+
+    def sample(self, *args: Any) -> None:
+        """Nothing to sample."""
 
 
 def _build_governor(cfg: Config) -> Governor:
