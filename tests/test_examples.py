@@ -21,7 +21,8 @@ BLOCKS = re.findall(r"^```python\n(.*?)^```", README.read_text(encoding="utf-8")
 NEEDS = {"baseline_table.py": ("paper", "tracks"), "fusion_ablation.py": ("paper",),
          "generalisation_table.py": ("paper",), "mechanism_ablation.py": ("paper",),
          "mismatch_table.py": ("paper", "tracks"),
-         "paper_ablation.py": ("paper",), "paper_explained.py": ("paper",), "race_tracks.py": ("tracks",)}
+         "paper_ablation.py": ("paper",), "paper_explained.py": ("paper",), "race_tracks.py": ("tracks",),
+         "capped_tracks.py": ("tracks",)}
 #: Arguments for the shortened test runs: one local Dask worker (a second would cost its start,
 #: imports and kernel loads, ~5 s of CPU, for nothing).
 ARGS = {"mismatch_table.py": ["--workers", "1"]}
