@@ -398,6 +398,17 @@ def _measurement_terms(s, lane, o, terms):
 
 
 @njit(**_INL)
+def _wdot3(x0, x1, x2, q0, q1, q2, y0, y1, y2):
+    """Σ_l x_l q_l y_l summed from 0.0 in the order l = 0, 1, 2 (the scalar window solve's order:
+    the lanes equal it bit for bit)."""
+    acc = 0.0
+    acc += x0 * q0 * y0
+    acc += x1 * q1 * y1
+    acc += x2 * q2 * y2
+    return acc
+
+
+@njit(**_INL)
 def _previous_stage_terms(s, lane, op, terms):
     """Stage k−1: the state noise weight q and its input term B u."""
     d00, d10, d11, d20, d21, d22, g00, g10, g20, g01, g11, g21 = terms
@@ -433,69 +444,22 @@ def _next_stage_terms(s, lane, o, terms):
     b10, b11 = s[pb + 2 * LANES], s[pb + 3 * LANES]
     b20, b21 = s[pb + 4 * LANES], s[pb + 5 * LANES]
     # D_ij += Σ_l A_li q_l A_lj (the lower triangle, which the Cholesky reads)
-    acc = 0.0
-    acc += a00 * q0 * a00
-    acc += a10 * q1 * a10
-    acc += a20 * q2 * a20
-    d00 += acc
-    acc = 0.0
-    acc += a01 * q0 * a00
-    acc += a11 * q1 * a10
-    acc += a21 * q2 * a20
-    d10 += acc
-    acc = 0.0
-    acc += a01 * q0 * a01
-    acc += a11 * q1 * a11
-    acc += a21 * q2 * a21
-    d11 += acc
-    acc = 0.0
-    acc += a02 * q0 * a00
-    acc += a12 * q1 * a10
-    acc += a22 * q2 * a20
-    d20 += acc
-    acc = 0.0
-    acc += a02 * q0 * a01
-    acc += a12 * q1 * a11
-    acc += a22 * q2 * a21
-    d21 += acc
-    acc = 0.0
-    acc += a02 * q0 * a02
-    acc += a12 * q1 * a12
-    acc += a22 * q2 * a22
-    d22 += acc
+    d00 += _wdot3(a00, a10, a20, q0, q1, q2, a00, a10, a20)
+    d10 += _wdot3(a01, a11, a21, q0, q1, q2, a00, a10, a20)
+    d11 += _wdot3(a01, a11, a21, q0, q1, q2, a01, a11, a21)
+    d20 += _wdot3(a02, a12, a22, q0, q1, q2, a00, a10, a20)
+    d21 += _wdot3(a02, a12, a22, q0, q1, q2, a01, a11, a21)
+    d22 += _wdot3(a02, a12, a22, q0, q1, q2, a02, a12, a22)
     bl0 = b00 * u0 + b01 * u1
     bl1 = b10 * u0 + b11 * u1
     bl2 = b20 * u0 + b21 * u1
-    ab = 0.0
-    ab += a00 * q0 * bl0
-    ab += a10 * q1 * bl1
-    ab += a20 * q2 * bl2
-    ae = 0.0
-    ae += a00 * q0 * (-b00)
-    ae += a10 * q1 * (-b10)
-    ae += a20 * q2 * (-b20)
-    g00 -= ab
-    g01 += ae
-    ab = 0.0
-    ab += a01 * q0 * bl0
-    ab += a11 * q1 * bl1
-    ab += a21 * q2 * bl2
-    ae = 0.0
-    ae += a01 * q0 * (-b00)
-    ae += a11 * q1 * (-b10)
-    ae += a21 * q2 * (-b20)
-    g10 -= ab
-    g11 += ae
-    ab = 0.0
-    ab += a02 * q0 * bl0
-    ab += a12 * q1 * bl1
-    ab += a22 * q2 * bl2
-    ae = 0.0
-    ae += a02 * q0 * (-b00)
-    ae += a12 * q1 * (-b10)
-    ae += a22 * q2 * (-b20)
-    g20 -= ab
-    g21 += ae
+    # G_i· −= Σ_l A_li q_l (B u)_l, and the F column Σ_l A_li q_l (−B_l0)
+    g00 -= _wdot3(a00, a10, a20, q0, q1, q2, bl0, bl1, bl2)
+    g01 += _wdot3(a00, a10, a20, q0, q1, q2, -b00, -b10, -b20)
+    g10 -= _wdot3(a01, a11, a21, q0, q1, q2, bl0, bl1, bl2)
+    g11 += _wdot3(a01, a11, a21, q0, q1, q2, -b00, -b10, -b20)
+    g20 -= _wdot3(a02, a12, a22, q0, q1, q2, bl0, bl1, bl2)
+    g21 += _wdot3(a02, a12, a22, q0, q1, q2, -b00, -b10, -b20)
     hff = s[MH_HFF * LANES + lane]
     gf = s[MH_GF * LANES + lane]
     e = -b00

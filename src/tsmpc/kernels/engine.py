@@ -257,15 +257,6 @@ def _clamp(x, lo, hi):
 
 
 @njit(cache=True, fastmath=False)
-def _npclip(x, lo, hi):
-    """``np.clip`` of one float (NaN stays NaN)."""
-    if x != x:
-        return x
-    y = x if x >= lo else lo
-    return y if y <= hi else hi
-
-
-@njit(cache=True, fastmath=False)
 def _wrap(a):
     """Angle to [−π, π) exactly as ``(a + π) % 2π − π`` in Python/numpy."""
     return (a + math.pi) % (2.0 * math.pi) - math.pi
