@@ -57,7 +57,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from tsmpc._records import quick_init
+from tsmpc._records import StateField, quick_init
 from tsmpc.config import FrictionEstimate, LQRSettings, VehicleParams
 from tsmpc.errors import ConfigError
 from tsmpc.kernels.jit import _numba_ready, jitable
@@ -333,37 +333,10 @@ class TSLQR:
         self._s[:] = 0.0
 
     # The controller state as named views of the state vector (the numpy step's variables).
-    @property
-    def _f(self) -> NDArray[np.float64]:
-        return self._s[0:2]
-
-    @_f.setter
-    def _f(self, value: Any) -> None:
-        self._s[0:2] = value
-
-    @property
-    def _zeta(self) -> float:
-        return float(self._s[2])
-
-    @_zeta.setter
-    def _zeta(self, value: float) -> None:
-        self._s[2] = value
-
-    @property
-    def _started(self) -> bool:
-        return bool(self._s[3])
-
-    @_started.setter
-    def _started(self, value: bool) -> None:
-        self._s[3] = 1.0 if value else 0.0
-
-    @property
-    def _applied(self) -> NDArray[np.float64]:
-        return self._s[4:6]
-
-    @_applied.setter
-    def _applied(self, value: Any) -> None:
-        self._s[4:6] = value
+    _f: StateField = StateField("_s", slice(0, 2))
+    _zeta: StateField = StateField("_s", 2, float)
+    _started: StateField = StateField("_s", 3, bool)
+    _applied: StateField = StateField("_s", slice(4, 6))
 
     @property
     def applied_input(self) -> NDArray[np.float64]:

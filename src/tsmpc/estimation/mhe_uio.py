@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from scipy.linalg.lapack import dpotrf as _potrf  # pyright: ignore[reportAttributeAccessIssue]
 from scipy.linalg.lapack import dpotrs as _potrs  # pyright: ignore[reportAttributeAccessIssue]
 
-from tsmpc._records import quick_init
+from tsmpc._records import StateField, quick_init
 from tsmpc.config import MHESettings, VehicleParams
 from tsmpc.control.qp import QPStatus, solve_daqp
 from tsmpc.errors import ConfigError
@@ -239,54 +239,13 @@ class MHEUIO:
         self._n_rejected = 0
         self._n_failed = 0
 
-    # the state, views of the block's records (_ms, _mi)
-    @property
-    def _x(self) -> NDArray[np.float64]:
-        return self._ms[0:3]
-
-    @_x.setter
-    def _x(self, value: Any) -> None:
-        self._ms[0:3] = value
-
-    @property
-    def _F(self) -> float:
-        return float(self._ms[3])
-
-    @_F.setter
-    def _F(self, value: float) -> None:
-        self._ms[3] = value
-
-    @property
-    def _arrival(self) -> NDArray[np.float64]:
-        return self._ms[4:7]
-
-    @_arrival.setter
-    def _arrival(self, value: Any) -> None:
-        self._ms[4:7] = value
-
-    @property
-    def _ny(self) -> int:
-        return int(self._mi[0])
-
-    @_ny.setter
-    def _ny(self, value: int) -> None:
-        self._mi[0] = value
-
-    @property
-    def _n_rejected(self) -> int:
-        return int(self._mi[1])
-
-    @_n_rejected.setter
-    def _n_rejected(self, value: int) -> None:
-        self._mi[1] = value
-
-    @property
-    def _n_failed(self) -> int:
-        return int(self._mi[2])
-
-    @_n_failed.setter
-    def _n_failed(self, value: int) -> None:
-        self._mi[2] = value
+    # the state, views of the block's records (_ms, _mi; kernels.mhe's MS_* and MI_* slots)
+    _x: StateField = StateField("_ms", slice(0, 3))
+    _F: StateField = StateField("_ms", 3, float)
+    _arrival: StateField = StateField("_ms", slice(4, 7))
+    _ny: StateField = StateField("_mi", 0, int)
+    _n_rejected: StateField = StateField("_mi", 1, int)
+    _n_failed: StateField = StateField("_mi", 2, int)
 
     @property
     def n_rejected(self) -> int:
