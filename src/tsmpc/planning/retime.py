@@ -142,7 +142,7 @@ def retime(ref: Reference, a_max: Callable[[float], float], v_cap: np.ndarray | 
     x, y = np.asarray(ref.x), np.asarray(ref.y)
     v = np.maximum(np.asarray(ref.v, dtype=float), 0.0)
     n = v.size
-    kappa = path_curvature(ref) if a_grip is not None else v
+    kappa = path_curvature(ref)  # (the friction circle reads it; the resampled output too)
     # ds[k]: the step into sample k (ds[0]: from the last sample, a closed lap's wrap)
     ds = np.hypot(np.diff(x, prepend=x[-1]), np.diff(y, prepend=y[-1]))
     top = v if v_cap is None else np.minimum(v, np.maximum(np.asarray(v_cap, dtype=float), 0.0))
@@ -168,7 +168,6 @@ def retime(ref: Reference, a_max: Callable[[float], float], v_cap: np.ndarray | 
     tau = np.concatenate([[0.0], np.cumsum(step)])
     m = int(np.floor(tau[-1] / dt + 1e-9)) + 1
     t_new = np.arange(m) * dt
-    kappa = path_curvature(ref)
     vv = np.interp(t_new, tau, w)
     out = Reference(ref.t[0] + t_new, np.interp(t_new, tau, x), np.interp(t_new, tau, y),
                     np.interp(t_new, tau, np.asarray(ref.theta)), vv, np.interp(t_new, tau, kappa) * vv,
