@@ -340,3 +340,120 @@ def test_speed_bounded_yaw_rate_by_hand() -> None:
     assert gates.speed_bounded_yaw_rate(0.3, -1.0, 0.2) == 0.0
     assert gates.speed_bounded_yaw_rate(0.5, -math.inf, 0.2) == 0.5
     assert gates.speed_bounded_yaw_rate(-0.5, math.nan, 0.2) == -0.5
+
+
+# -- the inner block after the MHE (tsmpc.control.inner_block) -----------------------------------
+def _inner_records(friction_step: bool = True, mass: bool = True):
+    from tsmpc.control.inner_block import InnerBlockParams
+    from tsmpc.control.ts_lqr import InnerParams
+    from tsmpc.estimation.fusion import MassParams
+
+    return InnerBlockParams(friction_step, FrictionStepParams(30, 5.0), mass,
+                            MassParams(683.0, 0.01, 30, 0.3, True),
+                            InnerParams(True, False, True, 2.0, 3000.0))
+
+
+def _inner_law():
+    from tsmpc.control.ts_lqr import LQRLaw
+
+    Kv = np.zeros((8, 2, 6))
+    Kv[:, 0, 0], Kv[:, 1, 2], Kv[:, 0, 5] = -100.0, -0.1, 50.0
+    bits = np.array([[(i >> j) & 1 for j in range(3)] for i in range(8)], dtype=np.bool_)
+    prm = np.array([683.0, 560.0, 25000.0, 25000.0, 0.758, 1.036, 4.9, 0.4])
+    return LQRLaw(Kv, np.array([-0.4, 2.0, -0.1]), np.array([0.4, 20.0, 0.1]), bits, prm, 10.0,
+                  math.exp(-0.1), 0.01, -2000.0, 3000.0, -0.4, 0.4, True, 0.3)
+
+
+def _inner_inputs(rng, i):
+    """An estimate sequence: speeds through the mass fit's floor, a friction step at sample 400,
+    rejected and failed samples, a NaN estimate."""
+    v = 1.0 + 0.02 * i + rng.normal(0, 0.05) + (math.sin(i / 25.0) if i > 100 else 0.0)
+    Fw = 300.0 + rng.normal(0, 5) + (600.0 if i > 400 else 0.0)
+    Fr = Fw + rng.normal(0, 300) + (900.0 if 400 < i < 440 else 0.0)
+    status = 1 if rng.random() > 0.05 else int(rng.choice([2, 3, 4]))
+    if 400 < i < 440 and i % 6 == 0:  # failed and warm-up samples while the step is compensated
+        status = 3 if i % 12 else 4
+    om = math.nan if i == 333 else float(rng.normal(0, 0.2))
+    return float(v), float(rng.normal(0, 0.02)), om, float(Fw), float(Fr), status
+
+
+def test_inner_block_composes_its_parts() -> None:
+    """compensated_force is the friction-step detector then the mass fit's inertia terms (the
+    blocks' own reference wrappers, FrictionStep and MassEstimator); count_step counts by hand."""
+    from tsmpc.control.inner_block import (
+        IC_FAILED,
+        IC_FSTEPS,
+        IC_REJECTED,
+        IC_SATURATED,
+        compensated_force,
+        count_step,
+        start_state,
+    )
+    from tsmpc.estimation.friction_step import FrictionStep
+    from tsmpc.estimation.fusion import MassEstimator
+
+    p = _inner_records()
+    st, ring, cnt = start_state(30)
+    fs, me = FrictionStep(30, 5.0), MassEstimator(683.0, 0.01, 30, 0.3, True)
+    rng = np.random.default_rng(11)
+    moved = 0
+    for i in range(1500):
+        v, _a, _w, Fw, Fr, status = _inner_inputs(rng, i)
+        v_ref = v + float(rng.normal(0, 0.3))
+        F_c, F_r = compensated_force(p, st, ring, cnt, v, Fw, Fr, status == 1, v_ref, True)
+        want = fs.step(Fw, Fr, status == 1)
+        dF = me.inertia_terms(v, Fw, v_ref)
+        moved += dF != 0.0
+        assert (F_c, F_r) == ((want + dF, Fr + dF) if dF != 0.0 else (want, Fr)), i
+    assert moved > 100 and cnt[IC_FSTEPS] == fs.n_steps >= 1
+    before = st.copy()  # without the MHE's estimate (the oracle): no mass sample
+    compensated_force(p, st, ring, cnt, 10.0, 100.0, 100.0, True, 10.0, False)
+    assert np.array_equal(st[5:], before[5:])
+    off = _inner_records(False, False)
+    st2, ring2, cnt2 = start_state(30)
+    assert compensated_force(off, st2, ring2, cnt2, 10.0, 100.0, 7e3, True, 12.0, True) == (100.0, 7e3)
+    assert not st2.any()
+    c = np.zeros(4, dtype=np.int64)
+    for status, sat in ((2, False), (3, True), (3, False), (1, True), (4, False), (2, True), (2, False)):
+        count_step(c, status, sat)
+    assert (c[IC_REJECTED], c[IC_FAILED], c[IC_SATURATED], c[IC_FSTEPS]) == (3, 2, 3, 0)
+
+
+def test_inner_block_compiled_equals_python() -> None:
+    """The cascade's compiled call of the block (kernels/inner.py) and the block as Python: the
+    same commands, states and counters to the bit; a NaN estimate holds (counted saturated); no
+    law hands the step to the numpy law uncounted."""
+    from tsmpc.control.inner_block import IC_SATURATED, inner_block, start_state
+    from tsmpc.control.ts_lqr import LQR_HELD, LQR_NUMPY, LQR_OK
+    from tsmpc.estimation.friction_step import FrictionStep
+    from tsmpc.estimation.fusion import MassEstimator
+
+    kern = kernels.load("inner")
+    if kern is None:
+        pytest.skip("compiled kernels unavailable")
+    p, law = _inner_records(), _inner_law()
+    bp = kern.pack(p, law)
+    a, b = start_state(30), start_state(30)
+    sa, sb = np.zeros(6), np.zeros(6)
+    rng = np.random.default_rng(13)
+    held = 0
+    fs, me = FrictionStep(30, 5.0), MassEstimator(683.0, 0.01, 30, 0.3, True)  # the parts' references
+    for i in range(1500):
+        v, al, om, Fw, Fr, status = _inner_inputs(rng, i)
+        v_ref, w_ref = v + float(rng.normal(0, 0.5)), float(rng.normal(0, 0.2))
+        out = inner_block(p, law, sa, *a, v, al, om, Fw, Fr, status, v_ref, w_ref)
+        want = fs.step(Fw, Fr, status == 1)  # only an accepted (OK) sample feeds the detector
+        dF = me.inertia_terms(v, Fw, v_ref)
+        assert out.status != LQR_OK or out.F_comp == (want + dF if dF != 0.0 else want), i
+        got = kern.inner_call(bp, law.Kv, law.zlo, law.zhi, law.bits, law.prm, sb, *b, v, al, om, Fw, Fr,
+                              status, v_ref, w_ref)
+        assert tuple(out) == got, i
+        held += out.status == LQR_HELD
+        for x, y in zip(a, b, strict=True):
+            assert np.array_equal(x, y)
+        assert np.array_equal(sa, sb)
+    assert held == 1 and 0 < a[2][IC_SATURATED] < 1500
+    c0 = a[2].copy()
+    out = inner_block(p, None, sa, *a, 10.0, 0.0, 0.0, 100.0, 90.0, 2, 10.0, 0.0)
+    assert out.status == LQR_NUMPY
+    assert np.array_equal(a[2][:3], c0[:3])  # the numpy law's caller counts the step

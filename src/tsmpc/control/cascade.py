@@ -57,10 +57,27 @@ from tsmpc.control.gates import (
     speed_bounded_yaw_rate,
 )
 from tsmpc.control.governor import Governor, GovernorParams, GripParams, governed_window, governor_inputs
+from tsmpc.control.inner_block import (
+    EST_FAILED,
+    EST_OK,
+    EST_REJECTED,
+    EST_WARMUP,
+    IC_FAILED,
+    IC_FSTEPS,
+    IC_REJECTED,
+    IC_SATURATED,
+    InnerBlockParams,
+    block_delta_mass,
+    compensated_force,
+    count_step,
+    inner_block,
+    start_state,
+)
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
+from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
-from tsmpc.estimation.friction_step import FrictionStep
-from tsmpc.estimation.fusion import steer_command
+from tsmpc.estimation.friction_step import FrictionStep, FrictionStepParams
+from tsmpc.estimation.fusion import MassParams, steer_command
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.planning.reference import Reference
@@ -293,9 +310,7 @@ class Cascade:
         # course fusion or a block that does nothing; the servo with or without the offset
         self._course: Any = self._fusion.course if self._fusion.any_course else _NoCourse()
         self._servo = self._servo_offset if cfg.fusion.steering_offset else self._servo_plain
-        # beyond the paper: the compensated friction may step within the MHE window
-        self._friction_step = (FrictionStep(cfg.mhe.N, cfg.lqr.friction_step_threshold)
-                               if cfg.lqr.friction_step else None)
+        self._build_inner_block(cfg)
         self.governor = _build_governor(cfg) if cfg.governor.enabled else None  # issue 36
         self.road_mu = math.nan  # governor.grip_source = "oracle": the true μ(road), set by the simulator
         self.reset(x0)
@@ -314,8 +329,7 @@ class Cascade:
         self.lqr.reset()
         self._slip_gate.reset()
         self._fusion.reset(None if self._x0 is None else self._x0[:3])
-        if self._friction_step is not None:
-            self._friction_step.reset()
+        self._ib_state, self._ib_ring, self._ib_count = start_state(self.cfg.mhe.N)
         if getattr(self, "_stiffness_applied", None):  # back to the config's stiffnesses
             _apply_stiffness_to((self.mhe, self.lqr), (self.cfg.vehicle.C_f, self.cfg.vehicle.C_r), [])
         self._stiffness_applied: list[float] = []
@@ -351,6 +365,7 @@ class Cascade:
         self._events["step_errors"] = 0
         self._events["repeated_rejected"] = 0  # fusion.reject_repeated_samples (issue 21)
         self._events["friction_steps"] = 0  # lqr.friction_step: steps of the friction detected
+        # (mhe_rejected, mhe_failed, inner_saturated and friction_steps: the inner block's counters)
         if self.governor is not None:  # the speed governor (governor.py): its actions
             self.governor.reset()
             self._events["governor_actions"] = self._events["governor_steps"] = 0
@@ -362,7 +377,10 @@ class Cascade:
         samples rejected for their age, ``step_errors``, unexpected errors caught,
         ``repeated_rejected``, stalled samples, and ``friction_steps``, steps of the friction force
         declared by ``lqr.friction_step``)."""
-        return dict(self._events)
+        ev, c = dict(self._events), self._ib_count.tolist()
+        ev["mhe_rejected"], ev["mhe_failed"] = c[IC_REJECTED], c[IC_FAILED]
+        ev["inner_saturated"], ev["friction_steps"] = c[IC_SATURATED], c[IC_FSTEPS]
+        return ev
 
     @property
     def last_plan(self) -> MPCResult | None:
@@ -563,10 +581,9 @@ class Cascade:
         self._course.sample(ok, th, v, a_hat, v_hat * w_hat, om, float(u_model[1]), float(u_model[0]),
                             pose_ok)
         self._steer_fit(ok, est, v_hat, om)
-        F, delta, sat, low = self._inner(self._compensated(m, est, v_ref), est, v_ref, w_ref)
+        F, delta, sat, low = self._inner(m, est, v_hat, a_hat, w_hat, v_ref, w_ref)
         t3 = time.perf_counter()
         delta = self._servo(F, delta, low)
-        self._count(est, sat)
         return Command(F, delta, sat, v_ref, w_ref, est, plan, e_meas, t_mpc, t2 - t1, t3 - t2)
 
     def _gyro(self, pose_ok: bool, th: float, ok: bool, om: float) -> float:
@@ -604,14 +621,6 @@ class Cascade:
         self._steer_offset, self._steer_sent = self._fusion.steer_offset(), delta
         self._u_applied, self._low_applied = (F, delta), low
         return delta
-
-    def _count(self, est: Estimate, sat: bool) -> None:
-        """The step's events: the estimator's rejected and failed samples, the inner loop's
-        saturation."""
-        ev = self._events
-        ev["mhe_rejected"] += est.status == EstimatorStatus.REJECTED
-        ev["mhe_failed"] += est.status == EstimatorStatus.FAILED
-        ev["inner_saturated"] += sat
 
     def _start_from(self, t: float, X: float, Y: float, th: float, v: float, om: float) -> None:
         """Start from the first measurement (its garbage made harmless)."""
@@ -729,7 +738,7 @@ class Cascade:
         assert gov is not None
         mass = cfg.vehicle.mass
         if cfg.fusion.mass_estimate:
-            mass += self._fusion.mass.delta_mass
+            mass += block_delta_mass(self._ib, self._ib_state)
         last = self._last
         # the friction estimate means nothing below the dynamic box's speeds (the resistance
         # fades at standstill; the MHE starts up there) nor from a rejected or failed sample
@@ -814,40 +823,84 @@ class Cascade:
                            EstimatorStatus.FAILED, time.perf_counter() - t1)
         return est, u_model
 
-    def _compensated(self, m: Measurement, est: Estimate, v_ref: float) -> Estimate:
-        """What the TS-LQR gets: the estimate with the friction force to compensate (the window
-        fit, stepped by friction_step.py, less the mass error's inertia), or the oracle's state."""
-        F_c = est.F_fr  # the compensated window estimate (friction_step.py)
-        if self._friction_step is not None:  # (reset together with the events)
-            F_c = self._friction_step.step(float(est.F_fr), float(est.F_fr_raw),
-                                           est.status == EstimatorStatus.OK)
-            self._events["friction_steps"] = self._friction_step.n_steps
-        if m.state is None:
-            inner = est if F_c == est.F_fr else Estimate(est.x, F_c, est.F_fr_raw, est.status,
-                                                         est.solve_time_s)
-            if self.cfg.fusion.mass_estimate:  # the mass error's inertia is not friction (fusion.py)
-                dF = self._fusion.inertia_terms(float(est.x[0]), float(est.F_fr), v_ref)
-                if dF != 0.0:
-                    inner = Estimate(est.x, F_c + dF, est.F_fr_raw + dF, est.status,
-                                     est.solve_time_s)
-            return inner
-        if self.cfg.lqr.true_state_feedback:  # the published run: true state, F̂ as configured
-            return Estimate(np.asarray(m.state, dtype=float).reshape(3).copy(), F_c,
-                            est.F_fr_raw, est.status, est.solve_time_s)
-        return _oracle_estimate(m.state)
+    def _build_inner_block(self, cfg: Config) -> None:
+        """The inner block's records (inner_block.py: lqr.friction_step's detector, beyond the paper;
+        fusion.mass_estimate's inertia terms; the TS-LQR) and its compiled call when the TS-LQR has
+        its compiled law."""
+        N, lq = cfg.mhe.N, cfg.lqr
+        fs = (FrictionStep(N, lq.friction_step_threshold).params if lq.friction_step  # (validates)
+              else FrictionStepParams(N, 1.0))
+        inner = getattr(self.lqr, "_inner", None)  # the TS-LQR's (the as-run law has none)
+        self._ib = InnerBlockParams(
+            bool(lq.friction_step), fs, bool(cfg.fusion.mass_estimate),
+            MassParams(float(cfg.vehicle.mass), self.Td, int(N), float(lq.speed_time_constant),
+                       bool(lq.speed_feedback)),
+            inner if isinstance(inner, InnerParams) else InnerParams(False, False, False, 1.0, 0.0))
+        law = getattr(self.lqr, "_law", None)
+        self._ib_call: Any = None
+        # the TS-LQR whose step is the block's (the as-run law's is its own)
+        self._ib_lqr: TSLQR | None = self.lqr if isinstance(inner, InnerParams) else None  # type: ignore[assignment]
+        if self._ib_lqr is not None and law is not None and self._ib_lqr._kern is not None:
+            from tsmpc import kernels
 
-    def _inner(self, inner: Estimate, est: Estimate, v_ref: float,
+            kern = kernels.load("inner")
+            if kern is not None:
+                bp = kern.pack(self._ib, law)
+                self._ib_call = (kern.inner_call, bp, law.Kv, law.zlo, law.zhi, law.bits, law.prm)
+
+    def _inner(self, m: Measurement, est: Estimate, v_hat: float, a_hat: float, w_hat: float, v_ref: float,
                w_ref: float) -> tuple[float, float, bool, float]:
-        """The TS-LQR's command (F_xR, δ, saturated, its low-speed part), or the blind stop's."""
+        """The inner block after the MHE (inner_block.py): the compensated friction, the TS-LQR's
+        command (F_xR, δ, saturated, its low-speed part) and the step's events — one compiled call
+        on the default path; the oracle, the published run's law, the blind stop (and a replaced
+        ``lqr.step``) take the same block's parts around their own law."""
+        lqr, code = self._ib_lqr, _EST_CODE[est.status]
+        if m.state is not None or self._blind_since is not None or lqr is None or "step" in lqr.__dict__:
+            return self._inner_other(m, est, v_hat, v_ref, w_ref, code)
+        call = self._ib_call
+        if call is not None:
+            F, d, sat, comp, low, st = call[0](*call[1:], lqr._s, self._ib_state, self._ib_ring,
+                                               self._ib_count, v_hat, a_hat, w_hat, float(est.F_fr),
+                                               float(est.F_fr_raw), code, v_ref, w_ref)
+        else:  # TSMPC_NO_JIT, or a TS-LQR without its compiled law: the block as Python
+            out = inner_block(self._ib, lqr._law if lqr._kern is not None else None, lqr._s, self._ib_state,
+                              self._ib_ring, self._ib_count, v_hat, a_hat, w_hat, float(est.F_fr),
+                              float(est.F_fr_raw), code, v_ref, w_ref)
+            F, d, sat, comp, low, st = out
+        if st == LQR_NUMPY:  # no compiled law, or it found N̄ singular: the numpy law decides
+            c = lqr._numpy_step(v_hat, a_hat, w_hat, v_ref, w_ref, comp, low)
+            count_step(self._ib_count, code, bool(c.saturated))
+            return c.F_xR, c.delta, bool(c.saturated), c.F_low_speed
+        return F, d, bool(sat), low
+
+    def _inner_other(self, m: Measurement, est: Estimate, v_hat: float, v_ref: float, w_ref: float,
+                     code: int) -> tuple[float, float, bool, float]:
+        """The configurations the compiled block does not express: the friction the block
+        compensates (inner_block.compensated_force: the mass terms on the MHE's estimate only),
+        then the law on the oracle's true state, the published run's law, or the blind stop."""
+        F_c, F_r = compensated_force(self._ib, self._ib_state, self._ib_ring, self._ib_count, v_hat,
+                                     float(est.F_fr), float(est.F_fr_raw), code == EST_OK, v_ref,
+                                     m.state is None)
+        if m.state is None:
+            inner = est if (F_c == est.F_fr and F_r == est.F_fr_raw) else Estimate(
+                est.x, F_c, F_r, est.status, est.solve_time_s)
+        elif self.cfg.lqr.true_state_feedback:  # the published run: true state, F̂ as configured
+            inner = Estimate(np.asarray(m.state, dtype=float).reshape(3).copy(), F_c, est.F_fr_raw,
+                             est.status, est.solve_time_s)
+        else:
+            inner = _oracle_estimate(m.state)
         if self._blind_since is None:
             out = self.lqr.step(inner, v_ref, w_ref)
-            return out.F_xR, out.delta, bool(out.saturated), out.F_low_speed
-        rc = self._recovery  # recovery: blind, the minimal-risk stop (gates.py)
-        assert rc is not None
-        F, delta = blind_stop(float(est.x[0]), float(self._u_applied[1]), self.cfg.vehicle.mass,
-                              rc.stop_decel, *self._force_limits)
-        self._events["blind_steps"] += 1
-        return F, delta, False, 0.0
+            F, delta, sat, low = out.F_xR, out.delta, bool(out.saturated), out.F_low_speed
+        else:
+            rc = self._recovery  # recovery: blind, the minimal-risk stop (gates.py)
+            assert rc is not None
+            F, delta = blind_stop(float(est.x[0]), float(self._u_applied[1]), self.cfg.vehicle.mass,
+                                  rc.stop_decel, *self._force_limits)
+            self._events["blind_steps"] += 1
+            sat, low = False, 0.0
+        count_step(self._ib_count, code, sat)
+        return F, delta, sat, low
 
 
 class _NoCourse:
@@ -892,6 +945,11 @@ def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied
         if setter is not None:
             setter(*C)
     applied[:] = list(C)
+
+
+#: The estimator's status as the inner block's code (inner_block.EST_*)
+_EST_CODE = {EstimatorStatus.OK: EST_OK, EstimatorStatus.REJECTED: EST_REJECTED,
+             EstimatorStatus.FAILED: EST_FAILED, EstimatorStatus.WARMUP: EST_WARMUP}
 
 
 def _oracle_estimate(state: ArrayLike) -> Estimate:

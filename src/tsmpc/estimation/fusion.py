@@ -1391,7 +1391,6 @@ class Fusion:
         self.guard = RepeatGuard()
         self.course = CourseFusion(self.Tc, cfg.noise.position * cfg.noise.scale, cfg.vehicle, Td=self.Td,
                                    n_inner=cfg.rates.inner_per_outer)
-        self.mass = MassEstimator(cfg.vehicle.mass, self.Td, cfg.mhe.N, self.tau, self.speed_feedback)
         nz = cfg.noise
         self.gyro = GyroFit(self.Td, nz.theta * nz.scale, nz.omega * nz.scale)
         veh = cfg.vehicle
@@ -1403,7 +1402,6 @@ class Fusion:
         """Start over from ``pose`` (None: the first measured one)."""
         self.guard.reset()
         self.course.reset()
-        self.mass.reset()
         self.gyro.reset()
         self.steer_p = self._steer_p0  # (the cascade's reset gives the blocks the config's stiffnesses)
         self.steer = steer_start(self.steer_p)
@@ -1446,13 +1444,3 @@ class Fusion:
     def slip_correction(self, a_y: float) -> float:
         """The correction added to α̂ for the outer loop (0 with ``course_slip`` off)."""
         return self.course.slip_correction(a_y) if self.settings.course_slip else 0.0
-
-    def inertia_terms(self, v_hat: float, F_hat: float, v_ref: float) -> float:
-        """The force to add to the compensated F̂ (0 with ``mass_estimate`` off):
-        −ΔM̂ ā (the mass error's inertia is not friction) + ΔM̂ (v_ref − v̂)/τ (the speed
-        feedback's missing mass)."""
-        if not self.settings.mass_estimate:
-            return 0.0
-        m = self.mass  # (MassEstimator.inertia_terms, one call less)
-        m.state = mass_update(m.params, m.state, m._ring, v_hat, F_hat)
-        return inertia_force(m.params, m.state, v_hat, v_ref)

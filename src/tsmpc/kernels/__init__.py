@@ -31,10 +31,10 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-__all__ = ["cache_problem", "compile_lock", "enabled", "failure", "in_cache", "load", "numba_cache_dir",
-           "warmup"]
+__all__ = ["cache_problem", "compile_lock", "enabled", "failure", "forget_stale", "in_cache", "load",
+           "numba_cache_dir", "warmup"]
 
-_MODULES = ("mpc", "mhe", "plant", "lqr")
+_MODULES = ("mpc", "mhe", "plant", "lqr", "inner")
 _LOADED: dict[str, ModuleType] | None = None
 _FAILED = False
 _FAILURE: str | None = None
@@ -122,7 +122,7 @@ def _cold(cache: Path) -> bool:
 
 
 def load(name: str) -> Any:
-    """The kernel module ``name`` (mpc, mhe, plant, lqr), compiled or loaded from the cache; None
+    """The kernel module ``name`` (mpc, mhe, plant, lqr, inner), compiled or loaded from the cache; None
     when the kernels are off or numba is unavailable (the caller then uses numpy)."""
     global _LOADED, _FAILED, _FAILURE
     if not enabled() or _FAILED:
@@ -216,3 +216,35 @@ def warmup() -> tuple[bool, float]:
     t0 = time.perf_counter()
     ok = load("mpc") is not None
     return ok, time.perf_counter() - t0
+
+
+def forget_stale(folder: Path, prefix: str, sources: tuple[str, ...], stamp_name: str,
+                 blocks: tuple[str, ...]) -> None:
+    """numba keys a cached function by its own file only: a kernel's machine code that contains
+    code of other modules (the run engine: kernels/mpc.py, mhe.py, lqr.py, plant.py; the inner
+    block's call: kernels/inner.py, lqr.py; both: the ``@jitable`` blocks of
+    :data:`tsmpc.kernels.jit.BLOCK_MODULES`) would outlive an edit of one of them. So the cache
+    entries ``<prefix>.*`` carry the hash of those ``sources`` (kernel modules by name) and
+    ``blocks`` (modules by dotted name) in a file beside them, ``stamp_name``, and are deleted when
+    it differs: the next call compiles afresh."""
+    from tsmpc.errors import TsmpcError
+    from tsmpc.textfile import read_bytes, read_text
+
+    here = Path(__file__).parent
+    top = here.parent.parent  # the folder holding the tsmpc package
+    files = [here / f"{m}.py" for m in sources] + [top / (m.replace(".", "/") + ".py")
+                                                   for m in blocks]
+    digest = hashlib.sha256(b"".join(read_bytes(f, "kernel source") for f in files)).hexdigest()
+    stamp = folder / stamp_name
+    try:
+        if read_text(stamp, f"{prefix} cache stamp", limit=1024).strip() == digest:
+            return
+    except (TsmpcError, OSError):
+        pass
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for p in folder.glob(f"{prefix}.*.nb[ic]"):
+            p.unlink()
+        stamp.write_text(digest)
+    except OSError:  # an unwritable cache: numba refuses it too (cache_problem)
+        pass

@@ -9,7 +9,9 @@ mass-error terms, the TS-LQR) and the plant's T_d/h RK4 steps — and logs into 
 The blocks are the compiled kernels the Python wrappers call: the TS-MPC's step (paper eq. "MPC";
 :func:`~tsmpc.kernels.mpc.guarded_step`), the MHE-UIO's window (eqs. "MHE", "disturb_estimation";
 :func:`~tsmpc.kernels.mhe.window_step`), the TS-LQR (Sec. 3.2; its step's block
-:func:`~tsmpc.control.ts_lqr.inner_step` around :func:`~tsmpc.kernels.lqr.lqr_step`)
+:func:`~tsmpc.control.ts_lqr.inner_step` around :func:`~tsmpc.kernels.lqr.lqr_step`, inside the
+inner block :func:`~tsmpc.control.inner_block.inner_block` with friction-step detection and the
+mass terms)
 and the plant's RK4 block (the single-track plant; :func:`~tsmpc.kernels.plant.rk4_block`). The
 ``@jitable`` blocks (:mod:`tsmpc.kernels.jit`: the sample gates, the fusion estimators of
 :mod:`tsmpc.estimation.fusion`, friction-step detection, the slip gate, …) are the cascade's own
@@ -50,13 +52,24 @@ from tsmpc.control.governor import (
     governor_update,
     interp_unit,
 )
-from tsmpc.control.slip_aware import slip_gate_update
-from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams, LQRLaw, inner_step
-from tsmpc.estimation.friction_step import (
-    FrictionStepParams,
-    FrictionStepState,
-    friction_step_update,
+from tsmpc.control.inner_block import (
+    EST_FAILED,
+    EST_OK,
+    EST_REJECTED,
+    EST_WARMUP,
+    IC_FAILED,
+    IC_FSTEPS,
+    IC_REJECTED,
+    IC_SATURATED,
+    N_IB,
+    N_IC,
+    InnerBlockParams,
+    inner_block,
+    mass_load,
 )
+from tsmpc.control.slip_aware import slip_gate_update
+from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams, LQRLaw
+from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import (
     RING,
     CourseState,
@@ -64,7 +77,6 @@ from tsmpc.estimation.fusion import (
     GyroState,
     Interval,
     MassParams,
-    MassState,
     RepeatState,
     SlipFit,
     SpeedFit,
@@ -77,8 +89,6 @@ from tsmpc.estimation.fusion import (
     delta_mass,
     gyro_bias,
     gyro_sample,
-    inertia_force,
-    mass_update,
     repeat_check,
     slip_correction,
     speed_offset,
@@ -127,12 +137,18 @@ DONE, NEED_MPC, NEED_MHE, NEED_LQR, NEED_PLANT, DIVERGED = range(6)
 PH_START, PH_PLAN, PH_MHE, PH_POST_MHE, PH_POST_LQR, PH_POST_PLANT = range(6)
 # MHE statuses (EstimatorStatus) and MPC statuses (MPCStatus) as codes
 ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP = MHE_OK, MHE_REJECTED, MHE_FAILED, MHE_WARMUP
+assert (ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP) == (EST_OK, EST_REJECTED, EST_FAILED, EST_WARMUP)
 MPC_OPTIMAL, MPC_SOFT, MPC_FALLBACK = 1, 2, 3
-# event counters, in the order of Cascade.events
-(EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_MHE_REJ, EV_MHE_FAIL, EV_SAT, EV_POSE_REJ, EV_TIME_REJ,
+# event counters: the cascade's own, then the inner block's (its IC_* counters, a view of ev)
+(EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_POSE_REJ, EV_TIME_REJ,
  EV_STAMP_REJ, EV_SPEED_REJ, EV_JUMP_REJ, EV_POSE_NAN, EV_REINIT, EV_BLIND, EV_RECOVER,
- EV_STALE_REJ, EV_STEP_ERR, EV_REPEATED, EV_FSTEP) = range(19)
-N_EVENTS = 19
+ EV_STALE_REJ, EV_STEP_ERR, EV_REPEATED, EV_INNER) = range(16)
+N_EVENTS = EV_INNER + N_IC
+#: the slot of each of Cascade.events' counters, in its order
+EVENT_SLOTS = (EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_INNER + IC_REJECTED, EV_INNER + IC_FAILED,
+               EV_INNER + IC_SATURATED, EV_POSE_REJ, EV_TIME_REJ, EV_STAMP_REJ, EV_SPEED_REJ, EV_JUMP_REJ,
+               EV_POSE_NAN, EV_REINIT, EV_BLIND, EV_RECOVER, EV_STALE_REJ, EV_STEP_ERR, EV_REPEATED,
+               EV_INNER + IC_FSTEPS)
 
 # ---------------------------------------------------------------------------- float parameters
 (FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_V_LO, FP_V_HI, FP_W_LIM, FP_POSE_NOISE, FP_HEAD_NOISE,
@@ -159,21 +175,22 @@ N_IP = 33
 (SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, SF_HELD, _H1, _H2, SF_UPREV, _U1, SF_UAPP, _A1,
  SF_PLANTU, _PU1, SF_LASTA, SF_GUARD, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
  SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, _FREE0, _FREE1, SF_AHPREV,
- SF_LF, SF_LA, SF_SXY, SF_SXX, SF_ACCEL, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
+ _FREE4, _FREE5, _FREE6, _FREE7, _FREE8, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2,
- SF_VNOW, SF_ACT, _AC1, SF_LOW, SF_FSVAR, SF_FSGP, SF_FSGM, _FREE2, _FREE3, SF_N2,
+ SF_VNOW, SF_ACT, _AC1, SF_LOW, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, SF_N2,
  SF_N1, SF_JUMP, _J1, _J2, _J3, SF_JT0,
  SF_TOFF, SF_GRATE, SF_GGRIP, SF_GHOLD,
  SF_GYTH0, SF_GYINT, SF_GYWLAST, SF_GYSB, SF_GYSW,  # SF_GY*: the GyroState's floats
  SF_STOMF, SF_STDEF, SF_STDDF, SF_STS11, SF_STS12, SF_STS22, SF_STB1, SF_STB2,  # the SteerState's floats
  SF_STOFF, SF_STSENT) = range(85)  # the steering offset in force, the angle last sent (Cascade)
-SF_SENS = 85  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
+SF_IB = 85  # the inner block's state (N_IB values, tsmpc.control.inner_block's IB_* slots)
+SF_SENS = SF_IB + N_IB  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
 N_SF = SF_SENS + N_SS
 # ---------------------------------------------------------------------------- integer state
-(SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, SI_MASSRUN, SI_NCHORDS,
- SI_HASAH, SI_MASSN, SI_MASSOPEN, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
+(SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, _SFREE0, SI_NCHORDS,
+ SI_HASAH, _SFREE1, _SFREE2, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
  SI_FRESH, SI_SPOK, SI_POSEOK, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
- SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, SI_FSN, SI_FSSINCE,
+ SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, _SFREE3, _SFREE4,
  SI_GACT, SI_GSTEPS, SI_GWIN,
  SI_GYOPEN, SI_GYN, SI_GYGAP, SI_GYCHORDS,  # SI_GY*: the GyroState's flags and counts
  SI_STINIT, SI_STN,  # the SteerState's flag and count
@@ -184,7 +201,7 @@ assert SF_MF == SF_MX + MS_F and SF_ARR == SF_MX + MS_ARR
 assert SI_NREJ == SI_NY + MI_NREJ and SI_NFAIL == SI_NY + MI_NFAIL
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
- SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_INF, SC_INFR, SC_OF, SC_OD, SC_MU, SC_EY,
+ SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_COMP, SC_LOWF, SC_OF, SC_OD, SC_MU, SC_EY,
  SC_PU, _PU2, SC_UK, _UK1, SC_TMP, _TM1, _TM2, SC_GROW, _GR1, _GR2, _GR3, _GR4) = range(38)
 N_SC = 38  # then the governed window's v and ω, N + 1 each (sc has N_SC + 2 (N + 1) slots)
 # ---------------------------------------------------------------------------- course intervals
@@ -489,27 +506,10 @@ def _steer_out(fp, sf, si, delta):
 
 
 @njit(cache=True, fastmath=False)
-def _mass_load(sf, si):
-    """The :class:`~tsmpc.estimation.fusion.MassState` of the engine's slots."""
-    return MassState(si[SI_MASSN], si[SI_MASSRUN], sf[SF_ACCEL], sf[SF_LF], sf[SF_LA], si[SI_MASSOPEN] != 0,
-                     sf[SF_SXY], sf[SF_SXX])
-
-
-@njit(cache=True, fastmath=False)
-def _mass_terms(mpar, v_hat, F_hat, v_ref, mv, sf, si):
-    """``Fusion.inertia_terms``: :func:`mass_update` on the window's speeds ``mv``, then the force
-    added to F̂ (:func:`inertia_force`)."""
-    s = mass_update(mpar, _mass_load(sf, si), mv, v_hat, F_hat)
-    si[SI_MASSN], si[SI_MASSRUN], si[SI_MASSOPEN] = s.n_samples, s.run, 1 if s.open else 0
-    sf[SF_ACCEL], sf[SF_LF], sf[SF_LA], sf[SF_SXY], sf[SF_SXX] = s.accel, s.lf, s.la, s.sxy, s.sxx
-    return inertia_force(mpar, s, v_hat, v_ref)
-
-
-@njit(cache=True, fastmath=False)
 def _delta_mass(sf, fp):
-    """ΔM̂ of the engine's mass slots (:func:`delta_mass`)."""
+    """ΔM̂ of the inner block's mass fit (:func:`delta_mass`)."""
     return delta_mass(MassParams(fp[FP_VM], fp[FP_TD], 0, fp[FP_TAU], False),
-                      MassState(0, 0, sf[SF_ACCEL], sf[SF_LF], sf[SF_LA], False, sf[SF_SXY], sf[SF_SXX]))
+                      mass_load(sf[SF_IB:SF_IB + N_IB]))
 
 
 # ============================================================================ speed governor
@@ -559,19 +559,6 @@ def _govern(t, fp, ip, sf, si, sc, frb, patches, events, ref_v, ref_w):
 
 
 # ============================================================================ MHE wrapper
-@njit(cache=True, fastmath=False)
-def _friction_step(Fw, Fr, ok, sf, si, fp, ip, ev):
-    """The friction-step block (:func:`tsmpc.estimation.friction_step.friction_step_update`, one
-    definition) on the engine's state slots."""
-    s = FrictionStepState(sf[SF_FSVAR], si[SI_FSN], sf[SF_FSGP], sf[SF_FSGM], si[SI_FSSINCE])
-    F, s, declared = friction_step_update(FrictionStepParams(ip[IP_NW], fp[FP_FS_H]), s, Fw, Fr, ok)
-    sf[SF_FSVAR], si[SI_FSN], sf[SF_FSGP], sf[SF_FSGM], si[SI_FSSINCE] = \
-        s.var, s.n_var, s.g_plus, s.g_minus, s.since
-    if declared:
-        ev[EV_FSTEP] += 1
-    return F
-
-
 @njit(cache=True, fastmath=False)
 def _mhe_begin(y0, y1, u0, u1, mass, mY, mW, mU, mXS, mA, mB, mX, mp, views, sf, si, sc, ip):
     """``MHEUIO.step`` up to the window solve's answer (:func:`~tsmpc.kernels.mhe.mhe_step`, its
@@ -652,7 +639,6 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     gates = GateParams(fp[FP_V_LO], fp[FP_V_HI], fp[FP_W_LIM], fp[FP_POSE_NOISE], fp[FP_HEAD_NOISE], Td)
     cpar = course_params(Tc, fp[FP_COURSE_SIGMA], True, fp[FP_CF0], fp[FP_CR0], fp[FP_VM], fp[FP_VI],
                          fp[FP_VA], fp[FP_VB], fp[FP_VG], Td, n_in)
-    mpar = MassParams(fp[FP_VM], Td, ip[IP_NW], fp[FP_TAU], ip[IP_SPEEDFB] != 0)
     gpar = GyroParams(fp[FP_GYRO], fp[FP_GYRO + 1], fp[FP_GYRO + 2], fp[FP_GYRO + 3])
     sens = unpack_params(fp[FP_SENS:FP_SENS + N_SP])
     act = ActuatorParams(fp[FP_A_GF], fp[FP_A_GD], fp[FP_A_RMAX], fp[FP_A_DOFF], ip[IP_ACT_N])
@@ -661,6 +647,11 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     lqr_p = InnerParams(ip[IP_COMP] != 0, ip[IP_UIO] != 0, ip[IP_LOWRES] != 0, zlo[1], prm[6] * prm[0])
     law = LQRLaw(Kv, zlo, zhi, bits, prm, fp[FP_L_LAM], fp[FP_L_AF], fp[FP_L_TD], fp[FP_L_FMIN],
                  fp[FP_L_FMAX], fp[FP_L_DMIN], fp[FP_L_DMAX], ip[IP_LQR_SFB] != 0, fp[FP_L_TAU])
+    # the inner block's (Cascade._ib): friction step, mass terms, the TS-LQR's records; its state and counters
+    ibp = InnerBlockParams(ip[IP_FSTEP] != 0, FrictionStepParams(ip[IP_NW], fp[FP_FS_H]), ip[IP_MASSEST] != 0,
+                           MassParams(fp[FP_VM], Td, ip[IP_NW], fp[FP_TAU], ip[IP_SPEEDFB] != 0), lqr_p)
+    ibs = sf[SF_IB:SF_IB + N_IB]
+    icnt = ev[EV_INNER:EV_INNER + N_IC]
     mhe_views = (sf[SF_MX:SF_MX + N_MS], si[SI_NY:SI_NY + N_MI], sc[SC_UK:SC_UK + 2])
     while si[SI_M] < m_end:
         m = si[SI_M]
@@ -862,18 +853,12 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 _steer_step(fp, si[SI_FRESH] != 0 and si[SI_SPOK] != 0 and si[SI_ESTSTAT] == ST_OK
                             and not (si[SI_HASLAST] != 0 and si[SI_SAT] != 0), ev0,
                             y[4] - _gyro_now(ip, sf, si), sf, si)
-            F_in, Fr_in = sc[SC_ESTF], sc[SC_ESTFR]
-            F_c = F_in  # the compensated window estimate (lqr.friction_step)
-            if ip[IP_FSTEP] != 0:
-                F_c = _friction_step(F_in, Fr_in, si[SI_ESTSTAT] == ST_OK, sf, si, fp, ip, ev)
-            if ip[IP_MASSEST] != 0:
-                dF = _mass_terms(mpar, ev0, F_in, sc[SC_VREF], mass_v, sf, si)
-                if dF != 0.0:
-                    F_c, Fr_in = F_c + dF, Fr_in + dF
-            sc[SC_INF], sc[SC_INFR] = F_c, Fr_in
-            # TSLQR.step: its block (ts_lqr.inner_step); the numpy step (singular N̄) is the caller's
-            out = inner_step(lqr_p, law, ls, ev0, ev1, ev2, F_c, Fr_in, sc[SC_VREF], sc[SC_WREF])
+            # the inner block (Cascade._inner): friction step, mass terms, TS-LQR, events; the
+            # numpy law (a singular N̄) is the caller's, with the block's compensation and residual
+            out = inner_block(ibp, law, ls, ibs, mass_v, icnt, ev0, ev1, ev2, sc[SC_ESTF], sc[SC_ESTFR],
+                              si[SI_ESTSTAT], sc[SC_VREF], sc[SC_WREF])
             if out.status == LQR_NUMPY:
+                sc[SC_COMP], sc[SC_LOWF] = out.F_comp, out.F_low_speed
                 li[m, LI_TLQR] = float(_ticks() - tick)
                 si[SI_PHASE] = PH_POST_LQR
                 return NEED_LQR
@@ -889,9 +874,6 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 sc[SC_OD], wheels = _steer_out(fp, sf, si, sc[SC_OD])
             sf[SF_UAPP], sf[SF_UAPP + 1] = sc[SC_OF], wheels
             st = si[SI_ESTSTAT]
-            ev[EV_MHE_REJ] += 1 if st == ST_REJECTED else 0
-            ev[EV_MHE_FAIL] += 1 if st == ST_FAILED else 0
-            ev[EV_SAT] += si[SI_SAT]
             si[SI_CALLS] += 1
             si[SI_HASLAST] = 1
             sf[SF_LASTA] = sc[SC_EST + 1]

@@ -36,6 +36,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 BLOCK_MODULES = (
     "tsmpc.control.gates",
     "tsmpc.control.governor",
+    "tsmpc.control.inner_block",
     "tsmpc.control.slip_aware",
     "tsmpc.control.ts_lqr",
     "tsmpc.estimation.friction_step",

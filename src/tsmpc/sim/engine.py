@@ -37,7 +37,6 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -48,7 +47,7 @@ from tsmpc.control.cascade import EVENT_NAMES, Cascade
 from tsmpc.control.governor import governed_window
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
-from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
+from tsmpc.estimation.mhe_uio import EstimatorStatus
 from tsmpc.scenarios import Scenario
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.start import _start_state, default_plant, tracked_steps
@@ -60,9 +59,10 @@ if TYPE_CHECKING:
 
 __all__ = ["LAST_RUN", "EngineFallback", "applicability", "cached", "enabled", "exact", "run", "warmup"]
 
-#: Event names in the order of :attr:`Cascade.events` (the kernel's counter array).
+#: Event names in the order of :attr:`Cascade.events` (the kernel's counters: kernels/engine.py's
+#: EVENT_SLOTS, in this order).
 _EVENTS = (*EVENT_NAMES, "stale_rejected", "step_errors", "repeated_rejected", "friction_steps")
-assert len(_EVENTS) == 19  # kernels/engine.py's EV_* order
+assert len(_EVENTS) == 19
 _MHE_STATUS = {1: EstimatorStatus.OK, 2: EstimatorStatus.REJECTED, 3: EstimatorStatus.FAILED,
                4: EstimatorStatus.WARMUP}
 _MHE_CODE = {v: k for k, v in _MHE_STATUS.items()}
@@ -133,30 +133,27 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
     "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
-    "tsmpc.control.cascade:Cascade.__init__": "45a100c835410e08",
-    "tsmpc.control.cascade:Cascade.reset": "2627c65266eea2a0",
+    "tsmpc.control.cascade:Cascade.__init__": "e04993d36852e86f",
+    "tsmpc.control.cascade:Cascade.reset": "88f0e8d26885ab5e",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "759cb964eb220cf9",
+    "tsmpc.control.cascade:Cascade._step": "14337833d5610532",
     "tsmpc.control.cascade:Cascade._gyro": "d4f0749f2a101860",
     "tsmpc.control.cascade:Cascade._ay_ref_at": "9a44f89a841913eb",
     "tsmpc.control.cascade:Cascade._steer_fit": "1f125e94d12be522",
     "tsmpc.control.cascade:Cascade._servo_offset": "393f0c29d7e8e37c",
     "tsmpc.control.cascade:Cascade._servo_plain": "308054ab84aa02b6",
-    "tsmpc.control.cascade:Cascade._count": "34545297f48edbfa",
     "tsmpc.control.cascade:_NoCourse": "35449a3e893bc074",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "d9c505541bd394e7",
     "tsmpc.control.cascade:Cascade._outer": "6153de103bbe0efc",
     "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
     "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
-    "tsmpc.control.cascade:Cascade._govern": "5e06de8d6a2b15e0",
+    "tsmpc.control.cascade:Cascade._govern": "048bb8890267a4cb",
     "tsmpc.control.cascade:Cascade._governed": "b1b952c55d88d9b3",
     "tsmpc.control.cascade:Cascade.reference_row": "257f90494b63c8c2",
     "tsmpc.control.governor:governed_window": "cadafab2efb735cb",
     "tsmpc.control.governor:Governor.step": "12200cfb7c1bc640",
     "tsmpc.control.cascade:Cascade._estimate": "6008b3dd2bedaea5",
-    "tsmpc.control.cascade:Cascade._compensated": "7bfaf70f34cf6d62",
-    "tsmpc.control.cascade:Cascade._inner": "3a018d7e1029a195",
     "tsmpc.control.cascade:Cascade._plausible_speeds": "4b22de6905cbdf56",
     "tsmpc.control.cascade:Cascade._accept_pose": "d00e5362890189a2",
     "tsmpc.control.cascade:Cascade._dead_reckon": "d73049a3445880ad",
@@ -276,8 +273,10 @@ def _replaced_code() -> str | None:
         ts_lqr = importlib.import_module("tsmpc.control.ts_lqr")  # its block calls the law
         if importlib.import_module("tsmpc.kernels.lqr").lqr_step is not ts_lqr.lqr_step:
             return "tsmpc.kernels.lqr.lqr_step was replaced"
-        if ts_lqr.inner_step is not ke.inner_step:
+        if ts_lqr.inner_step is not importlib.import_module("tsmpc.control.inner_block").inner_step:
             return "tsmpc.control.ts_lqr.inner_step was replaced"
+        if importlib.import_module("tsmpc.control.inner_block").inner_block is not ke.inner_block:
+            return "tsmpc.control.inner_block.inner_block was replaced"
     return None
 
 
@@ -504,38 +503,12 @@ def _load_kernel() -> Any:
 def _forget_stale_machine_code(folder: Any, prefix: str = "engine",
                                sources: tuple[str, ...] = ("mpc", "mhe", "lqr", "plant"),
                                stamp_name: str = "engine.blocks-sha256") -> None:
-    """numba keys a cached function by its own file only: the engine's machine code, which
-    contains the block kernels it calls (kernels/mpc.py, mhe.py, lqr.py, plant.py, and the
-    ``@jitable`` blocks of :data:`tsmpc.kernels.jit.BLOCK_MODULES`), would outlive an edit of one
-    of them. So the cache entries ``<prefix>.*`` carry the hash of those
-    ``sources`` (a file beside them, ``stamp_name``) and are deleted when it differs: the next
-    call compiles afresh. The batch kernel (tsmpc.sim.batch) uses the same with its sources."""
-    import hashlib
-
-    import tsmpc.kernels as pkg
-    from tsmpc.errors import TsmpcError
+    """The engine's cache entries ``<prefix>.*`` deleted when the sources compiled into them
+    changed (:func:`tsmpc.kernels.forget_stale`; the batch kernel uses it with its sources)."""
+    from tsmpc import kernels
     from tsmpc.kernels.jit import BLOCK_MODULES
-    from tsmpc.textfile import read_bytes, read_text
 
-    here = Path(pkg.__file__).parent
-    top = here.parent.parent  # the folder holding the tsmpc package
-    # the blocks compiled into the kernel (tsmpc.kernels.jit) are part of its machine code too
-    files = [here / f"{m}.py" for m in sources] + [top / (m.replace(".", "/") + ".py")
-                                                   for m in BLOCK_MODULES]
-    digest = hashlib.sha256(b"".join(read_bytes(f, "kernel source") for f in files)).hexdigest()
-    stamp = folder / stamp_name
-    try:
-        if read_text(stamp, f"{prefix} cache stamp", limit=1024).strip() == digest:
-            return
-    except (TsmpcError, OSError):
-        pass
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        for p in folder.glob(f"{prefix}.*.nb[ic]"):
-            p.unlink()
-        stamp.write_text(digest)
-    except OSError:  # an unwritable cache: numba refuses it too (tsmpc.kernels.cache_problem)
-        pass
+    kernels.forget_stale(folder, prefix, sources, stamp_name, BLOCK_MODULES)
 
 
 def _compiled(ke: Any, args: tuple[Any, ...]) -> bool:
@@ -664,7 +637,7 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     fp[ke.FP_CF0], fp[ke.FP_CR0] = veh.C_f, veh.C_r
     fp[ke.FP_VM], fp[ke.FP_VI], fp[ke.FP_VA], fp[ke.FP_VB] = veh.mass, veh.inertia, veh.a, veh.b
     fp[ke.FP_VG] = veh.g
-    fp[ke.FP_TAU] = fu.tau
+    fp[ke.FP_TAU] = cascade._ib.mass.tau  # the inner block's mass fit's
     fp[ke.FP_MHE_MASS] = mhe.vehicle.mass
     bound = scenario.divergence_bound_m or cfg.divergence_bound_m
     ip[ke.IP_HASBOUND] = bound is not None
@@ -689,13 +662,12 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     ip[ke.IP_STEER] = fs.steering_offset
     assert len(fu.steer_p) == ke.N_STEER_P  # (the kernel rebuilds the record from these slots)
     fp[ke.FP_STEER:ke.FP_STEER + ke.N_STEER_P] = fu.steer_p
-    ip[ke.IP_SPEEDFB], ip[ke.IP_LQR_SFB] = fu.speed_feedback, law.speed_feedback
+    ip[ke.IP_SPEEDFB], ip[ke.IP_LQR_SFB] = cascade._ib.mass.speed_feedback, law.speed_feedback
     inner = lqr._inner
     ip[ke.IP_COMP], ip[ke.IP_UIO], ip[ke.IP_LOWRES] = inner.compensation, inner.raw_estimate, inner.low_speed
-    fstep = cascade._friction_step
-    ip[ke.IP_FSTEP] = fstep is not None
-    if fstep is not None:
-        fp[ke.FP_FS_H] = fstep.threshold
+    ib = cascade._ib  # the inner block's records (the kernel rebuilds them from these slots)
+    ip[ke.IP_FSTEP] = ib.friction_step
+    fp[ke.FP_FS_H] = ib.fstep.threshold
     ip[ke.IP_MFORCE], ip[ke.IP_MSTEER] = scenario.measured_force, scenario.measured_steering
     rc = cascade._recovery
     ip[ke.IP_RECOV] = rc is not None
@@ -722,11 +694,7 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     """The kernel's float and integer state (``sf``, ``si``): the cascade's after reset(x0)."""
     sf, si = np.zeros(ke.N_SF), np.zeros(ke.N_SI, dtype=np.int64)
     mhe, course = cascade.mhe, cascade._fusion.course
-    fstep = cascade._friction_step
-    if fstep is not None:
-        st = fstep.state
-        sf[ke.SF_FSVAR], sf[ke.SF_FSGP], sf[ke.SF_FSGM] = st.var, st.g_plus, st.g_minus
-        si[ke.SI_FSN], si[ke.SI_FSSINCE] = st.n_var, st.since
+    sf[ke.SF_IB:ke.SF_IB + ke.N_IB] = cascade._ib_state  # the inner block's (friction step, mass fit)
     sf[ke.SF_POSE:ke.SF_POSE + 3] = cascade._pose
     sf[ke.SF_HELD:ke.SF_HELD + 3] = cascade._pose_held
     sf[ke.SF_POSET] = cascade._pose_t
@@ -805,7 +773,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
         ref_x=_f64(ref.x), ref_y=_f64(ref.y), ref_th=_f64(ref.theta), ref_v=_f64(ref.v[ridx]),
         ref_w=_f64(ref.omega[ridx]), th_tan=_f64(cascade._theta_tangent), mv=mv, mw=mw,
         gate=cascade._slip_gate.poses.copy(), cur=np.zeros(ke.N_IV),
-        ivs=np.zeros((ke.RING, ke.N_IV)), mass_v=np.zeros(cfg.mhe.N + 1),
+        ivs=np.zeros((ke.RING, ke.N_IV)), mass_v=cascade._ib_ring.copy(),
         mY=mhe._Y, mW=mhe._W, mU=mhe._U, mXS=mhe._XS, mA=mhe._Ab, mB=mhe._Bb, mX=mhe._Xb, mp=mp,
         ls=lqr._s, Kv=Kv, zlo=zlo, zhi=zhi, bits=bits, prm=prm,
         mints=mpc._ints, mprm=mpc._prm, mPS=mpc._PS,
@@ -893,20 +861,20 @@ class _Run:
 
     def _lqr(self) -> None:
         """TSLQR's numpy law (the compiled one found N̄ singular)."""
+        from tsmpc.control.inner_block import count_step
+
         a, ke, lqr = self.a, self.ke, _static_lqr(self.cascade)
         if a.si[ke.SI_HASAPPLIED]:  # the numpy law reads the stiffnesses from its vehicle
             lqr.set_cornering_stiffness(float(a.prm[2]), float(a.prm[3]))
-        inner = Estimate(a.sc[ke.SC_EST:ke.SC_EST + 3].copy(), float(a.sc[ke.SC_INF]),
-                         float(a.sc[ke.SC_INFR]), _MHE_STATUS[int(a.si[ke.SI_ESTSTAT])], 0.0)
-        kern, lqr._kern = lqr._kern, None
+        v, al, om = a.sc[ke.SC_EST:ke.SC_EST + 3].tolist()
         t0 = time.perf_counter()
-        try:
-            out = lqr._step(inner, float(a.sc[ke.SC_VREF]), float(a.sc[ke.SC_WREF]))
+        try:  # as Cascade._inner: the block's compensation and residual, the numpy law, the events
+            out = lqr._numpy_step(v, al, om, float(a.sc[ke.SC_VREF]), float(a.sc[ke.SC_WREF]),
+                                  float(a.sc[ke.SC_COMP]), float(a.sc[ke.SC_LOWF]))
         except Exception as err:
             raise EngineFallback(f"TS-LQR raised {type(err).__name__}") from err
-        finally:
-            lqr._kern = kern
         self.sec_lqr[int(a.si[ke.SI_M])] = time.perf_counter() - t0
+        count_step(a.ev[ke.EV_INNER:ke.EV_INNER + ke.N_IC], int(a.si[ke.SI_ESTSTAT]), bool(out.saturated))
         a.sc[ke.SC_OF], a.sc[ke.SC_OD] = out.F_xR, out.delta
         a.sf[ke.SF_LOW] = out.F_low_speed
         a.si[ke.SI_SAT] = bool(out.saturated)
@@ -1054,7 +1022,7 @@ def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termina
     else:
         refs = np.stack([ref.x[:K], ref.y[:K], ref.theta[:K], ref.v[:K], ref.omega[:K]], axis=1)
     f_true = np.ascontiguousarray(li[:, ke.LI_FTRUE])
-    events = {name: int(a.ev[n]) for n, name in enumerate(_EVENTS)}
+    events = {name: int(a.ev[slot]) for name, slot in zip(_EVENTS, ke.EVENT_SLOTS, strict=True)}
     if gov:
         events["governor_actions"] = int(a.si[ke.SI_GACT])
         events["governor_steps"] = int(a.si[ke.SI_GSTEPS])

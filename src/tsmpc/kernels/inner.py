@@ -1,0 +1,84 @@
+"""The cascade's compiled call of the inner block (:func:`tsmpc.control.inner_block.inner_block`, its
+one definition): the block's records rebuilt from arrays inside the compiled code, because numba's
+dispatcher types a record argument field by field (≈ 0.15 µs a field, more than the block's work),
+an array at once.
+
+:func:`pack` writes :class:`~tsmpc.control.inner_block.InnerBlockParams` and the TS-LQR's
+:class:`~tsmpc.control.ts_lqr.LQRLaw` scalars into one float vector (slots ``BP_*``); :func:`inner_call`
+rebuilds both records from it (and the law's arrays, passed as they are: ``prm`` is written in place
+by the stiffness fit) and runs the block.
+
+The block's machine code is part of this module's cache entry although its source is not: the
+entry carries the hash of the block modules (:func:`tsmpc.kernels.forget_stale`, as the run engine's).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from tsmpc import kernels
+from tsmpc.control.inner_block import InnerBlockParams, inner_block, start_state
+from tsmpc.control.ts_lqr import InnerParams, LQRLaw
+from tsmpc.estimation.friction_step import FrictionStepParams
+from tsmpc.estimation.fusion import MassParams
+from tsmpc.kernels.jit import BLOCK_MODULES
+
+__all__ = ["inner_call", "pack", "warm"]
+
+# entries compiled from other versions of the blocks (or of the law, kernels/lqr.py) are deleted
+# before the first call below loads one
+kernels.forget_stale(kernels._tree_folder(kernels.numba_cache_dir()), "inner", ("inner", "lqr"),
+                     "inner.blocks-sha256", BLOCK_MODULES)
+
+(BP_FSTEP, BP_FS_WINDOW, BP_FS_H, BP_MASSEST, BP_M_MASS, BP_M_TD, BP_M_WINDOW, BP_M_TAU, BP_M_SFB,
+ BP_COMP, BP_RAW, BP_LOW, BP_VMIN, BP_RES,
+ BP_LAM, BP_AF, BP_TD, BP_FMIN, BP_FMAX, BP_DMIN, BP_DMAX, BP_SFB, BP_TAU) = range(23)
+N_BP = 23
+
+
+def pack(p: InnerBlockParams, law: LQRLaw) -> np.ndarray:
+    """The scalars of the block's records as the float vector :func:`inner_call` reads."""
+    fs, m, q = p.fstep, p.mass, p.inner
+    return np.array([p.friction_step, fs.window, fs.threshold, p.mass_estimate, m.mass, m.Td, m.window,
+                     m.tau, m.speed_feedback, q.compensation, q.raw_estimate, q.low_speed, q.v_min,
+                     q.resistance, law.lam, law.afilt, law.Td, law.F_min, law.F_max, law.d_min, law.d_max,
+                     law.speed_feedback, law.tau], dtype=np.float64)
+
+
+@njit(cache=True, fastmath=False)
+def _records(bp, Kv, zlo, zhi, bits, prm):
+    """(InnerBlockParams, LQRLaw) of the packed vector and the law's arrays."""
+    p = InnerBlockParams(
+        bp[BP_FSTEP] != 0.0, FrictionStepParams(int(bp[BP_FS_WINDOW]), bp[BP_FS_H]), bp[BP_MASSEST] != 0.0,
+        MassParams(bp[BP_M_MASS], bp[BP_M_TD], int(bp[BP_M_WINDOW]), bp[BP_M_TAU], bp[BP_M_SFB] != 0.0),
+        InnerParams(bp[BP_COMP] != 0.0, bp[BP_RAW] != 0.0, bp[BP_LOW] != 0.0, bp[BP_VMIN], bp[BP_RES]))
+    law = LQRLaw(Kv, zlo, zhi, bits, prm, bp[BP_LAM], bp[BP_AF], bp[BP_TD], bp[BP_FMIN], bp[BP_FMAX],
+                 bp[BP_DMIN], bp[BP_DMAX], bp[BP_SFB] != 0.0, bp[BP_TAU])
+    return p, law
+
+
+@njit(cache=True, fastmath=False)
+def inner_call(bp, Kv, zlo, zhi, bits, prm, s, st, ring, cnt, v, alpha, omega, F_window, F_raw, status,
+               v_ref, w_ref):
+    """:func:`~tsmpc.control.inner_block.inner_block` of the packed records: (F_xR, δ, saturated,
+    compensation, low-speed residual, the TS-LQR step's status)."""
+    p, law = _records(bp, Kv, zlo, zhi, bits, prm)
+    out = inner_block(p, law, s, st, ring, cnt, v, alpha, omega, F_window, F_raw, status, v_ref, w_ref)
+    return out.F_xR, out.delta, out.saturated, out.F_comp, out.F_low_speed, out.status
+
+
+def warm() -> None:
+    """Compile (or load from the cache) the signature the cascade uses."""
+    Kv = np.zeros((8, 2, 6))
+    Kv[:, 0, 0] = -100.0
+    Kv[:, 1, 2] = -0.1
+    bits = np.array([[(i >> j) & 1 for j in range(3)] for i in range(8)], dtype=np.bool_)
+    prm = np.array([683.0, 560.0, 25000.0, 25000.0, 0.758, 1.036, 4.9, 0.4])
+    p = InnerBlockParams(True, FrictionStepParams(30, 5.0), True, MassParams(683.0, 0.01, 30, 0.3, True),
+                         InnerParams(True, False, True, 2.0, 3000.0))
+    law = LQRLaw(Kv, np.array([-0.4, 2.0, -0.1]), np.array([0.4, 20.0, 0.1]), bits, prm, 10.0, 0.9, 0.01,
+                 -2000.0, 10000.0, -0.4, 0.4, True, 0.3)
+    st, ring, cnt = start_state(30)
+    inner_call(pack(p, law), law.Kv, law.zlo, law.zhi, law.bits, law.prm, np.zeros(6), st, ring, cnt, 10.0,
+               0.0, 0.0, 100.0, 90.0, 1, 10.0, 0.0)
