@@ -420,7 +420,7 @@ def test_inner_block_composes_its_parts() -> None:
 
 
 def test_inner_block_compiled_equals_python() -> None:
-    """The cascade's compiled call of the block (kernels/inner.py) and the block as Python: the
+    """The cascade's compiled call of the block (kernels/blocks.py) and the block as Python: the
     same commands, states and counters to the bit; a NaN estimate holds (counted saturated); no
     law hands the step to the numpy law uncounted."""
     from tsmpc.control.inner_block import IC_SATURATED, inner_block, start_state
@@ -428,7 +428,7 @@ def test_inner_block_compiled_equals_python() -> None:
     from tsmpc.estimation.friction_step import FrictionStep
     from tsmpc.estimation.fusion import MassEstimator
 
-    kern = kernels.load("inner")
+    kern = kernels.load("blocks")
     if kern is None:
         pytest.skip("compiled kernels unavailable")
     p, law = _inner_records(), _inner_law()
@@ -457,3 +457,73 @@ def test_inner_block_compiled_equals_python() -> None:
     out = inner_block(p, None, sa, *a, 10.0, 0.0, 0.0, 100.0, 90.0, 2, 10.0, 0.0)
     assert out.status == LQR_NUMPY
     assert np.array_equal(a[2][:3], c0[:3])  # the numpy law's caller counts the step
+
+
+def test_pose_gate_by_hand() -> None:
+    """The gate block: a repeat is not fresh (counted), a fresh non-finite pose is counted, the
+    first pose and a pose the gate owes are taken, a jump is rejected until a run of consistent
+    ones has lasted reinit_s (recovery), which re-initialises the pose; without recovery never."""
+    gp = gates.GateBlockParams(G, True, 0.05, True)
+    gs, c = gates.gate_state()
+    a = (True, 10.0, 0.0, 0.0, 5.0, 0.1, -math.inf)
+    assert gates.pose_gate(gp, gs, c, 0.0, *a, False, 0.0, 0.0, 0.0, 0.0) == (True, True)  # the first
+    assert gates.pose_gate(gp, gs, c, 0.01, *a, True, 10.0, 0.0, 0.0, 0.0) == (False, False)  # a repeat
+    b = (True, math.nan, 0.0, 0.0, 5.0, 0.1, -math.inf)
+    assert gates.pose_gate(gp, gs, c, 0.02, *b, True, 10.0, 0.0, 0.0, 0.0) == (True, False)
+    assert gates.pose_gate(gp, gs, c, 0.02, False, *b[1:], True, 10.0, 0.0, 0.0, 0.0) == (False, False)
+    assert (c[gates.GC_REPEATED], c[gates.GC_NAN]) == (1, 1)
+    took = []
+    for i in range(8):  # 5 m off the dead-reckoned pose, consistent among themselves
+        t = 0.03 + 0.01 * i
+        took.append(gates.pose_gate(gp, gs, c, t, True, 15.0 + 0.01 * i, 0.0, 0.0, 5.0, 0.1, t, True,
+                                    10.0, 0.0, 0.0, 0.0)[1])
+    # taken once the run has lasted reinit_s; the next jump starts a new run
+    assert took == [False] * 5 + [True] + [False] * 2 and (c[gates.GC_JUMP], c[gates.GC_REINIT]) == (7, 1)
+    assert gs[gates.GS_JT0] == 0.03 + 0.01 * 6
+    gs, c = gates.gate_state()  # an accepted pose ends a run: the next jump starts a new one
+
+    def jump(t: float) -> bool:  # 5 m off the dead-reckoned pose (10, 0, 0), stamped t
+        return gates.pose_gate(gp, gs, c, t, True, 15.0, 0.0, 0.0, 5.0, 0.1, t, True, 10.0, 0.0, 0.0, 0.0)[1]
+
+    assert not jump(0.0)
+    assert gates.pose_gate(gp, gs, c, 0.01, True, 10.0, 0.0, 0.0, 5.0, 0.1, 0.01, True, 10.0, 0.0, 0.0,
+                           0.0)[1]
+    assert [jump(t) for t in (0.02, 0.03, 0.04, 0.05, 0.0625, 0.0725)] == [False] * 5 + [True]
+    gs[gates.GS_FREE] = 1.0  # after a blind stop: the next fresh finite pose, wherever it is
+    assert gates.pose_gate(gp, gs, c, 1.0, True, 99.0, 0.0, 0.0, 5.0, 0.1, 1.0, True, 10.0, 0.0, 0.0,
+                           0.9)[1]
+    assert gs[gates.GS_FREE] == 0.0
+    no = gates.GateBlockParams(G, False, 0.05, False)
+    gs, c = gates.gate_state()
+    assert [gates.pose_gate(no, gs, c, 0.01 * i, True, 15.0, 0.0, 0.0, 5.0, 0.1, -math.inf, True, 10.0, 0.0,
+                            0.0, 0.0)[1] for i in range(10)] == [False] * 10
+    assert (c[gates.GC_JUMP], c[gates.GC_REINIT], c[gates.GC_REPEATED]) == (10, 0, 0)
+    assert gates.speed_gate(G, c, 41.0, 0.0) is False and c[gates.GC_SPEED] == 1
+
+
+def test_pose_gate_compiled_equals_python() -> None:
+    """The cascade's compiled call of the gate block and the block as Python: the same answers,
+    states and counters to the bit on random samples (jumps, repeats, NaN)."""
+    kern = kernels.load("blocks")
+    if kern is None:
+        pytest.skip("compiled kernels unavailable")
+    gp = gates.GateBlockParams(G, True, 0.05, True)
+    bp = kern.pack_gates(gp)
+    (ga, ca), (gb, cb) = gates.gate_state(), gates.gate_state()
+    rng = np.random.default_rng(17)
+    prev = (0.0, 0.0, 0.0)
+    for i in range(2000):
+        t = 0.01 * i
+        X, Y, th = (float(v) for v in rng.normal(0, 1.5, 3))
+        if 1000 <= i < 1100:  # a run of poses consistent among themselves, far from the dead reckoning
+            X, Y, th = 20.0 + 0.001 * i, 0.0, 0.0
+        if i % 7 == 0:
+            X, Y, th = prev
+        if i % 13 == 0:
+            Y = math.nan
+        prev = (X, Y, th)
+        px, py, pth = (float(v) for v in rng.normal(0, 1, 3))
+        args = (t, bool(rng.random() > 0.1), X, Y, th, 5.0, 0.1, -math.inf, i > 0, px, py, pth, t - 0.01)
+        assert gates.pose_gate(gp, ga, ca, *args) == kern.pose_call(bp, gb, cb, *args), i
+        assert np.array_equal(ga, gb, equal_nan=True) and np.array_equal(ca, cb)
+    assert ca[gates.GC_REPEATED] > 0 and ca[gates.GC_NAN] > 0 and ca[gates.GC_REINIT] > 0

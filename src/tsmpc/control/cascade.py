@@ -47,14 +47,21 @@ from numpy.typing import ArrayLike, NDArray
 from tsmpc._records import quick_init
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
 from tsmpc.control.gates import (
+    GC_JUMP,
+    GC_NAN,
+    GC_REINIT,
+    GC_REPEATED,
+    GC_SPEED,
+    GS_FREE,
+    GateBlockParams,
     GateParams,
     blind_stop,
     dead_reckon,
-    jump_run,
+    gate_state,
     nearest_sample,
-    plausible_speeds,
-    pose_consistent,
+    pose_gate,
     speed_bounded_yaw_rate,
+    speed_gate,
 )
 from tsmpc.control.governor import Governor, GovernorParams, GripParams, governed_window, governor_inputs
 from tsmpc.control.inner_block import (
@@ -299,6 +306,10 @@ class Cascade:
         # beyond the paper: blind stop and recovery (gates.py)
         self._recovery = cfg.recovery if cfg.recovery.enabled else None
         self._force_limits = cfg.lqr.force_limits(cfg.vehicle)
+        # the gate block (gates.py): the bounds, the jump-run re-initialisation, the repeat guard
+        rp = cfg.recovery.pose_reinit_s
+        self._gate_p = GateBlockParams(self._gates, self._recovery is not None, float(rp),
+                                       bool(cfg.fusion.reject_repeated_samples))
         # recovery.yaw_rate_bound: the kinematic bicycle's tightest path curvature tan(δ_max)/L [1/m]
         rc = cfg.recovery
         self._curvature_max = (math.tan(cfg.lqr.delta_max) / cfg.vehicle.wheelbase
@@ -352,12 +363,10 @@ class Cascade:
         self._t_meas: float | None = None
         self._blind_since: float | None = None
         self._reanchor = False
-        self._pose_free = False
         self._t_offset = 0.0
         self._outage_s = 0.0
         self._catch_up = False  # after a re-anchoring: the reference waits for the car's speed
-        self._jump_t0 = math.nan
-        self._jump_last = (math.nan, math.nan, math.nan, math.nan)
+        self._gs, self._gate_count = gate_state()  # the gate block's state and counters
         self._last: Command | None = None
         self._plan: MPCResult | None = None
         self._events = dict.fromkeys(EVENT_NAMES, 0)
@@ -377,7 +386,9 @@ class Cascade:
         samples rejected for their age, ``step_errors``, unexpected errors caught,
         ``repeated_rejected``, stalled samples, and ``friction_steps``, steps of the friction force
         declared by ``lqr.friction_step``)."""
-        ev, c = dict(self._events), self._ib_count.tolist()
+        ev, c, g = dict(self._events), self._ib_count.tolist(), self._gate_count.tolist()
+        ev["speed_rejected"], ev["repeated_rejected"], ev["pose_nan"] = g[GC_SPEED], g[GC_REPEATED], g[GC_NAN]
+        ev["pose_reinit"], ev["pose_jump_rejected"] = g[GC_REINIT], g[GC_JUMP]
         ev["mhe_rejected"], ev["mhe_failed"] = c[IC_REJECTED], c[IC_FAILED]
         ev["inner_saturated"], ev["friction_steps"] = c[IC_SATURATED], c[IC_FSTEPS]
         return ev
@@ -466,33 +477,6 @@ class Cascade:
         self._events["stale_rejected"] += 1
         return False
 
-    def _plausible_speeds(self, v: float, om: float) -> bool:
-        """False (counted) for a finite speed or yaw rate no vehicle of this config can have."""
-        if plausible_speeds(self._gates, v, om):
-            return True
-        self._events["speed_rejected"] += 1
-        return False
-
-    def _accept_pose(self, t: float, X: float, Y: float, th: float) -> bool:
-        """Is a finite, fresh pose consistent with where the car can be (the dead-reckoned pose)?
-        With ``recovery``: the first pose after a blind stop is, and so is one that ends
-        ``pose_reinit_s`` of consistent jump rejections (gates.py)."""
-        p = self._pose
-        if p is None or self._pose_free or pose_consistent(self._gates, X, Y, th, *_xyz(p), t - self._pose_t):
-            self._pose_free, self._jump_t0 = False, math.nan
-            return True
-        rc = self._recovery
-        if rc is not None:
-            take, self._jump_t0 = jump_run(self._gates, rc.pose_reinit_s, self._jump_t0, *self._jump_last,
-                                           X, Y, th, t)
-            self._jump_last = (X, Y, th, t)
-            if take:
-                self._events["pose_reinit"] += 1
-                self._jump_t0 = math.nan
-                return True
-        self._events["pose_jump_rejected"] += 1
-        return False
-
     def _watch_samples(self, t: float, ok: bool) -> None:
         """recovery: the blind stop begins after ``blind_after_s`` without a usable speed / yaw-rate
         sample and ends at the next one (the gates then take the next pose, and the reference is
@@ -505,7 +489,8 @@ class Cascade:
         if ok:
             if self._blind_since is not None:
                 self._events["recoveries"] += 1
-                self._reanchor = self._pose_free = True
+                self._reanchor = True
+                self._gs[GS_FREE] = 1.0  # the gates take the next pose
                 self._outage_s = t - self._t_meas
                 self.lqr.reset()  # its filter did not run while blind
             self._t_meas, self._blind_since = t, None
@@ -634,21 +619,23 @@ class Cascade:
     def _gate(self, t: float, m: Measurement, X: float, Y: float, th: float, v: float,
               om: float) -> tuple[bool, bool, bool]:
         """The sample gates (gates.py): (fresh, speeds plausible, pose accepted)."""
-        ev = self._events
         fresh = m.stamp is None or self._fresh(t, m)
-        speeds_ok = self._plausible_speeds(v, om)
+        speeds_ok = speed_gate(self._gates, self._gate_count, v, om)
         if self._recovery is not None:
             self._watch_samples(t, fresh and speeds_ok and _finite(v, om))
         stamp = -math.inf if m.stamp is None else float(m.stamp)  # a new stamp is a new sample
-        if self.cfg.fusion.reject_repeated_samples and self._fusion.guard.repeated_at(X, Y, th, v, om, stamp):
-            fresh = False  # a stalled bus re-delivering the last sample: missing, like NaN
-            ev["repeated_rejected"] += 1
         # The pose, every call: accepted when fresh, finite and where the car can be; else the
         # dead-reckoned pose stands (advanced at the end of the call) for the plausibility gate.
-        pose_finite = _finite(X, Y, th)
-        if fresh and not pose_finite:
-            ev["pose_nan"] += 1  # counted at every call (pose_rejected: at the MPC's steps)
-        pose_ok = fresh and pose_finite and self._accept_pose(t, X, Y, th)
+        p = self._pose
+        has = p is not None
+        px, py, pth = _xyz(p) if has else (0.0, 0.0, 0.0)  # type: ignore[arg-type]
+        call = self._gate_call
+        if call is not None:
+            fresh, pose_ok = call[0](call[1], self._gs, self._gate_count, t, fresh, X, Y, th, v, om, stamp,
+                                     has, px, py, pth, self._pose_t)
+        else:  # TSMPC_NO_JIT: the block as Python
+            fresh, pose_ok = pose_gate(self._gate_p, self._gs, self._gate_count, t, fresh, X, Y, th, v, om,
+                                       stamp, has, px, py, pth, self._pose_t)
         if pose_ok:
             self._pose, self._pose_t = np.array([X, Y, th]), t
         return fresh, speeds_ok, pose_ok
@@ -826,7 +813,7 @@ class Cascade:
     def _build_inner_block(self, cfg: Config) -> None:
         """The inner block's records (inner_block.py: lqr.friction_step's detector, beyond the paper;
         fusion.mass_estimate's inertia terms; the TS-LQR) and its compiled call when the TS-LQR has
-        its compiled law."""
+        its compiled law; the gate block's compiled call (kernels/blocks.py)."""
         N, lq = cfg.mhe.N, cfg.lqr
         fs = (FrictionStep(N, lq.friction_step_threshold).params if lq.friction_step  # (validates)
               else FrictionStepParams(N, 1.0))
@@ -838,12 +825,15 @@ class Cascade:
             inner if isinstance(inner, InnerParams) else InnerParams(False, False, False, 1.0, 0.0))
         law = getattr(self.lqr, "_law", None)
         self._ib_call: Any = None
+        self._gate_call: Any = None
+        from tsmpc import kernels
+
+        kern = kernels.load("blocks")
+        if kern is not None:  # the gate block's compiled call
+            self._gate_call = (kern.pose_call, kern.pack_gates(self._gate_p))
         # the TS-LQR whose step is the block's (the as-run law's is its own)
         self._ib_lqr: TSLQR | None = self.lqr if isinstance(inner, InnerParams) else None  # type: ignore[assignment]
         if self._ib_lqr is not None and law is not None and self._ib_lqr._kern is not None:
-            from tsmpc import kernels
-
-            kern = kernels.load("inner")
             if kern is not None:
                 bp = kern.pack(self._ib, law)
                 self._ib_call = (kern.inner_call, bp, law.Kv, law.zlo, law.zhi, law.bits, law.prm)

@@ -46,6 +46,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from tsmpc.estimation.fusion import RepeatState, repeat_check
 from tsmpc.kernels.jit import exact_hypot, jitable
 
 __all__ = [
@@ -53,6 +54,7 @@ __all__ = [
     "HEADING_JUMP_RAD",
     "POSE_DRIFT_M_PER_S",
     "POSE_JUMP_M",
+    "GateBlockParams",
     "GateParams",
     "blind_stop",
     "dead_reckon",
@@ -60,7 +62,9 @@ __all__ = [
     "nearest_sample",
     "plausible_speeds",
     "pose_consistent",
+    "pose_gate",
     "speed_bounded_yaw_rate",
+    "speed_gate",
 ]
 
 #: Drift allowed between the dead-reckoned and a measured pose: metres plus metres per second
@@ -90,6 +94,89 @@ class GateParams(NamedTuple):
     pose_noise: float
     heading_noise: float
     Td: float
+
+
+class GateBlockParams(NamedTuple):
+    """The sample gates' block (:func:`speed_gate`, :func:`pose_gate`) as the cascade composes it.
+
+    Attributes:
+        gates: the bounds.
+        recovery: a run of consistent jump rejections may re-initialise the pose (``recovery``).
+        reinit_s: how long that run must last [s] (``recovery.pose_reinit_s``).
+        repeat: a sample equal to the previous one is missing (``fusion.reject_repeated_samples``).
+    """
+
+    gates: GateParams
+    recovery: bool
+    reinit_s: float
+    repeat: bool
+
+
+#: The gate block's state slots (a float vector): the pose gate owes the next pose (after a blind
+#: stop), the run of jump rejections (its start, NaN: none; the last rejected pose and its time),
+#: the repeat guard's previous sample (RepeatState).
+(GS_FREE, GS_JT0, GS_JX, GS_JY, GS_JTH, GS_JT,
+ GS_RHAS, GS_RX, GS_RY, GS_RTH, GS_RV, GS_RW, GS_RSTAMP) = range(13)
+N_GS = 13
+#: Its event counters: implausible speeds, repeated samples, non-finite fresh poses, poses taken
+#: after a run of jumps, poses rejected as jumps.
+GC_SPEED, GC_REPEATED, GC_NAN, GC_REINIT, GC_JUMP = range(5)
+N_GC = 5
+
+
+def gate_state() -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """(state, counters) of the gate block at the start: no run, no previous sample."""
+    gs = np.zeros(N_GS)
+    gs[GS_JT0:GS_JT + 1] = np.nan
+    gs[GS_RSTAMP] = -np.inf
+    return gs, np.zeros(N_GC, dtype=np.int64)
+
+
+@jitable
+def speed_gate(p: GateParams, cnt: NDArray[np.int64], v: float, omega: float) -> bool:
+    """:func:`plausible_speeds`, an implausible sample counted."""
+    if plausible_speeds(p, v, omega):
+        return True
+    cnt[GC_SPEED] += 1
+    return False
+
+
+@jitable
+def pose_gate(p: GateBlockParams, gs: NDArray[np.float64], cnt: NDArray[np.int64], t: float, fresh: bool,
+              X: float, Y: float, theta: float, v: float, omega: float, stamp: float, has_pose: bool,
+              px: float, py: float, pth: float, pose_t: float) -> tuple[bool, bool]:
+    """(fresh, the pose is accepted) of a sample (X, Y, θ, v, ω, its stamp; −inf: none) at time
+    ``t``: a sample equal to the previous one is not fresh (a stalled bus re-delivering it: missing,
+    like NaN); a fresh finite pose is accepted when the gate owes one (``has_pose`` False: the
+    first; or after a blind stop) or it is consistent with the dead-reckoned pose (px, py, pth)
+    ``t − pose_t`` after the last accepted one (:func:`pose_consistent`), or — ``recovery`` — it ends
+    a run of consistent jump rejections (:func:`jump_run`). Counted in ``cnt``."""
+    if p.repeat:
+        same, r = repeat_check(RepeatState(gs[GS_RHAS] != 0.0, gs[GS_RX], gs[GS_RY], gs[GS_RTH], gs[GS_RV],
+                                           gs[GS_RW], gs[GS_RSTAMP]), X, Y, theta, v, omega, stamp)
+        gs[GS_RHAS], gs[GS_RX], gs[GS_RY], gs[GS_RTH] = 1.0 if r.has else 0.0, r.X, r.Y, r.theta
+        gs[GS_RV], gs[GS_RW], gs[GS_RSTAMP] = r.v, r.omega, r.stamp
+        if same:
+            fresh = False
+            cnt[GC_REPEATED] += 1
+    finite = math.isfinite(X) and math.isfinite(Y) and math.isfinite(theta)
+    if fresh and not finite:
+        cnt[GC_NAN] += 1  # counted at every call (pose_rejected: at the MPC's steps)
+    if not (fresh and finite):
+        return fresh, False
+    if not has_pose or gs[GS_FREE] != 0.0 or pose_consistent(p.gates, X, Y, theta, px, py, pth, t - pose_t):
+        gs[GS_FREE], gs[GS_JT0] = 0.0, math.nan
+        return fresh, True
+    if p.recovery:
+        take, gs[GS_JT0] = jump_run(p.gates, p.reinit_s, gs[GS_JT0], gs[GS_JX], gs[GS_JY], gs[GS_JTH],
+                                    gs[GS_JT], X, Y, theta, t)
+        gs[GS_JX], gs[GS_JY], gs[GS_JTH], gs[GS_JT] = X, Y, theta, t
+        if take:
+            cnt[GC_REINIT] += 1
+            gs[GS_JT0] = math.nan
+            return fresh, True
+    cnt[GC_JUMP] += 1
+    return fresh, False
 
 
 @jitable

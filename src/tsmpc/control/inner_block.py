@@ -3,7 +3,7 @@ the force it compensates, the mass error's inertia terms, the estimate handed to
 TS-LQR's step and the step's events.
 
 One definition, three callers: :class:`~tsmpc.control.cascade.Cascade` calls :func:`inner_block`
-through one compiled call (``tsmpc.kernels.inner.inner_call``; as Python with ``TSMPC_NO_JIT``), the
+through one compiled call (``tsmpc.kernels.blocks.inner_call``; as Python with ``TSMPC_NO_JIT``), the
 run engine (``tsmpc.kernels.engine.run``) and the batch compile it into their step. Its parts are
 the blocks of their own modules: :func:`~tsmpc.estimation.friction_step.friction_step_update`,
 :func:`~tsmpc.estimation.fusion.mass_update` / :func:`~tsmpc.estimation.fusion.inertia_force` and
@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams, InnerStep, LQRLaw, inner_step
 from tsmpc.estimation.friction_step import FrictionStepParams, FrictionStepState, friction_step_update
 from tsmpc.estimation.fusion import MassParams, MassState, delta_mass, inertia_force, mass_update
-from tsmpc.kernels.jit import jitable
+from tsmpc.kernels.jit import jitable, jitable_inline
 
 __all__ = ["EST_FAILED", "EST_OK", "EST_REJECTED", "EST_WARMUP", "IC_FAILED", "IC_FSTEPS", "IC_REJECTED",
            "IC_SATURATED", "N_IB", "N_IC", "InnerBlockParams", "block_delta_mass", "compensated_force",
@@ -93,7 +93,7 @@ def block_delta_mass(p: InnerBlockParams, st: NDArray[np.float64]) -> float:
     return delta_mass(p.mass, mass_load(st))
 
 
-@jitable
+@jitable_inline
 def compensated_force(p: InnerBlockParams, st: NDArray[np.float64], ring: NDArray[np.float64],
                       cnt: NDArray[np.int64], v_hat: float, F_window: float, F_raw: float, ok: bool,
                       v_ref: float, with_mass: bool) -> tuple[float, float]:
@@ -132,7 +132,7 @@ def count_step(cnt: NDArray[np.int64], status: int, saturated: bool) -> None:
         cnt[IC_SATURATED] += 1
 
 
-@jitable
+@jitable_inline
 def inner_block(p: InnerBlockParams, law: LQRLaw | None, s: NDArray[np.float64], st: NDArray[np.float64],
                 ring: NDArray[np.float64], cnt: NDArray[np.int64], v: float, alpha: float, omega: float,
                 F_window: float, F_raw: float, status: int, v_ref: float, w_ref: float) -> InnerStep:

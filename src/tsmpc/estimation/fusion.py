@@ -1388,7 +1388,6 @@ class Fusion:
         self.Td, self.Tc = cfg.rates.Td, cfg.rates.Tc
         self.tau = cfg.lqr.speed_time_constant
         self.speed_feedback = cfg.lqr.speed_feedback
-        self.guard = RepeatGuard()
         self.course = CourseFusion(self.Tc, cfg.noise.position * cfg.noise.scale, cfg.vehicle, Td=self.Td,
                                    n_inner=cfg.rates.inner_per_outer)
         nz = cfg.noise
@@ -1400,7 +1399,6 @@ class Fusion:
 
     def reset(self, pose: NDArray[np.float64] | None) -> None:
         """Start over from ``pose`` (None: the first measured one)."""
-        self.guard.reset()
         self.course.reset()
         self.gyro.reset()
         self.steer_p = self._steer_p0  # (the cascade's reset gives the blocks the config's stiffnesses)

@@ -34,7 +34,7 @@ from typing import Any
 __all__ = ["cache_problem", "compile_lock", "enabled", "failure", "forget_stale", "in_cache", "load",
            "numba_cache_dir", "warmup"]
 
-_MODULES = ("mpc", "mhe", "plant", "lqr", "inner")
+_MODULES = ("mpc", "mhe", "plant", "lqr", "blocks")
 _LOADED: dict[str, ModuleType] | None = None
 _FAILED = False
 _FAILURE: str | None = None
@@ -122,7 +122,7 @@ def _cold(cache: Path) -> bool:
 
 
 def load(name: str) -> Any:
-    """The kernel module ``name`` (mpc, mhe, plant, lqr, inner), compiled or loaded from the cache; None
+    """The kernel module ``name`` (mpc, mhe, plant, lqr, blocks), compiled or loaded from the cache; None
     when the kernels are off or numba is unavailable (the caller then uses numpy)."""
     global _LOADED, _FAILED, _FAILURE
     if not enabled() or _FAILED:
@@ -222,7 +222,7 @@ def forget_stale(folder: Path, prefix: str, sources: tuple[str, ...], stamp_name
                  blocks: tuple[str, ...]) -> None:
     """numba keys a cached function by its own file only: a kernel's machine code that contains
     code of other modules (the run engine: kernels/mpc.py, mhe.py, lqr.py, plant.py; the inner
-    block's call: kernels/inner.py, lqr.py; both: the ``@jitable`` blocks of
+    block's call: kernels/blocks.py, lqr.py; both: the ``@jitable`` blocks of
     :data:`tsmpc.kernels.jit.BLOCK_MODULES`) would outlive an edit of one of them. So the cache
     entries ``<prefix>.*`` carry the hash of those ``sources`` (kernel modules by name) and
     ``blocks`` (modules by dotted name) in a file beside them, ``stamp_name``, and are deleted when

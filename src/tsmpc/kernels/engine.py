@@ -41,7 +41,20 @@ from numba import njit
 from numba.core import cgutils, types
 from numba.extending import intrinsic as _numba_intrinsic
 
-from tsmpc.control.gates import GateParams, dead_reckon, jump_run, plausible_speeds, pose_consistent
+from tsmpc.control.gates import (
+    GC_JUMP,
+    GC_NAN,
+    GC_REINIT,
+    GC_REPEATED,
+    GC_SPEED,
+    N_GC,
+    N_GS,
+    GateBlockParams,
+    GateParams,
+    dead_reckon,
+    pose_gate,
+    speed_gate,
+)
 from tsmpc.control.governor import (
     GovernorParams,
     GovernorState,
@@ -77,7 +90,6 @@ from tsmpc.estimation.fusion import (
     GyroState,
     Interval,
     MassParams,
-    RepeatState,
     SlipFit,
     SpeedFit,
     SteerParams,
@@ -89,7 +101,6 @@ from tsmpc.estimation.fusion import (
     delta_mass,
     gyro_bias,
     gyro_sample,
-    repeat_check,
     slip_correction,
     speed_offset,
     steer_command,
@@ -139,16 +150,17 @@ PH_START, PH_PLAN, PH_MHE, PH_POST_MHE, PH_POST_LQR, PH_POST_PLANT = range(6)
 ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP = MHE_OK, MHE_REJECTED, MHE_FAILED, MHE_WARMUP
 assert (ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP) == (EST_OK, EST_REJECTED, EST_FAILED, EST_WARMUP)
 MPC_OPTIMAL, MPC_SOFT, MPC_FALLBACK = 1, 2, 3
-# event counters: the cascade's own, then the inner block's (its IC_* counters, a view of ev)
-(EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_POSE_REJ, EV_TIME_REJ,
- EV_STAMP_REJ, EV_SPEED_REJ, EV_JUMP_REJ, EV_POSE_NAN, EV_REINIT, EV_BLIND, EV_RECOVER,
- EV_STALE_REJ, EV_STEP_ERR, EV_REPEATED, EV_INNER) = range(16)
+# event counters: the cascade's own, then the gate block's and the inner block's (their GC_* and
+# IC_* counters, views of ev)
+(EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_POSE_REJ, EV_TIME_REJ, EV_STAMP_REJ, EV_BLIND, EV_RECOVER,
+ EV_STALE_REJ, EV_STEP_ERR, EV_GATES) = range(11)
+EV_INNER = EV_GATES + N_GC
 N_EVENTS = EV_INNER + N_IC
 #: the slot of each of Cascade.events' counters, in its order
 EVENT_SLOTS = (EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_INNER + IC_REJECTED, EV_INNER + IC_FAILED,
-               EV_INNER + IC_SATURATED, EV_POSE_REJ, EV_TIME_REJ, EV_STAMP_REJ, EV_SPEED_REJ, EV_JUMP_REJ,
-               EV_POSE_NAN, EV_REINIT, EV_BLIND, EV_RECOVER, EV_STALE_REJ, EV_STEP_ERR, EV_REPEATED,
-               EV_INNER + IC_FSTEPS)
+               EV_INNER + IC_SATURATED, EV_POSE_REJ, EV_TIME_REJ, EV_STAMP_REJ, EV_GATES + GC_SPEED,
+               EV_GATES + GC_JUMP, EV_GATES + GC_NAN, EV_GATES + GC_REINIT, EV_BLIND, EV_RECOVER,
+               EV_STALE_REJ, EV_STEP_ERR, EV_GATES + GC_REPEATED, EV_INNER + IC_FSTEPS)
 
 # ---------------------------------------------------------------------------- float parameters
 (FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_V_LO, FP_V_HI, FP_W_LIM, FP_POSE_NOISE, FP_HEAD_NOISE,
@@ -173,21 +185,22 @@ N_FP = FP_SENS + N_SP
 N_IP = 33
 # ---------------------------------------------------------------------------- float state
 (SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, SF_HELD, _H1, _H2, SF_UPREV, _U1, SF_UAPP, _A1,
- SF_PLANTU, _PU1, SF_LASTA, SF_GUARD, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
+ SF_PLANTU, _PU1, SF_LASTA, _FREE12, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
  SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, _FREE0, _FREE1, SF_AHPREV,
  _FREE4, _FREE5, _FREE6, _FREE7, _FREE8, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2,
  SF_VNOW, SF_ACT, _AC1, SF_LOW, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, SF_N2,
- SF_N1, SF_JUMP, _J1, _J2, _J3, SF_JT0,
+ SF_N1, _FREE13, _J1, _J2, _J3, _FREE14,
  SF_TOFF, SF_GRATE, SF_GGRIP, SF_GHOLD,
  SF_GYTH0, SF_GYINT, SF_GYWLAST, SF_GYSB, SF_GYSW,  # SF_GY*: the GyroState's floats
  SF_STOMF, SF_STDEF, SF_STDDF, SF_STS11, SF_STS12, SF_STS22, SF_STB1, SF_STB2,  # the SteerState's floats
  SF_STOFF, SF_STSENT) = range(85)  # the steering offset in force, the angle last sent (Cascade)
 SF_IB = 85  # the inner block's state (N_IB values, tsmpc.control.inner_block's IB_* slots)
-SF_SENS = SF_IB + N_IB  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
+SF_GS = SF_IB + N_IB  # the gate block's state (N_GS values, tsmpc.control.gates' GS_* slots)
+SF_SENS = SF_GS + N_GS  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
 N_SF = SF_SENS + N_SS
 # ---------------------------------------------------------------------------- integer state
-(SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, SI_GUARDHAS, SI_GATEN, SI_IVN, _SFREE0, SI_NCHORDS,
+(SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, _SFREE5, SI_GATEN, SI_IVN, _SFREE0, SI_NCHORDS,
  SI_HASAH, _SFREE1, _SFREE2, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
  SI_FRESH, SI_SPOK, SI_POSEOK, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
  SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, _SFREE3, _SFREE4,
@@ -337,18 +350,6 @@ def _pose_errors(X, Y, th, xd, yd, thd, out):
 # The fusion's blocks are tsmpc.estimation.fusion's (one definition); here their records are
 # loaded from and stored to the engine's state slots around each call.
 assert RING == 8  # _course_load lists the ring's intervals one by one
-
-
-@njit(cache=True, fastmath=False)
-def _repeated(X, Y, th, v, omega, sf, si):
-    """The repeat guard (:func:`repeat_check`; the simulator's samples carry no stamp)."""
-    same, g = repeat_check(RepeatState(si[SI_GUARDHAS] != 0, sf[SF_GUARD], sf[SF_GUARD + 1],
-                                       sf[SF_GUARD + 2], sf[SF_GUARD + 3], sf[SF_GUARD + 4], -math.inf),
-                           X, Y, th, v, omega, -math.inf)
-    si[SI_GUARDHAS] = 1 if g.has else 0
-    sf[SF_GUARD], sf[SF_GUARD + 1], sf[SF_GUARD + 2], sf[SF_GUARD + 3], sf[SF_GUARD + 4] = \
-        g.X, g.Y, g.theta, g.v, g.omega
-    return same
 
 
 @njit(cache=True, fastmath=False)
@@ -639,20 +640,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     gates = GateParams(fp[FP_V_LO], fp[FP_V_HI], fp[FP_W_LIM], fp[FP_POSE_NOISE], fp[FP_HEAD_NOISE], Td)
     cpar = course_params(Tc, fp[FP_COURSE_SIGMA], True, fp[FP_CF0], fp[FP_CR0], fp[FP_VM], fp[FP_VI],
                          fp[FP_VA], fp[FP_VB], fp[FP_VG], Td, n_in)
-    gpar = GyroParams(fp[FP_GYRO], fp[FP_GYRO + 1], fp[FP_GYRO + 2], fp[FP_GYRO + 3])
-    sens = unpack_params(fp[FP_SENS:FP_SENS + N_SP])
-    act = ActuatorParams(fp[FP_A_GF], fp[FP_A_GD], fp[FP_A_RMAX], fp[FP_A_DOFF], ip[IP_ACT_N])
-    sens_state = sf[SF_SENS:SF_SENS + N_SS]
-    # the TS-LQR's records (TSLQR._inner, TSLQR._law: the same values)
-    lqr_p = InnerParams(ip[IP_COMP] != 0, ip[IP_UIO] != 0, ip[IP_LOWRES] != 0, zlo[1], prm[6] * prm[0])
-    law = LQRLaw(Kv, zlo, zhi, bits, prm, fp[FP_L_LAM], fp[FP_L_AF], fp[FP_L_TD], fp[FP_L_FMIN],
-                 fp[FP_L_FMAX], fp[FP_L_DMIN], fp[FP_L_DMAX], ip[IP_LQR_SFB] != 0, fp[FP_L_TAU])
-    # the inner block's (Cascade._ib): friction step, mass terms, the TS-LQR's records; its state and counters
-    ibp = InnerBlockParams(ip[IP_FSTEP] != 0, FrictionStepParams(ip[IP_NW], fp[FP_FS_H]), ip[IP_MASSEST] != 0,
-                           MassParams(fp[FP_VM], Td, ip[IP_NW], fp[FP_TAU], ip[IP_SPEEDFB] != 0), lqr_p)
-    ibs = sf[SF_IB:SF_IB + N_IB]
-    icnt = ev[EV_INNER:EV_INNER + N_IC]
-    mhe_views = (sf[SF_MX:SF_MX + N_MS], si[SI_NY:SI_NY + N_MI], sc[SC_UK:SC_UK + 2])
+    # (each phase's records and state views are made in the phase: the batch enters run() about
+    # three times a step, at its phases)
     while si[SI_M] < m_end:
         m = si[SI_M]
         k = m // n_in
@@ -660,6 +649,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
         t = m * Td
         phase = si[SI_PHASE]
         if phase == PH_START:
+            sens_state = sf[SF_SENS:SF_SENS + N_SS]
+            sens = unpack_params(fp[FP_SENS:FP_SENS + N_SP])
             # ---- sensors and the outer-step log (simulate)
             _sensor(m, k * Tc if j == 0 else t, x, noise, u_drop, gnss, sens, sens_state, fifo, y)
             if j == 0:
@@ -681,32 +672,13 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                     return DIVERGED
             # ---- Cascade._step: gates
             X, Y, th, v, omv = y[0], y[1], y[2], y[3], y[4]
-            fresh = True
-            speeds_ok = plausible_speeds(gates, v, omv)
-            if not speeds_ok:
-                ev[EV_SPEED_REJ] += 1
-            if ip[IP_REPEAT] != 0 and _repeated(X, Y, th, v, omv, sf, si):
-                fresh = False
-                ev[EV_REPEATED] += 1
-            pose_ok = fresh and math.isfinite(X) and math.isfinite(Y) and math.isfinite(th)
-            if fresh and not pose_ok:
-                ev[EV_POSE_NAN] += 1
-            if pose_ok and not pose_consistent(gates, X, Y, th, sf[SF_POSE], sf[SF_POSE + 1],
-                                               sf[SF_POSE + 2], t - sf[SF_POSET]):
-                take = False  # Cascade._accept_pose: a jump from the dead-reckoned pose
-                if ip[IP_RECOV] != 0:  # ... unless a run of consistent ones (recovery)
-                    take, sf[SF_JT0] = jump_run(gates, fp[FP_REINIT], sf[SF_JT0], sf[SF_JUMP],
-                                                sf[SF_JUMP + 1], sf[SF_JUMP + 2], sf[SF_JUMP + 3],
-                                                X, Y, th, t)
-                    sf[SF_JUMP], sf[SF_JUMP + 1], sf[SF_JUMP + 2], sf[SF_JUMP + 3] = X, Y, th, t
-                if take:
-                    ev[EV_REINIT] += 1
-                    sf[SF_JT0] = math.nan
-                else:
-                    ev[EV_JUMP_REJ] += 1
-                    pose_ok = False
-            elif pose_ok:
-                sf[SF_JT0] = math.nan
+            # the gate block (Cascade._gate_p, its state and counters; the simulator's samples carry no stamp)
+            gbp = GateBlockParams(gates, ip[IP_RECOV] != 0, fp[FP_REINIT], ip[IP_REPEAT] != 0)
+            gsv = sf[SF_GS:SF_GS + N_GS]
+            gcnt = ev[EV_GATES:EV_GATES + N_GC]
+            speeds_ok = speed_gate(gates, gcnt, v, omv)
+            fresh, pose_ok = pose_gate(gbp, gsv, gcnt, t, True, X, Y, th, v, omv, -math.inf, True,
+                                       sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], sf[SF_POSET])
             if pose_ok:
                 sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2] = X, Y, th
                 sf[SF_POSET] = t
@@ -717,6 +689,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             # from here on (the course fusion, the MHE's measurement below)
             gb = 0.0
             if ip[IP_GYRO] != 0:
+                gpar = GyroParams(fp[FP_GYRO], fp[FP_GYRO + 1], fp[FP_GYRO + 2], fp[FP_GYRO + 3])
                 gb = _gyro_step(gpar, pose_ok, th, fresh and speeds_ok, omv, sf, si)
             omv = omv - gb
             mpc_step = si[SI_CALLS] % n_in == 0
@@ -834,7 +807,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 u0 = u0 - sf[SF_LOW]
             si[SI_TICK0] = _ticks()
             if _mhe_begin(sc[SC_YM], sc[SC_YM + 1], u0, u1, fp[FP_MHE_MASS], mY, mW, mU, mXS, mA,
-                          mB, mX, mp, mhe_views, sf, si, sc, ip) != 0:
+                          mB, mX, mp, (sf[SF_MX:SF_MX + N_MS], si[SI_NY:SI_NY + N_MI], sc[SC_UK:SC_UK + 2]),
+                          sf, si, sc, ip) != 0:
                 si[SI_PHASE] = PH_POST_MHE
                 return NEED_MHE
             li[m, LI_TMHE] = float(_ticks() - si[SI_TICK0])
@@ -854,7 +828,18 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                             and not (si[SI_HASLAST] != 0 and si[SI_SAT] != 0), ev0,
                             y[4] - _gyro_now(ip, sf, si), sf, si)
             # the inner block (Cascade._inner): friction step, mass terms, TS-LQR, events; the
-            # numpy law (a singular N̄) is the caller's, with the block's compensation and residual
+            # numpy law (a singular N̄) is the caller's, with the block's compensation and residual.
+            # Its records (Cascade._ib; TSLQR._inner, TSLQR._law: the same values), state, counters
+            lqr_p = InnerParams(ip[IP_COMP] != 0, ip[IP_UIO] != 0, ip[IP_LOWRES] != 0, zlo[1],
+                                prm[6] * prm[0])
+            law = LQRLaw(Kv, zlo, zhi, bits, prm, fp[FP_L_LAM], fp[FP_L_AF], fp[FP_L_TD], fp[FP_L_FMIN],
+                         fp[FP_L_FMAX], fp[FP_L_DMIN], fp[FP_L_DMAX], ip[IP_LQR_SFB] != 0, fp[FP_L_TAU])
+            ibp = InnerBlockParams(ip[IP_FSTEP] != 0, FrictionStepParams(ip[IP_NW], fp[FP_FS_H]),
+                                   ip[IP_MASSEST] != 0,
+                                   MassParams(fp[FP_VM], Td, ip[IP_NW], fp[FP_TAU], ip[IP_SPEEDFB] != 0),
+                                   lqr_p)
+            ibs = sf[SF_IB:SF_IB + N_IB]
+            icnt = ev[EV_INNER:EV_INNER + N_IC]
             out = inner_block(ibp, law, ls, ibs, mass_v, icnt, ev0, ev1, ev2, sc[SC_ESTF], sc[SC_ESTFR],
                               si[SI_ESTSTAT], sc[SC_VREF], sc[SC_WREF])
             if out.status == LQR_NUMPY:
@@ -900,6 +885,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                     return NEED_PLANT
                 sf[SF_PLANTU], sf[SF_PLANTU + 1] = sc[SC_OF], sc[SC_OD]
             else:
+                act = ActuatorParams(fp[FP_A_GF], fp[FP_A_GD], fp[FP_A_RMAX], fp[FP_A_DOFF], ip[IP_ACT_N])
                 xn, ok = _actuated(x, sc[SC_OF], sc[SC_OD], mu, act, fp, ip, sf, si, cst)
                 if not ok:
                     si[SI_PHASE] = PH_POST_PLANT

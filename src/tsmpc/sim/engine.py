@@ -133,8 +133,8 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
     "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
-    "tsmpc.control.cascade:Cascade.__init__": "e04993d36852e86f",
-    "tsmpc.control.cascade:Cascade.reset": "88f0e8d26885ab5e",
+    "tsmpc.control.cascade:Cascade.__init__": "2c571001cda672d7",
+    "tsmpc.control.cascade:Cascade.reset": "0b1b8c5bd95e85c7",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
     "tsmpc.control.cascade:Cascade._step": "14337833d5610532",
     "tsmpc.control.cascade:Cascade._gyro": "d4f0749f2a101860",
@@ -144,7 +144,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade._servo_plain": "308054ab84aa02b6",
     "tsmpc.control.cascade:_NoCourse": "35449a3e893bc074",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
-    "tsmpc.control.cascade:Cascade._gate": "d9c505541bd394e7",
+    "tsmpc.control.cascade:Cascade._gate": "696dd9b43cc81793",
     "tsmpc.control.cascade:Cascade._outer": "6153de103bbe0efc",
     "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
     "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
@@ -154,10 +154,8 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.governor:governed_window": "cadafab2efb735cb",
     "tsmpc.control.governor:Governor.step": "12200cfb7c1bc640",
     "tsmpc.control.cascade:Cascade._estimate": "6008b3dd2bedaea5",
-    "tsmpc.control.cascade:Cascade._plausible_speeds": "4b22de6905cbdf56",
-    "tsmpc.control.cascade:Cascade._accept_pose": "d00e5362890189a2",
     "tsmpc.control.cascade:Cascade._dead_reckon": "d73049a3445880ad",
-    "tsmpc.control.cascade:Cascade._watch_samples": "7a7df27fe2b75dfc",
+    "tsmpc.control.cascade:Cascade._watch_samples": "a2b6f37a111ff688",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
     "tsmpc.control.cascade:Cascade._apply_stiffness": "fe7618eb687caf00",
@@ -671,7 +669,7 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     ip[ke.IP_MFORCE], ip[ke.IP_MSTEER] = scenario.measured_force, scenario.measured_steering
     rc = cascade._recovery
     ip[ke.IP_RECOV] = rc is not None
-    fp[ke.FP_REINIT] = 0.0 if rc is None else rc.pose_reinit_s
+    fp[ke.FP_REINIT] = cascade._gate_p.reinit_s
     gov = cascade.governor
     ip[ke.IP_GOV] = gov is not None
     if gov is not None:  # the speed governor's parameters (Cascade._govern's inputs)
@@ -700,8 +698,7 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf[ke.SF_POSET] = cascade._pose_t
     # recovery: the run of poses rejected as jumps (the blind stop is not reproduced:
     # applicability() keeps runs that can blind the cascade in Python)
-    sf[ke.SF_JT0] = cascade._jump_t0
-    sf[ke.SF_JUMP:ke.SF_JUMP + 4] = cascade._jump_last
+    sf[ke.SF_GS:ke.SF_GS + ke.N_GS] = cascade._gs  # the gate block's (the jump run, the repeat guard)
     si[ke.SI_GATEN] = cascade._slip_gate.n_poses
     sf[ke.SF_UPREV:ke.SF_UPREV + 2] = cascade._u_prev
     sf[ke.SF_UAPP:ke.SF_UAPP + 2] = cascade._u_applied

@@ -1,12 +1,13 @@
-"""The cascade's compiled call of the inner block (:func:`tsmpc.control.inner_block.inner_block`, its
-one definition): the block's records rebuilt from arrays inside the compiled code, because numba's
-dispatcher types a record argument field by field (≈ 0.15 µs a field, more than the block's work),
-an array at once.
+"""The cascade's compiled calls of its blocks (their one definitions: the inner block
+:func:`tsmpc.control.inner_block.inner_block`, the pose gate :func:`tsmpc.control.gates.pose_gate`):
+the blocks' records rebuilt from arrays inside the compiled code, because numba's dispatcher types
+a record argument field by field (≈ 0.15 µs a field, more than the block's work), an array at once.
 
 :func:`pack` writes :class:`~tsmpc.control.inner_block.InnerBlockParams` and the TS-LQR's
 :class:`~tsmpc.control.ts_lqr.LQRLaw` scalars into one float vector (slots ``BP_*``); :func:`inner_call`
 rebuilds both records from it (and the law's arrays, passed as they are: ``prm`` is written in place
-by the stiffness fit) and runs the block.
+by the stiffness fit) and runs the block. :func:`pack_gates` and :func:`pose_call` do the same for the
+gate block's :class:`~tsmpc.control.gates.GateBlockParams`.
 
 The block's machine code is part of this module's cache entry although its source is not: the
 entry carries the hash of the block modules (:func:`tsmpc.kernels.forget_stale`, as the run engine's).
@@ -18,18 +19,19 @@ import numpy as np
 from numba import njit
 
 from tsmpc import kernels
+from tsmpc.control.gates import GateBlockParams, GateParams, gate_state, pose_gate
 from tsmpc.control.inner_block import InnerBlockParams, inner_block, start_state
 from tsmpc.control.ts_lqr import InnerParams, LQRLaw
 from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import MassParams
 from tsmpc.kernels.jit import BLOCK_MODULES
 
-__all__ = ["inner_call", "pack", "warm"]
+__all__ = ["inner_call", "pack", "pack_gates", "pose_call", "warm"]
 
 # entries compiled from other versions of the blocks (or of the law, kernels/lqr.py) are deleted
 # before the first call below loads one
-kernels.forget_stale(kernels._tree_folder(kernels.numba_cache_dir()), "inner", ("inner", "lqr"),
-                     "inner.blocks-sha256", BLOCK_MODULES)
+kernels.forget_stale(kernels._tree_folder(kernels.numba_cache_dir()), "blocks", ("blocks", "lqr"),
+                     "blocks.blocks-sha256", BLOCK_MODULES)
 
 (BP_FSTEP, BP_FS_WINDOW, BP_FS_H, BP_MASSEST, BP_M_MASS, BP_M_TD, BP_M_WINDOW, BP_M_TAU, BP_M_SFB,
  BP_COMP, BP_RAW, BP_LOW, BP_VMIN, BP_RES,
@@ -68,8 +70,26 @@ def inner_call(bp, Kv, zlo, zhi, bits, prm, s, st, ring, cnt, v, alpha, omega, F
     return out.F_xR, out.delta, out.saturated, out.F_comp, out.F_low_speed, out.status
 
 
+def pack_gates(p: GateBlockParams) -> np.ndarray:
+    """The gate block's record as the float vector :func:`pose_call` reads (GateParams' fields, then
+    recovery, reinit_s, repeat)."""
+    return np.array([*p.gates, p.recovery, p.reinit_s, p.repeat], dtype=np.float64)
+
+
+@njit(cache=True, fastmath=False)
+def pose_call(gbp, gs, cnt, t, fresh, X, Y, theta, v, omega, stamp, has_pose, px, py, pth, pose_t):
+    """:func:`~tsmpc.control.gates.pose_gate` of the packed record: (fresh, pose accepted)."""
+    p = GateBlockParams(GateParams(gbp[0], gbp[1], gbp[2], gbp[3], gbp[4], gbp[5]), gbp[6] != 0.0, gbp[7],
+                        gbp[8] != 0.0)
+    return pose_gate(p, gs, cnt, t, fresh, X, Y, theta, v, omega, stamp, has_pose, px, py, pth, pose_t)
+
+
 def warm() -> None:
-    """Compile (or load from the cache) the signature the cascade uses."""
+    """Compile (or load from the cache) the signatures the cascade uses."""
+    gs, gcnt = gate_state()
+    gp = GateBlockParams(GateParams(-1.0, 40.0, 4.0, 0.05, 0.01, 0.01), True, 2.0, True)
+    pose_call(pack_gates(gp), gs, gcnt, 0.01, True, 1.0, 2.0, 0.1, 10.0, 0.1, -np.inf, True, 1.0, 2.0, 0.1,
+              0.0)
     Kv = np.zeros((8, 2, 6))
     Kv[:, 0, 0] = -100.0
     Kv[:, 1, 2] = -0.1
