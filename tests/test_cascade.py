@@ -95,6 +95,27 @@ def test_step_never_raises_blocks_fall_back_and_count(cfg: Config, ref) -> None:
     assert cas.events["step_errors"] == 13  # 11 MHE calls, 1 MPC call, 1 LQR call
 
 
+
+def test_a_replaced_lqr_step_is_what_the_cascade_runs(cfg: Config, ref, monkeypatch) -> None:
+    """The default path runs the inner block in place of TSLQR.step; a step replaced on the class
+    (an instrumentation, a test's recorder) is called instead, with the block's compensated
+    estimate, and decides the command."""
+    from tsmpc.control.ts_lqr import TSLQR
+
+    x = _start(ref)
+    plain = Cascade(cfg, Method.REF, ref, x0=x).step(0.0, _meas(x))
+    seen = []
+    orig = TSLQR.step
+
+    def recorded(self, est, v_ref, w_ref):
+        seen.append(float(est.F_fr))
+        return orig(self, est, v_ref, w_ref)
+
+    monkeypatch.setattr(TSLQR, "step", recorded)
+    cmd = Cascade(cfg, Method.REF, ref, x0=x).step(0.0, _meas(x))
+    assert len(seen) == 1 and (cmd.F_xR, cmd.delta) == (plain.F_xR, plain.delta)
+
+
 def test_measured_applied_input_reaches_the_mhe(cfg: Config, ref) -> None:
     """The MHE's window holds the measured applied input, not the command, when given (the force
     net of the law's lqr.low_speed_resistance part, which its model lacks)."""

@@ -81,7 +81,7 @@ from tsmpc.control.inner_block import (
     start_state,
 )
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
-from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams
+from tsmpc.control.ts_lqr import LQR_NUMPY, TSLQR, InnerParams
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep, FrictionStepParams
 from tsmpc.estimation.fusion import MassParams, steer_command
@@ -91,7 +91,6 @@ from tsmpc.planning.reference import Reference
 
 if TYPE_CHECKING:
     from tsmpc.control.paper_as_run import AsRunLQR
-    from tsmpc.control.ts_lqr import TSLQR
     from tsmpc.estimation.mhe_uio import MHEUIO
 
 __all__ = ["EVENT_NAMES", "Cascade", "Command", "Measurement", "Method", "build_outer_controller"]
@@ -845,7 +844,8 @@ class Cascade:
         on the default path; the oracle, the published run's law, the blind stop (and a replaced
         ``lqr.step``) take the same block's parts around their own law."""
         lqr, code = self._ib_lqr, _EST_CODE[est.status]
-        if m.state is not None or self._blind_since is not None or lqr is None or "step" in lqr.__dict__:
+        if (m.state is not None or self._blind_since is not None or lqr is None or "step" in lqr.__dict__
+                or type(lqr).step is not _TSLQR_STEP):  # (a replaced step: the Python path calls it)
             return self._inner_other(m, est, v_hat, v_ref, w_ref, code)
         call = self._ib_call
         if call is not None:
@@ -936,6 +936,9 @@ def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied
             setter(*C)
     applied[:] = list(C)
 
+
+#: TSLQR.step as defined (Cascade._inner calls the block in its place unless it was replaced)
+_TSLQR_STEP = TSLQR.step
 
 #: The estimator's status as the inner block's code (inner_block.EST_*)
 _EST_CODE = {EstimatorStatus.OK: EST_OK, EstimatorStatus.REJECTED: EST_REJECTED,

@@ -224,12 +224,10 @@ _PORTED_CLASSES = (
     ("tsmpc.sensors", "SensorNoise"), ("tsmpc.scenarios", "PaperFriction"),
     ("tsmpc.scenarios", "PatchFriction"), ("tsmpc.scenarios", "ConstantFriction"),
     ("tsmpc.estimation.fusion", "Fusion"), ("tsmpc.estimation.fusion", "CourseFusion"),
-    ("tsmpc.estimation.fusion", "MassEstimator"), ("tsmpc.estimation.fusion", "RepeatGuard"),
     ("tsmpc.control.slip_aware", "SlipGate"), ("tsmpc.sensors", "SensorModel"),
     ("tsmpc.scenarios", "EventFriction"), ("tsmpc.scenarios", "ResolvedEvent"),
     ("tsmpc.sensors", "DropoutFault"), ("tsmpc.sensors", "NaNBurstFault"),
     ("tsmpc.vehicle.actuators", "ActuatedPlant"), ("tsmpc.vehicle.actuators", "Actuators"),
-    ("tsmpc.estimation.friction_step", "FrictionStep"),
 )
 #: Module-level functions the loop calls by name (module, name, where it is defined).
 _PORTED_FUNCTIONS = (
