@@ -523,6 +523,11 @@ class MPCSettings(_Frozen):
         default=True, description="beyond the paper: the measured e_θ against the path's tangent at the "
         "sample (θ_d moved forward by its measured lag, half the reference's own period)"
     )
+    offset_free_s: NonNegFloat = Field(
+        default=10.0, le=600.0, description="beyond the paper: time constant τ [s] of the offset-free "
+        "outer loop's heading and speed disturbance estimates (control/offset_free.py), 0 = off, else "
+        "1 to 600 s"
+    )
     step_average_reference: StrictBool = Field(
         default=True, description="beyond the paper: the reference inputs of each T_c step are that step's "
         "averages from the path geometry, ω_d = Δθ_tangent / T_c and v_d = chord / T_c (the "
@@ -546,6 +551,8 @@ class MPCSettings(_Frozen):
         _within((self.u_min[1], self.u_max[1]), "u_min/u_max[ω]", -OMEGA_LIMIT, OMEGA_LIMIT, "rad/s")
         _within(self.du_max[:1], "du_max[v]", 1e-3, 100.0, "m/s per step")
         _within(self.du_max[1:], "du_max[ω]", 1e-4, OMEGA_LIMIT, "rad/s per step")
+        if 0.0 < self.offset_free_s < 1.0:
+            raise ValueError(f"offset_free_s = {self.offset_free_s} s: 0 (off) or 1 to 600 s")
         return self
 
 
@@ -1205,7 +1212,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     # Its force limits are the published absolute [-2000, 10000] N (they do not follow the mass).
     "paper": {"lqr": {"speed_feedback": False, "friction_estimate": "uio", "low_speed_resistance": False,
                       "friction_step": False, "force_min": -2000.0, "force_max": 10000.0},
-              "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False},
+              "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False,
+                      "offset_free_s": 0.0},
               "fusion": _FUSION_OFF, "recovery": {"enabled": False}, "governor": {"enabled": False}},
     # The paper as it was run (the published run): the ``paper`` preset plus every quirk of the published
     # simulation, each its own switch. Quirks of that run, not recommendations; never the default.
@@ -1223,7 +1231,8 @@ PRESETS: dict[str, dict[str, Any]] = {
                 "true_state_feedback": True,  # the inner law on the true states; MHE unused
                 "law": "as-run", "steering_bias_rad": 0.5236, "scheduling_speed_shift": 2.0,
                 "extrapolate_memberships": True, "initial_filter_state": (4355.15, 0.52466)},
-        "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False},
+        "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False,
+                      "offset_free_s": 0.0},
         "noise": {"scale": 0.0},  # the noise model existed but was not called
         "metrics": {"paper_run_rmse": True},
         "fusion": _FUSION_OFF,

@@ -80,6 +80,7 @@ from tsmpc.control.inner_block import (
     inner_block,
     start_state,
 )
+from tsmpc.control.offset_free import NoOffset, OffsetFree
 from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
 from tsmpc.control.ts_lqr import LQR_NUMPY, TSLQR, InnerParams
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
@@ -322,6 +323,9 @@ class Cascade:
         self._servo = self._servo_offset if cfg.fusion.steering_offset else self._servo_plain
         self._build_inner_block(cfg)
         self.governor = _build_governor(cfg) if cfg.governor.enabled else None  # issue 36
+        # beyond the paper: the offset-free outer loop: a course-offset estimate (offset_free.py)
+        self._offset: OffsetFree | NoOffset = (OffsetFree(self.Tc, cfg.mpc.offset_free_s)
+                                               if cfg.mpc.offset_free_s > 0 else NoOffset())
         self.road_mu = math.nan  # governor.grip_source = "oracle": the true μ(road), set by the simulator
         self.reset(x0)
 
@@ -338,6 +342,7 @@ class Cascade:
         self.mhe.reset(None if self._x0 is None else self._x0[3:6].copy())
         self.lqr.reset()
         self._slip_gate.reset()
+        self._offset.reset()
         self._fusion.reset(None if self._x0 is None else self._x0[:3])
         self._ib_state, self._ib_ring, self._ib_count = start_state(self.cfg.mhe.N)
         if getattr(self, "_stiffness_applied", None):  # back to the config's stiffnesses
@@ -665,6 +670,7 @@ class Cascade:
         else:
             e_meas = self._outer_errors(p, min(k, len(self.reference) - 1))  # type: ignore[arg-type]
             window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
+        e_meas = self._offset.correct(e_meas, _next_errors(self._plan), float(self._u_prev[0]))  # type: ignore[index]
         t0 = time.perf_counter()
         try:
             plan = self.mpc.step(e_meas, self._u_prev, window)
@@ -943,6 +949,13 @@ _TSLQR_STEP = TSLQR.step
 #: The estimator's status as the inner block's code (inner_block.EST_*)
 _EST_CODE = {EstimatorStatus.OK: EST_OK, EstimatorStatus.REJECTED: EST_REJECTED,
              EstimatorStatus.FAILED: EST_FAILED, EstimatorStatus.WARMUP: EST_WARMUP}
+
+
+def _next_errors(plan: MPCResult | None) -> NDArray[np.float64] | None:
+    """The errors a plan predicted for the next MPC step (x_pred[1]), None without one."""
+    if plan is None or len(plan.x_pred) < 2:
+        return None
+    return np.asarray(plan.x_pred[1], dtype=float)
 
 
 def _oracle_estimate(state: ArrayLike) -> Estimate:

@@ -80,6 +80,7 @@ from tsmpc.control.inner_block import (
     inner_block,
     mass_load,
 )
+from tsmpc.control.offset_free import OffsetParams, offset_update
 from tsmpc.control.slip_aware import slip_gate_update
 from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams, LQRLaw
 from tsmpc.estimation.friction_step import FrictionStepParams
@@ -170,9 +171,9 @@ EVENT_SLOTS = (EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_INNER + IC_REJECTED, EV_INNE
  FP_A_GF, FP_A_GD, FP_A_RMAX, FP_A_DOFF, FP_FS_H, FP_REINIT,
  FP_G_MARGIN, FP_G_RDOWN, FP_G_RUP, FP_G_RMIN, FP_G_MUPLAN, FP_G_DEADBAND, FP_G_KT, FP_G_DRAG,
  FP_G_G, FP_G_TC, FP_G_ALPHA, FP_G_VMIN, FP_G_MUNOM, FP_G_MUDRY, FP_G_GPR, FP_G_REAR, FP_G_FMAX,
- FP_G_DT, FP_G_MDT) = range(55)
-FP_GYRO = 55  # the yaw-rate bias fit's GyroParams (Td, var_theta, var_omega, prior_w)
-FP_STEER = 59  # the steering-offset fit's SteerParams (N_STEER_P fields, in their order)
+ FP_G_DT, FP_G_MDT, FP_OFF_GAIN) = range(56)
+FP_GYRO = 56  # the yaw-rate bias fit's GyroParams (Td, var_theta, var_omega, prior_w)
+FP_STEER = 60  # the steering-offset fit's SteerParams (N_STEER_P fields, in their order)
 N_STEER_P = 18
 FP_SENS = FP_STEER + N_STEER_P  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
 N_FP = FP_SENS + N_SP
@@ -181,12 +182,12 @@ N_FP = FP_SENS + N_SP
  IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
  IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV,
- IP_GOV, IP_G_ORACLE, IP_G_PREVIEW, IP_GYRO, IP_DEFER, IP_STEER) = range(33)
-N_IP = 33
+ IP_GOV, IP_G_ORACLE, IP_G_PREVIEW, IP_GYRO, IP_DEFER, IP_STEER, IP_OFFSET) = range(34)
+N_IP = 34
 # ---------------------------------------------------------------------------- float state
 (SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, SF_HELD, _H1, _H2, SF_UPREV, _U1, SF_UAPP, _A1,
  SF_PLANTU, _PU1, SF_LASTA, _FREE12, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
- SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, _FREE0, _FREE1, SF_AHPREV,
+ SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_OFFB, _FREE1, SF_AHPREV,
  _FREE4, _FREE5, _FREE6, _FREE7, _FREE8, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2,
  SF_VNOW, SF_ACT, _AC1, SF_LOW, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, SF_N2,
@@ -745,6 +746,10 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                     _pose_errors(px, py, pth + a, xd, yd, th_d + 0.5 * 0.0, e_meas)
                 else:
                     _pose_errors(px, py, pth, xd, yd, thd, e_meas)
+                if ip[IP_OFFSET] != 0:  # the offset-free outer loop (Cascade._offset.correct)
+                    sf[SF_OFFB] = offset_update(OffsetParams(fp[FP_OFF_GAIN], Tc), sf[SF_OFFB], e_meas[1],
+                                                prevX[1, 1], si[SI_HASPREV] != 0, sf[SF_UPREV])
+                    e_meas[2] = e_meas[2] + sf[SF_OFFB]
                 # ---- TSMPC.step: its compiled step (checks, schedule, Riccati fast path); a
                 # declined step (a constraint active, a non-finite input) is the caller's
                 tick = _ticks()

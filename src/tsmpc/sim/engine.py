@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
 from tsmpc.control.cascade import EVENT_NAMES, Cascade
 from tsmpc.control.governor import governed_window
+from tsmpc.control.offset_free import OffsetFree
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
 from tsmpc.estimation.mhe_uio import EstimatorStatus
@@ -133,8 +134,8 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
     "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
-    "tsmpc.control.cascade:Cascade.__init__": "2c571001cda672d7",
-    "tsmpc.control.cascade:Cascade.reset": "0b1b8c5bd95e85c7",
+    "tsmpc.control.cascade:Cascade.__init__": "593484c657cc6a63",
+    "tsmpc.control.cascade:Cascade.reset": "ad3de8e43f7114ca",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
     "tsmpc.control.cascade:Cascade._step": "14337833d5610532",
     "tsmpc.control.cascade:Cascade._gyro": "d4f0749f2a101860",
@@ -145,7 +146,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:_NoCourse": "35449a3e893bc074",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "696dd9b43cc81793",
-    "tsmpc.control.cascade:Cascade._outer": "6153de103bbe0efc",
+    "tsmpc.control.cascade:Cascade._outer": "d6d30981bbc4b6bc",
     "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
     "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
     "tsmpc.control.cascade:Cascade._govern": "048bb8890267a4cb",
@@ -655,6 +656,9 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     ip[ke.IP_STIFF], ip[ke.IP_MASSEST] = fs.stiffness_estimate, fs.mass_estimate
     ip[ke.IP_GYRO] = fs.gyro_bias
     fp[ke.FP_GYRO:ke.FP_GYRO + 4] = fu.gyro.params
+    off = cascade._offset
+    if isinstance(off, OffsetFree):  # mpc.offset_free_s (control/offset_free.py)
+        ip[ke.IP_OFFSET], fp[ke.FP_OFF_GAIN] = 1, off.params.gain
     ip[ke.IP_STEER] = fs.steering_offset
     assert len(fu.steer_p) == ke.N_STEER_P  # (the kernel rebuilds the record from these slots)
     fp[ke.FP_STEER:ke.FP_STEER + ke.N_STEER_P] = fu.steer_p
