@@ -37,6 +37,7 @@ def test_paper_preset_is_the_published_cascade() -> None:
     outer = ("slip_aware", "tangent_heading", "step_average_reference")
     assert not any(getattr(paper.mpc, f) for f in outer)
     assert all(getattr(default.mpc, f) for f in outer)
+    assert paper.mpc.offset_free_s == 0.0 and default.mpc.offset_free_s > 0.0  # offset_free.py
     # only the named switches differ (not the whole lqr section: force limits, compensation, ...)
     # the fusion and adaptation switches (issue 21) likewise
     fusion = set(type(default.fusion).model_fields)
@@ -52,7 +53,7 @@ def test_paper_preset_is_the_published_cascade() -> None:
     assert default.lqr.force_max is None and paper.lqr.force_max == 10000.0
     beyond = {"lqr": {"speed_feedback", "friction_estimate", "low_speed_resistance", "friction_step",
                       "force_min", "force_max", "force_min_per_kg", "force_max_per_kg"},
-              "mpc": set(outer),
+              "mpc": {*outer, "offset_free_s"},
               "fusion": fusion,
               "recovery": {"enabled"},
               "governor": {"enabled"}}  # issue 36: beyond the paper

@@ -526,6 +526,7 @@ class Cascade:
         self._reanchor = False
         self._catch_up = True
         self.mpc.reset()
+        self._offset.reset()  # what it integrated while blind was no course error
         self._plan = None
         if _finite(v, om):
             self._u_prev = np.array([max(v, 0.0), om])
@@ -670,7 +671,9 @@ class Cascade:
         else:
             e_meas = self._outer_errors(p, min(k, len(self.reference) - 1))  # type: ignore[arg-type]
             window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
-        e_meas = self._offset.correct(e_meas, _next_errors(self._plan), float(self._u_prev[0]))  # type: ignore[index]
+        # (not while a restart waits for the car: the reference's timing is not the MPC's model then)
+        learn = None if self._catch_up else _next_errors(self._plan)
+        e_meas = self._offset.correct(e_meas, learn, float(self._u_prev[0]))  # type: ignore[index]
         t0 = time.perf_counter()
         try:
             plan = self.mpc.step(e_meas, self._u_prev, window)

@@ -1,7 +1,7 @@
 """Offset-free outer loop (beyond the paper): the heading error the MPC sees corrected by a
 constant-disturbance estimate, integrated from the MPC's own one-step prediction error.
 
-Why. The kinematic error model the TS-MPC predicts with (paper eq. "kinematic model", SPEC §4) has
+Why. The kinematic error model the TS-MPC predicts with (paper eq. "kinematic model") has
 no term for what the loops below it get wrong *at steady state*, and the one that shows is the
 course: the car drives a few mrad off the velocity heading θ + α̂ the MPC measures (a slip model
 with the wrong stiffness or centre of gravity, a yaw-rate or steering bias the fits have not removed

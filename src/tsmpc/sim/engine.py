@@ -146,7 +146,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:_NoCourse": "35449a3e893bc074",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "696dd9b43cc81793",
-    "tsmpc.control.cascade:Cascade._outer": "d6d30981bbc4b6bc",
+    "tsmpc.control.cascade:Cascade._outer": "04eadd014d54102b",
     "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
     "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
     "tsmpc.control.cascade:Cascade._govern": "048bb8890267a4cb",
