@@ -551,9 +551,14 @@ class MPCSettings(_Frozen):
         _within((self.u_min[1], self.u_max[1]), "u_min/u_max[ω]", -OMEGA_LIMIT, OMEGA_LIMIT, "rad/s")
         _within(self.du_max[:1], "du_max[v]", 1e-3, 100.0, "m/s per step")
         _within(self.du_max[1:], "du_max[ω]", 1e-4, OMEGA_LIMIT, "rad/s per step")
-        if 0.0 < self.offset_free_s < 1.0:
-            raise ValueError(f"offset_free_s = {self.offset_free_s} s: 0 (off) or 1 to 600 s")
         return self
+
+    @field_validator("offset_free_s")
+    @classmethod
+    def _offset_free(cls, v: float) -> float:
+        if 0.0 < v < 1.0:
+            raise ValueError(f"{v} s: 0 (off) or 1 to 600 s")
+        return v
 
 
 #: The force limits per kg by default: the paper's [-2000, 10000] N at its 683 kg (× 683 gives them
