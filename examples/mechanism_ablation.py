@@ -8,7 +8,7 @@ and the cases that complete only with it (docs/mismatch.md shows this script's o
 
 The rule: a switch stays when some case is better by 5 % or more with it in some column (RMSE x, y,
 θ, v, ω or max |e_y|), or completes only with it; else it is removed, not switched off.
-:func:`mechanism_blocks` is the docs generator's section ``mechanisms``. 972 whole runs: ≈ 60 min
+:func:`mechanism_blocks` is the docs generator's section ``mechanisms``. 918 whole runs: ≈ 55 min
 with one worker on two shared cores.
 """
 
@@ -35,7 +35,6 @@ MECHANISMS = {
     "no-friction-step": ("lqr.friction_step", "friction-step detection"),
     "no-slip-aware": ("mpc.slip_aware", "the velocity-frame errors (slip-aware outer loop)"),
     "no-tangent": ("mpc.tangent_heading", "the path's tangent heading"),
-    "no-offset-free": ("mpc.offset_free_s", "the course-offset estimate (offset-free outer loop)"),
     "no-step-average": ("mpc.step_average_reference", "the T_c step averages of the reference"),
     "no-repeat-guard": ("fusion.reject_repeated_samples", "repeated samples treated as missing"),
     "no-predict-pose": ("fusion.predict_pose", "dead-reckoned pose for a missing one"),

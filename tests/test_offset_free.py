@@ -68,7 +68,7 @@ def test_the_block_corrects_the_heading_the_mpc_sees() -> None:
 
 
 def test_config() -> None:
-    assert Config().mpc.offset_free_s == 10.0
+    assert Config().mpc.offset_free_s == 0.0  # opt-in (docs/design-decisions.md)
     assert Config.preset("paper").mpc.offset_free_s == 0.0
     assert Config.preset("paper-as-run").mpc.offset_free_s == 0.0
     with pytest.raises(ConfigError, match="offset_free_s"):

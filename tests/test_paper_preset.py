@@ -37,7 +37,7 @@ def test_paper_preset_is_the_published_cascade() -> None:
     outer = ("slip_aware", "tangent_heading", "step_average_reference")
     assert not any(getattr(paper.mpc, f) for f in outer)
     assert all(getattr(default.mpc, f) for f in outer)
-    assert paper.mpc.offset_free_s == 0.0 and default.mpc.offset_free_s > 0.0  # offset_free.py
+    assert paper.mpc.offset_free_s == default.mpc.offset_free_s == 0.0  # offset_free.py: opt-in
     # only the named switches differ (not the whole lqr section: force limits, compensation, ...)
     # the fusion and adaptation switches (issue 21) likewise
     fusion = set(type(default.fusion).model_fields)

@@ -47,12 +47,11 @@ def test_tangent_heading_is_the_path_direction_at_the_sample() -> None:
 @pytest.mark.slow
 def test_paper_reference_lateral_error_with_and_without(paper_reference_path: Path) -> None:
     """Issue 15 acceptance: REF on the paper reference has RMSE y ≤ 0.06 m with the slip-aware
-    loop and tangent heading; without both (the paper's loop, so without the offset-free loop on
-    top either) it is about twice the bound."""
+    loop and tangent heading; without both (the paper's loop) it is about twice the bound."""
     cfg = Config()
     sc = load_scenario(cfg, paper_reference_path)
     on = compute_metrics(simulate(cfg, Method.REF, sc))
-    off_cfg = replace(cfg, mpc=replace(cfg.mpc, slip_aware=False, tangent_heading=False, offset_free_s=0.0))
+    off_cfg = replace(cfg, mpc=replace(cfg.mpc, slip_aware=False, tangent_heading=False))
     off = compute_metrics(simulate(off_cfg, Method.REF, sc))
     assert on["termination"] == off["termination"] == "completed"
     assert on["rmse"]["y"] <= 0.06 and on["max_abs_lateral_m"] <= 0.15

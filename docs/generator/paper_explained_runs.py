@@ -170,12 +170,9 @@ def ablation_rows() -> list[ExplainedRow]:
         ExplainedRow("+ friction step detection", replace(low, lqr=replace(low.lqr, friction_step=True)),
                      "lqr.friction_step false → true", "ablation"),
         ExplainedRow("+ slip-aware outer loop, tangent heading, step-average reference",
-                     replace(Config(), fusion=paper.fusion,
-                             mpc=replace(Config().mpc, offset_free_s=0.0)),
+                     replace(Config(), fusion=paper.fusion),
                      "mpc.slip_aware, mpc.tangent_heading, mpc.step_average_reference false → true",
                      "ablation"),
-        ExplainedRow("+ offset-free outer loop", replace(Config(), fusion=paper.fusion),
-                     "mpc.offset_free_s 0 → 10 s", "ablation"),
         ExplainedRow("+ fusion and adaptation (= default)", Config(), "fusion.* false → true",
                      "ablation"),
     ]

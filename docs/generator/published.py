@@ -375,23 +375,13 @@ def ablation_rows() -> list[tuple[str, Any, bool]]:
         ("+ MHE-window friction estimate", win, False),
         ("+ low-speed model resistance", low, False),
         ("+ friction step detection", replace(low, lqr=replace(low.lqr, friction_step=True)), False),
-        ("+ outer-loop mechanisms", _outer_loop(paper), False),
-        ("+ offset-free outer loop", replace(Config(), fusion=paper.fusion), False),
+        ("+ outer-loop mechanisms", replace(Config(), fusion=paper.fusion), False),
         ("+ fusion and adaptation (**= default**)", Config(), False),
         ("oracle (`--oracle`)", Config(), True),
         ("paper preset, compensation off", replace(paper, lqr=replace(paper.lqr,
                                                                       friction_compensation=False)),
          False),
     ]
-
-
-def _outer_loop(paper: Any) -> Any:
-    """The default without the fusion and without the offset-free outer loop: the slip-aware loop,
-    the tangent heading and the step-average reference on top of the inner-loop mechanisms."""
-    from tsmpc.config import Config, replace
-
-    d = Config()
-    return replace(d, fusion=paper.fusion, mpc=replace(d.mpc, offset_free_s=0.0))
 
 
 def _ablation_runs(ctx: Context) -> list[tuple[str, Any, Any]]:
@@ -445,8 +435,8 @@ def ablation(ctx: Context) -> Produced:
     # two narrow tables rather than one wide one: each fits a page at 1400 px
     p.add("ablation", "table", _table(["row", "x", "y", "θ", "v", "ω", "max \\|e_y\\| [m]"], rows))
     p.add("ablation", "effort", _table(["row", "soft / fallback MPC steps", "σ(ΔF_xR) [N]"], effort))
-    paper, fb, win, low, fstep, mech, offs, dflt, oracle, _off = ms
-    ((_, _, log_paper), (_, _, log_fb), (_, _, log_win), (_, _, log_low), (_, _, log_step), _, _, _, _,
+    paper, fb, win, low, fstep, mech, dflt, oracle, _off = ms
+    ((_, _, log_paper), (_, _, log_fb), (_, _, log_win), (_, _, log_low), (_, _, log_step), _, _, _,
      (_, _, log_off)) = runs
 
     def ratios(m: dict[str, Any]) -> str:
@@ -487,13 +477,9 @@ def ablation(ctx: Context) -> Produced:
         f"{_d(mech['rmse']['y'], 3)} m, max \\|e_y\\| {_d(fstep['max_abs_lateral_m'], 2)} → "
         f"{_d(mech['max_abs_lateral_m'], 2)} m, RMSE θ {_d(fstep['rmse']['theta'], 4)} → "
         f"{_d(mech['rmse']['theta'], 4)} rad.",
-        f"* **+ offset-free outer loop**: on the nominal vehicle RMSE y {_d(mech['rmse']['y'], 4)} → "
-        f"{_d(offs['rmse']['y'], 4)} m, max \\|e_y\\| {_d(mech['max_abs_lateral_m'], 3)} → "
-        f"{_d(offs['max_abs_lateral_m'], 3)} m (it is for a course the car does not drive: the "
-        "mismatch benchmark and the generalisation class, page *Mismatch, faults and race speeds*).",
         f"* **+ fusion and adaptation (= default)**: on the nominal vehicle RMSE x "
-        f"{_d(offs['rmse']['x'], 4)} → {_d(dflt['rmse']['x'], 4)} m, y {_d(offs['rmse']['y'], 4)} → "
-        f"{_d(dflt['rmse']['y'], 4)} m, v {_d(offs['rmse']['v'], 3)} → {_d(dflt['rmse']['v'], 3)} m/s "
+        f"{_d(mech['rmse']['x'], 4)} → {_d(dflt['rmse']['x'], 4)} m, y {_d(mech['rmse']['y'], 4)} → "
+        f"{_d(dflt['rmse']['y'], 4)} m, v {_d(mech['rmse']['v'], 3)} → {_d(dflt['rmse']['v'], 3)} m/s "
         "(what they are for shows under mismatch and faults: the page *Mismatch, faults and race speeds*).",
         f"* **oracle**: RMSE x {_d(oracle['rmse']['x'], 3)} m against the default's "
         f"{_d(dflt['rmse']['x'], 3)} m.",
@@ -1321,7 +1307,7 @@ def fusion_ablation(ctx: Context) -> Produced:
 
 
 def mechanisms(ctx: Context) -> Produced:
-    """Which default-on mechanisms pay (examples/mechanisms.toml, 972 runs; docs/mismatch.md)."""
+    """Which default-on mechanisms pay (examples/mechanisms.toml, 918 runs; docs/mismatch.md)."""
     p = Produced()
     ctx.progress("examples/mechanism_ablation.py (the sweep of examples/mechanisms.toml)")
     for name, body in _example(ctx, "mechanism_ablation").mechanism_blocks(
@@ -1501,7 +1487,7 @@ PRODUCERS: tuple[Producer, ...] = (
     Producer("generalisation", generalisation, "the generalisation benchmark: 100 draws × 2 "
              "controllers, 100 oracle-tuned designs"),
     Producer("fusion-ablation", fusion_ablation, "the fusion switches' ablation (108 runs)"),
-    Producer("mechanisms", mechanisms, "which default-on mechanisms pay (972 runs, ≈ 60 min)"),
+    Producer("mechanisms", mechanisms, "which default-on mechanisms pay (918 runs, ≈ 55 min)"),
     Producer("race-speeds", race_speeds, "the public tracks at 22 and 25 m/s, S-bends"),
     Producer("baselines", baselines, "the baselines against the TS-MPC on five cases (6 compares)"),
     Producer("baseline-tuning", baseline_tuning, "the baselines' tuning search (≈ 700 runs)"),

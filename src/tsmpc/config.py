@@ -524,9 +524,9 @@ class MPCSettings(_Frozen):
         "sample (θ_d moved forward by its measured lag, half the reference's own period)"
     )
     offset_free_s: NonNegFloat = Field(
-        default=10.0, le=600.0, description="beyond the paper: time constant τ [s] of the offset-free "
-        "outer loop's heading and speed disturbance estimates (control/offset_free.py), 0 = off, else "
-        "1 to 600 s"
+        default=0.0, le=600.0, description="beyond the paper: time constant τ [s] of the offset-free "
+        "outer loop's course-offset estimate (control/offset_free.py), 0 = off (the default), else 1 to "
+        "600 s (10 s is the setting measured in docs/design-decisions.md)"
     )
     step_average_reference: StrictBool = Field(
         default=True, description="beyond the paper: the reference inputs of each T_c step are that step's "

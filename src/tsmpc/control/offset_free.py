@@ -26,7 +26,11 @@ Between poses (1–10 Hz) the MPC sees the dead-reckoned pose, whose steps carry
 ends the gap carries it all, so the sum of the updates over the gap is the same (the estimate
 ripples within it, which a τ of several seconds smooths). τ sets the trade: a slower one leaves the
 offset for longer, a faster one feeds the estimate the MPC's own transients (3 s made a car that
-oscillates in yaw diverge; 10 s is the default).
+oscillates in yaw diverge; 10 s is the setting measured).
+
+Opt-in (``mpc.offset_free_s`` = 0 by default): the estimate also reacts to what is dynamics, not a
+constant offset — an understeering car's corner entry (C_f −40 %) raised the largest lateral error
+it lowers elsewhere (docs/design-decisions.md).
 
 The along-track counterpart (a speed disturbance d_v in ė_x, the inner loop sent v + d̂_v) was
 measured and left out: it took 5 % off RMSE x on the paper reference but put 3.6 % on RMSE v there
