@@ -38,6 +38,7 @@ BLOCK_TESTS = (
     "tests/test_actuator_block.py",
     "tests/test_plant_block.py",
     "tests/test_mutation_guards.py",
+    "tests/test_offset_free.py::test_update_by_hand",
     *(f"tests/test_governor.py::{t}" for t in (
         "test_grip_estimate_from_the_friction_force", "test_spin_grip_by_hand",
         "test_a_spin_engages_the_governor_on_a_dry_road", "test_sample_demand_by_hand",
