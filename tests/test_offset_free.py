@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -58,13 +59,14 @@ def test_the_block_corrects_the_heading_the_mpc_sees() -> None:
     assert b.params == OffsetParams(0.01, 0.1)
     e = np.array([0.1, 0.25, 0.02])
     assert np.array_equal(b.correct(e, None, 10.0), e) and b.heading == 0.0  # no plan: nothing learnt
-    out = b.correct(e, np.array([0.0, 0.05, 0.0]), 10.0)
+    plan = SimpleNamespace(x_pred=np.array([[0.1, 0.25, 0.02], [0.0, 0.05, 0.0]]))  # an MPCResult's
+    out = b.correct(e, plan, 10.0)
     assert out[2] == pytest.approx(0.02 + 0.002, rel=1e-12) and out[:2].tolist() == [0.1, 0.25]
     assert e[2] == 0.02  # (e itself unchanged)
     b.reset()
     assert b.heading == 0.0
     n = NoOffset()
-    assert n.correct(e, np.zeros(3), 10.0) is e and n.heading == 0.0
+    assert n.correct(e, plan, 10.0) is e and n.heading == 0.0
 
 
 def test_config() -> None:

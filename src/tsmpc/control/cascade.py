@@ -672,8 +672,8 @@ class Cascade:
             e_meas = self._outer_errors(p, min(k, len(self.reference) - 1))  # type: ignore[arg-type]
             window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
         # (not while a restart waits for the car: the reference's timing is not the MPC's model then)
-        learn = None if self._catch_up else _next_errors(self._plan)
-        e_meas = self._offset.correct(e_meas, learn, float(self._u_prev[0]))  # type: ignore[index]
+        e_meas = self._offset.correct(e_meas, None if self._catch_up else self._plan,
+                                      float(self._u_prev[0]))  # type: ignore[index]
         t0 = time.perf_counter()
         try:
             plan = self.mpc.step(e_meas, self._u_prev, window)
@@ -852,7 +852,7 @@ class Cascade:
         command (F_xR, δ, saturated, its low-speed part) and the step's events — one compiled call
         on the default path; the oracle, the published run's law, the blind stop (and a replaced
         ``lqr.step``) take the same block's parts around their own law."""
-        lqr, code = self._ib_lqr, _EST_CODE[est.status]
+        lqr, code = self._ib_lqr, STATUS_CODE[est.status]
         if (m.state is not None or self._blind_since is not None or lqr is None or "step" in lqr.__dict__
                 or type(lqr).step is not _TSLQR_STEP):  # (a replaced step: the Python path calls it)
             return self._inner_other(m, est, v_hat, v_ref, w_ref, code)
@@ -949,16 +949,9 @@ def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied
 #: TSLQR.step as defined (Cascade._inner calls the block in its place unless it was replaced)
 _TSLQR_STEP = TSLQR.step
 
-#: The estimator's status as the inner block's code (inner_block.EST_*)
-_EST_CODE = {EstimatorStatus.OK: EST_OK, EstimatorStatus.REJECTED: EST_REJECTED,
+#: The estimator's status as the blocks' code (inner_block.EST_*, the run engine's MHE codes)
+STATUS_CODE = {EstimatorStatus.OK: EST_OK, EstimatorStatus.REJECTED: EST_REJECTED,
              EstimatorStatus.FAILED: EST_FAILED, EstimatorStatus.WARMUP: EST_WARMUP}
-
-
-def _next_errors(plan: MPCResult | None) -> NDArray[np.float64] | None:
-    """The errors a plan predicted for the next MPC step (x_pred[1]), None without one."""
-    if plan is None or len(plan.x_pred) < 2:
-        return None
-    return np.asarray(plan.x_pred[1], dtype=float)
 
 
 def _oracle_estimate(state: ArrayLike) -> Estimate:

@@ -40,7 +40,7 @@ and 5 % on RMSE v and 5–10 % on max |e_y| on the race tracks of the mismatch b
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -103,14 +103,14 @@ class OffsetFree:
         """The estimate back to 0."""
         self.heading = 0.0  #: b̂ [rad]
 
-    def correct(self, e: NDArray[np.float64], plan_x1: NDArray[np.float64] | None,
-                v: float) -> NDArray[np.float64]:
+    def correct(self, e: NDArray[np.float64], plan: Any, v: float) -> NDArray[np.float64]:
         """The errors the MPC gets: ``e`` with e_θ + b̂, after the update by the innovation of
-        ``e`` against ``plan_x1`` (the previous plan's x_pred[1]; None: none yet)."""
-        if plan_x1 is None:
+        ``e`` against the previous plan's prediction of them (``plan.x_pred[1]``; None: no update)."""
+        xp = None if plan is None else plan.x_pred
+        if xp is None or len(xp) < 2:
             b = offset_update(self.params, self.heading, float(e[1]), 0.0, False, v)
         else:
-            b = offset_update(self.params, self.heading, float(e[1]), float(plan_x1[1]), True, v)
+            b = offset_update(self.params, self.heading, float(e[1]), float(xp[1][1]), True, v)
         self.heading = b
         out = np.array(e, dtype=float)
         out[2] = out[2] + b
@@ -125,7 +125,6 @@ class NoOffset:
     def reset(self) -> None:
         """Nothing to forget."""
 
-    def correct(self, e: NDArray[np.float64], plan_x1: NDArray[np.float64] | None,
-                v: float) -> NDArray[np.float64]:
+    def correct(self, e: NDArray[np.float64], plan: Any, v: float) -> NDArray[np.float64]:
         """``e`` unchanged."""
         return e

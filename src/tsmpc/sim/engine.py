@@ -43,12 +43,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
-from tsmpc.control.cascade import EVENT_NAMES, Cascade
+from tsmpc.control.cascade import EVENT_NAMES, STATUS_CODE, Cascade
 from tsmpc.control.governor import governed_window
 from tsmpc.control.offset_free import OffsetFree
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
-from tsmpc.estimation.mhe_uio import EstimatorStatus
 from tsmpc.scenarios import Scenario
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.start import _start_state, default_plant, tracked_steps
@@ -64,9 +63,8 @@ __all__ = ["LAST_RUN", "EngineFallback", "applicability", "cached", "enabled", "
 #: EVENT_SLOTS, in this order).
 _EVENTS = (*EVENT_NAMES, "stale_rejected", "step_errors", "repeated_rejected", "friction_steps")
 assert len(_EVENTS) == 19
-_MHE_STATUS = {1: EstimatorStatus.OK, 2: EstimatorStatus.REJECTED, 3: EstimatorStatus.FAILED,
-               4: EstimatorStatus.WARMUP}
-_MHE_CODE = {v: k for k, v in _MHE_STATUS.items()}
+_MHE_CODE = STATUS_CODE  # the estimator's status as the kernel's code (the cascade's, one table)
+_MHE_STATUS = {k: v for v, k in STATUS_CODE.items()}
 _MPC_CODE = {MPCStatus.OPTIMAL: 1, MPCStatus.SOFT: 2, MPCStatus.FALLBACK: 3}
 _MPC_TEXT = np.array(["", str(MPCStatus.OPTIMAL), str(MPCStatus.SOFT), str(MPCStatus.FALLBACK)])
 _MHE_TEXT = np.array(["", *(str(_MHE_STATUS[i]) for i in (1, 2, 3, 4))])
@@ -146,7 +144,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:_NoCourse": "35449a3e893bc074",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "696dd9b43cc81793",
-    "tsmpc.control.cascade:Cascade._outer": "04eadd014d54102b",
+    "tsmpc.control.cascade:Cascade._outer": "b2f936e22f4d9f36",
     "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
     "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
     "tsmpc.control.cascade:Cascade._govern": "048bb8890267a4cb",
