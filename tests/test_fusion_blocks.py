@@ -247,6 +247,30 @@ def test_a_chord_after_a_long_step_weighs_its_lagging_alpha_dot_as_noise(b: _Blo
     assert s2.stiff.den_r == pytest.approx(g2 * s.stiff.den_r + (1.0 - g2) * prior, rel=1e-12)
 
 
+def test_a_chord_through_a_transient_counts_its_alpha_rate_as_slip_error(b: _Blocks) -> None:
+    """α̂ changing along the chord — its five intervals' means −0.01, −0.02, −0.02, −0.02, −0.03
+    rad (mean −0.02, so z = 0.02 at ā_y = 5), the first's and the last's centres 40 calls = 0.4 s
+    apart: α̇ = −0.05 rad/s, and SLIP_TRANSIENT_S |α̇| = 15 mrad of slip error beside the
+    chord's 5.9 mrad of position noise in the recursive least-squares step (a steady chord, the
+    test above, has none)."""
+    p = _params(b)
+    r = _corner_ring(p, -0.02)
+    ring = (*r.ring[:K0], r.ring[K0]._replace(sv_alpha=100.0 * -0.01), *r.ring[K0 + 1:-1],
+            r.ring[-1]._replace(sv_alpha=100.0 * -0.03))
+    s = b.course_chord(p, r._replace(ring=ring), K0, 5.0, 0.0, 0.0)
+    sig = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4
+    e_tr = fu.SLIP_TRANSIENT_S * 0.05
+    lam = 1.0 - 0.1 / fu.SLIP_MEMORY_S
+    P = np.diag(np.square(SLIP_PRIOR)) / lam
+    phi = np.array([5.0, 1.0])
+    k = P @ phi / (sig ** 2 + e_tr ** 2 + phi @ P @ phi)
+    assert (s.slip.kappa, s.slip.beta) == pytest.approx(tuple(k * 0.02), rel=1e-12)
+    P1 = P - np.outer(k, phi @ P)
+    assert (s.slip.P00, s.slip.P01, s.slip.P10, s.slip.P11) == pytest.approx(tuple(P1.ravel()), rel=1e-12)
+    steady = b.course_chord(p, _corner_ring(p, -0.02), K0, 5.0, 0.0, 0.0)  # same z, no transient
+    assert 0.0 < s.slip.kappa < 0.9 * steady.slip.kappa  # the transient weighs less
+
+
 def test_the_stiffness_fit_takes_only_steady_corners(b: _Blocks) -> None:
     """No stiffness update where the reference runs straight (min |v_d ω_d| < CORNER_ACCEL), where
     the car accelerates (|Δv| / span > STIFF_MAX_ACCEL g) or for an implausible F / α; on the
