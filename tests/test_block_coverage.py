@@ -39,6 +39,7 @@ BLOCK_TESTS = (
     "tests/test_plant_block.py",
     "tests/test_mutation_guards.py",
     "tests/test_offset_free.py::test_update_by_hand",
+    "tests/test_outer_block.py",
     *(f"tests/test_governor.py::{t}" for t in (
         "test_grip_estimate_from_the_friction_force", "test_spin_grip_by_hand",
         "test_a_spin_engages_the_governor_on_a_dry_road", "test_sample_demand_by_hand",
@@ -72,12 +73,15 @@ class Block(NamedTuple):
 
 
 def _is_jitable(dec: ast.expr) -> bool:
-    return (isinstance(dec, ast.Name) and dec.id == "jitable") or (
-        isinstance(dec, ast.Attribute) and dec.attr == "jitable")
+    """``@jitable`` or ``@jitable_inline`` (a block inlined into its compiled callers)."""
+    names = ("jitable", "jitable_inline")
+    return (isinstance(dec, ast.Name) and dec.id in names) or (
+        isinstance(dec, ast.Attribute) and dec.attr in names)
 
 
 def block_functions(package: Path) -> list[Block]:
-    """Every function decorated ``@jitable`` under ``package``, in file and line order."""
+    """Every function decorated ``@jitable`` (or ``@jitable_inline``) under ``package``, in file and
+    line order."""
     out = []
     for path in sorted(package.rglob("*.py")):
         text = path.read_text(encoding="utf-8")

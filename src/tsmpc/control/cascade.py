@@ -63,7 +63,7 @@ from tsmpc.control.gates import (
     speed_bounded_yaw_rate,
     speed_gate,
 )
-from tsmpc.control.governor import Governor, GovernorParams, GripParams, governed_window, governor_inputs
+from tsmpc.control.governor import GovernorParams, GripParams, governed_window
 from tsmpc.control.inner_block import (
     EST_FAILED,
     EST_OK,
@@ -80,14 +80,37 @@ from tsmpc.control.inner_block import (
     inner_block,
     start_state,
 )
-from tsmpc.control.offset_free import NoOffset, OffsetFree
-from tsmpc.control.slip_aware import SlipGate, outer_loop_errors
+from tsmpc.control.offset_free import OffsetParams
+from tsmpc.control.outer_block import (
+    MPC_FALLBACK,
+    MPC_OPTIMAL,
+    MPC_SOFT,
+    OB_OFFB,
+    OB_RATE,
+    OB_TOFF,
+    OC_CLIPPED,
+    OC_FALLBACK,
+    OC_GACT,
+    OC_GSTEPS,
+    OC_POSE_REJ,
+    OC_SOFT,
+    GovernBlockParams,
+    OuterBlockParams,
+    RefArrays,
+    governed_sample,
+    outer_after,
+    outer_errors,
+    outer_state,
+    pack_govern,
+    pack_outer,
+    scratch_size,
+)
+from tsmpc.control.slip_aware import BASELINE
 from tsmpc.control.ts_lqr import LQR_NUMPY, TSLQR, InnerParams
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep, FrictionStepParams
 from tsmpc.estimation.fusion import MassParams, steer_command
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
-from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.planning.reference import Reference
 
 if TYPE_CHECKING:
@@ -291,7 +314,7 @@ class Cascade:
             self.mhe = MHEUIO(cfg.mhe, dyn, cfg.vehicle, self.Td)
         self.max_age_s = self.Tc if max_age_s is None else float(max_age_s)
         self.max_time_jump_s = self.Tc if max_time_jump_s is None else float(max_time_jump_s)
-        self._slip_gate = SlipGate(self.Tc, cfg.noise.position * cfg.noise.scale)
+        self._slip_sigma = float(cfg.noise.position * cfg.noise.scale)  # the slip gate's (slip_aware.py)
         # Plausible measurements (issue 24): beyond every speed / yaw-rate bound of the config,
         # with room for the sensor noise.
         nz = cfg.noise
@@ -322,10 +345,9 @@ class Cascade:
         self._course: Any = self._fusion.course if self._fusion.any_course else _NoCourse()
         self._servo = self._servo_offset if cfg.fusion.steering_offset else self._servo_plain
         self._build_inner_block(cfg)
-        self.governor = _build_governor(cfg) if cfg.governor.enabled else None  # issue 36
-        # beyond the paper: the offset-free outer loop: a course-offset estimate (offset_free.py)
-        self._offset: OffsetFree | NoOffset = (OffsetFree(self.Tc, cfg.mpc.offset_free_s)
-                                               if cfg.mpc.offset_free_s > 0 else NoOffset())
+        #: the speed governor's block record (issue 36; None: off)
+        self.governor: GovernBlockParams | None = _build_governor(cfg) if cfg.governor.enabled else None
+        self._build_outer_block(cfg)
         self.road_mu = math.nan  # governor.grip_source = "oracle": the true μ(road), set by the simulator
         self.reset(x0)
 
@@ -341,8 +363,7 @@ class Cascade:
         self._x0 = None if x0 is None else np.asarray(x0, dtype=float).reshape(6).copy()
         self.mhe.reset(None if self._x0 is None else self._x0[3:6].copy())
         self.lqr.reset()
-        self._slip_gate.reset()
-        self._offset.reset()
+        self._gate_poses = np.zeros((BASELINE + 1, 3))  # the slip gate's MPC poses (slip_aware.py)
         self._fusion.reset(None if self._x0 is None else self._x0[:3])
         self._ib_state, self._ib_ring, self._ib_count = start_state(self.cfg.mhe.N)
         if getattr(self, "_stiffness_applied", None):  # back to the config's stiffnesses
@@ -352,7 +373,9 @@ class Cascade:
         self._calls = 0
         self._t_last: float | None = None
         self._pose = None if self._x0 is None else self._x0[:3].copy()
-        self._pose_held = self._pose
+        # the outer block's state (held pose, slip gate count, offset estimate, reference time
+        # offset, governor) and its counters (outer_block.py)
+        self._ob, self._oc = outer_state(self._pose)
         self._pose_t = 0.0  # time of the last accepted pose
         self._pose_fresh = False
         self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
@@ -367,7 +390,6 @@ class Cascade:
         self._t_meas: float | None = None
         self._blind_since: float | None = None
         self._reanchor = False
-        self._t_offset = 0.0
         self._outage_s = 0.0
         self._catch_up = False  # after a re-anchoring: the reference waits for the car's speed
         self._gs, self._gate_count = gate_state()  # the gate block's state and counters
@@ -380,7 +402,6 @@ class Cascade:
         self._events["friction_steps"] = 0  # lqr.friction_step: steps of the friction detected
         # (mhe_rejected, mhe_failed, inner_saturated and friction_steps: the inner block's counters)
         if self.governor is not None:  # the speed governor (governor.py): its actions
-            self.governor.reset()
             self._events["governor_actions"] = self._events["governor_steps"] = 0
         self.last_error: str | None = None
 
@@ -395,6 +416,11 @@ class Cascade:
         ev["pose_reinit"], ev["pose_jump_rejected"] = g[GC_REINIT], g[GC_JUMP]
         ev["mhe_rejected"], ev["mhe_failed"] = c[IC_REJECTED], c[IC_FAILED]
         ev["inner_saturated"], ev["friction_steps"] = c[IC_SATURATED], c[IC_FSTEPS]
+        o = self._oc.tolist()  # the outer block's
+        ev["pose_rejected"], ev["mpc_soft"], ev["mpc_fallback"] = o[OC_POSE_REJ], o[OC_SOFT], o[OC_FALLBACK]
+        ev["mpc_scheduling_clipped"] = o[OC_CLIPPED]
+        if self.governor is not None:
+            ev["governor_actions"], ev["governor_steps"] = o[OC_GACT], o[OC_GSTEPS]
         return ev
 
     @property
@@ -526,7 +552,7 @@ class Cascade:
         self._reanchor = False
         self._catch_up = True
         self.mpc.reset()
-        self._offset.reset()  # what it integrated while blind was no course error
+        self._ob[OB_OFFB] = 0.0  # the offset-free estimate: what it integrated while blind was no course
         self._plan = None
         if _finite(v, om):
             self._u_prev = np.array([max(v, 0.0), om])
@@ -647,10 +673,10 @@ class Cascade:
 
     def _outer(self, t: float, X: float, Y: float, th: float, v: float, om: float, fresh: bool,
                speeds_ok: bool, pose_ok: bool) -> tuple[MPCResult, NDArray[np.float64], float]:
-        """An MPC step: (the plan, the errors it saw, its wall time)."""
-        ev, fu, fs = self._events, self._fusion, self.cfg.fusion
-        if not pose_ok:  # the MPC never sees NaN nor a jump: the dead-reckoned pose
-            ev["pose_rejected"] += 1
+        """An MPC step: (the plan, the errors it saw, its wall time). The outer block
+        (outer_block.py) before the solve (the errors, the window) and after it (the plan's events,
+        the governor); the recovery's restart around them."""
+        fu, fs = self._fusion, self.cfg.fusion
         if fu.any_course and fs.stiffness_estimate:  # the course fits' stiffnesses (_step closed)
             self._apply_stiffness()
         if self._reanchor and pose_ok:
@@ -661,19 +687,7 @@ class Cascade:
             k = max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0)
         else:  # a fixed number of calls per reference sample (the published run's time base)
             k = self._calls // self.n_inner
-        # fusion.predict_pose: a missing pose is dead-reckoned on the estimate; off (the
-        # paper), the MPC sees the pose of its last step, held
-        if pose_ok:
-            self._pose_held = self._pose.copy()  # type: ignore[union-attr]
-        p = self._pose if pose_ok or fs.predict_pose else self._pose_held
-        if self.governed:  # the reference at the governed time τ = t − offset (governor.py)
-            e_meas, window = self._governed(p, t)  # type: ignore[arg-type]
-        else:
-            e_meas = self._outer_errors(p, min(k, len(self.reference) - 1))  # type: ignore[arg-type]
-            window = self._mpc_reference.window(k, self.cfg.mpc.N + 1)
-        # (not while a restart waits for the car: the reference's timing is not the MPC's model then)
-        e_meas = self._offset.correct(e_meas, None if self._catch_up else self._plan,
-                                      float(self._u_prev[0]))  # type: ignore[index]
+        e_meas, window = self._outer_block(t, k, pose_ok)
         t0 = time.perf_counter()
         try:
             plan = self.mpc.step(e_meas, self._u_prev, window)
@@ -685,12 +699,85 @@ class Cascade:
         if self._curvature_max is not None and (self._reanchor or self._catch_up):
             self._bound_yaw_rate(v if fresh and speeds_ok else math.nan)  # restarting from rest
         self._plan = plan
-        ev["mpc_soft"] += plan.status == MPCStatus.SOFT
-        ev["mpc_fallback"] += plan.status == MPCStatus.FALLBACK
-        ev["mpc_scheduling_clipped"] += int(plan.n_clipped)
-        if self.governor is not None:
-            self._govern(t)
+        self._after_plan(t, plan)
         return plan, e_meas, t_mpc
+
+    def _outer_block(self, t: float, k: int, pose_ok: bool) -> tuple[NDArray[np.float64], Any]:
+        """The outer block before the solve (outer_block.outer_errors, one compiled call): the
+        errors the MPC sees of the pose against reference sample ``k`` (or the governed time's) and
+        its window (v_d, ω_d; a baseline's: the reference's window)."""
+        X, Y, th = _xyz(self._pose)  # type: ignore[arg-type]
+        last = self._last
+        plan = None if self._catch_up else self._plan  # (a restart waiting for the car: no learning)
+        xp = None if plan is None else plan.x_pred
+        has_pred = xp is not None and len(xp) >= 2
+        n = self.cfg.mpc.N + 1
+        e, wv, ww = np.empty(3), np.empty(n), np.empty(n)
+        args = (self._ob, self._oc, self._gate_poses, self._fusion.course.state.slip, t, k, pose_ok, X, Y, th,
+                last is not None, float(last.estimate.x[1]) if last is not None else 0.0, has_pred,
+                float(xp[1][1]) if has_pred else 0.0, float(self._u_prev[0]), e, wv, ww,  # type: ignore[index]
+                self._ob_buf)
+        call = self._outer_call
+        if call is not None:
+            governed = call[0](call[1], self._refs, *args)
+        else:  # TSMPC_NO_JIT: the block as Python
+            governed = outer_errors(self._ob_p, self._ref_rec, *args)
+        if not self._window_only:  # a baseline reads the whole reference window
+            tau, rate = t - self._t_offset, float(self._ob[OB_RATE])
+            return e, (governed_window(self._mpc_reference, tau, rate, n) if governed
+                       else self._mpc_reference.window(k, n))
+        return e, _Window(wv, ww)
+
+    def _after_plan(self, t: float, plan: MPCResult) -> None:
+        """The outer block after the solve (outer_block.outer_after, one compiled call): the plan's
+        events and the governor's rate for the next step from the last estimate's grip."""
+        last, gov = self._last, self.governor
+        has = last is not None
+        est = last.estimate if last is not None else None
+        dm = block_delta_mass(self._ib, self._ib_state) if gov is not None and gov.mass_estimate else 0.0
+        code, v_hat, F_fr = ((STATUS_CODE[est.status], float(est.x[0]), float(est.F_fr)) if est is not None
+                             else (0, math.nan, math.nan))
+        sat = has and bool(last.saturated)  # type: ignore[union-attr]
+        args = (self._ob, self._oc, _MPC_STATUS_CODE[plan.status], int(plan.n_clipped), t, has, code, v_hat,
+                F_fr, sat, float(self._u_applied[0]), self.road_mu, dm, self._ob_buf)
+        call = self._after_call
+        if call is not None:
+            call[0](call[1], call[2], self._refs, *args)
+        else:  # TSMPC_NO_JIT: the block as Python
+            outer_after(self._ob_p, self._gov_p, self._ref_rec, *args)
+
+    def _build_outer_block(self, cfg: Config) -> None:
+        """The outer block's records (outer_block.py), the reference it reads, its scratch and its
+        compiled calls (kernels/blocks.py)."""
+        ref, mref, mc = self.reference, self._mpc_reference, cfg.mpc
+        dt = ref.dt
+        turn = ref.theta[-1] - ref.theta[0] + ref.omega[0] * dt  # a closed lap's (Reference.window)
+        turn = 2 * np.pi * np.round(turn / (2 * np.pi))
+        off = mc.offset_free_s > 0  # beyond the paper: the offset-free outer loop (offset_free.py)
+        self._ob_p = OuterBlockParams(
+            bool(mc.slip_aware), bool(mc.tangent_heading), bool(cfg.fusion.course_slip),
+            bool(cfg.fusion.predict_pose), self._slip_sigma, off,
+            OffsetParams(float(self.Tc) / float(mc.offset_free_s) if off else 0.0, float(self.Tc)),
+            self.governor is not None, float(self.Tc), int(mc.N), float(dt), bool(ref.closed), float(turn),
+            float(mref.dt), bool(mref.closed))
+        self._gov_p = self.governor if self.governor is not None else _build_governor(cfg)
+        if len(mref) != len(ref):  # (step averages keep the samples)
+            raise ValueError("the MPC's reference must have the reference's samples")
+        self._refs = np.ascontiguousarray(np.vstack([ref.x, ref.y, ref.theta, ref.v, ref.omega,
+                                                     self._theta_tangent, mref.v, mref.omega]), dtype=float)
+        self._ref_rec = RefArrays(*self._refs)
+        self._ob_buf = np.zeros(scratch_size(int(mc.N), self._gov_p.preview))
+        # the TS-MPC reads the window's v and ω only; a baseline the whole reference window
+        self._window_only = self.method.is_ts_mpc
+        from tsmpc import kernels
+
+        kern = kernels.load("blocks")
+        self._outer_call: Any = None
+        self._after_call: Any = None
+        if kern is not None:
+            opk = pack_outer(self._ob_p)
+            self._outer_call = (kern.outer_call, opk)
+            self._after_call = (kern.after_call, opk, pack_govern(self._gov_p))
 
     def _bound_yaw_rate(self, v: float) -> None:
         """recovery.yaw_rate_bound, from the end of a blind stop until the car has the reference's
@@ -714,8 +801,7 @@ class Cascade:
     @property
     def governed(self) -> bool:
         """True once the speed governor has slowed the reference (its time τ is then fractional)."""
-        g = self.governor
-        return g is not None and (g.actions > 0 or g.rate < 1.0)
+        return self.governor is not None and bool(self._oc[OC_GACT] > 0 or self._ob[OB_RATE] < 1.0)
 
     @property
     def plan_delay(self) -> float:
@@ -725,75 +811,21 @@ class Cascade:
         which its RMSEs do not show."""
         return float(self._t_offset)
 
-    def _govern(self, t: float) -> None:
-        """After an MPC step: the governor's rate for the next step from the grip estimate and the
-        reference ahead; the reference time offset advances by (1 − r) T_c (the offset the
-        recovery re-anchors, one clock)."""
-        gov, cfg, ref = self.governor, self.cfg, self.reference
-        assert gov is not None
-        mass = cfg.vehicle.mass
-        if cfg.fusion.mass_estimate:
-            mass += block_delta_mass(self._ib, self._ib_state)
-        last = self._last
-        # the friction estimate means nothing below the dynamic box's speeds (the resistance
-        # fades at standstill; the MHE starts up there) nor from a rejected or failed sample
-        usable = (last is not None and last.estimate.status == EstimatorStatus.OK
-                  and float(last.estimate.x[0]) >= cfg.dynamic_box.v[0])
-        grip, spinning, force_per_kg = governor_inputs(
-            gov.grip, float(last.estimate.F_fr) if last is not None else math.nan, usable, mass,
-            last is not None and bool(last.saturated), float(self._u_applied[0]), self.road_mu)
-        k = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(ref) - 1)
-        w = ref.window(k, gov.preview + 1)
-        before = gov.actions
-        r = gov.step(grip, force_per_kg, np.asarray(w.v), np.asarray(w.omega), spinning)
-        self._events["governor_actions"] += int(gov.actions - before)
-        self._events["governor_steps"] += int(r < 1.0)
-        self._t_offset += (1.0 - r) * self.Tc
+    @property
+    def _t_offset(self) -> float:
+        """The reference time offset t − τ [s] (the outer block's slot: the governor and the
+        recovery's re-anchoring move it)."""
+        return float(self._ob[OB_TOFF])
+
+    @_t_offset.setter
+    def _t_offset(self, value: float) -> None:
+        self._ob[OB_TOFF] = value
 
     def reference_row(self, t: float) -> NDArray[np.float64]:
         """[x_d, y_d, θ_d, v_d, ω_d] the cascade tracks at time ``t``: the reference at the governed
         time (interpolated; v_d and ω_d times the governed rate) — the plan's sample when ungoverned."""
-        r = self.governor.rate if self.governor is not None else 1.0
-        w = governed_window(self.reference, t - self._t_offset, r, 1)
-        return np.array([w.x[0], w.y[0], w.theta[0], w.v[0], w.omega[0]])
-
-    def _governed(self, p: NDArray[np.float64], t: float) -> tuple[NDArray[np.float64], Reference]:
-        """The errors and the MPC's window at the governed time τ = t − offset, rate r."""
-        assert self.governor is not None
-        r, tau, N = self.governor.rate, t - self._t_offset, self.cfg.mpc.N
-        at = governed_window(self.reference, tau, r, 1)
-        x = tau / self.Tc
-        k0 = min(max(math.floor(x), 0), len(self.reference) - 2)
-        f = min(max(x - k0, 0.0), 1.0)
-        th_tan = (1.0 - f) * self._theta_tangent[k0] + f * self._theta_tangent[k0 + 1]
-        e = self._errors_against(p, float(at.x[0]), float(at.y[0]), float(at.theta[0]), float(th_tan),
-                                 float(at.v[0] * at.omega[0]))
-        return e, governed_window(self._mpc_reference, tau, r, N + 1)
-
-    def _outer_errors(self, p: NDArray[np.float64], kk: int) -> NDArray[np.float64]:
-        """The errors [e_x, e_y, e_θ] the MPC sees of pose ``p`` against reference sample ``kk``:
-        body frame (the paper), or slip-aware against the tangent heading (slip_aware.py)."""
-        ref = self.reference
-        return self._errors_against(p, ref.x[kk], ref.y[kk], ref.theta[kk], self._theta_tangent[kk],
-                                    float(ref.v[kk] * ref.omega[kk]))
-
-    def _errors_against(self, p: NDArray[np.float64], x_d: float, y_d: float, th_d: float,
-                        th_tan: float, a_y: float) -> NDArray[np.float64]:
-        """:meth:`_outer_errors` against the reference pose (x_d, y_d, θ_d), its path's tangent
-        heading ``th_tan`` and its lateral acceleration ``a_y``."""
-        mpc_cfg = self.cfg.mpc
-        if not (mpc_cfg.slip_aware or mpc_cfg.tangent_heading):
-            return np.array(pose_to_errors(p[0], p[1], p[2], x_d, y_d, th_d))
-        last = self._last
-        a_hat = float(last.estimate.x[1]) if mpc_cfg.slip_aware and last is not None else 0.0
-        if mpc_cfg.slip_aware and last is not None:
-            # the course-fitted model error at the reference's lateral acceleration (a
-            # feed-forward: the measured one would close a fast loop through ω, fusion.py)
-            a_hat += self._fusion.slip_correction(a_y)
-        if mpc_cfg.slip_aware:  # α̂ bounded by the measured course over ground
-            a_hat = self._slip_gate(p, a_hat)
-        th = th_tan if mpc_cfg.tangent_heading else th_d
-        return outer_loop_errors(p, np.array([x_d, y_d, th]), a_hat)
+        r = float(self._ob[OB_RATE]) if self.governor is not None else 1.0
+        return np.array(governed_sample(self._ob_p, self._ref_rec, t - self._t_offset, r, self._ob_buf))
 
     def _estimate(self, m: Measurement, v: float, om: float, speeds_ok: bool,
                   t1: float) -> tuple[Estimate, tuple[float, float]]:
@@ -913,8 +945,9 @@ class _NoCourse:
         """Nothing to sample."""
 
 
-def _build_governor(cfg: Config) -> Governor:
-    """The speed governor of ``cfg.governor`` for the config's vehicle (governor.py)."""
+def _build_governor(cfg: Config) -> GovernBlockParams:
+    """The speed governor's block record of ``cfg.governor`` for the config's vehicle (governor.py,
+    outer_block.py)."""
     g, veh, Tc = cfg.governor, cfg.vehicle, cfg.rates.Tc
     params = GovernorParams(
         margin=g.margin, rate_down=g.rate_down, rate_up=g.rate_up, rate_min=g.rate_min,
@@ -934,7 +967,17 @@ def _build_governor(cfg: Config) -> Governor:
         mu_tyre=tyre.mu_tyre, grip_per_road=tyre.mu_tyre / tyre.mu_dry if follows else 0.0,
         deadband=g.deadband, g=veh.g, mass=veh.mass, rear_share=veh.a / veh.wheelbase,
         force_max=cfg.lqr.force_limits(veh)[1])
-    return Governor(params, preview, grip)
+    return GovernBlockParams(params, grip, preview, float(cfg.dynamic_box.v[0]),
+                             bool(cfg.fusion.mass_estimate))
+
+
+class _Window:
+    """The MPC's window as the TS-MPC reads it: v_d, ω_d (N + 1 each), the outer block's."""
+
+    __slots__ = ("omega", "v")
+
+    def __init__(self, v: NDArray[np.float64], omega: NDArray[np.float64]) -> None:
+        self.v, self.omega = v, omega
 
 
 def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> None:
@@ -948,6 +991,10 @@ def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied
 
 #: TSLQR.step as defined (Cascade._inner calls the block in its place unless it was replaced)
 _TSLQR_STEP = TSLQR.step
+
+#: The plan's status as the outer block's code (outer_block.MPC_*)
+_MPC_STATUS_CODE = {MPCStatus.OPTIMAL: MPC_OPTIMAL, MPCStatus.SOFT: MPC_SOFT,
+                    MPCStatus.FALLBACK: MPC_FALLBACK}
 
 #: The estimator's status as the blocks' code (inner_block.EST_*, the run engine's MHE codes)
 STATUS_CODE = {EstimatorStatus.OK: EST_OK, EstimatorStatus.REJECTED: EST_REJECTED,

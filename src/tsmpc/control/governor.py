@@ -98,8 +98,11 @@ the cascade's without the governor, bit for bit — which is why it is on by def
 ``paper`` presets): with the default tyre it holds μ_tyre until a wheel spins.
 
 :func:`governor_inputs` and :func:`governor_update` are the block's one definition
-(:mod:`tsmpc.kernels.jit`: the cascade and the run engine call them);
-:class:`Governor` is its online wrapper, :func:`governed_window` the reference the MPC sees.
+(:mod:`tsmpc.kernels.jit`): the outer block (:func:`tsmpc.control.outer_block.outer_after`) runs
+them for the cascade, the run engine and the batch. :class:`Governor` is a standalone online
+wrapper of :func:`governor_update`; :func:`governed_window` the reference at a governed time as a
+:class:`~tsmpc.planning.reference.Reference` (the baselines' window; the outer block reads the same
+samples through :func:`governed_index` and :func:`governed_fill`).
 """
 
 from __future__ import annotations

@@ -87,8 +87,9 @@ def offset_update(p: OffsetParams, b: float, e_y: float, pred_y: float, has_pred
 
 
 class OffsetFree:
-    """The online block of :func:`offset_update` (``mpc.offset_free_s`` > 0): :meth:`correct` at
-    each MPC step, before the MPC.
+    """A standalone online wrapper of :func:`offset_update` (``mpc.offset_free_s`` > 0): :meth:`correct`
+    at each MPC step, before the MPC. The cascade runs :func:`offset_update` inside its outer block
+    (:func:`tsmpc.control.outer_block.outer_errors`, the estimate in its state).
 
     Args:
         Tc: the MPC's period [s].

@@ -61,8 +61,9 @@ def outer_loop_errors(
 ) -> NDArray[np.float64]:
     """The errors the MPC receives: of the velocity pose (``alpha_hat``, 0 = body frame) against
     the reference pose ``ref_pose`` (x_d, y_d, heading), its heading moved by half of
-    ``dtheta_next`` (0: as given; the cascade passes the path's tangent heading at the sample,
-    :meth:`~tsmpc.planning.reference.Reference.tangent_heading`, in ``ref_pose`` directly).
+    ``dtheta_next`` (0: as given). The cascade's outer block computes the same errors
+    (:func:`tsmpc.control.outer_block.outer_errors`, against the path's tangent heading at the
+    sample, :meth:`~tsmpc.planning.reference.Reference.tangent_heading`).
 
     Why the tangent: under the planners' convention x(k) = x(k−1) + v(k) cos θ(k) T
     θ_d(k) is the heading of the step *into* sample k; the path's tangent at (x_d, y_d)(k)
@@ -104,8 +105,9 @@ def slip_gate_update(sigma: float, poses: NDArray[np.float64], n: int, px: float
 
 
 class SlipGate:
-    """α̂ bounded by the course over ground of the MPC poses (see the module docstring; the online
-    wrapper of :func:`slip_gate_update`).
+    """α̂ bounded by the course over ground of the MPC poses (see the module docstring; a standalone
+    online wrapper of :func:`slip_gate_update`, which the cascade runs inside its outer block,
+    :func:`tsmpc.control.outer_block.outer_errors`).
 
     The course is the direction of the chord over the last ``BASELINE`` MPC steps (a longer chord
     divides the position noise); the slip it measures is that minus the mean body heading at the

@@ -1,5 +1,7 @@
 """The cascade's compiled calls of its blocks (their one definitions: the inner block
-:func:`tsmpc.control.inner_block.inner_block`, the pose gate :func:`tsmpc.control.gates.pose_gate`):
+:func:`tsmpc.control.inner_block.inner_block`, the pose gate :func:`tsmpc.control.gates.pose_gate`,
+the outer step's :func:`tsmpc.control.outer_block.outer_errors` and
+:func:`tsmpc.control.outer_block.outer_after`):
 the blocks' records rebuilt from arrays inside the compiled code, because numba's dispatcher types
 a record argument field by field (≈ 0.15 µs a field, more than the block's work), an array at once.
 
@@ -7,7 +9,10 @@ a record argument field by field (≈ 0.15 µs a field, more than the block's wo
 :class:`~tsmpc.control.ts_lqr.LQRLaw` scalars into one float vector (slots ``BP_*``); :func:`inner_call`
 rebuilds both records from it (and the law's arrays, passed as they are: ``prm`` is written in place
 by the stiffness fit) and runs the block. :func:`pack_gates` and :func:`pose_call` do the same for the
-gate block's :class:`~tsmpc.control.gates.GateBlockParams`.
+gate block's :class:`~tsmpc.control.gates.GateBlockParams`; :func:`outer_call` and :func:`after_call`
+rebuild the outer block's records from their packed vectors
+(:func:`~tsmpc.control.outer_block.pack_outer`, :func:`~tsmpc.control.outer_block.pack_govern`) and
+its reference from one (8, L) array (:class:`~tsmpc.control.outer_block.RefArrays`' rows).
 
 The block's machine code is part of this module's cache entry although its source is not: the
 entry carries the hash of the block modules (:func:`tsmpc.kernels.forget_stale`, as the run engine's).
@@ -21,12 +26,13 @@ from numba import njit
 from tsmpc import kernels
 from tsmpc.control.gates import GateBlockParams, GateParams, gate_state, pose_gate
 from tsmpc.control.inner_block import InnerBlockParams, inner_block, start_state
+from tsmpc.control.outer_block import RefArrays, outer_after, outer_errors, unpack_govern, unpack_outer
 from tsmpc.control.ts_lqr import InnerParams, LQRLaw
 from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import MassParams
 from tsmpc.kernels.jit import BLOCK_MODULES
 
-__all__ = ["inner_call", "pack", "pack_gates", "pose_call", "warm"]
+__all__ = ["after_call", "inner_call", "outer_call", "pack", "pack_gates", "pose_call", "warm"]
 
 # entries compiled from other versions of the blocks (or of the law, kernels/lqr.py) are deleted
 # before the first call below loads one
@@ -82,6 +88,28 @@ def pose_call(gbp, gs, cnt, t, fresh, X, Y, theta, v, omega, stamp, has_pose, px
     p = GateBlockParams(GateParams(gbp[0], gbp[1], gbp[2], gbp[3], gbp[4], gbp[5]), gbp[6] != 0.0, gbp[7],
                         gbp[8] != 0.0)
     return pose_gate(p, gs, cnt, t, fresh, X, Y, theta, v, omega, stamp, has_pose, px, py, pth, pose_t)
+
+
+@njit(cache=True, fastmath=False)
+def _refs(refs):
+    """The reference record of its (8, L) stack."""
+    return RefArrays(refs[0], refs[1], refs[2], refs[3], refs[4], refs[5], refs[6], refs[7])
+
+
+@njit(cache=True, fastmath=False)
+def outer_call(opk, refs, ob, cnt, gate, slip, t, k, pose_ok, X, Y, th, has_last, alpha_last, has_pred,
+               pred_y, v_prev, e, win_v, win_w, buf):
+    """:func:`~tsmpc.control.outer_block.outer_errors` of the packed record: True when governed."""
+    return outer_errors(unpack_outer(opk), _refs(refs), ob, cnt, gate, slip, t, k, pose_ok, X, Y, th,
+                        has_last, alpha_last, has_pred, pred_y, v_prev, e, win_v, win_w, buf)
+
+
+@njit(cache=True, fastmath=False)
+def after_call(opk, gpk, refs, ob, cnt, status, n_clipped, t, has_last, est_status, v_hat, F_fr, saturated,
+               F_applied, road_mu, dmass, buf):
+    """:func:`~tsmpc.control.outer_block.outer_after` of the packed records."""
+    outer_after(unpack_outer(opk), unpack_govern(gpk), _refs(refs), ob, cnt, status, n_clipped, t, has_last,
+                est_status, v_hat, F_fr, saturated, F_applied, road_mu, dmass, buf)
 
 
 def warm() -> None:

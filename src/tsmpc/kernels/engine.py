@@ -14,7 +14,8 @@ inner block :func:`~tsmpc.control.inner_block.inner_block` with friction-step de
 mass terms)
 and the plant's RK4 block (the single-track plant; :func:`~tsmpc.kernels.plant.rk4_block`). The
 ``@jitable`` blocks (:mod:`tsmpc.kernels.jit`: the sample gates, the fusion estimators of
-:mod:`tsmpc.estimation.fusion`, friction-step detection, the slip gate, …) are the cascade's own
+:mod:`tsmpc.estimation.fusion`, friction-step detection, the outer step's errors, window, offset
+correction and speed governor of :mod:`tsmpc.control.outer_block`, …) are the cascade's own
 functions, compiled in, their records loaded from and stored to the state slots around each call.
 The glue between them is ported operation by operation (same order, same rounding, Python's
 ``min``/``max``/``%`` and ``math.hypot``), so the engine reproduces the Python loop to the last bit.
@@ -55,16 +56,6 @@ from tsmpc.control.gates import (
     pose_gate,
     speed_gate,
 )
-from tsmpc.control.governor import (
-    GovernorParams,
-    GovernorState,
-    GripParams,
-    governed_fill,
-    governed_index,
-    governor_inputs,
-    governor_update,
-    interp_unit,
-)
 from tsmpc.control.inner_block import (
     EST_FAILED,
     EST_OK,
@@ -80,8 +71,26 @@ from tsmpc.control.inner_block import (
     inner_block,
     mass_load,
 )
-from tsmpc.control.offset_free import OffsetParams, offset_update
-from tsmpc.control.slip_aware import slip_gate_update
+from tsmpc.control.outer_block import (
+    N_GBP,
+    N_OB,
+    N_OBP,
+    N_OC,
+    OB_RATE,
+    OB_TOFF,
+    OC_CLIPPED,
+    OC_FALLBACK,
+    OC_GACT,
+    OC_POSE_REJ,
+    OC_SOFT,
+    RefArrays,
+    governed_sample,
+    outer_after,
+    outer_errors,
+    pose_errors,
+    unpack_govern,
+    unpack_outer,
+)
 from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams, LQRLaw
 from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import (
@@ -102,7 +111,6 @@ from tsmpc.estimation.fusion import (
     delta_mass,
     gyro_bias,
     gyro_sample,
-    slip_correction,
     speed_offset,
     steer_command,
     steer_correction,
@@ -151,61 +159,64 @@ PH_START, PH_PLAN, PH_MHE, PH_POST_MHE, PH_POST_LQR, PH_POST_PLANT = range(6)
 ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP = MHE_OK, MHE_REJECTED, MHE_FAILED, MHE_WARMUP
 assert (ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP) == (EST_OK, EST_REJECTED, EST_FAILED, EST_WARMUP)
 MPC_OPTIMAL, MPC_SOFT, MPC_FALLBACK = 1, 2, 3
-# event counters: the cascade's own, then the gate block's and the inner block's (their GC_* and
-# IC_* counters, views of ev)
-(EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_POSE_REJ, EV_TIME_REJ, EV_STAMP_REJ, EV_BLIND, EV_RECOVER,
- EV_STALE_REJ, EV_STEP_ERR, EV_GATES) = range(11)
+# event counters: the cascade's own, then the gate block's, the inner block's and the outer block's
+# (their GC_*, IC_* and OC_* counters, views of ev)
+(EV_TIME_REJ, EV_STAMP_REJ, EV_BLIND, EV_RECOVER, EV_STALE_REJ, EV_STEP_ERR, EV_GATES) = range(7)
 EV_INNER = EV_GATES + N_GC
-N_EVENTS = EV_INNER + N_IC
+EV_OUTER = EV_INNER + N_IC
+N_EVENTS = EV_OUTER + N_OC
 #: the slot of each of Cascade.events' counters, in its order
-EVENT_SLOTS = (EV_SOFT, EV_FALLBACK, EV_CLIPPED, EV_INNER + IC_REJECTED, EV_INNER + IC_FAILED,
-               EV_INNER + IC_SATURATED, EV_POSE_REJ, EV_TIME_REJ, EV_STAMP_REJ, EV_GATES + GC_SPEED,
+EVENT_SLOTS = (EV_OUTER + OC_SOFT, EV_OUTER + OC_FALLBACK, EV_OUTER + OC_CLIPPED, EV_INNER + IC_REJECTED,
+               EV_INNER + IC_FAILED, EV_INNER + IC_SATURATED, EV_OUTER + OC_POSE_REJ, EV_TIME_REJ,
+               EV_STAMP_REJ, EV_GATES + GC_SPEED,
                EV_GATES + GC_JUMP, EV_GATES + GC_NAN, EV_GATES + GC_REINIT, EV_BLIND, EV_RECOVER,
                EV_STALE_REJ, EV_STEP_ERR, EV_GATES + GC_REPEATED, EV_INNER + IC_FSTEPS)
 
 # ---------------------------------------------------------------------------- float parameters
 (FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_V_LO, FP_V_HI, FP_W_LIM, FP_POSE_NOISE, FP_HEAD_NOISE,
- FP_GATE_SIGMA, FP_COURSE_SIGMA, FP_CF0, FP_CR0, FP_VM, FP_VI, FP_VA, FP_VB, FP_TAU, FP_MHE_MASS,
+ FP_COURSE_SIGMA, FP_CF0, FP_CR0, FP_VM, FP_VI, FP_VA, FP_VB, FP_TAU, FP_MHE_MASS,
  FP_BOUND,
  FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU, FP_VG,
- FP_A_GF, FP_A_GD, FP_A_RMAX, FP_A_DOFF, FP_FS_H, FP_REINIT,
- FP_G_MARGIN, FP_G_RDOWN, FP_G_RUP, FP_G_RMIN, FP_G_MUPLAN, FP_G_DEADBAND, FP_G_KT, FP_G_DRAG,
- FP_G_G, FP_G_TC, FP_G_ALPHA, FP_G_VMIN, FP_G_MUNOM, FP_G_MUDRY, FP_G_GPR, FP_G_REAR, FP_G_FMAX,
- FP_G_DT, FP_G_MDT, FP_OFF_GAIN) = range(56)
-FP_GYRO = 56  # the yaw-rate bias fit's GyroParams (Td, var_theta, var_omega, prior_w)
-FP_STEER = 60  # the steering-offset fit's SteerParams (N_STEER_P fields, in their order)
+ FP_A_GF, FP_A_GD, FP_A_RMAX, FP_A_DOFF, FP_FS_H, FP_REINIT) = range(35)
+FP_GYRO = 35  # the yaw-rate bias fit's GyroParams (Td, var_theta, var_omega, prior_w)
+FP_STEER = 39  # the steering-offset fit's SteerParams (N_STEER_P fields, in their order)
 N_STEER_P = 18
 FP_SENS = FP_STEER + N_STEER_P  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
-N_FP = FP_SENS + N_SP
+FP_OB = FP_SENS + N_SP  # the outer block's OuterBlockParams (N_OBP values, outer_block.pack_outer)
+FP_GB = FP_OB + N_OBP  # its GovernBlockParams (N_GBP values, outer_block.pack_govern)
+N_FP = FP_GB + N_GBP
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
- IP_SLIP, IP_TANGENT, IP_PREDICT, IP_REPEAT, IP_ANYCOURSE, IP_CSLIP, IP_CSPEED, IP_STIFF,
+ IP_REPEAT, IP_ANYCOURSE, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
  IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV,
- IP_GOV, IP_G_ORACLE, IP_G_PREVIEW, IP_GYRO, IP_DEFER, IP_STEER, IP_OFFSET) = range(34)
-N_IP = 34
+ IP_GYRO, IP_DEFER, IP_STEER) = range(26)
+N_IP = 26
 # ---------------------------------------------------------------------------- float state
-(SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, SF_HELD, _H1, _H2, SF_UPREV, _U1, SF_UAPP, _A1,
+(SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, _FREE15, _FREE16, _FREE17, SF_UPREV, _U1, SF_UAPP, _A1,
  SF_PLANTU, _PU1, SF_LASTA, _FREE12, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
- SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_OFFB, _FREE1, SF_AHPREV,
+ SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, _FREE18, _FREE1, SF_AHPREV,
  _FREE4, _FREE5, _FREE6, _FREE7, _FREE8, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2,
  SF_VNOW, SF_ACT, _AC1, SF_LOW, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, SF_N2,
  SF_N1, _FREE13, _J1, _J2, _J3, _FREE14,
- SF_TOFF, SF_GRATE, SF_GGRIP, SF_GHOLD,
+ _FREE19, _FREE20, _FREE21, _FREE22,
  SF_GYTH0, SF_GYINT, SF_GYWLAST, SF_GYSB, SF_GYSW,  # SF_GY*: the GyroState's floats
  SF_STOMF, SF_STDEF, SF_STDDF, SF_STS11, SF_STS12, SF_STS22, SF_STB1, SF_STB2,  # the SteerState's floats
  SF_STOFF, SF_STSENT) = range(85)  # the steering offset in force, the angle last sent (Cascade)
 SF_IB = 85  # the inner block's state (N_IB values, tsmpc.control.inner_block's IB_* slots)
 SF_GS = SF_IB + N_IB  # the gate block's state (N_GS values, tsmpc.control.gates' GS_* slots)
 SF_SENS = SF_GS + N_GS  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
-N_SF = SF_SENS + N_SS
+SF_OB = SF_SENS + N_SS  # the outer block's state (N_OB values, tsmpc.control.outer_block's OB_* slots)
+N_SF = SF_OB + N_OB
+SF_TOFF = SF_OB + OB_TOFF  # (the reference time offset, the governed rate: the caller reads them)
+SF_GRATE = SF_OB + OB_RATE
 # ---------------------------------------------------------------------------- integer state
-(SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, _SFREE5, SI_GATEN, SI_IVN, _SFREE0, SI_NCHORDS,
+(SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, _SFREE5, _SFREE6, SI_IVN, _SFREE0, SI_NCHORDS,
  SI_HASAH, _SFREE1, _SFREE2, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
- SI_FRESH, SI_SPOK, SI_POSEOK, SI_KW, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
+ SI_FRESH, SI_SPOK, SI_POSEOK, _SFREE7, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
  SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, _SFREE3, _SFREE4,
- SI_GACT, SI_GSTEPS, SI_GWIN,
+ _SFREE8, _SFREE9, SI_GWIN,
  SI_GYOPEN, SI_GYN, SI_GYGAP, SI_GYCHORDS,  # SI_GY*: the GyroState's flags and counts
  SI_STINIT, SI_STN,  # the SteerState's flag and count
  SI_CSINCE) = range(44)  # the CourseState's calls since its last interval ended
@@ -217,7 +228,8 @@ assert SI_NREJ == SI_NY + MI_NREJ and SI_NFAIL == SI_NY + MI_NFAIL
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_COMP, SC_LOWF, SC_OF, SC_OD, SC_MU, SC_EY,
  SC_PU, _PU2, SC_UK, _UK1, SC_TMP, _TM1, _TM2, SC_GROW, _GR1, _GR2, _GR3, _GR4) = range(38)
-N_SC = 38  # then the governed window's v and ω, N + 1 each (sc has N_SC + 2 (N + 1) slots)
+N_SC = 38  # then the MPC's window's v and ω, N + 1 each, then the outer block's scratch
+# (outer_block.scratch_size)
 # ---------------------------------------------------------------------------- course intervals
 (IV_OPEN, IV_OK, IV_SX, IV_SY, IV_STH, IV_N, IV_SV, IV_SVDTH, IV_SVALPHA, IV_SVAY, IV_SVFULL,
  IV_SDELTA, IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST, IV_THLAST,
@@ -287,12 +299,6 @@ def _clamp(x, lo, hi):
     return _pmin(_pmax(x, lo), hi)
 
 
-@njit(cache=True, fastmath=False)
-def _wrap(a):
-    """Angle to [−π, π) exactly as ``(a + π) % 2π − π`` in Python/numpy."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
 #: ``math.hypot`` of CPython ≤ 3.11 to the last bit, compiled (:func:`tsmpc.kernels.jit.cpython_hypot`;
 #: not cached on its own: its cache entry would be keyed by kernels/jit.py, outside the engine's
 #: entries that a broken cache's repair deletes)
@@ -333,18 +339,6 @@ def _sensor(m, tf, x, noise, u_drop, draws, sp, ss, fifo, y):
         s, ms = sensor_sample(p, ms, tf, s, u_drop[m], d[0], d[1], (d[2], d[3], d[4], d[5], d[6]))
     store_state(ss, bs, ms)
     y[0], y[1], y[2], y[3], y[4] = s
-
-
-# ============================================================================ cascade glue
-@njit(cache=True, fastmath=False)
-def _pose_errors(X, Y, th, xd, yd, thd, out):
-    """``pose_to_errors`` of one pose: [e_x, e_y, e_θ] into ``out`` (3,)."""
-    dx = xd - X
-    dy = yd - Y
-    c, s = math.cos(th), math.sin(th)
-    out[0] = c * dx + s * dy
-    out[1] = -s * dx + c * dy
-    out[2] = _wrap(thd - th)
 
 
 # ============================================================================ fusion
@@ -514,50 +508,58 @@ def _delta_mass(sf, fp):
                       mass_load(sf[SF_IB:SF_IB + N_IB]))
 
 
-# ============================================================================ speed governor
-@njit(cache=True, fastmath=False)
-def _governed_row(t, fp, ip, sf, ref_x, ref_y, ref_th, ref_v, ref_w, row):
-    """``Cascade.reference_row``: [x_d, y_d, θ_d, v_d, ω_d] at the governed time t − offset
-    (:func:`~tsmpc.control.governor.governed_window`'s samples, its one definition)."""
-    r = sf[SF_GRATE]
-    k0, s0 = governed_index(t - sf[SF_TOFF], fp[FP_G_DT])
-    row[0] = interp_unit(ref_x[k0:k0 + 3], s0)
-    row[1] = interp_unit(ref_y[k0:k0 + 3], s0)
-    row[2] = interp_unit(ref_th[k0:k0 + 3], s0)
-    row[3] = interp_unit(ref_v[k0:k0 + 3], s0) * r
-    row[4] = interp_unit(ref_w[k0:k0 + 3], s0) * r
+# ============================================================================ outer block
+@njit(cache=True, fastmath=False, inline="always")
+def _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v, ref_w, th_tan, mv, mw):
+    """The outer block's records (Cascade._ob_p, _refs), state, counters and scratch (after the
+    MPC's window in ``sc``: v_d, ω_d, N + 1 each)."""
+    refs = RefArrays(ref_x, ref_y, ref_th, ref_v, ref_w, th_tan, mv, mw)
+    return (unpack_outer(fp[FP_OB:FP_OB + N_OBP]), refs, sf[SF_OB:SF_OB + N_OB], ev[EV_OUTER:EV_OUTER + N_OC],
+            sc[N_SC + 2 * (N + 1):])
 
 
-@njit(cache=True, fastmath=False)
-def _govern(t, fp, ip, sf, si, sc, frb, patches, events, ref_v, ref_w):
-    """``Cascade._govern`` after an MPC step: the grip seen (the inner loop's last estimate, or
-    the scenario's μ for the oracle row), the governor's step (:func:`governor_update`, its one
-    definition), its counters and the reference time offset."""
-    p = GovernorParams(fp[FP_G_MARGIN], fp[FP_G_RDOWN], fp[FP_G_RUP], fp[FP_G_RMIN], fp[FP_G_MUPLAN],
-                       fp[FP_G_DEADBAND], fp[FP_G_KT], fp[FP_G_DRAG], fp[FP_G_G], fp[FP_G_TC],
-                       fp[FP_G_ALPHA])
-    oracle = ip[IP_G_ORACLE] != 0
-    gp = GripParams(oracle, fp[FP_G_MUNOM], fp[FP_G_MUDRY], fp[FP_G_MUPLAN], fp[FP_G_GPR], p.deadband,
-                    p.g, fp[FP_VM], fp[FP_G_REAR], fp[FP_G_FMAX])
-    mass = fp[FP_VM]
-    if ip[IP_MASSEST] != 0:
-        mass += _delta_mass(sf, fp)
-    has_last = si[SI_HASLAST] != 0
-    usable = has_last and si[SI_ESTSTAT] == ST_OK and sc[SC_EST] >= fp[FP_G_VMIN]
-    road_mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events) if oracle else math.nan
-    grip, spinning, force_per_kg = governor_inputs(gp, sc[SC_ESTF] if has_last else math.nan, usable, mass,
-                                                   has_last and si[SI_SAT] != 0, sf[SF_UAPP], road_mu)
-    Tc = fp[FP_TC]
-    k = min(max(math.floor((t - sf[SF_TOFF]) / Tc + 1e-6), 0), ip[IP_REFLEN] - 1)
-    n = ip[IP_G_PREVIEW] + 1
-    before = sf[SF_GRATE]
-    st = governor_update(p, GovernorState(before, sf[SF_GGRIP], sf[SF_GHOLD]), grip, force_per_kg,
-                         ref_v[k:k + n], ref_w[k:k + n], spinning)
-    r = st.rate
-    sf[SF_GRATE], sf[SF_GGRIP], sf[SF_GHOLD] = r, st.grip, st.spin_hold
-    si[SI_GACT] += 1 if before >= 1.0 and r < 1.0 else 0
-    si[SI_GSTEPS] += 1 if r < 1.0 else 0
-    sf[SF_TOFF] += (1.0 - r) * Tc
+@njit(cache=True, fastmath=False, inline="always")
+def _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, err, fp, ip, sc):
+    """The simulator's outer-step log (its recorder): the state, the reference it tracks (the
+    governed one once the governor acted: ``Cascade.reference_row``) and the true errors against
+    it; True when |e_y| is beyond the divergence bound (``sc[SC_EY]``)."""
+    for i in range(6):
+        lo[k, LO_X + i] = x[i]
+    rx, ry, rth = refs.x[k], refs.y[k], refs.theta[k]
+    if op.governor:  # the reference the simulator logs: the governed one
+        row = lo[k, LO_REF:LO_REF + 5]
+        if ocnt[OC_GACT] > 0 or obs[OB_RATE] < 1.0:
+            row[0], row[1], row[2], row[3], row[4] = governed_sample(op, refs, t - obs[OB_TOFF], obs[OB_RATE],
+                                                                     obuf)
+        else:
+            row[0], row[1], row[2], row[3], row[4] = rx, ry, rth, refs.v[k], refs.omega[k]
+        rx, ry, rth = row[0], row[1], row[2]
+    pose_errors(x[0], x[1], x[2], rx, ry, rth, err)
+    for i in range(3):
+        lo[k, LO_ERR + i] = err[i]
+    if ip[IP_HASBOUND] != 0 and abs(err[1]) > fp[FP_BOUND]:
+        sc[SC_EY] = err[1]
+        return True
+    return False
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp):
+    """The plan of MPC step ``k`` (the fast path's or the caller's): the previous input and plan
+    for the next step, the outer log's errors seen, command, prediction and status."""
+    sf[SF_UPREV], sf[SF_UPREV + 1] = sc[SC_PU], sc[SC_PU + 1]
+    for i in range(N):
+        prevU[i, 0], prevU[i, 1] = pU[i, 0], pU[i, 1]
+    for i in range(N + 1):
+        prevX[i, 0], prevX[i, 1], prevX[i, 2] = pX[i, 0], pX[i, 1], pX[i, 2]
+    si[SI_HASPREV] = 1
+    for i in range(3):
+        lo[k, LO_EMEAS + i] = sc[SC_EMEAS + i]
+    lo[k, LO_UC], lo[k, LO_UC + 1] = sc[SC_PU], sc[SC_PU + 1]
+    for i in range(N + 1):
+        lxp[k, i, 0], lxp[k, i, 1], lxp[k, i, 2] = pX[i, 0], pX[i, 1], pX[i, 2]
+    loi[k, LOI_STATUS], loi[k, LOI_IT] = si[SI_PSTAT], si[SI_PIT]
+    loi[k, LOI_QPIT], loi[k, LOI_CLIP] = si[SI_PQPIT], si[SI_PCLIP]
 
 
 # ============================================================================ MHE wrapper
@@ -635,9 +637,6 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     tmp3 = sc[SC_TMP:SC_TMP + 3]
     noX = prevX[:0]  # "no previous plan" for guarded_step
     noU = prevU[:0]
-    grow = sc[SC_GROW:SC_GROW + 5]  # the governed reference sample, and the MPC's governed window
-    gmv = sc[N_SC:N_SC + N + 1]
-    gmw = sc[N_SC + N + 1:N_SC + 2 * (N + 1)]
     gates = GateParams(fp[FP_V_LO], fp[FP_V_HI], fp[FP_W_LIM], fp[FP_POSE_NOISE], fp[FP_HEAD_NOISE], Td)
     cpar = course_params(Tc, fp[FP_COURSE_SIGMA], True, fp[FP_CF0], fp[FP_CR0], fp[FP_VM], fp[FP_VI],
                          fp[FP_VA], fp[FP_VB], fp[FP_VG], Td, n_in)
@@ -655,21 +654,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             # ---- sensors and the outer-step log (simulate)
             _sensor(m, k * Tc if j == 0 else t, x, noise, u_drop, gnss, sens, sens_state, fifo, y)
             if j == 0:
-                for i in range(6):
-                    lo[k, LO_X + i] = x[i]
-                rx, ry, rth = ref_x[k], ref_y[k], ref_th[k]
-                if ip[IP_GOV] != 0:  # the reference the simulator logs: the governed one
-                    row = lo[k, LO_REF:LO_REF + 5]
-                    if si[SI_GACT] > 0 or sf[SF_GRATE] < 1.0:
-                        _governed_row(t, fp, ip, sf, ref_x, ref_y, ref_th, ref_v, ref_w, row)
-                    else:
-                        row[0], row[1], row[2], row[3], row[4] = rx, ry, rth, ref_v[k], ref_w[k]
-                    rx, ry, rth = row[0], row[1], row[2]
-                _pose_errors(x[0], x[1], x[2], rx, ry, rth, tmp3)
-                for i in range(3):
-                    lo[k, LO_ERR + i] = tmp3[i]
-                if ip[IP_HASBOUND] != 0 and abs(tmp3[1]) > fp[FP_BOUND]:
-                    sc[SC_EY] = tmp3[1]
+                op, refs, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v,
+                                                         ref_w, th_tan, mv, mw)
+                if _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, tmp3, fp, ip, sc):
                     return DIVERGED
             # ---- Cascade._step: gates
             X, Y, th, v, omv = y[0], y[1], y[2], y[3], y[4]
@@ -703,97 +690,49 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                              omv if meas_ok else math.nan, ref_v[kc] * ref_w[kc], cur, ivs, sf, si)
             phase = PH_MHE
             if mpc_step:
-                if not pose_ok:
-                    ev[EV_POSE_REJ] += 1
                 if ip[IP_ANYCOURSE] != 0 and ip[IP_STIFF] != 0:
                     _course_stiffness(cpar, ivs, sf, si, mp, prm)
-                if pose_ok:
-                    for i in range(3):
-                        sf[SF_HELD + i] = sf[SF_POSE + i]
-                src = SF_POSE if pose_ok or ip[IP_PREDICT] != 0 else SF_HELD
-                px, py, pth = sf[src], sf[src + 1], sf[src + 2]
-                # the reference the errors are taken against: sample kc, or (the speed governor
-                # has acted) the governed time's (Cascade._governed)
-                governed = ip[IP_GOV] != 0 and (si[SI_GACT] > 0 or sf[SF_GRATE] < 1.0)
+                # the outer block (Cascade._outer_block): the errors the MPC sees, its window
+                op, refs, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v,
+                                                         ref_w, th_tan, mv, mw)
+                wv, ww = sc[N_SC:N_SC + N + 1], sc[N_SC + N + 1:N_SC + 2 * (N + 1)]
+                has_prev = si[SI_HASPREV] != 0
+                governed = outer_errors(op, refs, obs, ocnt, gate, _slip_load(sf), t, kw, pose_ok,
+                                        sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], si[SI_HASLAST] != 0,
+                                        sf[SF_LASTA], has_prev, prevX[1, 1], sf[SF_UPREV], e_meas, wv, ww,
+                                        obuf)
                 si[SI_GWIN] = 1 if governed else 0
-                if governed:
-                    _governed_row(t, fp, ip, sf, ref_x, ref_y, ref_th, ref_v, ref_w, grow)
-                    xd, yd, thd, ay = grow[0], grow[1], grow[2], grow[3] * grow[4]
-                    xt = (t - sf[SF_TOFF]) / Tc
-                    kt = min(max(math.floor(xt), 0), ip[IP_REFLEN] - 2)
-                    ft = min(max(xt - kt, 0.0), 1.0)
-                    ttan = (1.0 - ft) * th_tan[kt] + ft * th_tan[kt + 1]
-                    k0m, s0m = governed_index(t - sf[SF_TOFF], fp[FP_G_MDT])
-                    governed_fill(mv[k0m:k0m + N + 3], s0m, sf[SF_GRATE], sf[SF_GRATE], gmv)
-                    governed_fill(mw[k0m:k0m + N + 3], s0m, sf[SF_GRATE], sf[SF_GRATE], gmw)
-                else:
-                    xd, yd, thd, ttan = ref_x[kc], ref_y[kc], ref_th[kc], th_tan[kc]
-                    ay = ref_v[kc] * ref_w[kc]
-                if ip[IP_SLIP] != 0 or ip[IP_TANGENT] != 0:
-                    slip = ip[IP_SLIP] != 0
-                    has_last = si[SI_HASLAST] != 0
-                    a_hat = sf[SF_LASTA] if slip and has_last else 0.0
-                    if slip and has_last:
-                        corr = 0.0
-                        if ip[IP_CSLIP] != 0:  # the course-fitted slip error at the reference's a_y
-                            corr = slip_correction(_slip_load(sf), ay)
-                        a_hat += corr
-                    if slip:
-                        a_hat, si[SI_GATEN] = slip_gate_update(fp[FP_GATE_SIGMA], gate, si[SI_GATEN],
-                                                               px, py, pth, a_hat)
-                    th_d = ttan if ip[IP_TANGENT] != 0 else thd
-                    a = a_hat if math.isfinite(a_hat) else 0.0
-                    _pose_errors(px, py, pth + a, xd, yd, th_d + 0.5 * 0.0, e_meas)
-                else:
-                    _pose_errors(px, py, pth, xd, yd, thd, e_meas)
-                if ip[IP_OFFSET] != 0:  # the offset-free outer loop (Cascade._offset.correct)
-                    sf[SF_OFFB] = offset_update(OffsetParams(fp[FP_OFF_GAIN], Tc), sf[SF_OFFB], e_meas[1],
-                                                prevX[1, 1], si[SI_HASPREV] != 0, sf[SF_UPREV])
-                    e_meas[2] = e_meas[2] + sf[SF_OFFB]
                 # ---- TSMPC.step: its compiled step (checks, schedule, Riccati fast path); a
                 # declined step (a constraint active, a non-finite input) is the caller's
                 tick = _ticks()
-                si[SI_KW] = kw
-                code = 1
-                if governed or kw + N + 1 <= mv.size:
-                    has_prev = si[SI_HASPREV] != 0
-                    code, U, _du, Xp, _cost, n_clip, _up = guarded_step(
-                        mints, mprm, mPS, e_meas, sf[SF_UPREV:SF_UPREV + 2],
-                        gmv if governed else mv[kw:kw + N + 1], gmw if governed else mw[kw:kw + N + 1],
-                        prevX if has_prev else noX, prevU if has_prev else noU)
-                    if code == 0:
-                        for i in range(N):
-                            pU[i, 0], pU[i, 1] = U[i, 0], U[i, 1]
-                        for i in range(N + 1):
-                            pX[i, 0], pX[i, 1], pX[i, 2] = Xp[i, 0], Xp[i, 1], Xp[i, 2]
-                        sc[SC_PU], sc[SC_PU + 1] = U[0, 0], U[0, 1]
-                        si[SI_PSTAT], si[SI_PIT], si[SI_PQPIT], si[SI_PCLIP] = MPC_OPTIMAL, 0, 0, n_clip
+                code, U, _du, Xp, _cost, n_clip, _up = guarded_step(
+                    mints, mprm, mPS, e_meas, sf[SF_UPREV:SF_UPREV + 2], wv, ww, prevX if has_prev else noX,
+                    prevU if has_prev else noU)
+                if code == 0:
+                    for i in range(N):
+                        pU[i, 0], pU[i, 1] = U[i, 0], U[i, 1]
+                    for i in range(N + 1):
+                        pX[i, 0], pX[i, 1], pX[i, 2] = Xp[i, 0], Xp[i, 1], Xp[i, 2]
+                    sc[SC_PU], sc[SC_PU + 1] = U[0, 0], U[0, 1]
+                    si[SI_PSTAT], si[SI_PIT], si[SI_PQPIT], si[SI_PCLIP] = MPC_OPTIMAL, 0, 0, n_clip
                 lo[k, LO_TMPC] = float(_ticks() - tick)
                 if code != 0:
                     si[SI_PHASE] = PH_PLAN
                     return NEED_MPC
                 phase = PH_PLAN
         if phase == PH_PLAN:
-            # the plan of this MPC step (fast path or the caller's): u_prev, events, log
-            sf[SF_UPREV], sf[SF_UPREV + 1] = sc[SC_PU], sc[SC_PU + 1]
-            for i in range(N):
-                prevU[i, 0], prevU[i, 1] = pU[i, 0], pU[i, 1]
-            for i in range(N + 1):
-                prevX[i, 0], prevX[i, 1], prevX[i, 2] = pX[i, 0], pX[i, 1], pX[i, 2]
-            si[SI_HASPREV] = 1
-            st = si[SI_PSTAT]
-            ev[EV_SOFT] += 1 if st == MPC_SOFT else 0
-            ev[EV_FALLBACK] += 1 if st == MPC_FALLBACK else 0
-            ev[EV_CLIPPED] += si[SI_PCLIP]
-            for i in range(3):
-                lo[k, LO_EMEAS + i] = e_meas[i]
-            lo[k, LO_UC], lo[k, LO_UC + 1] = sc[SC_PU], sc[SC_PU + 1]
-            for i in range(N + 1):
-                lxp[k, i, 0], lxp[k, i, 1], lxp[k, i, 2] = pX[i, 0], pX[i, 1], pX[i, 2]
-            loi[k, LOI_STATUS], loi[k, LOI_IT] = st, si[SI_PIT]
-            loi[k, LOI_QPIT], loi[k, LOI_CLIP] = si[SI_PQPIT], si[SI_PCLIP]
-            if ip[IP_GOV] != 0:  # the speed governor's rate for the next MPC step
-                _govern(t, fp, ip, sf, si, sc, frb, patches, events, ref_v, ref_w)
+            # the plan of this MPC step (fast path or the caller's): u_prev, log; the outer block
+            # after it (Cascade._after_plan): its events, the speed governor's rate
+            _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp)
+            op, refs, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v, ref_w,
+                                                     th_tan, mv, mw)
+            govp = unpack_govern(fp[FP_GB:FP_GB + N_GBP])
+            oracle = op.governor and govp.grip.oracle  # (the oracle row reads the road's μ)
+            road_mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events) if oracle else math.nan
+            dm = _delta_mass(sf, fp) if op.governor and govp.mass_estimate else 0.0
+            outer_after(op, govp, refs, obs, ocnt, si[SI_PSTAT], si[SI_PCLIP], t, si[SI_HASLAST] != 0,
+                        si[SI_ESTSTAT], sc[SC_EST], sc[SC_ESTF], si[SI_SAT] != 0, sf[SF_UAPP], road_mu, dm,
+                        obuf)
             phase = PH_MHE
         if phase == PH_MHE:
             fresh, speeds_ok = si[SI_FRESH] != 0, si[SI_SPOK] != 0

@@ -38,6 +38,7 @@ BLOCK_MODULES = (
     "tsmpc.control.governor",
     "tsmpc.control.inner_block",
     "tsmpc.control.offset_free",
+    "tsmpc.control.outer_block",
     "tsmpc.control.slip_aware",
     "tsmpc.control.ts_lqr",
     "tsmpc.estimation.friction_step",

@@ -43,9 +43,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
-from tsmpc.control.cascade import EVENT_NAMES, STATUS_CODE, Cascade
-from tsmpc.control.governor import governed_window
-from tsmpc.control.offset_free import OffsetFree
+from tsmpc.control.cascade import _MPC_STATUS_CODE, EVENT_NAMES, STATUS_CODE, Cascade, _Window
+from tsmpc.control.outer_block import N_GBP, N_OBP, OC_GACT, OC_GSTEPS, pack_govern, pack_outer, scratch_size
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
 from tsmpc.scenarios import Scenario
@@ -65,7 +64,7 @@ _EVENTS = (*EVENT_NAMES, "stale_rejected", "step_errors", "repeated_rejected", "
 assert len(_EVENTS) == 19
 _MHE_CODE = STATUS_CODE  # the estimator's status as the kernel's code (the cascade's, one table)
 _MHE_STATUS = {k: v for v, k in STATUS_CODE.items()}
-_MPC_CODE = {MPCStatus.OPTIMAL: 1, MPCStatus.SOFT: 2, MPCStatus.FALLBACK: 3}
+_MPC_CODE = _MPC_STATUS_CODE  # the plan's status as the kernel's code (the cascade's, one table)
 _MPC_TEXT = np.array(["", str(MPCStatus.OPTIMAL), str(MPCStatus.SOFT), str(MPCStatus.FALLBACK)])
 _MHE_TEXT = np.array(["", *(str(_MHE_STATUS[i]) for i in (1, 2, 3, 4))])
 #: Outer steps per kernel call when a progress callback is given.
@@ -131,9 +130,9 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
     "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
     "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
-    "tsmpc.sim.simulator:_Recorder": "95dae884454688e0",
-    "tsmpc.control.cascade:Cascade.__init__": "593484c657cc6a63",
-    "tsmpc.control.cascade:Cascade.reset": "ad3de8e43f7114ca",
+    "tsmpc.sim.simulator:_Recorder": "726a2ab654776920",
+    "tsmpc.control.cascade:Cascade.__init__": "e5f5f55d6424ab11",
+    "tsmpc.control.cascade:Cascade.reset": "178d1264a0f00421",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
     "tsmpc.control.cascade:Cascade._step": "14337833d5610532",
     "tsmpc.control.cascade:Cascade._gyro": "d4f0749f2a101860",
@@ -144,14 +143,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:_NoCourse": "35449a3e893bc074",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "696dd9b43cc81793",
-    "tsmpc.control.cascade:Cascade._outer": "b2f936e22f4d9f36",
-    "tsmpc.control.cascade:Cascade._outer_errors": "250af3f12107422e",
-    "tsmpc.control.cascade:Cascade._errors_against": "194868cd06f12565",
-    "tsmpc.control.cascade:Cascade._govern": "048bb8890267a4cb",
-    "tsmpc.control.cascade:Cascade._governed": "b1b952c55d88d9b3",
-    "tsmpc.control.cascade:Cascade.reference_row": "257f90494b63c8c2",
-    "tsmpc.control.governor:governed_window": "cadafab2efb735cb",
-    "tsmpc.control.governor:Governor.step": "12200cfb7c1bc640",
+    "tsmpc.control.cascade:Cascade._outer": "a8a41901f93c5023",
     "tsmpc.control.cascade:Cascade._estimate": "6008b3dd2bedaea5",
     "tsmpc.control.cascade:Cascade._dead_reckon": "d73049a3445880ad",
     "tsmpc.control.cascade:Cascade._watch_samples": "a2b6f37a111ff688",
@@ -159,10 +151,6 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
     "tsmpc.control.cascade:Cascade._apply_stiffness": "fe7618eb687caf00",
     "tsmpc.control.cascade:_apply_stiffness_to": "3dd6d16df1ce959c",
-    "tsmpc.control.slip_aware:outer_loop_errors": "3775c2395e80851d",
-    "tsmpc.control.slip_aware:velocity_frame_errors": "b81a30dfed8c53bb",
-    "tsmpc.models.kinematic:pose_to_errors": "21aace1283045776",
-    "tsmpc.models.kinematic:wrap_angle": "84759ed30a2082e3",
     "tsmpc.estimation.mhe_uio:MHEUIO.reset": "91c37b33d40113cb",
     "tsmpc.estimation.mhe_uio:MHEUIO.step": "1caf5cba8ba85e25",
     "tsmpc.estimation.mhe_uio:MHEUIO.step_values": "cd60476bb9240171",
@@ -223,7 +211,7 @@ _PORTED_CLASSES = (
     ("tsmpc.sensors", "SensorNoise"), ("tsmpc.scenarios", "PaperFriction"),
     ("tsmpc.scenarios", "PatchFriction"), ("tsmpc.scenarios", "ConstantFriction"),
     ("tsmpc.estimation.fusion", "Fusion"), ("tsmpc.estimation.fusion", "CourseFusion"),
-    ("tsmpc.control.slip_aware", "SlipGate"), ("tsmpc.sensors", "SensorModel"),
+    ("tsmpc.sensors", "SensorModel"),
     ("tsmpc.scenarios", "EventFriction"), ("tsmpc.scenarios", "ResolvedEvent"),
     ("tsmpc.sensors", "DropoutFault"), ("tsmpc.sensors", "NaNBurstFault"),
     ("tsmpc.vehicle.actuators", "ActuatedPlant"), ("tsmpc.vehicle.actuators", "Actuators"),
@@ -234,12 +222,8 @@ _PORTED_FUNCTIONS = (
     ("tsmpc.sim.simulator", "_start_state", "tsmpc.sim.start"),
     ("tsmpc.sim.simulator", "_measurement", "tsmpc.sim.simulator"),
     ("tsmpc.sim.simulator", "tracked_steps", "tsmpc.sim.start"),
-    ("tsmpc.sim.simulator", "pose_to_errors", "tsmpc.models.kinematic"),
-    ("tsmpc.control.cascade", "outer_loop_errors", "tsmpc.control.slip_aware"),
-    ("tsmpc.control.cascade", "pose_to_errors", "tsmpc.models.kinematic"),
+    ("tsmpc.sim.simulator", "pose_errors", "tsmpc.control.outer_block"),
     ("tsmpc.control.cascade", "_apply_stiffness_to", "tsmpc.control.cascade"),
-    ("tsmpc.control.slip_aware", "velocity_frame_errors", "tsmpc.control.slip_aware"),
-    ("tsmpc.control.slip_aware", "pose_to_errors", "tsmpc.models.kinematic"),
 )
 
 
@@ -272,6 +256,9 @@ def _replaced_code() -> str | None:
             return "tsmpc.control.ts_lqr.inner_step was replaced"
         if importlib.import_module("tsmpc.control.inner_block").inner_block is not ke.inner_block:
             return "tsmpc.control.inner_block.inner_block was replaced"
+        ob = importlib.import_module("tsmpc.control.outer_block")
+        if ob.outer_errors is not ke.outer_errors or ob.outer_after is not ke.outer_after:
+            return "tsmpc.control.outer_block's block was replaced"
     return None
 
 
@@ -627,7 +614,7 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     fp[ke.FP_MU_NOM], fp[ke.FP_MG] = plant.vehicle.mu_nominal, plant._mg
     fp[ke.FP_V_LO], fp[ke.FP_V_HI] = cascade._v_range
     fp[ke.FP_W_LIM], fp[ke.FP_POSE_NOISE] = cascade._w_limit, cascade._pose_noise
-    fp[ke.FP_HEAD_NOISE], fp[ke.FP_GATE_SIGMA] = cascade._heading_noise, cascade._slip_gate.sigma
+    fp[ke.FP_HEAD_NOISE] = cascade._heading_noise
     fp[ke.FP_COURSE_SIGMA] = fu.course.sigma
     fp[ke.FP_CF0], fp[ke.FP_CR0] = veh.C_f, veh.C_r
     fp[ke.FP_VM], fp[ke.FP_VI], fp[ke.FP_VA], fp[ke.FP_VB] = veh.mass, veh.inertia, veh.a, veh.b
@@ -646,17 +633,12 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     ip[ke.IP_NIN], ip[ke.IP_N] = n_in, N
     ip[ke.IP_NSUB] = rk4_count(cascade.Td, plant.model.h) or 0  # (run() checked it)
     ip[ke.IP_NW], ip[ke.IP_REFLEN] = cfg.mhe.N, len(ref)
-    mc = cfg.mpc
-    ip[ke.IP_SLIP], ip[ke.IP_TANGENT] = mc.slip_aware, mc.tangent_heading
-    ip[ke.IP_PREDICT], ip[ke.IP_REPEAT] = fs.predict_pose, fs.reject_repeated_samples
+    ip[ke.IP_REPEAT] = fs.reject_repeated_samples
     ip[ke.IP_ANYCOURSE] = fu.any_course
-    ip[ke.IP_CSLIP], ip[ke.IP_CSPEED] = fs.course_slip, fs.course_speed
+    ip[ke.IP_CSPEED] = fs.course_speed
     ip[ke.IP_STIFF], ip[ke.IP_MASSEST] = fs.stiffness_estimate, fs.mass_estimate
     ip[ke.IP_GYRO] = fs.gyro_bias
     fp[ke.FP_GYRO:ke.FP_GYRO + 4] = fu.gyro.params
-    off = cascade._offset
-    if isinstance(off, OffsetFree):  # mpc.offset_free_s (control/offset_free.py)
-        ip[ke.IP_OFFSET], fp[ke.FP_OFF_GAIN] = 1, off.params.gain
     ip[ke.IP_STEER] = fs.steering_offset
     assert len(fu.steer_p) == ke.N_STEER_P  # (the kernel rebuilds the record from these slots)
     fp[ke.FP_STEER:ke.FP_STEER + ke.N_STEER_P] = fu.steer_p
@@ -670,21 +652,9 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     rc = cascade._recovery
     ip[ke.IP_RECOV] = rc is not None
     fp[ke.FP_REINIT] = cascade._gate_p.reinit_s
-    gov = cascade.governor
-    ip[ke.IP_GOV] = gov is not None
-    if gov is not None:  # the speed governor's parameters (Cascade._govern's inputs)
-        p = gov.params
-        (fp[ke.FP_G_MARGIN], fp[ke.FP_G_RDOWN], fp[ke.FP_G_RUP], fp[ke.FP_G_RMIN], fp[ke.FP_G_MUPLAN],
-         fp[ke.FP_G_DEADBAND], fp[ke.FP_G_KT], fp[ke.FP_G_DRAG], fp[ke.FP_G_G], fp[ke.FP_G_TC],
-         fp[ke.FP_G_ALPHA]) = p
-        fp[ke.FP_G_VMIN] = cfg.dynamic_box.v[0]
-        fp[ke.FP_G_MUNOM], fp[ke.FP_G_MUDRY] = veh.mu_nominal, cfg.tyre.mu_dry
-        fp[ke.FP_G_GPR] = gov.grip.grip_per_road  # 0: the tyre-only grip model (governor.py)
-        fp[ke.FP_G_REAR] = veh.a / veh.wheelbase
-        fp[ke.FP_G_FMAX] = cascade._force_limits[1]
-        fp[ke.FP_G_DT], fp[ke.FP_G_MDT] = ref.dt, cascade._mpc_reference.dt
-        ip[ke.IP_G_ORACLE] = cfg.governor.grip_source == "oracle"
-        ip[ke.IP_G_PREVIEW] = gov.preview
+    # the outer block's records (Cascade._ob_p, _gov_p; the kernel rebuilds them from these slots)
+    fp[ke.FP_OB:ke.FP_OB + N_OBP] = pack_outer(cascade._ob_p)
+    fp[ke.FP_GB:ke.FP_GB + N_GBP] = pack_govern(cascade._gov_p)
     return fp, ip
 
 
@@ -694,12 +664,10 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     mhe, course = cascade.mhe, cascade._fusion.course
     sf[ke.SF_IB:ke.SF_IB + ke.N_IB] = cascade._ib_state  # the inner block's (friction step, mass fit)
     sf[ke.SF_POSE:ke.SF_POSE + 3] = cascade._pose
-    sf[ke.SF_HELD:ke.SF_HELD + 3] = cascade._pose_held
     sf[ke.SF_POSET] = cascade._pose_t
     # recovery: the run of poses rejected as jumps (the blind stop is not reproduced:
     # applicability() keeps runs that can blind the cascade in Python)
     sf[ke.SF_GS:ke.SF_GS + ke.N_GS] = cascade._gs  # the gate block's (the jump run, the repeat guard)
-    si[ke.SI_GATEN] = cascade._slip_gate.n_poses
     sf[ke.SF_UPREV:ke.SF_UPREV + 2] = cascade._u_prev
     sf[ke.SF_UAPP:ke.SF_UAPP + 2] = cascade._u_applied
     sf[ke.SF_LOW] = cascade._low_applied
@@ -725,11 +693,7 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
     sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival
-    sf[ke.SF_TOFF] = cascade._t_offset
-    gov = cascade.governor
-    if gov is not None:
-        sf[ke.SF_GRATE], sf[ke.SF_GGRIP], sf[ke.SF_GHOLD] = gov.state
-        si[ke.SI_GACT], si[ke.SI_GSTEPS] = gov.actions, gov.steps
+    sf[ke.SF_OB:ke.SF_OB + ke.N_OB] = cascade._ob  # the outer block's (held pose, offset, governor, …)
     return sf, si
 
 
@@ -738,7 +702,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     """The kernel's arrays from a reset cascade, the plant (a VehiclePlant, or the ActuatedPlant
     around one) and the scenario."""
     plant = plant if scenario.actuators is None else plant.plant
-    ref, n_in, N = cascade.reference, cascade.n_inner, cfg.mpc.N
+    n_in, N = cascade.n_inner, cfg.mpc.N
     M = K * n_in
     mpc, mhe, lqr = cascade.mpc, cascade.mhe, _static_lqr(cascade)
     fp, ip = _parameters(cfg, cascade, scenario, plant, ke)
@@ -751,25 +715,16 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     prog = _friction_program(scenario.friction)
     assert prog is not None
     frb, patches, events = prog
-    # the MPC's reference inputs at every step: Reference.window's v, ω (a closed lap wraps, an
-    # open reference holds its last sample)
-    mref = cascade._mpc_reference
-    L = len(mref)
-    idx = np.arange(K + N + 3)  # (+2: the governed window's interpolation, governed_window)
-    idx = idx % L if mref.closed else np.minimum(idx, L - 1)
-    mv, mw = _f64(mref.v[idx]), _f64(mref.omega[idx])
-    # the speed governor's preview: Reference.window's v, ω of the reference past its end
-    gov = cascade.governor
-    n_ref = len(ref) + (0 if gov is None else gov.preview + 1)
-    ridx = np.arange(n_ref)
-    ridx = ridx % len(ref) if ref.closed else np.minimum(ridx, len(ref) - 1)
+    # the outer block's reference (Cascade._refs: the reference's signals, its tangent, the MPC's
+    # v and ω; the block reads windows past the end as Reference.window does)
+    rx, ry, rth, rv, rw, rtan, mv, mw = (_f64(a) for a in cascade._refs)
+    n_sc = ke.N_SC + 2 * (N + 1) + scratch_size(N, cascade._gov_p.preview)
     return _Arrays(
-        x=_f64(x0), fp=fp, ip=ip, sf=sf, si=si, sc=np.zeros(ke.N_SC + 2 * (N + 1)),
+        x=_f64(x0), fp=fp, ip=ip, sf=sf, si=si, sc=np.zeros(n_sc),
         ev=np.zeros(ke.N_EVENTS, dtype=np.int64), noise=_noise(cfg, M), u_drop=_f64(u_drop),
         gnss=_f64(gnss), fifo=fifo, frb=frb, patches=_f64(patches), events=_f64(events),
-        ref_x=_f64(ref.x), ref_y=_f64(ref.y), ref_th=_f64(ref.theta), ref_v=_f64(ref.v[ridx]),
-        ref_w=_f64(ref.omega[ridx]), th_tan=_f64(cascade._theta_tangent), mv=mv, mw=mw,
-        gate=cascade._slip_gate.poses.copy(), cur=np.zeros(ke.N_IV),
+        ref_x=rx, ref_y=ry, ref_th=rth, ref_v=rv, ref_w=rw, th_tan=rtan, mv=mv, mw=mw,
+        gate=cascade._gate_poses.copy(), cur=np.zeros(ke.N_IV),
         ivs=np.zeros((ke.RING, ke.N_IV)), mass_v=cascade._ib_ring.copy(),
         mY=mhe._Y, mW=mhe._W, mU=mhe._U, mXS=mhe._XS, mA=mhe._Ab, mB=mhe._Bb, mX=mhe._Xb, mp=mp,
         ls=lqr._s, Kv=Kv, zlo=zlo, zhi=zhi, bits=bits, prm=prm,
@@ -805,12 +760,8 @@ class _Run:
                                   iterations=0, qp_iterations=0, solve_time_s=0.0, n_clipped=0)
         else:
             mpc._prev = None
-        if a.si[ke.SI_GWIN]:  # the speed governor has acted: the window at the governed time
-            m = int(a.si[ke.SI_M])
-            tau = float(m * self.cascade.Td - a.sf[ke.SF_TOFF])
-            window = governed_window(self.cascade._mpc_reference, tau, float(a.sf[ke.SF_GRATE]), N + 1)
-        else:
-            window = self.cascade._mpc_reference.window(int(a.si[ke.SI_KW]), N + 1)
+        o = ke.N_SC  # the window the outer block made (at the governed time once the governor acted)
+        window = _Window(a.sc[o:o + N + 1].copy(), a.sc[o + N + 1:o + 2 * (N + 1)].copy())
         e = a.sc[ke.SC_EMEAS:ke.SC_EMEAS + 3].copy()
         t0 = time.perf_counter()
         try:
@@ -1021,8 +972,8 @@ def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termina
     f_true = np.ascontiguousarray(li[:, ke.LI_FTRUE])
     events = {name: int(a.ev[slot]) for name, slot in zip(_EVENTS, ke.EVENT_SLOTS, strict=True)}
     if gov:
-        events["governor_actions"] = int(a.si[ke.SI_GACT])
-        events["governor_steps"] = int(a.si[ke.SI_GSTEPS])
+        events["governor_actions"] = int(a.ev[ke.EV_OUTER + OC_GACT])
+        events["governor_steps"] = int(a.ev[ke.EV_OUTER + OC_GSTEPS])
     x = a.x
     return RunLog(
         method=method, scenario=scenario.name, Tc=Tc, Td=Td,

@@ -21,8 +21,8 @@ from numpy.typing import NDArray
 
 from tsmpc.config import Config
 from tsmpc.control.cascade import Cascade, Command, Measurement, Method, build_outer_controller
+from tsmpc.control.outer_block import pose_errors
 from tsmpc.errors import ConfigError, NonFiniteError
-from tsmpc.models.kinematic import pose_to_errors
 from tsmpc.planning.reference import Reference
 from tsmpc.scenarios import Scenario, SensorFault, SensorNoise
 from tsmpc.sim.log import RunLog
@@ -59,7 +59,7 @@ class _Recorder:
         """Log the true state at outer step k; returns the true lateral error e_y."""
         r = self.refs[k]
         self.state_outer[k] = x
-        self.errors[k] = pose_to_errors(x[0], x[1], x[2], r[0], r[1], r[2])
+        pose_errors(x[0], x[1], x[2], r[0], r[1], r[2], self.errors[k])  # (the outer block's, one definition)
         return float(self.errors[k, 1])
 
     def plan(self, k: int, cmd: Command) -> None:
