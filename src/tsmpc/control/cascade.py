@@ -80,6 +80,7 @@ from tsmpc.control.inner_block import (
     inner_block,
     start_state,
 )
+from tsmpc.control.mhe_block import N_EO, mhe_inputs
 from tsmpc.control.offset_free import OffsetParams
 from tsmpc.control.outer_block import (
     MPC_FALLBACK,
@@ -269,6 +270,7 @@ class Cascade:
 
     lqr: TSLQR | AsRunLQR  #: the inner loop (cfg.lqr.law)
     mhe: MHEUIO  #: the estimator (MHEUIO or its paper form PaperUIOMHE, cfg.mhe.form)
+    _mhe_arrays: tuple[Any, ...]  #: the MHE block's leading arguments (the estimator's arrays)
 
     def __init__(
         self, cfg: Config, method: Method | str, reference: Reference, *,
@@ -345,6 +347,7 @@ class Cascade:
         self._course: Any = self._fusion.course if self._fusion.any_course else _NoCourse()
         self._servo = self._servo_offset if cfg.fusion.steering_offset else self._servo_plain
         self._build_inner_block(cfg)
+        self._build_mhe_block()
         #: the speed governor's block record (issue 36; None: off)
         self.governor: GovernBlockParams | None = _build_governor(cfg) if cfg.governor.enabled else None
         self._build_outer_block(cfg)
@@ -829,26 +832,49 @@ class Cascade:
 
     def _estimate(self, m: Measurement, v: float, om: float, speeds_ok: bool,
                   t1: float) -> tuple[Estimate, tuple[float, float]]:
-        """The MHE-UIO's step on the measured speeds (NaN when the gates refused them) and the
-        input the plant received: (the estimate, that input as the MHE's model sees it)."""
-        y = (v - self._fusion.speed_offset(), om) if speeds_ok else (math.nan, math.nan)
-        u0, u1 = self._u_applied
-        if m.force is not None:
-            u0 = float(m.force)
-        if m.steering is not None:
-            u1 = float(m.steering) + self._steer_offset  # the wheels' intended angle
-        # lqr.low_speed_resistance: the MHE's model has the clipped resistance, so it sees the force
-        # net of the part the law added for it (ts_lqr.py)
-        u_model = (u0, u1) if self._low_applied == 0.0 else (u0 - self._low_applied, u1)
+        """The MHE block (mhe_block.py: one compiled call on the default path): the MHE-UIO's step
+        on the measured speeds (NaN when the gates refused them) and the input the plant received
+        — (the estimate, that input as the MHE's model sees it). Without the compiled kernel (or a
+        replaced ``mhe.step``) the block's inputs go to the estimator's own step."""
+        f, s, mhe = m.force, m.steering, self.mhe
+        hf, hs = f is not None, s is not None
+        F, S = (0.0 if f is None else float(f)), (0.0 if s is None else float(s))
+        off, (Fa, da) = self._fusion.speed_offset(), self._u_applied
+        so, low = self._steer_offset, self._low_applied
         try:
-            est = self.mhe.step(y, u_model)
+            call = self._mhe_call
+            if call is not None and "step" not in mhe.__dict__:
+                arrays = self._mhe_arrays
+                if arrays[1] is not mhe._Y:  # (the estimator's reset makes a new window)
+                    arrays = self._mhe_arrays = (mhe.vehicle.mass, mhe._Y, mhe._W, mhe._U, mhe._XS, mhe._Ab,
+                                                 mhe._Bb, mhe._Xb, mhe._mp, mhe._ms, mhe._mi, mhe._uk,
+                                                 self._est_buf)
+                st, F_raw, n, ok, u0, u1 = call(*arrays, speeds_ok, v, om, off, Fa, da, hf, F, hs, S, so, low)
+                return mhe.estimate(st, F_raw, n, ok, t1), (u0, u1)
+            y0, y1, u0, u1 = mhe_inputs(speeds_ok, v, om, off, Fa, da, hf, F, hs, S, so, low)
+            return mhe.step((y0, y1), (u0, u1)), (u0, u1)
         except Exception as err:  # e.g. a LinAlgError: keep the last estimate, flagged FAILED
             self._caught(err)
             last = self.last_estimate
             x_hat = last.x.copy() if last is not None else np.array([v, 0.0, om])
             est = Estimate(x_hat, last.F_fr if last is not None else 0.0, 0.0,
                            EstimatorStatus.FAILED, time.perf_counter() - t1)
-        return est, u_model
+            y0, y1, u0, u1 = mhe_inputs(speeds_ok, v, om, off, Fa, da, hf, F, hs, S, so, low)
+            return est, (u0, u1)
+
+    def _build_mhe_block(self) -> None:
+        """The MHE block's compiled call (kernels/blocks.py mhe_call) when the estimator runs the
+        compiled window kernel with its model in it (Euler) and its step is MHEUIO's own."""
+        from tsmpc import kernels
+        from tsmpc.estimation.mhe_uio import MHEUIO
+
+        mhe, kern = self.mhe, kernels.load("blocks")
+        self._est_buf = np.zeros(N_EO)
+        self._mhe_arrays = (None, None)  # the call's leading arguments (made at the first)
+        self._mhe_call: Any = None
+        if (kern is not None and mhe._kern is not None and mhe._kargs[-1] and type(mhe).step is MHEUIO.step
+                and type(mhe).step_values is MHEUIO.step_values):
+            self._mhe_call = kern.mhe_call
 
     def _build_inner_block(self, cfg: Config) -> None:
         """The inner block's records (inner_block.py: lqr.friction_step's detector, beyond the paper;

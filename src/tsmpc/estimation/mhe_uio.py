@@ -353,7 +353,8 @@ class MHEUIO:
 
     def step_values(self, v: float, omega: float, F_xR: float, delta: float) -> Estimate:
         """:meth:`step` of ``y = [v, omega]``, ``u = [F_xR, delta]`` (no arrays made): with the
-        kernel one compiled call (:func:`tsmpc.kernels.mhe.mhe_step`, the run engine's block)."""
+        kernel one compiled call (:func:`tsmpc.kernels.mhe.mhe_step`, which the cascade's MHE block
+        :func:`tsmpc.control.mhe_block.mhe_block` calls too), then :meth:`estimate`."""
         t0 = time.perf_counter()
         k = self._kern
         if k is None:
@@ -367,16 +368,30 @@ class MHEUIO:
                 st, F_raw, n, ok = self._step_zoh(v, omega, F_xR, delta)
         except (np.linalg.LinAlgError, ValueError, ArithmeticError) as err:
             return self._failed(float("nan"), t0, f"{type(err).__name__}")
-        if st == k.MHE_DENSE:  # a state bound is active (or a pivot failed): the dense QP decides
-            try:
-                with np.errstate(all="ignore"):
-                    return self._step_dense(np.array([v, omega]), self._uk.copy(), ok, n,
-                                            n == self.settings.N, self._U[:n], self._XS[: n + 1],
-                                            (self._Ab[:n].copy(), self._Bb[:n].copy()), t0, F_raw)
-            except (np.linalg.LinAlgError, ValueError, ArithmeticError) as err:
-                return self._failed(float("nan"), t0, f"{type(err).__name__}")
-        return Estimate(self._ms[0:3].copy(), float(self._ms[3]), F_raw, _STATUS[st],
+        return self.estimate(st, F_raw, n, ok, t0)
+
+    def estimate(self, status: int, F_raw: float, n: int, ok: bool, t0: float) -> Estimate:
+        """The estimate of a step the compiled kernel ran (:func:`tsmpc.kernels.mhe.mhe_step`, in
+        :meth:`step_values` or the cascade's MHE block, :func:`tsmpc.control.mhe_block.mhe_block`)
+        from its status code: the estimator's state, or — ``MHE_DENSE`` — the dense QP's
+        (:meth:`dense_step`). ``t0``: when the step began."""
+        if status == 0:  # MHE_DENSE: a state bound is active (or a pivot failed)
+            return self.dense_step(ok, n, F_raw, t0)
+        return Estimate(self._ms[0:3].copy(), float(self._ms[3]), F_raw, _STATUS[status],
                         time.perf_counter() - t0)
+
+    def dense_step(self, ok: bool, n: int, F_raw: float, t0: float) -> Estimate:
+        """The step the kernel handed over (a window of ``n`` inputs, updated, the model along it
+        in ``_Ab``/``_Bb``, the input in ``_uk``; ``ok``: the sample was accepted): the dense QP
+        decides (a linear-algebra error: FAILED). The cascade's, the run engine's and the
+        batch's one Python path."""
+        try:
+            with np.errstate(all="ignore"):
+                return self._step_dense(self._Y[n].copy(), self._uk.copy(), ok, n, n == self.settings.N,
+                                        self._U[:n], self._XS[: n + 1],
+                                        (self._Ab[:n].copy(), self._Bb[:n].copy()), t0, F_raw)
+        except (np.linalg.LinAlgError, ValueError, ArithmeticError) as err:
+            return self._failed(float("nan"), t0, f"{type(err).__name__}")
 
     def _step_zoh(self, v: float, omega: float, F_xR: float, delta: float) -> tuple[int, float, int, bool]:
         """The block's step with the model evaluated by numpy (ZOH) between the window's update

@@ -38,6 +38,7 @@ from numba.core import cgutils
 from numba.core import types as nbtypes
 from numba.np.arrayobj import populate_array
 
+from tsmpc.control.mhe_block import N_EO, estimate_out
 from tsmpc.kernels import engine as ke
 from tsmpc.kernels import mhe as km
 from tsmpc.kernels import plant as kplant
@@ -762,7 +763,7 @@ def _mhe_gather(s, slot, n, mY, mW, mU, mXS, mp, sf, si, key, sn, cs):
 
 @njit(**_NJ)
 def _mhe_finish(s, slot, n, mXS, mA, mB, mp, sf, si, sc):
-    """window_step's and _mhe_begin's ends for one lane from its solved slot: True when the
+    """window_step's and the MHE block's ends for one lane from its solved slot: True when the
     estimate is in (the window's minimiser within the state bounds), False when the dense QP must
     decide (the model matrices then in mA, mB as window_step leaves them)."""
     F = s[MH_F * LANES + slot]
@@ -787,10 +788,9 @@ def _mhe_finish(s, slot, n, mXS, mA, mB, mp, sf, si, sc):
         o = (k + 1) * MR * LANES + slot
         for i in range(3):
             mXS[k, i] = s[o + (MR_X + i) * LANES]
-    for i in range(3):
-        sf[ke.SF_MX + i] = mXS[n, i]
-    sf[ke.SF_MF] = F
-    ke._est_out(sf, sc, si, ke.ST_OK if si[ke.SI_MHEFULL] != 0 else ke.ST_WARMUP, sc[ke.SC_FRAW])
+    ms = sf[ke.SF_MX:ke.SF_MX + km.N_MS]  # the estimate: the MHE's own ends (kernels.mhe, mhe_block.py)
+    si[ke.SI_ESTSTAT] = km.mhe_solved(ms, mXS, n, F, si[ke.SI_MHEFULL] != 0)
+    estimate_out(ms, sc[ke.SC_EST:ke.SC_EST + N_EO], sc[ke.SC_ESTFR])
     return True
 
 

@@ -1,7 +1,7 @@
 """The cascade's compiled calls of its blocks (their one definitions: the inner block
 :func:`tsmpc.control.inner_block.inner_block`, the pose gate :func:`tsmpc.control.gates.pose_gate`,
 the outer step's :func:`tsmpc.control.outer_block.outer_errors` and
-:func:`tsmpc.control.outer_block.outer_after`):
+:func:`tsmpc.control.outer_block.outer_after`, the MHE-UIO's step :func:`tsmpc.control.mhe_block.mhe_block`):
 the blocks' records rebuilt from arrays inside the compiled code, because numba's dispatcher types
 a record argument field by field (≈ 0.15 µs a field, more than the block's work), an array at once.
 
@@ -26,17 +26,18 @@ from numba import njit
 from tsmpc import kernels
 from tsmpc.control.gates import GateBlockParams, GateParams, gate_state, pose_gate
 from tsmpc.control.inner_block import InnerBlockParams, inner_block, start_state
+from tsmpc.control.mhe_block import MHEBlockParams, MHEWindow, mhe_block
 from tsmpc.control.outer_block import RefArrays, outer_after, outer_errors, unpack_govern, unpack_outer
 from tsmpc.control.ts_lqr import InnerParams, LQRLaw
 from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import MassParams
 from tsmpc.kernels.jit import BLOCK_MODULES
 
-__all__ = ["after_call", "inner_call", "outer_call", "pack", "pack_gates", "pose_call", "warm"]
+__all__ = ["after_call", "inner_call", "mhe_call", "outer_call", "pack", "pack_gates", "pose_call", "warm"]
 
 # entries compiled from other versions of the blocks (or of the law, kernels/lqr.py) are deleted
 # before the first call below loads one
-kernels.forget_stale(kernels._tree_folder(kernels.numba_cache_dir()), "blocks", ("blocks", "lqr"),
+kernels.forget_stale(kernels._tree_folder(kernels.numba_cache_dir()), "blocks", ("blocks", "lqr", "mhe"),
                      "blocks.blocks-sha256", BLOCK_MODULES)
 
 (BP_FSTEP, BP_FS_WINDOW, BP_FS_H, BP_MASSEST, BP_M_MASS, BP_M_TD, BP_M_WINDOW, BP_M_TAU, BP_M_SFB,
@@ -112,6 +113,18 @@ def after_call(opk, gpk, refs, ob, cnt, status, n_clipped, t, has_last, est_stat
                 est_status, v_hat, F_fr, saturated, F_applied, road_mu, dmass, buf)
 
 
+@njit(cache=True, fastmath=False)
+def mhe_call(mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, est, speeds_ok, v, omega, speed_offset, F_applied,
+             delta_applied, has_force, force, has_steering, steering, steer_offset, low):
+    """:func:`~tsmpc.control.mhe_block.mhe_block` of the estimator's arrays (the window solved
+    here): (status, F̂_raw, n, sample accepted, u0, u1) as a plain tuple (a NamedTuple's boxing
+    costs ≈ 0.45 µs a call)."""
+    r = mhe_block(MHEBlockParams(mass, False), MHEWindow(Y, W, U, XS, A, B, X), mp, ms, mi, uk, est,
+                  speeds_ok, v, omega, speed_offset, F_applied, delta_applied, has_force, force, has_steering,
+                  steering, steer_offset, low)
+    return r.status, r.F_raw, r.n, r.ok, r.u0, r.u1
+
+
 def warm() -> None:
     """Compile (or load from the cache) the signatures the cascade uses."""
     gs, gcnt = gate_state()
@@ -127,6 +140,13 @@ def warm() -> None:
                          InnerParams(True, False, True, 2.0, 3000.0))
     law = LQRLaw(Kv, np.array([-0.4, 2.0, -0.1]), np.array([0.4, 20.0, 0.1]), bits, prm, 10.0, 0.9, 0.01,
                  -2000.0, 10000.0, -0.4, 0.4, True, 0.3)
+    o3, n = np.ones(3), 3  # the MHE block (a window of 3; the types are the cascade's)
+    mp = np.concatenate([o3, np.ones(2), o3, [1e-10], -o3 * 100, o3 * 100, -o3, o3 * 20,
+                         [683.0, 560.0, 25000.0, 25000.0, 0.7, 1.0, 4.9, 0.4, 0.01]])
+    mhe_call(683.0, np.zeros((n + 1, 2)), np.ones(n + 1), np.zeros((n, 2)), np.ones((n + 1, 3)) * 5.0,
+             np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3)), mp, np.ones(7) * 5.0,
+             np.zeros(3, dtype=np.int64), np.zeros(2), np.zeros(5), True, 5.0, 0.1, 0.0, 0.0, 0.0, False, 0.0,
+             False, 0.0, 0.0, 0.0)
     st, ring, cnt = start_state(30)
     inner_call(pack(p, law), law.Kv, law.zlo, law.zhi, law.bits, law.prm, np.zeros(6), st, ring, cnt, 10.0,
                0.0, 0.0, 100.0, 90.0, 1, 10.0, 0.0)

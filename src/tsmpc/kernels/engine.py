@@ -8,7 +8,8 @@ its fits, the slip-aware outer-loop errors, the TS-MPC every T_c/T_d calls, the 
 mass-error terms, the TS-LQR) and the plant's T_d/h RK4 steps — and logs into preallocated arrays.
 The blocks are the compiled kernels the Python wrappers call: the TS-MPC's step (paper eq. "MPC";
 :func:`~tsmpc.kernels.mpc.guarded_step`), the MHE-UIO's window (eqs. "MHE", "disturb_estimation";
-:func:`~tsmpc.kernels.mhe.window_step`), the TS-LQR (Sec. 3.2; its step's block
+:func:`~tsmpc.kernels.mhe.window_step`, inside the MHE block :func:`~tsmpc.control.mhe_block.mhe_block`
+with its inputs and status), the TS-LQR (Sec. 3.2; its step's block
 :func:`~tsmpc.control.ts_lqr.inner_step` around :func:`~tsmpc.kernels.lqr.lqr_step`, inside the
 inner block :func:`~tsmpc.control.inner_block.inner_block` with friction-step detection and the
 mass terms)
@@ -71,6 +72,7 @@ from tsmpc.control.inner_block import (
     inner_block,
     mass_load,
 )
+from tsmpc.control.mhe_block import MHE_DENSE, N_EO, MHEBlockParams, MHEWindow, mhe_block
 from tsmpc.control.outer_block import (
     N_GBP,
     N_OB,
@@ -119,8 +121,7 @@ from tsmpc.estimation.fusion import (
     stiffness_update,
 )
 from tsmpc.kernels.jit import cpython_hypot
-from tsmpc.kernels.mhe import (  # the MHE's records and its step
-    MHE_DENSE,
+from tsmpc.kernels.mhe import (  # the MHE's records
     MHE_FAILED,
     MHE_OK,
     MHE_REJECTED,
@@ -133,7 +134,6 @@ from tsmpc.kernels.mhe import (  # the MHE's records and its step
     MS_F,
     N_MI,
     N_MS,
-    mhe_step,
 )
 from tsmpc.kernels.mpc import guarded_step
 from tsmpc.kernels.plant import rk4_block
@@ -226,7 +226,7 @@ assert SF_MF == SF_MX + MS_F and SF_ARR == SF_MX + MS_ARR
 assert SI_NREJ == SI_NY + MI_NREJ and SI_NFAIL == SI_NY + MI_NFAIL
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
- SC_WREF, SC_UMHE, _UM1, SC_YM, _YM1, SC_FRAW, SC_COMP, SC_LOWF, SC_OF, SC_OD, SC_MU, SC_EY,
+ SC_WREF, SC_UMHE, _UM1, _SCF1, _SCF2, _SCF3, SC_COMP, SC_LOWF, SC_OF, SC_OD, SC_MU, SC_EY,
  SC_PU, _PU2, SC_UK, _UK1, SC_TMP, _TM1, _TM2, SC_GROW, _GR1, _GR2, _GR3, _GR4) = range(38)
 N_SC = 38  # then the MPC's window's v and ω, N + 1 each, then the outer block's scratch
 # (outer_block.scratch_size)
@@ -562,38 +562,6 @@ def _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp):
     loi[k, LOI_QPIT], loi[k, LOI_CLIP] = si[SI_PQPIT], si[SI_PCLIP]
 
 
-# ============================================================================ MHE wrapper
-@njit(cache=True, fastmath=False)
-def _mhe_begin(y0, y1, u0, u1, mass, mY, mW, mU, mXS, mA, mB, mX, mp, views, sf, si, sc, ip):
-    """``MHEUIO.step`` up to the window solve's answer (:func:`~tsmpc.kernels.mhe.mhe_step`, its
-    one definition, on the estimator's slots). Returns 0 with the estimate in
-    ``sc``/``si[SI_ESTSTAT]``, or 1 when the dense QP must decide (the window is ready for
-    ``MHEUIO._step_dense``; ``sc[SC_FRAW]`` holds F̂_raw). ``views``: the slices of ``sf``,
-    ``si`` and ``sc`` the block takes, made once per call of run()."""
-    ms, mi, uk = views
-    sc[SC_UMHE], sc[SC_UMHE + 1] = u0, u1  # what the cascade gave (the course fusion's δ, F)
-    st, F_raw, n, ok = mhe_step(y0, y1, u0, u1, mass, mY, mW, mU, mXS, mA, mB, mX, mp, ms, mi, uk, True,
-                                ip[IP_DEFER] != 0)
-    si[SI_MHEN] = n
-    si[SI_MHEOK] = 1 if ok else 0
-    si[SI_MHEFULL] = 1 if n == ip[IP_NW] else 0
-    sc[SC_FRAW] = F_raw
-    if st == MHE_DENSE:
-        return 1
-    _est_out(sf, sc, si, st, F_raw)
-    return 0
-
-
-@njit(cache=True, fastmath=False)
-def _est_out(sf, sc, si, status, F_raw):
-    """The estimate of this step: x̂ = the MHE's state, F̂ = its window force."""
-    for i in range(3):
-        sc[SC_EST + i] = sf[SF_MX + i]
-    sc[SC_ESTF] = sf[SF_MF]
-    sc[SC_ESTFR] = F_raw
-    si[SI_ESTSTAT] = status
-
-
 @njit(cache=True, fastmath=False)
 def _actuated(x, Fc, dc, mu, act, fp, ip, sf, si, cst):
     """``ActuatedPlant.step`` over T_d: per sub-step the actuators' block
@@ -735,26 +703,23 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                         obuf)
             phase = PH_MHE
         if phase == PH_MHE:
-            fresh, speeds_ok = si[SI_FRESH] != 0, si[SI_SPOK] != 0
+            # the MHE block (Cascade._estimate): its inputs, the window's update and solve, the estimate
             sc[SC_VREF], sc[SC_WREF] = sf[SF_UPREV], sf[SF_UPREV + 1]
-            if fresh and speeds_ok:
-                off = 0.0
-                if ip[IP_CSPEED] != 0:  # the course-fitted speed-sensor offset
-                    off = speed_offset(SpeedFit(sf[SF_SV], sf[SF_SW]))
-                sc[SC_YM], sc[SC_YM + 1] = y[3] - off, y[4] - _gyro_now(ip, sf, si)
-            else:
-                sc[SC_YM], sc[SC_YM + 1] = math.nan, math.nan
-            u0 = sf[SF_PLANTU] if ip[IP_MFORCE] != 0 else sf[SF_UAPP]
-            # (a measured steering is the servo's: the wheels' intended angle adds the offset in force)
-            u1 = sf[SF_PLANTU + 1] + sf[SF_STOFF] if ip[IP_MSTEER] != 0 else sf[SF_UAPP + 1]
-            if sf[SF_LOW] != 0.0:  # lqr.low_speed_resistance: the MHE sees the force net of it
-                u0 = u0 - sf[SF_LOW]
+            off = speed_offset(SpeedFit(sf[SF_SV], sf[SF_SW])) if ip[IP_CSPEED] != 0 else 0.0
             si[SI_TICK0] = _ticks()
-            if _mhe_begin(sc[SC_YM], sc[SC_YM + 1], u0, u1, fp[FP_MHE_MASS], mY, mW, mU, mXS, mA,
-                          mB, mX, mp, (sf[SF_MX:SF_MX + N_MS], si[SI_NY:SI_NY + N_MI], sc[SC_UK:SC_UK + 2]),
-                          sf, si, sc, ip) != 0:
+            mbp = MHEBlockParams(fp[FP_MHE_MASS], ip[IP_DEFER] != 0)
+            mst = mhe_block(mbp, MHEWindow(mY, mW, mU, mXS, mA, mB, mX), mp, sf[SF_MX:SF_MX + N_MS],
+                            si[SI_NY:SI_NY + N_MI], sc[SC_UK:SC_UK + 2], sc[SC_EST:SC_EST + N_EO],
+                            si[SI_FRESH] != 0 and si[SI_SPOK] != 0, y[3], y[4] - _gyro_now(ip, sf, si), off,
+                            sf[SF_UAPP], sf[SF_UAPP + 1], ip[IP_MFORCE] != 0, sf[SF_PLANTU],
+                            ip[IP_MSTEER] != 0, sf[SF_PLANTU + 1], sf[SF_STOFF], sf[SF_LOW])
+            sc[SC_UMHE], sc[SC_UMHE + 1] = mst.u0, mst.u1  # what the cascade gave (the course fusion's δ, F)
+            si[SI_MHEN], si[SI_MHEOK] = mst.n, 1 if mst.ok else 0
+            si[SI_MHEFULL] = 1 if mst.n == ip[IP_NW] else 0
+            if mst.status == MHE_DENSE:  # the estimator's dense QP decides (the batch: its lanes' solve)
                 si[SI_PHASE] = PH_POST_MHE
                 return NEED_MHE
+            si[SI_ESTSTAT] = mst.status
             li[m, LI_TMHE] = float(_ticks() - si[SI_TICK0])
             phase = PH_POST_MHE
         if phase == PH_POST_MHE:

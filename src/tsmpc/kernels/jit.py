@@ -37,6 +37,7 @@ BLOCK_MODULES = (
     "tsmpc.control.gates",
     "tsmpc.control.governor",
     "tsmpc.control.inner_block",
+    "tsmpc.control.mhe_block",
     "tsmpc.control.offset_free",
     "tsmpc.control.outer_block",
     "tsmpc.control.slip_aware",

@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["MHE_DENSE", "MHE_FAILED", "MHE_OK", "MHE_REJECTED", "MHE_WARMUP", "mhe_push", "mhe_solve",
-           "mhe_step", "warm", "window_step"]
+           "mhe_solved", "mhe_step", "warm", "window_step"]
 
 # ---------------------------------------------------------------------------- the estimator's records
 # mp = [q(3), r(2), p(3), p_F, x_min(3), x_max(3), box lo(3), box hi(3), M, I, C_f, C_r, a, b, μ_o g,
@@ -383,10 +383,18 @@ def mhe_solve(y0, ok, n, mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, eval_model,
         return (MHE_WARMUP if ok else MHE_REJECTED), F_raw
     if code == 1:
         return MHE_DENSE, F_raw
+    return mhe_solved(ms, XS, n, F, full), F_raw
+
+
+@njit(cache=True, fastmath=False, inline="always")  # (no call layers in the engine)
+def mhe_solved(ms, XS, n, F, full):
+    """The estimate of a window solved within the bounds (here, or by the batch's lanes): x̂ its
+    last state ``XS[n]``, F̂ its force; the status :data:`MHE_OK` (a full window) or
+    :data:`MHE_WARMUP`."""
     for i in range(3):
-        x[i] = XS[n, i]
+        ms[MS_X + i] = XS[n, i]
     ms[MS_F] = F
-    return (MHE_OK if full else MHE_WARMUP), F_raw
+    return MHE_OK if full else MHE_WARMUP
 
 
 @njit(cache=True, fastmath=False, inline="always")  # (no call layers in the engine)

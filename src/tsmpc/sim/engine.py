@@ -131,7 +131,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
     "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "726a2ab654776920",
-    "tsmpc.control.cascade:Cascade.__init__": "e5f5f55d6424ab11",
+    "tsmpc.control.cascade:Cascade.__init__": "997c77c4bfef55cb",
     "tsmpc.control.cascade:Cascade.reset": "178d1264a0f00421",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
     "tsmpc.control.cascade:Cascade._step": "14337833d5610532",
@@ -144,7 +144,6 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "696dd9b43cc81793",
     "tsmpc.control.cascade:Cascade._outer": "a8a41901f93c5023",
-    "tsmpc.control.cascade:Cascade._estimate": "6008b3dd2bedaea5",
     "tsmpc.control.cascade:Cascade._dead_reckon": "d73049a3445880ad",
     "tsmpc.control.cascade:Cascade._watch_samples": "a2b6f37a111ff688",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
@@ -152,9 +151,6 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade._apply_stiffness": "fe7618eb687caf00",
     "tsmpc.control.cascade:_apply_stiffness_to": "3dd6d16df1ce959c",
     "tsmpc.estimation.mhe_uio:MHEUIO.reset": "91c37b33d40113cb",
-    "tsmpc.estimation.mhe_uio:MHEUIO.step": "1caf5cba8ba85e25",
-    "tsmpc.estimation.mhe_uio:MHEUIO.step_values": "cd60476bb9240171",
-    "tsmpc.estimation.mhe_uio:MHEUIO._failed": "481c2d5e6c42c5f7",
     "tsmpc.estimation.mhe_uio:MHEUIO.set_cornering_stiffness": "b21e89a68616204d",
     "tsmpc.control.ts_lqr:TSLQR.reset": "87b87f561a20499d",
     "tsmpc.control.ts_lqr:TSLQR.set_cornering_stiffness": "2650a8e957df2414",
@@ -246,9 +242,13 @@ def _replaced_code() -> str | None:
             return f"{mod_name}.{name} was replaced (the Python loop runs the replacement)"
     if "mod" in _KERNEL and _KERNEL["mod"] is not None:
         ke = _KERNEL["mod"]
-        for block, fn in (("mpc", "guarded_step"), ("mhe", "mhe_step"), ("plant", "rk4_block")):
+        for block, fn in (("mpc", "guarded_step"), ("plant", "rk4_block")):
             if getattr(importlib.import_module(f"tsmpc.kernels.{block}"), fn) is not getattr(ke, fn):
                 return f"tsmpc.kernels.{block}.{fn} was replaced"
+        mb = importlib.import_module("tsmpc.control.mhe_block")  # the MHE block calls the window kernel
+        if (mb.mhe_block is not ke.mhe_block
+                or mb.mhe_step is not importlib.import_module("tsmpc.kernels.mhe").mhe_step):
+            return "tsmpc.control.mhe_block's block or its kernel was replaced"
         ts_lqr = importlib.import_module("tsmpc.control.ts_lqr")  # its block calls the law
         if importlib.import_module("tsmpc.kernels.lqr").lqr_step is not ts_lqr.lqr_step:
             return "tsmpc.kernels.lqr.lqr_step was replaced"
@@ -777,32 +777,20 @@ class _Run:
         a.si[ke.SI_PCLIP] = plan.n_clipped
 
     def _mhe(self) -> None:
-        """MHEUIO's dense QP (a state bound is active in the window)."""
+        """The MHE block's dense QP (a state bound is active in the window): MHEUIO.dense_step on
+        the estimator's state as the kernel left it."""
         a, ke, mhe = self.a, self.ke, self.cascade.mhe
-        n, ok, full = int(a.si[ke.SI_MHEN]), bool(a.si[ke.SI_MHEOK]), bool(a.si[ke.SI_MHEFULL])
-        mhe._x = a.sf[ke.SF_MX:ke.SF_MX + 3].copy()
-        mhe._F = float(a.sf[ke.SF_MF])
-        mhe._ny, mhe._n_failed = int(a.si[ke.SI_NY]), int(a.si[ke.SI_NFAIL])
-        mhe._n_rejected = int(a.si[ke.SI_NREJ])
-        y = a.sc[ke.SC_YM:ke.SC_YM + 2].copy()
-        u = a.sc[ke.SC_UMHE:ke.SC_UMHE + 2].copy()
-        if not np.all(np.isfinite(u)):
-            u = np.zeros(2)
+        mhe._ms[:] = a.sf[ke.SF_MX:ke.SF_MX + ke.N_MS]
+        mhe._mi[:] = a.si[ke.SI_NY:ke.SI_NY + ke.N_MI]
+        mhe._uk[:] = a.sc[ke.SC_UK:ke.SC_UK + 2]
         t0 = time.perf_counter()
         try:
-            try:
-                with np.errstate(all="ignore"):
-                    est = mhe._step_dense(y, u, ok, n, full, mhe._U[:n], mhe._XS[: n + 1],
-                                          (mhe._Ab[:n].copy(), mhe._Bb[:n].copy()), t0,
-                                          float(a.sc[ke.SC_FRAW]))
-            except (np.linalg.LinAlgError, ValueError, ArithmeticError) as err:  # as MHEUIO.step
-                est = mhe._failed(float("nan"), t0, f"{type(err).__name__}")
+            est = mhe.dense_step(bool(a.si[ke.SI_MHEOK]), int(a.si[ke.SI_MHEN]), float(a.sc[ke.SC_ESTFR]), t0)
         except Exception as err:
             raise EngineFallback(f"MHE raised {type(err).__name__}") from err
         self.sec_mhe[int(a.si[ke.SI_M])] = time.perf_counter() - t0
-        a.sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
-        a.sf[ke.SF_MF] = mhe._F
-        a.si[ke.SI_NFAIL] = mhe._n_failed
+        a.sf[ke.SF_MX:ke.SF_MX + ke.N_MS] = mhe._ms
+        a.si[ke.SI_NY:ke.SI_NY + ke.N_MI] = mhe._mi
         a.sc[ke.SC_EST:ke.SC_EST + 3] = est.x
         a.sc[ke.SC_ESTF], a.sc[ke.SC_ESTFR] = est.F_fr, est.F_fr_raw
         a.si[ke.SI_ESTSTAT] = _MHE_CODE[est.status]
