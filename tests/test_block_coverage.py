@@ -41,6 +41,7 @@ BLOCK_TESTS = (
     "tests/test_offset_free.py::test_update_by_hand",
     "tests/test_outer_block.py",
     "tests/test_mhe_block.py",
+    "tests/test_stiffness_block.py",
     *(f"tests/test_governor.py::{t}" for t in (
         "test_grip_estimate_from_the_friction_force", "test_spin_grip_by_hand",
         "test_a_spin_engages_the_governor_on_a_dry_road", "test_sample_demand_by_hand",

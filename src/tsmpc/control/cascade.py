@@ -107,6 +107,7 @@ from tsmpc.control.outer_block import (
     scratch_size,
 )
 from tsmpc.control.slip_aware import BASELINE
+from tsmpc.control.stiffness_block import MP_CR, N_SA, PRM_CR, SA_CF, SA_CR, SA_HAS, stiffness_block
 from tsmpc.control.ts_lqr import LQR_NUMPY, TSLQR, InnerParams
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep, FrictionStepParams
@@ -369,9 +370,13 @@ class Cascade:
         self._gate_poses = np.zeros((BASELINE + 1, 3))  # the slip gate's MPC poses (slip_aware.py)
         self._fusion.reset(None if self._x0 is None else self._x0[:3])
         self._ib_state, self._ib_ring, self._ib_count = start_state(self.cfg.mhe.N)
-        if getattr(self, "_stiffness_applied", None):  # back to the config's stiffnesses
-            _apply_stiffness_to((self.mhe, self.lqr), (self.cfg.vehicle.C_f, self.cfg.vehicle.C_r), [])
-        self._stiffness_applied: list[float] = []
+        sa: list[float] | None = getattr(self, "_sa", None)
+        if sa is not None and sa[SA_HAS]:  # back to the config's stiffnesses
+            for b in (self.mhe, self.lqr):
+                setter = getattr(b, "set_cornering_stiffness", None)
+                if setter is not None:
+                    setter(self.cfg.vehicle.C_f, self.cfg.vehicle.C_r)
+        self._sa = [0.0] * N_SA  # the stiffness block's record of those given (stiffness_block.py)
         self.mpc.reset()
         self._calls = 0
         self._t_last: float | None = None
@@ -486,14 +491,19 @@ class Cascade:
         return tt
 
     def _apply_stiffness(self) -> None:
-        """fusion.stiffness_estimate: the fitted axle stiffnesses reach the MHE and the TS-LQR when
-        they moved by over 1 %; when they replace earlier ones, the slip fit's gain κ restarts
-        (the fusion's block decides both, fusion.stiffness_update: κ explained what the previous
-        model left unexplained)."""
-        C = self._fusion.course.stiffness_update(self._stiffness_applied)
-        if C is not None:
-            _apply_stiffness_to((self.mhe, self.lqr), C, self._stiffness_applied)
-            self._fusion.set_stiffness(C[0], C[1])  # the steering-offset fit's balance too
+        """fusion.stiffness_estimate: the stiffness block (stiffness_block.py) gives the fitted
+        axle stiffnesses to the MHE's and the TS-LQR's parameters when they moved by over 1 % (the
+        fusion decides, and restarts the slip fit's gain κ when they replace given ones); the
+        Python models around those arrays and the steering-offset fit's balance follow."""
+        course, sa = self._fusion.course, self._sa
+        give, course.state = stiffness_block(course.params, course.state, sa, self._stiff_mp, self._stiff_prm)
+        if give:
+            C_f, C_r = sa[SA_CF], sa[SA_CR]
+            for b in (self.mhe, self.lqr):
+                follow = getattr(b, "model_stiffness", None) or getattr(b, "set_cornering_stiffness", None)
+                if follow is not None:
+                    follow(C_f, C_r)
+            self._fusion.set_stiffness(C_f, C_r)  # the steering-offset fit's balance too
 
     def _fresh(self, t: float, m: Measurement) -> bool:
         if m.stamp is None:
@@ -870,6 +880,11 @@ class Cascade:
 
         mhe, kern = self.mhe, kernels.load("blocks")
         self._est_buf = np.zeros(N_EO)
+        # the stiffness block's parameter arrays: the MHE's and the TS-LQR law's (scratch where a
+        # block has none: its model_stiffness / set_cornering_stiffness holds its stiffnesses)
+        mp, law = getattr(mhe, "_mp", None), getattr(self.lqr, "_law", None)
+        self._stiff_mp = mp if isinstance(mp, np.ndarray) else np.zeros(MP_CR + 1)
+        self._stiff_prm = law.prm if law is not None else np.zeros(PRM_CR + 1)
         self._mhe_arrays = (None, None)  # the call's leading arguments (made at the first)
         self._mhe_call: Any = None
         if (kern is not None and mhe._kern is not None and mhe._kargs[-1] and type(mhe).step is MHEUIO.step
@@ -1004,15 +1019,6 @@ class _Window:
 
     def __init__(self, v: NDArray[np.float64], omega: NDArray[np.float64]) -> None:
         self.v, self.omega = v, omega
-
-
-def _apply_stiffness_to(blocks: tuple[Any, ...], C: tuple[float, float], applied: list[float]) -> None:
-    """Give (C_f, C_r) to the blocks that take them; ``applied`` becomes C."""
-    for b in blocks:
-        setter = getattr(b, "set_cornering_stiffness", None)
-        if setter is not None:
-            setter(*C)
-    applied[:] = list(C)
 
 
 #: TSLQR.step as defined (Cascade._inner calls the block in its place unless it was replaced)

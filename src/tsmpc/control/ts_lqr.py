@@ -59,6 +59,7 @@ from numpy.typing import NDArray
 
 from tsmpc._records import StateField, quick_init
 from tsmpc.config import FrictionEstimate, LQRSettings, VehicleParams
+from tsmpc.control.stiffness_block import PRM_CF, PRM_CR, give_stiffness
 from tsmpc.errors import ConfigError
 from tsmpc.kernels.jit import _numba_ready, jitable
 from tsmpc.models.dynamic import DynamicTS, continuous_matrices, equilibrium, steady_states
@@ -320,13 +321,17 @@ class TSLQR:
         """Use axle stiffnesses C_f, C_r [N/rad] in the reference gain N̄ (the model of the
         feed-forward) from the next step on (an online estimate, ``fusion.stiffness_estimate``);
         the LMI gains K_i and the controller state are kept."""
+        self.model_stiffness(C_f, C_r)
+        if self._law is not None:  # [M, I, C_f, C_r, a, b, μ_o g, d], read by every kernel step
+            give_stiffness(self._law.prm, PRM_CF, PRM_CR, float(C_f), float(C_r))
+
+    def model_stiffness(self, C_f: float, C_r: float) -> None:
+        """The stiffnesses of the numpy law (its vehicle), the compiled law's ``prm`` left as it
+        is: the cascade's stiffness block (control/stiffness_block.py) writes it."""
         from tsmpc.config import replace
 
         self.vehicle = replace(self.vehicle, cornering_stiffness_front=float(C_f),
                                cornering_stiffness_rear=float(C_r))
-        if self._law is not None:
-            prm = self._law.prm  # [M, I, C_f, C_r, a, b, μ_o g, d], read by every kernel step
-            prm[2], prm[3] = float(C_f), float(C_r)
 
     def reset(self) -> None:
         """Filter states at rest, integrator cleared."""

@@ -43,6 +43,7 @@ from scipy.linalg.lapack import dpotrs as _potrs  # pyright: ignore[reportAttrib
 from tsmpc._records import StateField, quick_init
 from tsmpc.config import MHESettings, VehicleParams
 from tsmpc.control.qp import QPStatus, solve_daqp
+from tsmpc.control.stiffness_block import MP_CF, MP_CR, give_stiffness
 from tsmpc.errors import ConfigError
 from tsmpc.models.dynamic import Discretization, DynamicTS
 
@@ -211,6 +212,14 @@ class MHEUIO:
         """Use axle stiffnesses C_f, C_r [N/rad] in the window model from the next step on (an
         online estimate, ``fusion.stiffness_estimate``): the numpy model and the kernel's
         parameters alike; the window and the estimate are kept."""
+        self.model_stiffness(C_f, C_r)
+        if self._kern is not None:  # the kernel's parameters (the cascade's stiffness block writes them)
+            give_stiffness(self._mp, MP_CF, MP_CR, float(C_f), float(C_r))
+
+    def model_stiffness(self, C_f: float, C_r: float) -> None:
+        """The stiffnesses of the Python side (the vehicle, the numpy model, the kernel's argument
+        tuple), the kernel's parameters ``_mp`` left as they are: the cascade's stiffness block
+        (control/stiffness_block.py) writes those."""
         from tsmpc.config import replace
 
         veh = replace(self.vehicle, cornering_stiffness_front=float(C_f),
@@ -222,7 +231,6 @@ class MHEUIO:
             k = list(self._kargs)
             k[10], k[11] = float(C_f), float(C_r)  # phys = (M, I, C_f, C_r, a, b, μ_o g, d) from 8
             self._kargs = tuple(k)
-            self._mp[self._kern.MP_CF], self._mp[self._kern.MP_CR] = float(C_f), float(C_r)
 
     def reset(self, x0: NDArray[np.float64] | None = None) -> None:
         """Empty the window; start from ``x0`` (or rest) with F̂ = 0."""

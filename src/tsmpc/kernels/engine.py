@@ -93,6 +93,7 @@ from tsmpc.control.outer_block import (
     unpack_govern,
     unpack_outer,
 )
+from tsmpc.control.stiffness_block import N_SA, SA_CF, SA_CR, SA_HAS, stiffness_block
 from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams, LQRLaw
 from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import (
@@ -118,7 +119,6 @@ from tsmpc.estimation.fusion import (
     steer_correction,
     steer_sample,
     steer_stiffness,
-    stiffness_update,
 )
 from tsmpc.kernels.jit import cpython_hypot
 from tsmpc.kernels.mhe import (  # the MHE's records
@@ -128,8 +128,6 @@ from tsmpc.kernels.mhe import (  # the MHE's records
     MHE_WARMUP,
     MI_NFAIL,
     MI_NREJ,
-    MP_CF,
-    MP_CR,
     MS_ARR,
     MS_F,
     N_MI,
@@ -196,7 +194,7 @@ N_IP = 26
 (SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, _FREE15, _FREE16, _FREE17, SF_UPREV, _U1, SF_UAPP, _A1,
  SF_PLANTU, _PU1, SF_LASTA, _FREE12, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
  SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, _FREE18, _FREE1, SF_AHPREV,
- _FREE4, _FREE5, _FREE6, _FREE7, _FREE8, SF_APPLIED, _AP1, SF_MX, _MX1, _MX2, SF_MF,
+ _FREE4, _FREE5, _FREE6, _FREE7, SF_SA, _SA1, _SA2, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2,
  SF_VNOW, SF_ACT, _AC1, SF_LOW, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, SF_N2,
  SF_N1, _FREE13, _J1, _J2, _J3, _FREE14,
@@ -213,7 +211,7 @@ SF_TOFF = SF_OB + OB_TOFF  # (the reference time offset, the governed rate: the 
 SF_GRATE = SF_OB + OB_RATE
 # ---------------------------------------------------------------------------- integer state
 (SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, _SFREE5, _SFREE6, SI_IVN, _SFREE0, SI_NCHORDS,
- SI_HASAH, _SFREE1, _SFREE2, SI_HASAPPLIED, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
+ SI_HASAH, _SFREE1, _SFREE2, _SFREE10, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
  SI_FRESH, SI_SPOK, SI_POSEOK, _SFREE7, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
  SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, _SFREE3, _SFREE4,
  _SFREE8, _SFREE9, SI_GWIN,
@@ -223,6 +221,7 @@ SF_GRATE = SF_OB + OB_RATE
 N_SI = 44
 # the MHE's state slots are its records' (kernels.mhe: ms = [x̂, F̂, x̄_0], mi = [samples, rejected, failed])
 assert SF_MF == SF_MX + MS_F and SF_ARR == SF_MX + MS_ARR
+assert SF_SA + N_SA == SF_MX  # the stiffness block's record (stiffness_block.SA_*)
 assert SI_NREJ == SI_NY + MI_NREJ and SI_NFAIL == SI_NY + MI_NFAIL
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
@@ -416,15 +415,11 @@ def _course_step(cp, mpc_step, has_pose, X, Y, th, v, omega, ay_ref, cur, ivs, s
 
 @njit(cache=True, fastmath=False)
 def _course_stiffness(cp, ivs, sf, si, mp, prm):
-    """An MPC step with the stiffness fit (``Cascade._apply_stiffness``, :func:`stiffness_update`):
-    the fitted (Ĉ_f, Ĉ_r) to the MHE's model and the TS-LQR's N̄ when they moved by over 1 %."""
-    give, C0, C1, s = stiffness_update(cp, _course_load(sf, si, ivs), si[SI_HASAPPLIED] != 0,
-                                       sf[SF_APPLIED], sf[SF_APPLIED + 1])
+    """An MPC step with the stiffness fit (``Cascade._apply_stiffness``): the stiffness block
+    :func:`~tsmpc.control.stiffness_block.stiffness_block` on the course state of the slots, the
+    MHE's ``mp``, the TS-LQR's ``prm`` and the record ``sf[SF_SA:]`` of those given."""
+    give, s = stiffness_block(cp, _course_load(sf, si, ivs), sf[SF_SA:SF_SA + N_SA], mp, prm)
     if give:
-        prm[2], prm[3] = C0, C1
-        mp[MP_CF], mp[MP_CR] = C0, C1
-        sf[SF_APPLIED], sf[SF_APPLIED + 1] = C0, C1
-        si[SI_HASAPPLIED] = 1
         _course_store(s, sf, si, ivs)  # (κ restarted when they replaced given ones)
 
 
@@ -476,8 +471,8 @@ def _steer_params(fp, sf, si):
                     fp[FP_STEER + 9], fp[FP_STEER + 10], fp[FP_STEER + 11], fp[FP_STEER + 12],
                     fp[FP_STEER + 13], fp[FP_STEER + 14], fp[FP_STEER + 15], fp[FP_STEER + 16],
                     fp[FP_STEER + 17])
-    if si[SI_HASAPPLIED] != 0:
-        return steer_stiffness(p, sf[SF_APPLIED], sf[SF_APPLIED + 1])
+    if sf[SF_SA + SA_HAS] != 0.0:
+        return steer_stiffness(p, sf[SF_SA + SA_CF], sf[SF_SA + SA_CR])
     return p
 
 

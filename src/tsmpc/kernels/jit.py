@@ -38,6 +38,7 @@ BLOCK_MODULES = (
     "tsmpc.control.governor",
     "tsmpc.control.inner_block",
     "tsmpc.control.mhe_block",
+    "tsmpc.control.stiffness_block",
     "tsmpc.control.offset_free",
     "tsmpc.control.outer_block",
     "tsmpc.control.slip_aware",

@@ -132,7 +132,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
     "tsmpc.sim.simulator:_Recorder": "726a2ab654776920",
     "tsmpc.control.cascade:Cascade.__init__": "997c77c4bfef55cb",
-    "tsmpc.control.cascade:Cascade.reset": "178d1264a0f00421",
+    "tsmpc.control.cascade:Cascade.reset": "61ea7ce539443769",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
     "tsmpc.control.cascade:Cascade._step": "14337833d5610532",
     "tsmpc.control.cascade:Cascade._gyro": "d4f0749f2a101860",
@@ -148,12 +148,8 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade._watch_samples": "a2b6f37a111ff688",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
-    "tsmpc.control.cascade:Cascade._apply_stiffness": "fe7618eb687caf00",
-    "tsmpc.control.cascade:_apply_stiffness_to": "3dd6d16df1ce959c",
     "tsmpc.estimation.mhe_uio:MHEUIO.reset": "91c37b33d40113cb",
-    "tsmpc.estimation.mhe_uio:MHEUIO.set_cornering_stiffness": "b21e89a68616204d",
     "tsmpc.control.ts_lqr:TSLQR.reset": "87b87f561a20499d",
-    "tsmpc.control.ts_lqr:TSLQR.set_cornering_stiffness": "2650a8e957df2414",
     "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
 }
@@ -219,7 +215,6 @@ _PORTED_FUNCTIONS = (
     ("tsmpc.sim.simulator", "_measurement", "tsmpc.sim.simulator"),
     ("tsmpc.sim.simulator", "tracked_steps", "tsmpc.sim.start"),
     ("tsmpc.sim.simulator", "pose_errors", "tsmpc.control.outer_block"),
-    ("tsmpc.control.cascade", "_apply_stiffness_to", "tsmpc.control.cascade"),
 )
 
 
@@ -256,6 +251,10 @@ def _replaced_code() -> str | None:
             return "tsmpc.control.ts_lqr.inner_step was replaced"
         if importlib.import_module("tsmpc.control.inner_block").inner_block is not ke.inner_block:
             return "tsmpc.control.inner_block.inner_block was replaced"
+        blk = importlib.import_module("tsmpc.control.stiffness_block").stiffness_block  # the hand-over
+        cas = importlib.import_module("tsmpc.control.cascade")
+        if blk is not ke.stiffness_block or cas.stiffness_block is not blk:
+            return "tsmpc.control.stiffness_block's block was replaced"
         ob = importlib.import_module("tsmpc.control.outer_block")
         if ob.outer_errors is not ke.outer_errors or ob.outer_after is not ke.outer_after:
             return "tsmpc.control.outer_block's block was replaced"
@@ -679,6 +678,7 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf[ke.SF_CNUM:ke.SF_CNUM + 2] = cs.stiff.num_f, cs.stiff.num_r
     sf[ke.SF_CDEN:ke.SF_CDEN + 2] = cs.stiff.den_f, cs.stiff.den_r
     sf[ke.SF_OMNOW], sf[ke.SF_VNOW] = cs.omega_now, cs.v_now
+    sf[ke.SF_SA:ke.SF_SA + ke.N_SA] = cascade._sa  # the stiffnesses given (a reset cascade: none)
     si[ke.SI_CSINCE] = cs.since
     gs = cascade._fusion.gyro.state  # the yaw-rate bias fit (a reset cascade: its prior)
     si[ke.SI_GYOPEN], si[ke.SI_GYN], si[ke.SI_GYGAP], si[ke.SI_GYCHORDS] = gs.open, gs.n, gs.gap, gs.n_chords
@@ -800,8 +800,8 @@ class _Run:
         from tsmpc.control.inner_block import count_step
 
         a, ke, lqr = self.a, self.ke, _static_lqr(self.cascade)
-        if a.si[ke.SI_HASAPPLIED]:  # the numpy law reads the stiffnesses from its vehicle
-            lqr.set_cornering_stiffness(float(a.prm[2]), float(a.prm[3]))
+        if a.sf[ke.SF_SA + ke.SA_HAS]:  # the numpy law reads the stiffnesses from its vehicle
+            lqr.model_stiffness(float(a.sf[ke.SF_SA + ke.SA_CF]), float(a.sf[ke.SF_SA + ke.SA_CR]))
         v, al, om = a.sc[ke.SC_EST:ke.SC_EST + 3].tolist()
         t0 = time.perf_counter()
         try:  # as Cascade._inner: the block's compensation and residual, the numpy law, the events
