@@ -101,3 +101,13 @@ def test_the_cascade_hands_over_through_the_block_and_reset_takes_them_back() ->
         assert tuple(mhe._mp[[MP_CF, MP_CR]]) == C0
     if lqr._law is not None:
         assert tuple(lqr._law.prm[[PRM_CF, PRM_CR]]) == C0
+
+
+
+def test_the_slots_are_the_mhe_kernels() -> None:
+    """The block's C_f, C_r slots are those of the MHE kernel's parameters (written in the block,
+    not imported: the kernels would bring numba in with the estimator, which imports the block)."""
+    pytest.importorskip("numba")
+    from tsmpc.kernels import mhe as km
+
+    assert (km.MP_CF, km.MP_CR) == (MP_CF, MP_CR)

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.estimation.fusion import CourseParams, CourseState, stiffness_update
-from tsmpc.kernels.jit import _numba_ready, jitable
+from tsmpc.kernels.jit import jitable
 
 __all__ = ["MP_CF", "MP_CR", "N_SA", "PRM_CF", "PRM_CR", "SA_CF", "SA_CR", "SA_HAS", "give_stiffness",
            "stiffness_block"]
@@ -31,15 +31,11 @@ __all__ = ["MP_CF", "MP_CR", "N_SA", "PRM_CF", "PRM_CR", "SA_CF", "SA_CR", "SA_H
 #: The record of the stiffnesses given: [given (1.0) or not (0.0), C_f, C_r].
 SA_HAS, SA_CF, SA_CR = 0, 1, 2
 N_SA = 3
-#: C_f, C_r in the MHE's parameters (tsmpc.kernels.mhe's MP_CF, MP_CR) and in the TS-LQR law's
-#: ``prm`` = [M, I, C_f, C_r, a, b, μ_o g, d].
+#: C_f, C_r in the MHE's parameters (tsmpc.kernels.mhe's MP_CF, MP_CR; tests/test_stiffness_block.py
+#: checks they agree: importing the kernels here would bring numba in with the estimator) and in
+#: the TS-LQR law's ``prm`` = [M, I, C_f, C_r, a, b, μ_o g, d].
 MP_CF, MP_CR = 23, 24
 PRM_CF, PRM_CR = 2, 3
-
-if _numba_ready():
-    from tsmpc.kernels import mhe as _km
-
-    assert (_km.MP_CF, _km.MP_CR) == (MP_CF, MP_CR)
 
 
 @jitable

@@ -43,7 +43,6 @@ from scipy.linalg.lapack import dpotrs as _potrs  # pyright: ignore[reportAttrib
 from tsmpc._records import StateField, quick_init
 from tsmpc.config import MHESettings, VehicleParams
 from tsmpc.control.qp import QPStatus, solve_daqp
-from tsmpc.control.stiffness_block import MP_CF, MP_CR, give_stiffness
 from tsmpc.errors import ConfigError
 from tsmpc.models.dynamic import Discretization, DynamicTS
 
@@ -214,6 +213,9 @@ class MHEUIO:
         parameters alike; the window and the estimate are kept."""
         self.model_stiffness(C_f, C_r)
         if self._kern is not None:  # the kernel's parameters (the cascade's stiffness block writes them)
+            # (imported here: the block module brings numba, which the estimator alone does not need)
+            from tsmpc.control.stiffness_block import MP_CF, MP_CR, give_stiffness
+
             give_stiffness(self._mp, MP_CF, MP_CR, float(C_f), float(C_r))
 
     def model_stiffness(self, C_f: float, C_r: float) -> None:
