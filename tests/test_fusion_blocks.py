@@ -176,7 +176,7 @@ def _corner_ring(p, alpha_hat: float = -0.01, ay_ref: float = 5.0, v_first: floa
     s = fu.course_start(p)
     slip = s.slip._replace(n2=0.25 * fu.NOISE_PRIOR_CHORDS)
     return CourseState((NO_INTERVAL,) * (RING - BASELINE) + (iv,) * BASELINE, BASELINE, 0.5, 10.0, 0, slip,
-                       s.speed, s.stiff, 0)
+                       s.speed, s.stiff, 0, fu.FIT_SETTLE_S)
 
 
 K0 = RING - BASELINE  #: the ring index of :func:`_corner_ring`'s first interval
@@ -209,7 +209,7 @@ def test_one_cornering_chord_in_the_slip_and_stiffness_fits(b: _Blocks) -> None:
     assert s.stiff.has_prev and s.stiff.alpha_prev == pytest.approx(-0.01)
     # the next chord: α̇ from the α̂ of consecutive chords, forgetting towards the prior
     s2 = b.course_chord(p, CourseState(_corner_ring(p, -0.02).ring, BASELINE, 0.5, 10.0, 1, s.slip, s.speed,
-                                       s.stiff, 0), K0, 5.0, 0.0, 0.0)
+                                       s.stiff, 0, s.age), K0, 5.0, 0.0, 0.0)
     g2 = 1.0 - 0.1 / STIFF_MEMORY_S
     S = 1000.0 * (5.0 + 10.0 * (-0.01 / 0.1))  # M (v ω + v α̇), α̇ = −0.01 rad / T_c: 4000 N
     F_f = 1.5 * S / 2.5  # 2400 N on α_F = 0.06: 40000 N/rad, plausible; the rear's 1600 N on
@@ -232,7 +232,7 @@ def test_a_chord_after_a_long_step_weighs_its_lagging_alpha_dot_as_noise(b: _Blo
     s = b.course_chord(p, _corner_ring(p), K0, 5.0, 0.0, 0.0)
     r = _corner_ring(p, -0.02)
     ring = (*r.ring[:-1], r.ring[-1]._replace(n=20))
-    s2 = b.course_chord(p, CourseState(ring, BASELINE, 0.5, 10.0, 1, s.slip, s.speed, s.stiff, 0), K0,
+    s2 = b.course_chord(p, CourseState(ring, BASELINE, 0.5, 10.0, 1, s.slip, s.speed, s.stiff, 0, s.age), K0,
                         5.0, 0.0, 0.0)
     sig = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4
     v = 500.0 / 60.0
@@ -269,6 +269,27 @@ def test_a_chord_through_a_transient_counts_its_alpha_rate_as_slip_error(b: _Blo
     assert (s.slip.P00, s.slip.P01, s.slip.P10, s.slip.P11) == pytest.approx(tuple(P1.ravel()), rel=1e-12)
     steady = b.course_chord(p, _corner_ring(p, -0.02), K0, 5.0, 0.0, 0.0)  # same z, no transient
     assert 0.0 < s.slip.kappa < 0.9 * steady.slip.kappa  # the transient weighs less
+
+
+def test_the_lateral_fits_wait_out_the_start_transient(b: _Blocks) -> None:
+    """For the first FIT_SETTLE_S seconds of chords the slip fit takes the chord as an offset β
+    alone (φ = [0, 1]: κ and its variance hold their prior) and the stiffness fits hold theirs,
+    while the speed fit learns; each chord adds its last interval's T_c to the age; from
+    FIT_SETTLE_S on the same chord moves them all."""
+    p = _params(b)
+    young = _corner_ring(p, -0.02)._replace(age=fu.FIT_SETTLE_S - 0.05)
+    s = b.course_chord(p, young, K0, 5.0, 0.0, 0.0)
+    assert s.age == pytest.approx(fu.FIT_SETTLE_S + 0.05, rel=1e-12)
+    assert s.stiff == young.stiff and s.slip.kappa == 0.0
+    lam = 1.0 - 0.1 / fu.SLIP_MEMORY_S
+    P00, P11 = SLIP_PRIOR[0] ** 2 / lam, SLIP_PRIOR[1] ** 2 / lam
+    sig = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4
+    assert s.slip.P00 == pytest.approx(P00, rel=1e-12)  # κ's variance: forgetting only
+    assert s.slip.beta == pytest.approx(P11 / (sig ** 2 + P11) * 0.02, rel=1e-12)  # z = 0.02, all β
+    assert s.speed.sw > young.speed.sw  # the speed fit took the chord
+    settled = b.course_chord(p, young._replace(age=fu.FIT_SETTLE_S), K0, 5.0, 0.0, 0.0)
+    assert settled.slip.kappa > 0.0 and settled.stiff != young.stiff
+    assert settled.speed == s.speed  # the speed fit does not wait
 
 
 def test_the_stiffness_fit_takes_only_steady_corners(b: _Blocks) -> None:
@@ -309,7 +330,7 @@ def test_stiffness_bounds_prior_and_application(b: _Blocks) -> None:
     assert b.stiffness(p, far) == (2.0 * 40000.0, 2.0 * 60000.0)
     assert b.stiffness(p, fu.StiffFit(1.0, 1.0, 1.0, 1.0, 0.0, False)) == (0.5 * 40000.0, 0.5 * 60000.0)
     slip = SlipFit(0.003, 0.002, 1e-5, 2e-6, 2e-6, 3e-4, 12.0, 11.0)
-    s = CourseState(s0.ring, 0, 0.0, math.nan, 0, slip, s0.speed, s0.stiff, 0)
+    s = CourseState(s0.ring, 0, 0.0, math.nan, 0, slip, s0.speed, s0.stiff, 0, 0.0)
     give, cf, cr, s1 = b.stiffness_update(p, s, False, 0.0, 0.0)  # none given yet: give, κ kept
     assert give and (cf, cr) == pytest.approx((40000.0, 60000.0)) and s1.slip == slip
     give, _, _, s1 = b.stiffness_update(p, s, True, 40000.0 * 1.0099, 60000.0 / 1.0099)

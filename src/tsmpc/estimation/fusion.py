@@ -187,6 +187,16 @@ SLIP_PRIOR = (0.005, 0.02)
 #: steering servo: max |e_y| 0.154 → 0.136 m, mean of seeds 2–3; no case of the benchmark worse
 #: by over 7 %, within its seed-to-seed spread).
 SLIP_TRANSIENT_S = 0.3
+#: Seconds of chords after a reset before the fits of the model's lateral error (the slip fit's
+#: κ, the stiffnesses) learn. A run starts from a state the car was not in (zero lateral slip at
+#: speed, mid-corner on a closed track; the MHE at its prior): its first chords are the lateral
+#: dynamics' start-up transient, not the model's steady error. The model car's single-track
+#: lateral dynamics at 30 m/s have the eigenvalues −2.4 ± 3.5i 1/s, a time constant of 0.41 s
+#: (0.27 s at 20 m/s): five of them, 2 s, leave under 1 % of the start. Meanwhile the slip offset β
+#: (a heading or steering offset is there from the first chord: it is fitted alone, κ held at its
+#: prior), the speed fit and the chords' noise level learn. Without it, held-back race tracks at
+#: 30 m/s learnt κ = 0.011 (twice its prior σ) within the first two seconds and left the road.
+FIT_SETTLE_S = 2.0
 #: Largest slip correction applied [rad] (a fit beyond it is a broken sensor, not a model error).
 SLIP_CORRECTION_MAX = 0.05
 #: Largest speed offset removed [m/s].
@@ -452,6 +462,8 @@ class CourseState(NamedTuple):
         speed: the speed-offset fit.
         stiff: the stiffness fit.
         since: calls since the last interval ended (a measured pose that ends no interval counts).
+        age: seconds of chords since the reset (each adds its last interval's time); the lateral
+            fits learn from ``FIT_SETTLE_S`` on.
     """
 
     ring: tuple[Interval, ...]
@@ -463,6 +475,7 @@ class CourseState(NamedTuple):
     speed: SpeedFit
     stiff: StiffFit
     since: int
+    age: float
 
 
 @jitable
@@ -485,7 +498,7 @@ def course_start(p: CourseParams) -> CourseState:
                    NOISE_PRIOR_CHORDS, NOISE_PRIOR_CHORDS)
     stiff = StiffFit(p.prior_num_f, p.prior_num_r, p.prior_den_f, p.prior_den_r, 0.0, False)
     return CourseState((NO_INTERVAL,) * RING, 0, 0.0, math.nan, 0, slip, SpeedFit(0.0, 0.0), stiff,
-                       p.n_inner)
+                       p.n_inner, 0.0)
 
 
 @jitable
@@ -541,7 +554,7 @@ def course_close(p: CourseParams, s: CourseState, cur: Interval, mpc_step: bool,
     good_pose = has_pose and math.isfinite(X) and math.isfinite(Y) and math.isfinite(theta)
     if not (good_pose and (mpc_step or since >= p.n_inner)):  # no interval ends here
         return CourseState(s.ring, s.n_iv, s.omega_now, s.v_now, s.n_chords, s.slip, s.speed, s.stiff,
-                           since), cur
+                           since, s.age), cur
     ay = abs(ay_ref) if math.isfinite(ay_ref) else 0.0
     good = math.isfinite(v)
     ring, n_iv = s.ring, s.n_iv
@@ -561,7 +574,7 @@ def course_close(p: CourseParams, s: CourseState, cur: Interval, mpc_step: bool,
         n_iv = min(n_iv + 1, RING)
         if good:
             k0 = _chord_start(p, ring, n_iv)
-    s = CourseState(ring, n_iv, omega, v, s.n_chords, s.slip, s.speed, s.stiff, 0)
+    s = CourseState(ring, n_iv, omega, v, s.n_chords, s.slip, s.speed, s.stiff, 0, s.age)
     if k0 >= 0:
         s = course_chord(p, s, k0, X, Y, theta)
     if not good:
@@ -595,7 +608,8 @@ def course_chord(p: CourseParams, s: CourseState, k0: int, ex: float, ey: float,
     shorter than ``MIN_CHORD_M`` or without speed changes nothing. The chord lasts its calls
     D = (n / ``n_inner``) T_c (``BASELINE`` T_c at the nominal sensors); each chord adds the time of
     its last interval, dt, to the fits' memories (their forgetting is per second, whatever the
-    pose rate)."""
+    pose rate). For the first ``FIT_SETTLE_S`` seconds of chords (the start's transient) the slip
+    fit takes the chord as an offset β alone (κ and the stiffness fits hold their priors)."""
     ring = s.ring
     first = ring[k0]
     last = ring[RING - 1]
@@ -642,8 +656,9 @@ def course_chord(p: CourseParams, s: CourseState, k0: int, ex: float, ey: float,
     sep = (n - 0.5 * (first.n + last.n)) / p.n_inner * p.Tc
     al_rate = ((last.sv_alpha / last.sv_full - first.sv_alpha / first.sv_full) / sep
                if sep > 0.0 and first.sv_full > 0.0 and last.sv_full > 0.0 else 0.0)
-    slip, noise_sig = _slip_fit(s.slip, dt, a_course - alpha_hat, a_y, chord, p.sigma, ay_min >= CORNER_ACCEL,
-                                SLIP_TRANSIENT_S * abs(al_rate))
+    settled = s.age >= FIT_SETTLE_S
+    slip, noise_sig = _slip_fit(s.slip, dt, a_course - alpha_hat, a_y if settled else 0.0, chord, p.sigma,
+                                ay_min >= CORNER_ACCEL, SLIP_TRANSIENT_S * abs(al_rate))
     # speed over ground: the arc of the chord (turn Δχ ≈ Δθ) over its time span
     turn = abs(_wrap(eth - first.sth))
     arc = chord * ((0.5 * turn) / math.sin(0.5 * turn) if turn > 1e-6 else 1.0)
@@ -659,13 +674,14 @@ def course_chord(p: CourseParams, s: CourseState, k0: int, ex: float, ey: float,
     # longer chord's means mix a corner's transient in); a NaN speed fails the test
     a_x = (s.v_now - first.v_first) / D
     steady = p.has_vehicle and abs(a_x) <= STIFF_MAX_ACCEL * p.g and n <= p.stiff_max
-    if p.has_vehicle and math.isfinite(s.omega_now) and ay_min >= CORNER_ACCEL and steady:
+    if settled and p.has_vehicle and math.isfinite(s.omega_now) and ay_min >= CORNER_ACCEL and steady:
         # α̇ from the model's α̂ over consecutive chords (smooth; the course's own α would put its
         # noise through a 1/dt difference into the force)
         al_dot = (alpha_hat - stiff.alpha_prev) / dt if stiff.has_prev else 0.0
         stiff = _stiffness_fit(p, stiff, a_course, alpha_hat, al_dot, s_vw / n, v_meas, s_F / n,
                                s.omega_now - first.w_first, s_wv / n, s_d / n, noise_sig, D, last.n)
-    return CourseState(ring, s.n_iv, s.omega_now, s.v_now, s.n_chords + 1, slip, speed, stiff, s.since)
+    return CourseState(ring, s.n_iv, s.omega_now, s.v_now, s.n_chords + 1, slip, speed, stiff, s.since,
+                       s.age + dt)
 
 
 @jitable
@@ -814,7 +830,7 @@ def stiffness_update(p: CourseParams, s: CourseState, has_applied: bool, C_f: fl
         return False, cf, cr, s
     if has_applied:
         s = CourseState(s.ring, s.n_iv, s.omega_now, s.v_now, s.n_chords, model_changed(s.slip), s.speed,
-                        s.stiff, s.since)
+                        s.stiff, s.since, s.age)
     return True, cf, cr, s
 
 

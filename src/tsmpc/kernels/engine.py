@@ -193,7 +193,7 @@ N_IP = 26
 # ---------------------------------------------------------------------------- float state
 (SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, _FREE15, _FREE16, _FREE17, SF_UPREV, _U1, SF_UAPP, _A1,
  SF_PLANTU, _PU1, SF_LASTA, _FREE12, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
- SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, _FREE18, _FREE1, SF_AHPREV,
+ SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_CAGE, _FREE1, SF_AHPREV,
  _FREE4, _FREE5, _FREE6, _FREE7, SF_SA, _SA1, _SA2, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2,
  SF_VNOW, SF_ACT, _AC1, SF_LOW, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, SF_N2,
@@ -382,7 +382,7 @@ def _course_load(sf, si, ivs):
     stiff = StiffFit(sf[SF_CNUM], sf[SF_CNUM + 1], sf[SF_CDEN], sf[SF_CDEN + 1], sf[SF_AHPREV],
                      si[SI_HASAH] != 0)
     return CourseState(ring, si[SI_IVN], sf[SF_OMNOW], sf[SF_VNOW], si[SI_NCHORDS], slip,
-                       SpeedFit(sf[SF_SV], sf[SF_SW]), stiff, si[SI_CSINCE])
+                       SpeedFit(sf[SF_SV], sf[SF_SW]), stiff, si[SI_CSINCE], sf[SF_CAGE])
 
 
 @njit(cache=True, fastmath=False)
@@ -391,7 +391,7 @@ def _course_store(s, sf, si, ivs):
     for r in range(RING):
         _iv_store(s.ring[r], ivs[r])
     si[SI_IVN], si[SI_NCHORDS], si[SI_CSINCE] = s.n_iv, s.n_chords, s.since
-    sf[SF_OMNOW], sf[SF_VNOW] = s.omega_now, s.v_now
+    sf[SF_OMNOW], sf[SF_VNOW], sf[SF_CAGE] = s.omega_now, s.v_now, s.age
     f = s.slip
     sf[SF_THETA], sf[SF_THETA + 1] = f.kappa, f.beta
     sf[SF_P], sf[SF_P + 1], sf[SF_P + 2], sf[SF_P + 3] = f.P00, f.P01, f.P10, f.P11

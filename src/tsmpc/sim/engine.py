@@ -677,7 +677,7 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf[ke.SF_SV], sf[ke.SF_SW] = cs.speed.sv, cs.speed.sw
     sf[ke.SF_CNUM:ke.SF_CNUM + 2] = cs.stiff.num_f, cs.stiff.num_r
     sf[ke.SF_CDEN:ke.SF_CDEN + 2] = cs.stiff.den_f, cs.stiff.den_r
-    sf[ke.SF_OMNOW], sf[ke.SF_VNOW] = cs.omega_now, cs.v_now
+    sf[ke.SF_OMNOW], sf[ke.SF_VNOW], sf[ke.SF_CAGE] = cs.omega_now, cs.v_now, cs.age
     sf[ke.SF_SA:ke.SF_SA + ke.N_SA] = cascade._sa  # the stiffnesses given (a reset cascade: none)
     si[ke.SI_CSINCE] = cs.since
     gs = cascade._fusion.gyro.state  # the yaw-rate bias fit (a reset cascade: its prior)
