@@ -20,11 +20,15 @@ from tsmpc.sensors import (
     FAULT_NAN_BURST,
     BurstParams,
     BurstState,
+    SensorBlockParams,
+    SensorDraws,
     SensorModel,
     SensorParams,
     SensorState,
     burst_sample,
+    fault_time,
     sensor_sample,
+    sensor_step,
 )
 from tsmpc.sim import engine as eng
 from tsmpc.sim.compare import load_scenario
@@ -129,6 +133,52 @@ def test_burst_block_by_hand() -> None:
     nan = BurstParams(FAULT_NAN_BURST, 7.0, 0.05, 3.0)
     assert all(math.isnan(v) for v in burst_sample(nan, s, 3.01, y3)[0])
     assert burst_sample(nan, s, 3.06, y3)[0] == y3 and burst_sample(BurstParams(), s, 2.05, y3) == (y3, s)
+
+
+def test_the_sensor_step_by_hand(way) -> None:
+    """The simulator's sensor step (one definition for both loops): known plant state, noise and
+    faults give a known sample — the true [X, Y, θ, v, ω] (ω the state's yaw rate) plus the noise
+    row; faults at the fault's time (an outer step's sample at k·T_c); the burst before the sensor
+    model (a held sample gets the model's drift at the time it is delivered); the model's delay
+    and dropouts on their own stream."""
+    step, ft = way(sensor_step), way(fault_time)
+    n_in, Tc, Td = 10, 0.1, 0.01
+    assert ft(30, n_in, Tc, Td) == 3 * Tc != 30 * Td and ft(31, n_in, Tc, Td) == 31 * Td
+    x = np.array([3.0, 4.0, 0.5, 12.0, 0.02, 0.1])
+    noise = np.outer(np.arange(40.0), [1e-3, -2e-3, 1e-4, 5e-3, -1e-5])
+    d = SensorDraws(noise, np.ones(1), np.zeros((1, 7)))
+
+    def true(m: int) -> tuple[float, ...]:
+        n = noise[m]
+        return (x[0] + n[0], x[1] + n[1], x[2] + n[2], x[3] + n[3], x[5] + n[4])
+
+    def run(p: SensorBlockParams, d: SensorDraws, upto: int, delay_n: int = 0) -> list[tuple[float, ...]]:
+        bs, ms, out = BurstState(), SensorState(np.zeros((delay_n + 1, 5))), []
+        for m in range(upto):
+            s, bs, ms = step(p, d, bs, ms, m, n_in, Tc, Td, x)
+            out.append(tuple(s))
+        return out
+
+    assert run(SensorBlockParams(), d, 8) == [true(m) for m in range(8)]  # no fault
+    # NaN for 0.05 s each second from 0.2 s: samples 20 … 24 lost
+    out = run(SensorBlockParams(BurstParams(FAULT_NAN_BURST, 1.0, 0.05, 0.2)), d, 26)
+    assert [m for m in range(26) if all(math.isnan(v) for v in out[m])] == [20, 21, 22, 23, 24]
+    assert out[19] == true(19) and out[25] == true(25)
+    # held from 0.2 s (sample 19 kept), then the model's speed drift at the time of delivery
+    p = SensorBlockParams(BurstParams(FAULT_HOLD_BURST, 1.0, 0.05, 0.2), True,
+                          SensorParams(drift=(0.0, 0.0, 0.0, 0.5, 0.0)))
+    out = run(p, SensorDraws(noise, np.ones(40), np.zeros((40, 7))), 26)
+    assert out[21] == (*true(19)[:3], true(19)[3] + (0.0 + 0.5 * (21 * Td) + 0.0), true(19)[4])
+    assert out[25][3] == true(25)[3] + (0.0 + 0.5 * (25 * Td) + 0.0)
+    # two samples late (sample 0 while the FIFO fills), samples 6 and 9 dropped (their U(0, 1) < 0.3)
+    u = np.full(12, 0.9)
+    u[[6, 9]] = 0.1
+    out = run(SensorBlockParams(has_model=True, model=SensorParams(p_drop=0.3, delay_n=2)),
+              SensorDraws(noise, u, np.zeros((12, 7))), 12, delay_n=2)
+    lost = [m for m in range(12) if all(math.isnan(v) for v in out[m])]
+    assert lost == [6, 9]
+    assert out[:3] == [true(0)] * 3 and [out[m] for m in (3, 4, 5, 7, 8, 10, 11)] == [
+        true(m - 2) for m in (3, 4, 5, 7, 8, 10, 11)]
 
 
 def test_blocks_compiled_equal_python() -> None:

@@ -2,14 +2,18 @@
 the sensor model of ``[scenario.sensors]`` and the bursts of the named robustness scenarios.
 
 The per-sample logic is written once, as ``@jitable`` functions over ``NamedTuple`` records
-(:mod:`tsmpc.kernels.jit`): :class:`SensorModel`, :class:`DropoutFault` and :class:`NaNBurstFault`
-call them as Python from the simulator's loop, the run engine and the batch compile the same
-functions (:func:`tsmpc.kernels.engine._sensor`). A sample is a 5-tuple [X, Y, θ, v, ω]; NaN in a
-channel is a missing measurement.
+(:mod:`tsmpc.kernels.jit`). The simulator's sensor step :func:`sensor_step` (the plant's true
+[X, Y, θ, v, ω] plus the seeded noise, then the scenario's burst fault, then the sensor model, at
+the fault's time :func:`fault_time`) is one definition: the simulator's Python loop calls it
+through :class:`SensorRun`, the run engine and the batch compile it
+(``tsmpc.kernels.engine._sensor``) on the same records. :class:`SensorModel`,
+:class:`DropoutFault` and :class:`NaNBurstFault` call the same blocks as objects (a fault of the
+user's, or a model after one, runs that way in the Python loop). A sample is a 5-tuple
+[X, Y, θ, v, ω]; NaN in a channel is a missing measurement.
 
-The random numbers are the caller's: the classes draw them one sample at a time, the engine draws
-the same streams for the whole run beforehand (:func:`model_draws`, :func:`noise_draws`), so both
-loops see the same numbers.
+The random numbers are the caller's: the classes draw them one sample at a time, a run
+(:class:`SensorRun`, both loops) draws the same streams for the whole run beforehand
+(:func:`model_draws`, :func:`noise_draws`), so every way sees the same numbers.
 
 What :func:`sensor_sample` does to a noisy sample, in order (each off by default):
 
@@ -48,16 +52,23 @@ __all__ = [
     "BurstState",
     "DropoutFault",
     "NaNBurstFault",
+    "SensorBlockParams",
+    "SensorDraws",
     "SensorFault",
     "SensorModel",
     "SensorNoise",
     "SensorParams",
+    "SensorRun",
     "SensorState",
     "burst_action",
     "burst_sample",
+    "fault_problem",
+    "fault_time",
     "model_draws",
     "noise_draws",
     "sensor_sample",
+    "sensor_step",
+    "split_fault",
 ]
 
 #: A sensor sample [X, Y, θ, v, ω] (NaN: missing).
@@ -426,6 +437,127 @@ class SensorFault(Protocol):
     def __call__(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]: ...
 
 
+# ---------------------------------------------------------------------------- the step of a run
+class SensorBlockParams(NamedTuple):
+    """The sensors of a run as the step reads them: the scenario's burst fault (a named robustness
+    scenario's; kind :data:`FAULT_NONE` when there is none), then the sensor model of
+    ``[scenario.sensors]`` when ``has_model``."""
+
+    burst: BurstParams = BurstParams()
+    has_model: bool = False
+    model: SensorParams = SensorParams()
+
+
+class SensorDraws(NamedTuple):
+    """A run's random numbers, drawn before it (:func:`noise_draws`, :func:`model_draws`): the
+    noise of sample m ``noise[m]`` (5,); the sensor model's ``u_drop[m]`` and ``draws[m]`` (7,)
+    (read only with a model: one row each without one)."""
+
+    noise: NDArray[np.float64]
+    u_drop: NDArray[np.float64]
+    draws: NDArray[np.float64]
+
+
+@jitable
+def fault_time(m: int, n_in: int, Tc: float, Td: float) -> float:
+    """The time [s] a fault is given at sample ``m`` (``n_in`` samples per outer step): an outer
+    step's sample at k·T_c (the MPC's clock), the others at m·T_d."""
+    k = m // n_in
+    return k * Tc if m - k * n_in == 0 else m * Td
+
+
+@jitable
+def sensor_step(p: SensorBlockParams, d: SensorDraws, bs: BurstState, ms: SensorState, m: int, n_in: int,
+                Tc: float, Td: float, x: NDArray[np.float64]) -> tuple[Sample, BurstState, SensorState]:
+    """The simulator's sensor step, one definition for its Python loop, the run engine and the
+    batch: (the sample [X, Y, θ, v, ω] the cascade gets at sample ``m`` of the plant state ``x``
+    (6,), the new states). The true [X, Y, θ, v, ω] plus the seeded noise, then the burst fault
+    (:func:`burst_sample`), then the sensor model (:func:`sensor_sample`), both at
+    :func:`fault_time`."""
+    n = d.noise[m]
+    s = (x[0] + n[0], x[1] + n[1], x[2] + n[2], x[3] + n[3], x[5] + n[4])
+    tf = fault_time(m, n_in, Tc, Td)
+    s, bs = burst_sample(p.burst, bs, tf, s)
+    if p.has_model:
+        g = d.draws[m]
+        s, ms = sensor_sample(p.model, ms, tf, s, d.u_drop[m], g[0], g[1], (g[2], g[3], g[4], g[5], g[6]))
+    return s, bs, ms
+
+
+def split_fault(fault: SensorFault | None) -> tuple[SensorModel | None, SensorFault | None]:
+    """(sensor model, the fault before it) of a scenario's sensor fault."""
+    if type(fault) is SensorModel:
+        return fault, fault.inner
+    return None, fault
+
+
+def fault_problem(fault: SensorFault | None) -> str | None:
+    """Why ``fault`` has no data form for :func:`sensor_step` (a fault class of the user's, a
+    sensor model in the middle of a run); None when it has one (no fault, :class:`DropoutFault`,
+    :class:`NaNBurstFault`, a :class:`SensorModel` after one of them or none)."""
+    if fault is None:
+        return None
+    model, inner = split_fault(fault)
+    if inner is not None and type(inner) not in (DropoutFault, NaNBurstFault):
+        return f"sensor fault {type(inner).__name__} (no data form)"
+    if model is not None and model._t is not None and not model._t > 1e-12:
+        return "a sensor model in the middle of a run (its first call would not restart it)"
+    return None
+
+
+class SensorRun:
+    """The sensors of one run of ``M`` samples (``n_in`` per outer step of ``Tc``, every ``Td``):
+    the noise of ``settings`` and ``seed``, then the scenario's ``fault``. A fault with a data form
+    (:func:`fault_problem`) runs as :func:`sensor_step` over the records :attr:`params`,
+    :attr:`burst`, :attr:`model` and the run's draws :attr:`draws` — the records and draws the run
+    engine packs into its slots; any other fault is called as the object it is. The fault objects
+    start from where they are (a :class:`DropoutFault`'s last sample; a :class:`SensorModel`
+    restarts) and :meth:`finish` leaves them as the run does."""
+
+    def __init__(self, settings: NoiseSettings, seed: int, fault: SensorFault | None, M: int, n_in: int,
+                 Tc: float, Td: float) -> None:
+        self.fault, self.n_in, self.Tc, self.Td = fault, int(n_in), float(Tc), float(Td)
+        self.data = fault_problem(fault) is None
+        model, inner = split_fault(fault)
+        burst, self.burst = BurstParams(), BurstState()
+        if inner is not None and self.data:
+            burst = inner.params  # type: ignore[attr-defined]
+            held = getattr(inner, "_held", None)
+            if held is not None:  # a DropoutFault keeps its last sample from a previous run
+                self.burst = BurstState(_as_sample(held), True)
+        u_drop, draws, fifo = np.zeros(1), np.zeros((1, 7)), np.zeros((1, 5))
+        if model is not None and self.data:
+            u_drop, draws = model_draws(model, M)
+            fifo = np.zeros((model.delay_n + 1, 5))
+        self.params = SensorBlockParams(burst, model is not None, SensorParams() if model is None
+                                        else model.params)
+        self.draws = SensorDraws(noise_draws(settings, seed, M), u_drop, draws)
+        self.model = SensorState(fifo)
+
+    def sample(self, m: int, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The sample [X, Y, θ, v, ω] the cascade gets at sample ``m`` of the plant state ``x``."""
+        if self.data:
+            out, self.burst, self.model = sensor_step(self.params, self.draws, self.burst, self.model, m,
+                                                      self.n_in, self.Tc, self.Td, x)
+            return np.array(out)
+        y = np.array([x[0], x[1], x[2], x[3], x[5]]) + self.draws.noise[m]
+        assert self.fault is not None  # (no fault has a data form)
+        return self.fault(fault_time(m, self.n_in, self.Tc, self.Td), y)
+
+    def finish(self, n_calls: int) -> None:
+        """Leave the fault objects as ``n_calls`` samples of the run leave them (a comparison runs
+        its next method on the same objects)."""
+        if not self.data:
+            return
+        model, inner = split_fault(self.fault)
+        if isinstance(inner, DropoutFault):
+            inner._held = np.array(self.burst.held) if self.burst.has_held else None
+        if model is not None and n_calls > 0:
+            advance_streams(model, n_calls)
+            model.state = self.model._replace(fifo=self.model.fifo.copy())
+            model._t = fault_time(n_calls - 1, self.n_in, self.Tc, self.Td)
+
+
 # --------------------------------------------------------------- the records as the engine's arrays
 #: Length of :func:`pack_params`'s array and of :func:`pack_state`'s.
 N_SP = 33
@@ -449,12 +581,12 @@ def _five(a: NDArray[np.float64], i: int) -> Sample:
 
 
 @jitable
-def unpack_params(a: NDArray[np.float64]) -> tuple[BurstParams, bool, SensorParams]:
-    """(burst fault, a sensor model is there, its parameters) of :func:`pack_params`'s array."""
+def unpack_params(a: NDArray[np.float64]) -> SensorBlockParams:
+    """The records of :func:`pack_params`'s array."""
     burst = BurstParams(int(a[0]), a[1], a[2], a[3])
     p = SensorParams(_five(a, 5), _five(a, 10), _five(a, 15), _five(a, 20), a[25], a[26], a[27] != 0.0,
                      int(a[28]), a[29] != 0.0, a[30], a[31], a[32])
-    return burst, a[4] != 0.0, p
+    return SensorBlockParams(burst, a[4] != 0.0, p)
 
 
 def pack_state(burst: BurstState, model: SensorState | None) -> NDArray[np.float64]:

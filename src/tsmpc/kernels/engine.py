@@ -136,7 +136,7 @@ from tsmpc.kernels.mhe import (  # the MHE's records
 from tsmpc.kernels.mpc import guarded_step
 from tsmpc.kernels.plant import rk4_block
 from tsmpc.scenarios import apply_events, paper_mu, patch_mu
-from tsmpc.sensors import N_SP, N_SS, burst_sample, sensor_sample, store_state, unpack_params, unpack_state
+from tsmpc.sensors import N_SP, N_SS, SensorDraws, sensor_step, store_state, unpack_params, unpack_state
 from tsmpc.vehicle.actuators import (
     ActuatorParams,
     ActuatorState,
@@ -321,21 +321,12 @@ def friction_mu(t, s, frb, patches, events):
 
 
 @njit(cache=True, fastmath=False)
-def _sensor(m, tf, x, noise, u_drop, draws, sp, ss, fifo, y):
-    """The sample the sensors deliver at step m (``simulate``: state + noise, then the scenario's
-    sensor fault at time ``tf``): the blocks of :mod:`tsmpc.sensors` (one definition), a burst
-    fault then the sensor model, on the pre-drawn random numbers ``u_drop`` (M,) and ``draws``
-    (M, 7) (:func:`tsmpc.sensors.model_draws`). ``sp``: the records as :func:`unpack_params`
-    returns them; ``ss`` the state's scalars (:func:`tsmpc.sensors.pack_state`), ``fifo`` the
-    delay's rows. ``y`` (5,) in place."""
-    burst, has_model, p = sp
-    s = (x[0] + noise[m, 0], x[1] + noise[m, 1], x[2] + noise[m, 2], x[3] + noise[m, 3],
-         x[5] + noise[m, 4])
+def _sensor(m, n_in, Tc, Td, x, noise, u_drop, draws, sp, ss, fifo, y):
+    """The sensor step (:func:`tsmpc.sensors.sensor_step`, one definition) at step m on the
+    records of the slots: ``sp`` the parameters' (:func:`unpack_params`), ``ss`` the states'
+    scalars, ``fifo`` the delay's rows. ``y`` (5,) in place."""
     bs, ms = unpack_state(ss, fifo)
-    s, bs = burst_sample(burst, bs, tf, s)
-    if has_model:
-        d = draws[m]
-        s, ms = sensor_sample(p, ms, tf, s, u_drop[m], d[0], d[1], (d[2], d[3], d[4], d[5], d[6]))
+    s, bs, ms = sensor_step(sp, SensorDraws(noise, u_drop, draws), bs, ms, m, n_in, Tc, Td, x)
     store_state(ss, bs, ms)
     y[0], y[1], y[2], y[3], y[4] = s
 
@@ -615,7 +606,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             sens_state = sf[SF_SENS:SF_SENS + N_SS]
             sens = unpack_params(fp[FP_SENS:FP_SENS + N_SP])
             # ---- sensors and the outer-step log (simulate)
-            _sensor(m, k * Tc if j == 0 else t, x, noise, u_drop, gnss, sens, sens_state, fifo, y)
+            _sensor(m, n_in, Tc, Td, x, noise, u_drop, gnss, sens, sens_state, fifo, y)
             if j == 0:
                 op, refs, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v,
                                                          ref_w, th_tan, mv, mw)

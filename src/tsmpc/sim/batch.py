@@ -343,11 +343,7 @@ def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant
         for f in _LOGS:  # the batch's log rows become the lane's logs (views, no copy)
             setattr(r.a, f, st[f][j])
         termination, done, rows, n_calls = _termination(lane, int(need[j]), ke)
-        m_last = n_calls - 1
-        k_last, j_last = divmod(m_last, n_in)
-        Tc, Td = r.cascade.Tc, r.cascade.Td
-        eng._restore_fault(lane.scenario.sensor_fault, n_calls,
-                           k_last * Tc if j_last == 0 else m_last * Td, r.a.fifo, r.a.sf, r.a.si)
+        eng._restore_fault(r, n_calls)
         out.append(eng._log(r, method.value, lane.scenario, done, rows, termination, ticks_per_s,
                             wall / B))
     LAST_BATCH["logs_s"] += time.perf_counter() - t_logs

@@ -16,9 +16,9 @@ What this module does:
 * :func:`applicability` — the explicit test, with the reason when the engine does not apply
   (foreign plants, NL-MPC and the baselines, the oracle, the ``paper-as-run`` quirks,
   the paper's UIO form of the MHE, friction profiles or sensor faults it has no data form for);
-* the data: the sensor noise drawn with the generator calls :class:`~tsmpc.scenarios.SensorNoise`
-  makes (blocks of 4096 samples, in order), the sensor model's dropout and GNSS draws likewise,
-  the friction profile as a small program, the blocks' parameters read from a :class:`Cascade`
+* the data: the run's sensors set up as the Python loop sets them up
+  (:class:`~tsmpc.sensors.SensorRun`: its records and the noise, dropout and GNSS draws of the
+  whole run), the friction profile as a small program, the blocks' parameters read from a :class:`Cascade`
   built exactly as ``simulate`` builds it;
 * the slow paths: where a block's compiled fast path does not decide a step, the kernel returns
   and this module runs that block's Python path on the same state (the MPC's condensed QP / SOCP,
@@ -86,6 +86,7 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
     """None when the engine runs ``simulate(cfg, method, scenario, oracle=…, plant=…)``; else
     why not (one line)."""
     from tsmpc import kernels
+    from tsmpc.sensors import fault_problem
 
     if not kernels.enabled():
         return "the compiled kernels are off (TSMPC_NO_JIT)"
@@ -107,7 +108,7 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
         return why
     if _friction_program(scenario.friction) is None:
         return f"friction profile {type(scenario.friction).__name__} (no data form)"
-    why = _fault_problem(scenario.sensor_fault)
+    why = fault_problem(scenario.sensor_fault)
     if why is not None:
         return why
     why = _blinding_fault(cfg, scenario.sensor_fault)
@@ -125,7 +126,7 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
 #: steps aside (the Python loop runs) until kernels/engine.py follows the change and this table is
 #: refreshed (``python -m tsmpc.sim.engine`` prints it; tests/test_engine.py checks it).
 _PORTED: dict[str, str] = {
-    "tsmpc.sim.simulator:simulate": "010fe22d7a4f334e",
+    "tsmpc.sim.simulator:simulate": "90021754803d4d5c",
     "tsmpc.sim.start:_start_state": "2e35ad3de46ce500",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
     "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
@@ -200,12 +201,10 @@ _PORTED_CLASSES = (
     ("tsmpc.control.cascade", "Cascade"), ("tsmpc.control.ts_mpc", "TSMPC"),
     ("tsmpc.estimation.mhe_uio", "MHEUIO"), ("tsmpc.control.ts_lqr", "TSLQR"),
     ("tsmpc.vehicle.plant", "VehiclePlant"), ("tsmpc.vehicle.plant", "Plant"),
-    ("tsmpc.sensors", "SensorNoise"), ("tsmpc.scenarios", "PaperFriction"),
+    ("tsmpc.sensors", "SensorRun"), ("tsmpc.scenarios", "PaperFriction"),
     ("tsmpc.scenarios", "PatchFriction"), ("tsmpc.scenarios", "ConstantFriction"),
     ("tsmpc.estimation.fusion", "Fusion"), ("tsmpc.estimation.fusion", "CourseFusion"),
-    ("tsmpc.sensors", "SensorModel"),
     ("tsmpc.scenarios", "EventFriction"), ("tsmpc.scenarios", "ResolvedEvent"),
-    ("tsmpc.sensors", "DropoutFault"), ("tsmpc.sensors", "NaNBurstFault"),
     ("tsmpc.vehicle.actuators", "ActuatedPlant"), ("tsmpc.vehicle.actuators", "Actuators"),
 )
 #: Module-level functions the loop calls by name (module, name, where it is defined).
@@ -213,6 +212,7 @@ _PORTED_FUNCTIONS = (
     ("tsmpc.sim.simulator", "default_plant", "tsmpc.sim.start"),
     ("tsmpc.sim.simulator", "_start_state", "tsmpc.sim.start"),
     ("tsmpc.sim.simulator", "_measurement", "tsmpc.sim.simulator"),
+    ("tsmpc.sim.simulator", "SensorRun", "tsmpc.sensors"),
     ("tsmpc.sim.simulator", "tracked_steps", "tsmpc.sim.start"),
     ("tsmpc.sim.simulator", "pose_errors", "tsmpc.control.outer_block"),
 )
@@ -258,6 +258,8 @@ def _replaced_code() -> str | None:
         ob = importlib.import_module("tsmpc.control.outer_block")
         if ob.outer_errors is not ke.outer_errors or ob.outer_after is not ke.outer_after:
             return "tsmpc.control.outer_block's block was replaced"
+        if importlib.import_module("tsmpc.sensors").sensor_step is not ke.sensor_step:
+            return "tsmpc.sensors.sensor_step was replaced"
     return None
 
 
@@ -315,40 +317,17 @@ def _actuator_data(plant: Any, Td: float, fp: NDArray[np.float64], ip: NDArray[n
     return n_rk is not None
 
 
-def _split_fault(fault: Any) -> tuple[Any, Any]:
-    """(sensor model, inner fault) of a scenario's sensor fault."""
-    from tsmpc.scenarios import SensorModel
-
-    if type(fault) is SensorModel:
-        return fault, fault.inner
-    return None, fault
-
-
-def _fault_problem(fault: Any) -> str | None:
-    from tsmpc.scenarios import DropoutFault, NaNBurstFault, SensorModel
-
-    if fault is None:
-        return None
-    model, inner = _split_fault(fault)
-    if inner is not None and type(inner) not in (DropoutFault, NaNBurstFault):
-        return f"sensor fault {type(inner).__name__} (no data form)"
-    if model is not None and type(model) is SensorModel and model._t is not None \
-            and not model._t > 1e-12:
-        return "a sensor model in the middle of a run (its first call would not restart it)"
-    return None
-
-
 def _blinding_fault(cfg: Config, fault: Any) -> str | None:
     """Why not, when the sensor fault can leave the cascade without a usable speed sample for
     ``recovery.blind_after_s`` (the blind stop and recovery run in the Python loop only): a burst
     that long, or dropouts so frequent that such a run of them is not negligible (p > 0.5)."""
-    from tsmpc.scenarios import DropoutFault, NaNBurstFault, SensorModel
+    from tsmpc.sensors import DropoutFault, NaNBurstFault, SensorModel, split_fault
 
     rc = cfg.recovery
     if fault is None or not rc.enabled:
         return None
-    model, inner = _split_fault(fault)
-    if type(inner) in (DropoutFault, NaNBurstFault) and \
+    model, inner = split_fault(fault)
+    if isinstance(inner, DropoutFault | NaNBurstFault) and \
             inner.duration_s + 2.0 * cfg.rates.Td > rc.blind_after_s:
         return (f"a sensor burst of {inner.duration_s:g} s can blind the cascade "
                 "(recovery.blind_after_s; the blind stop runs in the Python loop)")
@@ -362,53 +341,30 @@ def _blinding_fault(cfg: Config, fault: Any) -> str | None:
     return None
 
 
-def _fault_data(fault: Any, M: int, fp: NDArray[np.float64], ip: NDArray[np.int64],
-                sf: NDArray[np.float64], si: NDArray[np.int64]) -> tuple[Any, ...]:
-    """The scenario's sensor fault as data (:mod:`tsmpc.sensors`' records packed into fp's and
-    sf's sensor slots) and its pre-drawn random numbers: (u_drop (M,), draws (M, 7), fifo)."""
+def _fault_data(cfg: Config, cascade: Cascade, fault: Any, M: int, fp: NDArray[np.float64],
+                sf: NDArray[np.float64]) -> Any:
+    """The run's sensors (:class:`~tsmpc.sensors.SensorRun`, as the Python loop sets them up) with
+    their records packed into fp's and sf's sensor slots."""
     from tsmpc import sensors
     from tsmpc.kernels import engine as ke
 
-    model, inner = _split_fault(fault)
-    u_drop, draws, fifo = np.zeros(1), np.zeros((1, 7)), np.zeros((1, 5))
-    burst, burst_state = sensors.BurstParams(), sensors.BurstState()
-    if inner is not None:
-        burst = inner.params
-        held = getattr(inner, "_held", None)
-        if held is not None:  # a DropoutFault keeps its last sample from a previous run
-            burst_state = sensors.BurstState(tuple(float(v) for v in held), True)  # type: ignore[arg-type]
-    params = None
-    if model is not None:
-        params = model.params
-        u_drop, draws = sensors.model_draws(model, M)
-        fifo = np.zeros((model.delay_n + 1, 5))
-    fp[ke.FP_SENS:ke.FP_SENS + sensors.N_SP] = sensors.pack_params(burst, params)
-    sf[ke.SF_SENS:ke.SF_SENS + sensors.N_SS] = sensors.pack_state(burst_state, None)
-    return u_drop, draws, fifo
+    sr = sensors.SensorRun(cfg.noise, cfg.seed, fault, M, cascade.n_inner, cascade.Tc, cascade.Td)
+    p = sr.params
+    fp[ke.FP_SENS:ke.FP_SENS + sensors.N_SP] = sensors.pack_params(p.burst, p.model if p.has_model else None)
+    sf[ke.SF_SENS:ke.SF_SENS + sensors.N_SS] = sensors.pack_state(sr.burst, None)
+    return sr
 
 
-def _restore_fault(fault: Any, n_calls: int, t_last: float, fifo: NDArray[np.float64],
-                   sf: NDArray[np.float64], si: NDArray[np.int64]) -> None:
+def _restore_fault(r: _Run, n_calls: int) -> None:
     """Leave the scenario's fault objects as the Python loop would have left them (a comparison
-    runs its next method on the same objects)."""
+    runs its next method on the same objects): the run's sensor states out of the slots,
+    :meth:`~tsmpc.sensors.SensorRun.finish`."""
     from tsmpc import sensors
     from tsmpc.kernels import engine as ke
 
-    model, inner = _split_fault(fault)
-    burst_state, model_state = sensors.unpack_state(sf[ke.SF_SENS:ke.SF_SENS + sensors.N_SS], fifo.copy())
-    if isinstance(inner, sensors.DropoutFault):
-        inner._held = np.array(burst_state.held) if burst_state.has_held else None
-    if model is not None and n_calls > 0:
-        sensors.advance_streams(model, n_calls)
-        model.state = model_state
-        model._t = t_last
-
-
-def _noise(cfg: Config, M: int) -> NDArray[np.float64]:
-    """The M samples :class:`~tsmpc.sensors.SensorNoise` draws (:func:`~tsmpc.sensors.noise_draws`)."""
-    from tsmpc.sensors import noise_draws
-
-    return noise_draws(cfg.noise, cfg.seed, M)
+    sr = r.sensors
+    sr.burst, sr.model = sensors.unpack_state(r.a.sf[ke.SF_SENS:ke.SF_SENS + sensors.N_SS], r.a.fifo)
+    sr.finish(n_calls)
 
 
 # ------------------------------------------------------------------------------ exactness probes
@@ -698,7 +654,7 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
 
 
 def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: int,
-             x0: NDArray[np.float64], ke: Any) -> _Arrays:
+             x0: NDArray[np.float64], ke: Any) -> tuple[_Arrays, Any]:
     """The kernel's arrays from a reset cascade, the plant (a VehiclePlant, or the ActuatedPlant
     around one) and the scenario."""
     plant = plant if scenario.actuators is None else plant.plant
@@ -711,7 +667,8 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     assert law is not None  # run() checked lqr._kern
     Kv, zlo, zhi, bits, prm = law.Kv, law.zlo, law.zhi, law.bits, law.prm
     mp = mhe._mp.copy()  # the MHE block's parameters (C_f, C_r change with the stiffness fit)
-    u_drop, gnss, fifo = _fault_data(scenario.sensor_fault, M, fp, ip, sf, si)
+    sr = _fault_data(cfg, cascade, scenario.sensor_fault, M, fp, sf)  # the sensors (tsmpc.sensors.SensorRun)
+    noise, u_drop, gnss = sr.draws
     prog = _friction_program(scenario.friction)
     assert prog is not None
     frb, patches, events = prog
@@ -721,8 +678,8 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     n_sc = ke.N_SC + 2 * (N + 1) + scratch_size(N, cascade._gov_p.preview)
     return _Arrays(
         x=_f64(x0), fp=fp, ip=ip, sf=sf, si=si, sc=np.zeros(n_sc),
-        ev=np.zeros(ke.N_EVENTS, dtype=np.int64), noise=_noise(cfg, M), u_drop=_f64(u_drop),
-        gnss=_f64(gnss), fifo=fifo, frb=frb, patches=_f64(patches), events=_f64(events),
+        ev=np.zeros(ke.N_EVENTS, dtype=np.int64), noise=noise, u_drop=_f64(u_drop),
+        gnss=_f64(gnss), fifo=sr.model.fifo, frb=frb, patches=_f64(patches), events=_f64(events),
         ref_x=rx, ref_y=ry, ref_th=rth, ref_v=rv, ref_w=rw, th_tan=rtan, mv=mv, mw=mw,
         gate=cascade._gate_poses.copy(), cur=np.zeros(ke.N_IV),
         ivs=np.zeros((ke.RING, ke.N_IV)), mass_v=cascade._ib_ring.copy(),
@@ -732,7 +689,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
         prevX=np.zeros((N + 1, 3)), prevU=np.zeros((N, 2)), pX=np.zeros((N + 1, 3)),
         pU=np.zeros((N, 2)), cst=plant.model._cst, lo=np.zeros((K, ke.N_LO)),
         loi=np.zeros((K, 4), dtype=np.int64), lxp=np.zeros((K, N + 1, 3)),
-        li=np.zeros((M, ke.N_LI)), lstat=np.zeros(M, dtype=np.int8), lsat=np.zeros(M, dtype=bool))
+        li=np.zeros((M, ke.N_LI)), lstat=np.zeros(M, dtype=np.int8), lsat=np.zeros(M, dtype=bool)), sr
 
 
 class _Run:
@@ -743,7 +700,7 @@ class _Run:
         self.cfg, self.cascade, self.scenario, self.plant, self.K, self.ke = (
             cfg, cascade, scenario, plant, K, ke)
         self.n_in, self.N = cascade.n_inner, cfg.mpc.N
-        self.a = _prepare(cfg, cascade, scenario, plant, K, x0, ke)
+        self.a, self.sensors = _prepare(cfg, cascade, scenario, plant, K, x0, ke)
         self.args = self.a.args()
         self.sec_mpc: dict[int, float] = {}
         self.sec_mhe: dict[int, float] = {}
@@ -902,7 +859,7 @@ def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_desi
     mhe, lqr, mpc = cascade.mhe, _static_lqr(cascade), cascade.mpc
     if mpc._kern is None or mhe._kern is None or not mhe._kargs[-1] or lqr._kern is None:
         return None
-    ref, N, Tc, Td, n_in = cascade.reference, cfg.mpc.N, cfg.rates.Tc, cfg.rates.Td, cascade.n_inner
+    ref, N, Td = cascade.reference, cfg.mpc.N, cfg.rates.Td
     K = tracked_steps(ref, N)
     if K < 1:
         return None  # simulate raises the ConfigError
@@ -928,10 +885,7 @@ def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_desi
     wall, ticks = time.perf_counter() - t_loop, ke.ticks() - tick0
     LAST_RUN.clear()
     LAST_RUN.update(slow_paths=dict(r.slow), loop_s=wall, compile_s=t_compile, exact=exact())
-    m_last = n_calls - 1
-    k_last, j_last = divmod(m_last, n_in)
-    _restore_fault(scenario.sensor_fault, n_calls, k_last * Tc if j_last == 0 else m_last * Td,
-                   r.a.fifo, r.a.sf, r.a.si)
+    _restore_fault(r, n_calls)
     return _log(r, cascade.method.value, scenario, done, rows, termination,
                 ticks / wall if wall > 0 and ticks > 0 else 0.0,
                 time.perf_counter() - t_start - t_compile)

@@ -24,7 +24,8 @@ from tsmpc.control.cascade import Cascade, Command, Measurement, Method, build_o
 from tsmpc.control.outer_block import pose_errors
 from tsmpc.errors import ConfigError, NonFiniteError
 from tsmpc.planning.reference import Reference
-from tsmpc.scenarios import Scenario, SensorFault, SensorNoise
+from tsmpc.scenarios import Scenario, SensorFault
+from tsmpc.sensors import SensorRun
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.plant import Plant
 from tsmpc.sim.start import _start_state, default_plant, tracked_steps
@@ -157,14 +158,14 @@ def simulate(
     plant.reset(x)
     cascade.reset(x)
     rec = _Recorder(ref, K, n_in, N, Tc, Td)
-    noise, fault = SensorNoise(cfg.noise, cfg.seed), scenario.sensor_fault
+    sensors = SensorRun(cfg.noise, cfg.seed, scenario.sensor_fault, K * n_in, n_in, Tc, Td)
     bound = scenario.divergence_bound_m or cfg.divergence_bound_m  # off the road: diverged
-    termination, done, rows, s_travel, t_start = "completed", K, 0, 0.0, time.perf_counter()
+    termination, done, rows, n_calls, s_travel, t_start = "completed", K, 0, 0, 0.0, time.perf_counter()
     for m in range(K * n_in):
         k, j = divmod(m, n_in)
         t = m * Td
-        y = np.array([x[0], x[1], x[2], x[3], x[5]]) + noise.sample()
-        y = fault(k * Tc if j == 0 else t, y) if fault is not None else y
+        y = sensors.sample(m, x)  # (tsmpc.sensors.sensor_step: noise, the fault, the sensor model)
+        n_calls = m + 1
         if cascade.governor is not None:  # the governed reference and the oracle's μ (governor.py)
             cascade.road_mu = float(scenario.friction.mu(t, s_travel))
             if j == 0 and cascade.governed:
@@ -192,6 +193,7 @@ def simulate(
         s_travel += max(x[3], 0.0) * Td
         if progress is not None and j == n_in - 1:
             progress(k + 1, K)
+    sensors.finish(n_calls)
     return rec.log(cascade.method.value, scenario.name, Tc, Td, done, rows,
                    wall_s=time.perf_counter() - t_start, termination=termination, events=cascade.events,
                    meta={"oracle": oracle, "seed": cfg.seed, **scenario.meta,
