@@ -1,11 +1,13 @@
 """Whole-run engine: the simulator's loop (:func:`tsmpc.sim.simulator.simulate`) with the cascade
 (:class:`tsmpc.control.cascade.Cascade`) and the built-in plant in one compiled call.
 
-Every T_d the kernel does what one iteration of ``simulate`` does — the sensor sample (noise drawn
-beforehand by the caller with the same generator calls, sensor faults as data), the outer-step
-log and the divergence test, ``Cascade.step`` (sample gates, dead reckoning, the course fusion and
-its fits, the slip-aware outer-loop errors, the TS-MPC every T_c/T_d calls, the MHE-UIO, the
-mass-error terms, the TS-LQR) and the plant's T_d/h RK4 steps — and logs into preallocated arrays.
+Every T_d the kernel does what one iteration of ``simulate`` does — the sensor step
+(:func:`tsmpc.sensors.sensor_step`, on the run's draws and the fault's records that
+:class:`~tsmpc.sensors.SensorRun` set up), the outer-step log and the divergence test (the
+recorder block, :mod:`tsmpc.sim.record_block`), ``Cascade.step`` (sample gates, dead reckoning,
+the course fusion and its fits, the slip-aware outer-loop errors, the TS-MPC every T_c/T_d calls,
+the MHE-UIO, the mass-error terms, the TS-LQR) and the plant's T_d/h RK4 steps — and logs into
+the recorder block's preallocated arrays through its functions, as the Python loop does.
 The blocks are the compiled kernels the Python wrappers call: the TS-MPC's step (paper eq. "MPC";
 :func:`~tsmpc.kernels.mpc.guarded_step`), the MHE-UIO's window (eqs. "MHE", "disturb_estimation";
 :func:`~tsmpc.kernels.mhe.window_step`, inside the MHE block :func:`~tsmpc.control.mhe_block.mhe_block`
@@ -82,14 +84,11 @@ from tsmpc.control.outer_block import (
     OB_TOFF,
     OC_CLIPPED,
     OC_FALLBACK,
-    OC_GACT,
     OC_POSE_REJ,
     OC_SOFT,
     RefArrays,
-    governed_sample,
     outer_after,
     outer_errors,
-    pose_errors,
     unpack_govern,
     unpack_outer,
 )
@@ -137,6 +136,17 @@ from tsmpc.kernels.mpc import guarded_step
 from tsmpc.kernels.plant import rk4_block
 from tsmpc.scenarios import apply_events, paper_mu, patch_mu
 from tsmpc.sensors import N_SP, N_SS, SensorDraws, sensor_step, store_state, unpack_params, unpack_state
+from tsmpc.sim.record_block import (  # (LI_TMHE, LI_TLQR, LO_TMPC: the engine's block times)
+    LI_TLQR,
+    LI_TMHE,
+    LO_TMPC,
+    logged_reference,
+    off_road,
+    record_inner,
+    record_outer,
+    record_plan,
+    travelled,
+)
 from tsmpc.vehicle.actuators import (
     ActuatorParams,
     ActuatorState,
@@ -186,7 +196,7 @@ N_FP = FP_GB + N_GBP
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
  IP_REPEAT, IP_ANYCOURSE, IP_CSPEED, IP_STIFF,
- IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, IP_HASBOUND,
+ IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, _IFREE0,
  IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV,
  IP_GYRO, IP_DEFER, IP_STEER) = range(26)
 N_IP = 26
@@ -226,7 +236,7 @@ assert SI_NREJ == SI_NY + MI_NREJ and SI_NFAIL == SI_NY + MI_NFAIL
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
  SC_WREF, SC_UMHE, _UM1, _SCF1, _SCF2, _SCF3, SC_COMP, SC_LOWF, SC_OF, SC_OD, SC_MU, SC_EY,
- SC_PU, _PU2, SC_UK, _UK1, SC_TMP, _TM1, _TM2, SC_GROW, _GR1, _GR2, _GR3, _GR4) = range(38)
+ SC_PU, _PU2, SC_UK, _UK1, _CFREE0, _CFREE1, _CFREE2, SC_GROW, _GR1, _GR2, _GR3, _GR4) = range(38)
 N_SC = 38  # then the MPC's window's v and ω, N + 1 each, then the outer block's scratch
 # (outer_block.scratch_size)
 # ---------------------------------------------------------------------------- course intervals
@@ -234,16 +244,7 @@ N_SC = 38  # then the MPC's window's v and ω, N + 1 each, then the outer block'
  IV_SDELTA, IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST, IV_THLAST,
  IV_WLAST) = range(20)  # Interval's fields
 N_IV = 20
-# ---------------------------------------------------------------------------- inner log columns
-(LI_X, _LX1, _LX2, _LX3, _LX4, _LX5, LI_EST, _LE1, _LE2, LI_MEAS, _LM1, LI_FHAT, LI_FRAW,
- LI_FTRUE, LI_MU, LI_CMD, _LC1, LI_TMHE, LI_TLQR) = range(19)
-N_LI = 19
-# outer log columns
-(LO_X, _OX1, _OX2, _OX3, _OX4, _OX5, LO_ERR, _OE1, _OE2, LO_EMEAS, _OM1, _OM2, LO_UC, _OU1,
- LO_TMPC, LO_REF, _OR1, _OR2, _OR3, _OR4) = range(20)
-N_LO = 20
-# integer outer log columns
-LOI_STATUS, LOI_IT, LOI_QPIT, LOI_CLIP = range(4)
+# the log's columns are the recorder block's (tsmpc.sim.record_block: LI_*, LO_*, LOI_*)
 
 # friction programs (the profiles of tsmpc.scenarios / tsmpc.conditions as data)
 FR_CONST, FR_PAPER, FR_PATCH = 0, 1, 2
@@ -505,26 +506,12 @@ def _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v, ref_w, th_tan, 
 
 
 @njit(cache=True, fastmath=False, inline="always")
-def _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, err, fp, ip, sc):
-    """The simulator's outer-step log (its recorder): the state, the reference it tracks (the
-    governed one once the governor acted: ``Cascade.reference_row``) and the true errors against
-    it; True when |e_y| is beyond the divergence bound (``sc[SC_EY]``)."""
-    for i in range(6):
-        lo[k, LO_X + i] = x[i]
-    rx, ry, rth = refs.x[k], refs.y[k], refs.theta[k]
-    if op.governor:  # the reference the simulator logs: the governed one
-        row = lo[k, LO_REF:LO_REF + 5]
-        if ocnt[OC_GACT] > 0 or obs[OB_RATE] < 1.0:
-            row[0], row[1], row[2], row[3], row[4] = governed_sample(op, refs, t - obs[OB_TOFF], obs[OB_RATE],
-                                                                     obuf)
-        else:
-            row[0], row[1], row[2], row[3], row[4] = rx, ry, rth, refs.v[k], refs.omega[k]
-        rx, ry, rth = row[0], row[1], row[2]
-    pose_errors(x[0], x[1], x[2], rx, ry, rth, err)
-    for i in range(3):
-        lo[k, LO_ERR + i] = err[i]
-    if ip[IP_HASBOUND] != 0 and abs(err[1]) > fp[FP_BOUND]:
-        sc[SC_EY] = err[1]
+def _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, fp, sc):
+    """The simulator's outer-step log (the recorder block: :func:`record_outer` of the row
+    :func:`logged_reference`); True when |e_y| is beyond the divergence bound (``sc[SC_EY]``)."""
+    e_y = record_outer(lo, k, x, logged_reference(op, refs, obs, ocnt, k, t, obuf))
+    if off_road(e_y, fp[FP_BOUND]):
+        sc[SC_EY] = e_y
         return True
     return False
 
@@ -532,20 +519,15 @@ def _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, err, fp, ip, sc):
 @njit(cache=True, fastmath=False, inline="always")
 def _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp):
     """The plan of MPC step ``k`` (the fast path's or the caller's): the previous input and plan
-    for the next step, the outer log's errors seen, command, prediction and status."""
+    for the next step (Cascade._outer, TSMPC's), the outer log's record of it."""
     sf[SF_UPREV], sf[SF_UPREV + 1] = sc[SC_PU], sc[SC_PU + 1]
     for i in range(N):
         prevU[i, 0], prevU[i, 1] = pU[i, 0], pU[i, 1]
     for i in range(N + 1):
         prevX[i, 0], prevX[i, 1], prevX[i, 2] = pX[i, 0], pX[i, 1], pX[i, 2]
     si[SI_HASPREV] = 1
-    for i in range(3):
-        lo[k, LO_EMEAS + i] = sc[SC_EMEAS + i]
-    lo[k, LO_UC], lo[k, LO_UC + 1] = sc[SC_PU], sc[SC_PU + 1]
-    for i in range(N + 1):
-        lxp[k, i, 0], lxp[k, i, 1], lxp[k, i, 2] = pX[i, 0], pX[i, 1], pX[i, 2]
-    loi[k, LOI_STATUS], loi[k, LOI_IT] = si[SI_PSTAT], si[SI_PIT]
-    loi[k, LOI_QPIT], loi[k, LOI_CLIP] = si[SI_PQPIT], si[SI_PCLIP]
+    record_plan(lo, loi, lxp, k, sc[SC_EMEAS:SC_EMEAS + 3], sc[SC_PU], sc[SC_PU + 1], pX, si[SI_PSTAT],
+                si[SI_PIT], si[SI_PQPIT], si[SI_PCLIP])  # (the recorder block)
 
 
 @njit(cache=True, fastmath=False)
@@ -588,7 +570,6 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     y = sc[SC_Y:SC_Y + 5]
     e_meas = sc[SC_EMEAS:SC_EMEAS + 3]
     # scratch as views, not allocations: the batch calls run() for every lane at every step
-    tmp3 = sc[SC_TMP:SC_TMP + 3]
     noX = prevX[:0]  # "no previous plan" for guarded_step
     noU = prevU[:0]
     gates = GateParams(fp[FP_V_LO], fp[FP_V_HI], fp[FP_W_LIM], fp[FP_POSE_NOISE], fp[FP_HEAD_NOISE], Td)
@@ -610,7 +591,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             if j == 0:
                 op, refs, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v,
                                                          ref_w, th_tan, mv, mw)
-                if _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, tmp3, fp, ip, sc):
+                if _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, fp, sc):
                     return DIVERGED
             # ---- Cascade._step: gates
             X, Y, th, v, omv = y[0], y[1], y[2], y[3], y[4]
@@ -759,17 +740,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             sf[SF_LASTA] = sc[SC_EST + 1]
             mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events)
             sc[SC_MU] = mu
-            for i in range(6):
-                li[m, LI_X + i] = x[i]
-            for i in range(3):
-                li[m, LI_EST + i] = sc[SC_EST + i]
-            li[m, LI_MEAS], li[m, LI_MEAS + 1] = y[3], y[4]
-            li[m, LI_FHAT], li[m, LI_FRAW] = sc[SC_ESTF], sc[SC_ESTFR]
-            li[m, LI_FTRUE] = friction_force(fp[FP_MU_NOM], fp[FP_MG], mu)  # VehiclePlant's
-            li[m, LI_MU] = mu
-            li[m, LI_CMD], li[m, LI_CMD + 1] = sc[SC_OF], sc[SC_OD]
-            lstat[m] = st
-            lsat[m] = si[SI_SAT] != 0
+            record_inner(li, lstat, lsat, m, x, sc[SC_EST:SC_EST + 3], y[3], y[4], sc[SC_ESTF], sc[SC_ESTFR],
+                         friction_force(fp[FP_MU_NOM], fp[FP_MG], mu), mu, sc[SC_OF], sc[SC_OD], st,
+                         si[SI_SAT] != 0)  # (the recorder block; the plant's true F_fr: VehiclePlant's)
             if ip[IP_ACT] == 0:
                 if ip[IP_DEFER] != 0:  # the batch integrates its lanes at once (kernels.batch)
                     xn, ok = x, False
@@ -789,7 +762,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 x[i] = xn[i]
             phase = PH_POST_PLANT
         # PH_POST_PLANT: the travelled distance, next step
-        sf[SF_STRAVEL] += _pmax(x[3], 0.0) * Td
+        sf[SF_STRAVEL] = travelled(sf[SF_STRAVEL], x[3], Td)
         si[SI_M] = m + 1
         si[SI_PHASE] = PH_START
     return DONE

@@ -46,6 +46,7 @@ BLOCK_MODULES = (
     "tsmpc.estimation.friction_step",
     "tsmpc.estimation.fusion",
     "tsmpc.kernels.jit",
+    "tsmpc.sim.record_block",
     "tsmpc.scenarios",
     "tsmpc.sensors",
     "tsmpc.vehicle.actuators",

@@ -49,6 +49,7 @@ from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
 from tsmpc.scenarios import Scenario
 from tsmpc.sim.log import RunLog
+from tsmpc.sim.record_block import LI_TLQR, LI_TMHE, LO_TMPC, Records, new_records, run_log
 from tsmpc.sim.start import _start_state, default_plant, tracked_steps
 from tsmpc.vehicle.actuators import ActuatorState
 from tsmpc.vehicle.plant import rk4_count
@@ -63,10 +64,7 @@ __all__ = ["LAST_RUN", "EngineFallback", "applicability", "cached", "enabled", "
 _EVENTS = (*EVENT_NAMES, "stale_rejected", "step_errors", "repeated_rejected", "friction_steps")
 assert len(_EVENTS) == 19
 _MHE_CODE = STATUS_CODE  # the estimator's status as the kernel's code (the cascade's, one table)
-_MHE_STATUS = {k: v for v, k in STATUS_CODE.items()}
 _MPC_CODE = _MPC_STATUS_CODE  # the plan's status as the kernel's code (the cascade's, one table)
-_MPC_TEXT = np.array(["", str(MPCStatus.OPTIMAL), str(MPCStatus.SOFT), str(MPCStatus.FALLBACK)])
-_MHE_TEXT = np.array(["", *(str(_MHE_STATUS[i]) for i in (1, 2, 3, 4))])
 #: Outer steps per kernel call when a progress callback is given.
 _PROGRESS_CHUNK = 50
 
@@ -126,12 +124,8 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
 #: steps aside (the Python loop runs) until kernels/engine.py follows the change and this table is
 #: refreshed (``python -m tsmpc.sim.engine`` prints it; tests/test_engine.py checks it).
 _PORTED: dict[str, str] = {
-    "tsmpc.sim.simulator:simulate": "90021754803d4d5c",
-    "tsmpc.sim.start:_start_state": "2e35ad3de46ce500",
+    "tsmpc.sim.simulator:simulate": "ba020e97f0f11213",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
-    "tsmpc.sim.start:default_plant": "0088c937e0241d8b",
-    "tsmpc.sim.start:tracked_steps": "394064c7f7227dae",
-    "tsmpc.sim.simulator:_Recorder": "726a2ab654776920",
     "tsmpc.control.cascade:Cascade.__init__": "997c77c4bfef55cb",
     "tsmpc.control.cascade:Cascade.reset": "61ea7ce539443769",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
@@ -214,7 +208,9 @@ _PORTED_FUNCTIONS = (
     ("tsmpc.sim.simulator", "_measurement", "tsmpc.sim.simulator"),
     ("tsmpc.sim.simulator", "SensorRun", "tsmpc.sensors"),
     ("tsmpc.sim.simulator", "tracked_steps", "tsmpc.sim.start"),
-    ("tsmpc.sim.simulator", "pose_errors", "tsmpc.control.outer_block"),
+    *(("tsmpc.sim.simulator", name, "tsmpc.sim.record_block") for name in (
+        "logged_reference", "new_records", "off_road", "record_inner", "record_outer", "record_plan",
+        "run_log", "travelled")),
 )
 
 
@@ -258,6 +254,10 @@ def _replaced_code() -> str | None:
         ob = importlib.import_module("tsmpc.control.outer_block")
         if ob.outer_errors is not ke.outer_errors or ob.outer_after is not ke.outer_after:
             return "tsmpc.control.outer_block's block was replaced"
+        rb = importlib.import_module("tsmpc.sim.record_block")  # the recorder's and the sensors' blocks
+        if any(getattr(rb, f) is not getattr(ke, f) for f in (
+                "logged_reference", "off_road", "record_inner", "record_outer", "record_plan", "travelled")):
+            return "tsmpc.sim.record_block's block was replaced"
         if importlib.import_module("tsmpc.sensors").sensor_step is not ke.sensor_step:
             return "tsmpc.sensors.sensor_step was replaced"
     return None
@@ -577,7 +577,6 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     fp[ke.FP_TAU] = cascade._ib.mass.tau  # the inner block's mass fit's
     fp[ke.FP_MHE_MASS] = mhe.vehicle.mass
     bound = scenario.divergence_bound_m or cfg.divergence_bound_m
-    ip[ke.IP_HASBOUND] = bound is not None
     fp[ke.FP_BOUND] = math.inf if bound is None else float(bound)
     law = lqr._law  # the TS-LQR's records: the kernel rebuilds them from these slots
     assert law is not None  # run() checked lqr._kern
@@ -687,9 +686,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
         ls=lqr._s, Kv=Kv, zlo=zlo, zhi=zhi, bits=bits, prm=prm,
         mints=mpc._ints, mprm=mpc._prm, mPS=mpc._PS,
         prevX=np.zeros((N + 1, 3)), prevU=np.zeros((N, 2)), pX=np.zeros((N + 1, 3)),
-        pU=np.zeros((N, 2)), cst=plant.model._cst, lo=np.zeros((K, ke.N_LO)),
-        loi=np.zeros((K, 4), dtype=np.int64), lxp=np.zeros((K, N + 1, 3)),
-        li=np.zeros((M, ke.N_LI)), lstat=np.zeros(M, dtype=np.int8), lsat=np.zeros(M, dtype=bool)), sr
+        pU=np.zeros((N, 2)), cst=plant.model._cst, **new_records(K, n_in, N)._asdict()), sr
 
 
 class _Run:
@@ -893,51 +890,27 @@ def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_desi
 
 def _log(r: _Run, method: str, scenario: Scenario, done: int, rows: int, termination: str,
          ticks_per_s: float, wall_s: float) -> RunLog:
-    """The :class:`RunLog` ``simulate`` would have returned."""
-    a, ke, cfg, K, n_in = r.a, r.ke, r.cfg, r.K, r.n_in
+    """The :class:`RunLog` ``simulate`` would have returned (the recorder block's
+    :func:`~tsmpc.sim.record_block.run_log`, the blocks' cycle counts in seconds)."""
+    a, ke, cfg = r.a, r.ke, r.cfg
     ref = r.cascade.reference
-    Tc, Td, N = cfg.rates.Tc, cfg.rates.Td, cfg.mpc.N
-    t0 = float(ref.t[0])
     o, i = slice(0, done), slice(0, rows)
-    lo, li = a.lo[o], a.li[i]
     scale = 1.0 / ticks_per_s if ticks_per_s > 0 else 0.0
-    mpc_t, mhe_t, lqr_t = lo[:, ke.LO_TMPC] * scale, li[:, ke.LI_TMHE] * scale, li[:, ke.LI_TLQR] * scale
+    mpc_t, mhe_t, lqr_t = a.lo[o, LO_TMPC] * scale, a.li[i, LI_TMHE] * scale, a.li[i, LI_TLQR] * scale
     for d, arr in ((r.sec_mpc, mpc_t), (r.sec_mhe, mhe_t), (r.sec_lqr, lqr_t)):
-        for idx, sec in d.items():
+        for idx, sec in d.items():  # the steps a Python path decided: its own clock
             if idx < arr.size:
                 arr[idx] = sec
     gov = r.cascade.governor is not None
-    if gov:  # the reference as logged: the governed one (Cascade.reference_row)
-        refs = np.ascontiguousarray(a.lo[:, ke.LO_REF:ke.LO_REF + 5])
-    else:
-        refs = np.stack([ref.x[:K], ref.y[:K], ref.theta[:K], ref.v[:K], ref.omega[:K]], axis=1)
-    f_true = np.ascontiguousarray(li[:, ke.LI_FTRUE])
     events = {name: int(a.ev[slot]) for name, slot in zip(_EVENTS, ke.EVENT_SLOTS, strict=True)}
     if gov:
         events["governor_actions"] = int(a.ev[ke.EV_OUTER + OC_GACT])
         events["governor_steps"] = int(a.ev[ke.EV_OUTER + OC_GSTEPS])
-    x = a.x
-    return RunLog(
-        method=method, scenario=scenario.name, Tc=Tc, Td=Td,
-        t_outer=(np.arange(K, dtype=np.float64) * Tc + t0)[o], ref=refs[o],
-        state_outer=np.ascontiguousarray(lo[:, ke.LO_X:ke.LO_X + 6]),
-        errors=np.ascontiguousarray(lo[:, ke.LO_ERR:ke.LO_ERR + 3]),
-        errors_measured=np.ascontiguousarray(lo[:, ke.LO_EMEAS:ke.LO_EMEAS + 3]),
-        u_c=np.ascontiguousarray(lo[:, ke.LO_UC:ke.LO_UC + 2]), x_pred=a.lxp[o][:, : N + 1],
-        mpc_time_s=np.ascontiguousarray(mpc_t), mpc_status=_MPC_TEXT[a.loi[o, ke.LOI_STATUS]].astype("<U16"),
-        mpc_iterations=a.loi[o, ke.LOI_IT].copy(), mpc_qp_iterations=a.loi[o, ke.LOI_QPIT].copy(),
-        mpc_clipped=a.loi[o, ke.LOI_CLIP].copy(),
-        t_inner=(np.arange(K * n_in, dtype=np.float64) * Td + t0)[i],
-        state=np.ascontiguousarray(li[:, ke.LI_X:ke.LI_X + 6]),
-        estimate=np.ascontiguousarray(li[:, ke.LI_EST:ke.LI_EST + 3]),
-        measurement=np.ascontiguousarray(li[:, ke.LI_MEAS:ke.LI_MEAS + 2]),
-        F_fr_hat=np.ascontiguousarray(li[:, ke.LI_FHAT]), F_fr_raw=np.ascontiguousarray(li[:, ke.LI_FRAW]),
-        F_fr_true=f_true, mu_road=np.ascontiguousarray(li[:, ke.LI_MU]),
-        command=np.ascontiguousarray(li[:, ke.LI_CMD:ke.LI_CMD + 2]), saturated=a.lsat[i].copy(),
-        mhe_time_s=np.ascontiguousarray(mhe_t), lqr_time_s=np.ascontiguousarray(lqr_t),
-        mhe_status=_MHE_TEXT[a.lstat[i]].astype("<U16"),
-        wall_s=wall_s, termination=termination, events=events,
-        meta={"oracle": False, "seed": cfg.seed, **scenario.meta, "final_state": x.tolist(),
+    return run_log(
+        Records(a.lo, a.loi, a.lxp, a.li, a.lstat, a.lsat), method=method, scenario=scenario.name,
+        Tc=cfg.rates.Tc, Td=cfg.rates.Td, t0=float(ref.t[0]), done=done, rows=rows,
+        times=(mpc_t, mhe_t, lqr_t), wall_s=wall_s, termination=termination, events=events,
+        meta={"oracle": False, "seed": cfg.seed, **scenario.meta, "final_state": a.x.tolist(),
               **({"planned_v": ref.v[:done].tolist(), "plan_delay_s": float(a.sf[ke.SF_TOFF])}
                  if gov else {})})
 

@@ -12,6 +12,7 @@ A run is reproducible from ``cfg.seed``: the sensor noise is the only random dra
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -20,14 +21,33 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import Config
-from tsmpc.control.cascade import Cascade, Command, Measurement, Method, build_outer_controller
-from tsmpc.control.outer_block import pose_errors
+from tsmpc.control.cascade import (
+    _MPC_STATUS_CODE,
+    STATUS_CODE,
+    Cascade,
+    Command,
+    Measurement,
+    Method,
+    build_outer_controller,
+)
 from tsmpc.errors import ConfigError, NonFiniteError
-from tsmpc.planning.reference import Reference
 from tsmpc.scenarios import Scenario, SensorFault
 from tsmpc.sensors import SensorRun
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.plant import Plant
+from tsmpc.sim.record_block import (
+    LI_TLQR,
+    LI_TMHE,
+    LO_TMPC,
+    logged_reference,
+    new_records,
+    off_road,
+    record_inner,
+    record_outer,
+    record_plan,
+    run_log,
+    travelled,
+)
 from tsmpc.sim.start import _start_state, default_plant, tracked_steps
 
 __all__ = ["Method", "Scenario", "SensorFault", "build_outer_controller", "default_plant", "simulate",
@@ -37,70 +57,33 @@ ProgressFn = Callable[[int, int], None]
 
 
 class _Recorder:
-    """Preallocated log arrays of a run (K outer rows, K·T_c/T_d inner rows) → :class:`RunLog`."""
+    """The run's log: the recorder block's records (:mod:`tsmpc.sim.record_block`, the engine's
+    too), written by its functions from the cascade's objects."""
 
-    def __init__(self, ref: Reference, K: int, n_in: int, N: int, Tc: float, Td: float) -> None:
-        M = K * n_in
-        t0 = float(ref.t[0])
-        self.t_outer = np.arange(K) * Tc + t0
-        self.t_inner = np.arange(M) * Td + t0
-        self.refs = np.stack([ref.x[:K], ref.y[:K], ref.theta[:K], ref.v[:K], ref.omega[:K]], axis=1)
-        self.N = N
-        z = np.zeros
-        self.state_outer, self.errors, self.errors_meas = z((K, 6)), z((K, 3)), z((K, 3))
-        self.u_c, self.x_pred, self.mpc_time = z((K, 2)), z((K, N + 1, 3)), z(K)
-        self.mpc_status = np.empty(K, dtype="<U16")
-        self.mpc_it, self.mpc_qpit, self.mpc_clip = (z(K, dtype=np.int64) for _ in range(3))
-        self.state, self.est, self.meas = z((M, 6)), z((M, 3)), z((M, 2))
-        self.f_hat, self.f_raw, self.f_true, self.mu, self.mhe_time, self.lqr_time = z((6, M))
-        self.cmd, self.sat = z((M, 2)), z(M, dtype=bool)
-        self.mhe_status = np.empty(M, dtype="<U16")
+    def __init__(self, K: int, n_in: int, N: int) -> None:
+        self.r = new_records(K, n_in, N)
 
-    def outer(self, k: int, x: NDArray[np.float64]) -> float:
-        """Log the true state at outer step k; returns the true lateral error e_y."""
-        r = self.refs[k]
-        self.state_outer[k] = x
-        pose_errors(x[0], x[1], x[2], r[0], r[1], r[2], self.errors[k])  # (the outer block's, one definition)
-        return float(self.errors[k, 1])
+    def outer(self, k: int, t: float, x: NDArray[np.float64], c: Cascade) -> float:
+        """Log the true state at outer step k against the reference the cascade tracks (the
+        outer block's records); returns the true lateral error e_y."""
+        row = logged_reference(c._ob_p, c._ref_rec, c._ob, c._oc, k, t, c._ob_buf)
+        return float(record_outer(self.r.lo, k, x, row))
 
     def plan(self, k: int, cmd: Command) -> None:
         res = cmd.plan
         assert res is not None and cmd.errors_measured is not None
-        self.errors_meas[k], self.mpc_time[k] = cmd.errors_measured, cmd.mpc_time_s
-        self.u_c[k] = res.u
-        xp = np.asarray(res.x_pred)
-        self.x_pred[k, : xp.shape[0]] = xp[: self.N + 1]
-        self.mpc_status[k] = str(res.status)
-        self.mpc_it[k], self.mpc_qpit[k], self.mpc_clip[k] = (res.iterations, res.qp_iterations,
-                                                              res.n_clipped)
+        record_plan(self.r.lo, self.r.loi, self.r.lxp, k, cmd.errors_measured, res.u[0], res.u[1],
+                    np.asarray(res.x_pred), _MPC_STATUS_CODE[res.status], res.iterations, res.qp_iterations,
+                    res.n_clipped)
+        self.r.lo[k, LO_TMPC] = cmd.mpc_time_s
 
     def inner(self, m: int, x: NDArray[np.float64], y: NDArray[np.float64], cmd: Command,
               mu: float, f_true: float | None) -> None:
         e = cmd.estimate
-        self.state[m], self.est[m], self.meas[m] = x, e.x, y
-        self.f_hat[m], self.f_raw[m] = e.F_fr, e.F_fr_raw
-        self.f_true[m] = np.nan if f_true is None else f_true
-        self.mu[m], self.cmd[m], self.sat[m] = mu, (cmd.F_xR, cmd.delta), cmd.saturated
-        self.mhe_time[m], self.lqr_time[m], self.mhe_status[m] = (cmd.mhe_time_s, cmd.lqr_time_s,
-                                                                  str(cmd.estimate.status))
-
-    def log(self, method: str, scenario: str, Tc: float, Td: float, done: int, m: int, **facts: Any
-            ) -> RunLog:
-        o, i = slice(0, done), slice(0, m)
-        return RunLog(
-            method=method, scenario=scenario, Tc=Tc, Td=Td,
-            # (float64 in fact: numpy's stubs type int array × float as floating[Any]; this class's
-            # syntax tree is fingerprinted for the run engine, tsmpc.sim.engine._PORTED)
-            t_outer=self.t_outer[o], ref=self.refs[o], state_outer=self.state_outer[o],  # type: ignore[arg-type]
-            errors=self.errors[o], errors_measured=self.errors_meas[o], u_c=self.u_c[o],
-            x_pred=self.x_pred[o], mpc_time_s=self.mpc_time[o], mpc_status=self.mpc_status[o],
-            mpc_iterations=self.mpc_it[o], mpc_qp_iterations=self.mpc_qpit[o],
-            mpc_clipped=self.mpc_clip[o],
-            t_inner=self.t_inner[i], state=self.state[i], estimate=self.est[i],  # type: ignore[arg-type]
-            measurement=self.meas[i], F_fr_hat=self.f_hat[i], F_fr_raw=self.f_raw[i],
-            F_fr_true=self.f_true[i], mu_road=self.mu[i], command=self.cmd[i],
-            saturated=self.sat[i], mhe_time_s=self.mhe_time[i], lqr_time_s=self.lqr_time[i],
-            mhe_status=self.mhe_status[i], **facts)
+        record_inner(self.r.li, self.r.lstat, self.r.lsat, m, x, e.x, y[3], y[4], e.F_fr, e.F_fr_raw,
+                     math.nan if f_true is None else f_true, mu, cmd.F_xR, cmd.delta, STATUS_CODE[e.status],
+                     cmd.saturated)
+        self.r.li[m, LI_TMHE], self.r.li[m, LI_TLQR] = cmd.mhe_time_s, cmd.lqr_time_s
 
 
 def _measurement(y: NDArray[np.float64], x: NDArray[np.float64], plant: Plant, oracle: bool,
@@ -157,21 +140,19 @@ def simulate(
     x = _start_state(ref, scenario.initial_error)
     plant.reset(x)
     cascade.reset(x)
-    rec = _Recorder(ref, K, n_in, N, Tc, Td)
+    rec = _Recorder(K, n_in, N)
     sensors = SensorRun(cfg.noise, cfg.seed, scenario.sensor_fault, K * n_in, n_in, Tc, Td)
-    bound = scenario.divergence_bound_m or cfg.divergence_bound_m  # off the road: diverged
+    bound = scenario.divergence_bound_m or cfg.divergence_bound_m or math.inf  # off the road: diverged
     termination, done, rows, n_calls, s_travel, t_start = "completed", K, 0, 0, 0.0, time.perf_counter()
     for m in range(K * n_in):
         k, j = divmod(m, n_in)
         t = m * Td
         y = sensors.sample(m, x)  # (tsmpc.sensors.sensor_step: noise, the fault, the sensor model)
         n_calls = m + 1
-        if cascade.governor is not None:  # the governed reference and the oracle's μ (governor.py)
+        if cascade.governor is not None:  # the oracle's μ (governor.py)
             cascade.road_mu = float(scenario.friction.mu(t, s_travel))
-            if j == 0 and cascade.governed:
-                rec.refs[k] = cascade.reference_row(t)
-        e_y = rec.outer(k, x) if j == 0 else 0.0
-        if bound is not None and abs(e_y) > bound:
+        e_y = rec.outer(k, t, x, cascade) if j == 0 else 0.0
+        if off_road(e_y, bound):
             termination = f"diverged: |e_y| = {abs(e_y):.2f} m > {bound:g} m at t = {k * Tc:.1f} s"
             done = k + 1
             break
@@ -185,18 +166,18 @@ def simulate(
                 raise NonFiniteError(f"plant: non-finite state {x_next}")
         except NonFiniteError as err:
             termination, done, x_next = f"plant diverged at t = {k * Tc:.2f} s: {err}", k + 1, None
-        rec.inner(m, x, y[3:5], cmd, mu, plant.friction_force)
+        rec.inner(m, x, y, cmd, mu, plant.friction_force)
         rows = m + 1
         if x_next is None:
             break
         x = x_next
-        s_travel += max(x[3], 0.0) * Td
+        s_travel = travelled(s_travel, x[3], Td)
         if progress is not None and j == n_in - 1:
             progress(k + 1, K)
     sensors.finish(n_calls)
-    return rec.log(cascade.method.value, scenario.name, Tc, Td, done, rows,
-                   wall_s=time.perf_counter() - t_start, termination=termination, events=cascade.events,
-                   meta={"oracle": oracle, "seed": cfg.seed, **scenario.meta,
-                         "final_state": x.tolist(),
+    return run_log(rec.r, method=cascade.method.value, scenario=scenario.name, Tc=Tc, Td=Td,
+                   t0=float(ref.t[0]), done=done, rows=rows, wall_s=time.perf_counter() - t_start,
+                   termination=termination, events=cascade.events,
+                   meta={"oracle": oracle, "seed": cfg.seed, **scenario.meta, "final_state": x.tolist(),
                          **({} if cascade.governor is None else {"planned_v": ref.v[:done].tolist(),
                                                                  "plan_delay_s": cascade.plan_delay})})
