@@ -42,6 +42,7 @@ BLOCK_TESTS = (
     "tests/test_outer_block.py",
     "tests/test_mhe_block.py",
     "tests/test_stiffness_block.py",
+    "tests/test_record_block.py",
     *(f"tests/test_governor.py::{t}" for t in (
         "test_grip_estimate_from_the_friction_force", "test_spin_grip_by_hand",
         "test_a_spin_engages_the_governor_on_a_dry_road", "test_sample_demand_by_hand",
@@ -53,6 +54,7 @@ BLOCK_TESTS = (
         "test_bias_drift_scale_by_hand", "test_extra_gnss_noise_by_hand", "test_delay_and_dropouts_by_hand",
         "test_sample_rates_and_heading",
         "test_burst_block_by_hand", "test_the_records_cross_into_the_engine_unchanged",
+        "test_the_sensor_step_by_hand",
         "test_steering_offset_moves_the_steady_state_yaw_rate")),
     *(f"tests/test_gyro_bias.py::{t}" for t in (
         "test_the_fit_converges_to_a_constant_bias_within_its_noise", "test_the_fit_tracks_a_drifting_bias",
