@@ -100,8 +100,7 @@ def logged_reference(op: OuterBlockParams, refs: RefArrays, ob: NDArray[np.float
 def record_outer(lo: NDArray[np.float64], k: int, x: NDArray[np.float64], r: Row) -> float:
     """Outer row ``k``: the true state ``x`` (6,), the reference row ``r`` and the true errors
     against it; returns the true lateral error e_y."""
-    for i in range(6):
-        lo[k, LO_X + i] = x[i]
+    lo[k, LO_X:LO_X + 6] = x
     lo[k, LO_REF], lo[k, LO_REF + 1], lo[k, LO_REF + 2], lo[k, LO_REF + 3], lo[k, LO_REF + 4] = r
     pose_errors(x[0], x[1], x[2], r[0], r[1], r[2], lo[k, LO_ERR:LO_ERR + 3])
     return lo[k, LO_ERR + 1]
@@ -119,11 +118,10 @@ def record_plan(lo: NDArray[np.float64], loi: NDArray[np.int64], lxp: NDArray[np
                 iterations: int, qp_iterations: int, clipped: int) -> None:
     """The plan of MPC step ``k``: the errors it saw ``e_meas`` (3,), its command (u0, u1), its
     prediction ``x_pred`` (its first N + 1 rows), its status code and counts."""
-    for i in range(3):
-        lo[k, LO_EMEAS + i] = e_meas[i]
+    lo[k, LO_EMEAS:LO_EMEAS + 3] = e_meas
     lo[k, LO_UC], lo[k, LO_UC + 1] = u0, u1
-    for i in range(min(x_pred.shape[0], lxp.shape[1])):
-        lxp[k, i, 0], lxp[k, i, 1], lxp[k, i, 2] = x_pred[i, 0], x_pred[i, 1], x_pred[i, 2]
+    n = min(x_pred.shape[0], lxp.shape[1])
+    lxp[k, :n] = x_pred[:n, :3]
     loi[k, LOI_STATUS], loi[k, LOI_IT] = status, iterations
     loi[k, LOI_QPIT], loi[k, LOI_CLIP] = qp_iterations, clipped
 
@@ -136,7 +134,7 @@ def record_inner(li: NDArray[np.float64], lstat: NDArray[np.int8], lsat: NDArray
     """Inner row ``m``: the true state ``x`` (6,), the estimate ``est`` [v, α, ω], the measured v
     and ω, the friction estimates (filtered, raw), the true friction force (NaN: unknown), μ(road),
     the command [F_xR, δ], the estimator's status code and whether the command saturated."""
-    for i in range(6):
+    for i in range(6):  # (element by element: every step of the engine; a slice copy costs it ≈ 1 %)
         li[m, LI_X + i] = x[i]
     for i in range(3):
         li[m, LI_EST + i] = est[i]
