@@ -43,6 +43,7 @@ BLOCK_TESTS = (
     "tests/test_mhe_block.py",
     "tests/test_stiffness_block.py",
     "tests/test_record_block.py",
+    "tests/test_fusion_block.py",
     *(f"tests/test_governor.py::{t}" for t in (
         "test_grip_estimate_from_the_friction_force", "test_spin_grip_by_hand",
         "test_a_spin_engages_the_governor_on_a_dry_road", "test_sample_demand_by_hand",

@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tsmpc._records import quick_init
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
+from tsmpc.control.fusion_block import FusionParams, fusion_after, fusion_before, servo
 from tsmpc.control.gates import (
     GC_JUMP,
     GC_NAN,
@@ -111,7 +112,7 @@ from tsmpc.control.stiffness_block import MP_CR, N_SA, PRM_CR, SA_CF, SA_CR, SA_
 from tsmpc.control.ts_lqr import LQR_NUMPY, TSLQR, InnerParams
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep, FrictionStepParams
-from tsmpc.estimation.fusion import MassParams, steer_command
+from tsmpc.estimation.fusion import MassParams
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.planning.reference import Reference
 
@@ -293,8 +294,9 @@ class Cascade:
         self.reference = ref
         # the path's tangent at each sample, from the geometry (any sample period; slip_aware.py)
         self._theta_tangent = ref.tangent_heading()
-        # the reference's lateral acceleration v_d ω_d at each sample (the course fusion's, every call)
-        self._ay_ref: list[float] = (ref.v * ref.omega).tolist()
+        # the reference's v_d, ω_d (the course fusion's lateral acceleration v_d ω_d, every call)
+        self._ref_v: list[float] = ref.v.tolist()
+        self._ref_w: list[float] = ref.omega.tolist()
         # what the MPC's steps see: the planner's samples (paper) or each T_c step's averages
         self._mpc_reference = ref.step_averages() if cfg.mpc.step_average_reference else ref
         kd = kinematic_design or load_or_design_kinematic(cfg)
@@ -343,10 +345,11 @@ class Cascade:
         from tsmpc.estimation.fusion import Fusion
 
         self._fusion = Fusion(cfg)  # beyond the paper: cfg.fusion's switches (issue 21)
-        # the blocks the config selects, composed once (the step has no feature switch): the
-        # course fusion or a block that does nothing; the servo with or without the offset
-        self._course: Any = self._fusion.course if self._fusion.any_course else _NoCourse()
-        self._servo = self._servo_offset if cfg.fusion.steering_offset else self._servo_plain
+        # the fusion block's record (fusion_block.py): the parts the config selects (the step has
+        # no feature switch), the steering limits of the servo
+        self._fb_p = FusionParams(bool(cfg.fusion.gyro_bias), self._fusion.any_course,
+                                  bool(cfg.fusion.steering_offset), -cfg.lqr.delta_max, cfg.lqr.delta_max,
+                                  self._fusion.gyro.params, self._fusion.course.params)
         self._build_inner_block(cfg)
         self._build_mhe_block()
         #: the speed governor's block record (issue 36; None: off)
@@ -590,11 +593,10 @@ class Cascade:
             self._start_from(t, X, Y, th, v, om)
         fresh, speeds_ok, pose_ok = self._gate(t, m, X, Y, th, v, om)
         ok = fresh and speeds_ok
-        om = self._gyro(pose_ok, th, ok, om)
         mpc_step = self._calls % self.n_inner == 0
-        # an accepted pose may end the course fusion's interval
-        self._course.close_at(pose_ok, X, Y, th, v if ok else math.nan, om if ok else math.nan,
-                              self._ay_ref_at(t), mpc_step)
+        # the fusion block (fusion_block.py): the gyro's sample, ω less its bias from here on, and
+        # the course interval's close at an accepted pose
+        om = self._fuse(t, pose_ok, X, Y, th, ok, v, om, mpc_step)
         plan, e_meas, t_mpc = (self._outer(t, X, Y, th, v, om, fresh, speeds_ok, pose_ok) if mpc_step
                                else (None, None, 0.0))
         # (_u_prev and _pose are set by _start_from above; ignores, not asserts: the syntax tree
@@ -605,51 +607,47 @@ class Cascade:
         t2 = time.perf_counter()
         v_hat, a_hat, w_hat = est.x.tolist()
         self._dead_reckon(v_hat, a_hat, w_hat)
-        # only samples the gates accepted: a rejected speed is garbage, a rejected or missing
-        # heading is the gyro's integral since the last accepted one
-        self._course.sample(ok, th, v, a_hat, v_hat * w_hat, om, float(u_model[1]), float(u_model[0]),
-                            pose_ok)
-        self._steer_fit(ok, est, v_hat, om)
+        self._fuse_after(ok, pose_ok, th, v, est, v_hat, a_hat, w_hat, om, u_model)
         F, delta, sat, low = self._inner(m, est, v_hat, a_hat, w_hat, v_ref, w_ref)
         t3 = time.perf_counter()
         delta = self._servo(F, delta, low)
         return Command(F, delta, sat, v_ref, w_ref, est, plan, e_meas, t_mpc, t2 - t1, t3 - t2)
 
-    def _gyro(self, pose_ok: bool, th: float, ok: bool, om: float) -> float:
-        """fusion.gyro_bias: the raw ω against the accepted poses' heading; ω less the bias for
-        every block after it (the MHE, hence ω̂ for the TS-LQR and the dead reckoning; the course
-        fits)."""
-        self._fusion.gyro_sample(pose_ok, th, ok, om)
-        return om - self._fusion.gyro_bias()
+    def _fuse(self, t: float, pose_ok: bool, X: float, Y: float, th: float, ok: bool, v: float, om: float,
+              mpc_step: bool) -> float:
+        """The fusion block before the MPC and the MHE (fusion_block.fusion_before): the yaw-rate
+        bias fit's sample of the raw ω against the accepted pose's heading, and the course
+        fusion's close at an accepted pose; ω less the bias for every block after it (the MHE,
+        hence ω̂ for the TS-LQR and the dead reckoning; the course fits)."""
+        fu = self._fusion
+        gy, course = fu.gyro, fu.course
+        om, gy.state, course.state, course.cur = fusion_before(
+            self._fb_p, gy.state, course.state, course.cur, pose_ok, X, Y, th, ok, v, om, mpc_step, t,
+            self._t_offset, self._ref_v, self._ref_w)
+        return om
 
-    def _ay_ref_at(self, t: float) -> float:
-        """The reference's lateral acceleration v_d ω_d at the sample of time ``t``."""
-        kc = min(max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0), len(self._ay_ref) - 1)
-        return float(self._ay_ref[kc])
+    def _fuse_after(self, ok: bool, pose_ok: bool, th: float, v: float, est: Estimate, v_hat: float,
+                    a_hat: float, w_hat: float, om: float, u_model: tuple[float, float]) -> None:
+        """The fusion block after the MHE (fusion_block.fusion_after): the course fusion's sample
+        and the steering-offset fit's (the steady yaw balance of the bias-free ω against the angle
+        last sent; frozen while the sample, the MHE or the inner loop is unusable)."""
+        fu, last = self._fusion, self._last
+        course = fu.course
+        course.cur, fu.steer = fusion_after(
+            self._fb_p, fu.steer_p, fu.steer, course.cur, ok, pose_ok, th, v, v_hat, a_hat, w_hat, om,
+            float(u_model[1]), float(u_model[0]), STATUS_CODE[est.status], self._blind_since is not None,
+            last is not None and last.saturated, self._steer_sent)
 
-    def _steer_fit(self, ok: bool, est: Estimate, v_hat: float, om: float) -> None:
-        """fusion.steering_offset's sample: the steady yaw balance of the MHE's model, the
-        bias-free ω against the angle last sent; frozen while the sample, the MHE or the inner loop
-        is unusable."""
-        last = self._last
-        self._fusion.steer_sample(ok and est.status == EstimatorStatus.OK and self._blind_since is None
-                                  and not (last is not None and last.saturated), v_hat, om, self._steer_sent)
-
-    def _servo_offset(self, F: float, delta: float, low: float) -> float:
-        """The angle sent: the wheels' angle less the steering offset in force (held while blind:
-        the fit is frozen then), within the steering limits; _u_applied keeps the wheels' intended
-        angle (fusion.steering_offset)."""
-        off, lim = self._fusion.steer_offset(), self.cfg.lqr.delta_max
-        sent, wheels = steer_command(delta, off, -lim, lim)
-        self._steer_offset, self._steer_sent = off, sent
+    def _servo(self, F: float, delta: float, low: float) -> float:
+        """The angle sent (fusion_block.servo): the wheels' angle less the steering offset in force
+        (held while blind: the fit is frozen then), within the steering limits — the inner loop's
+        angle, unclipped, with fusion.steering_offset off; _u_applied keeps the wheels' intended
+        angle (what the MHE's model sees)."""
+        fu = self._fusion
+        sent, wheels, self._steer_offset = servo(self._fb_p, fu.steer_p, fu.steer, delta)
+        self._steer_sent = sent
         self._u_applied, self._low_applied = (F, wheels), low
         return sent
-
-    def _servo_plain(self, F: float, delta: float, low: float) -> float:
-        """The angle sent is the inner loop's, unclipped (fusion.steering_offset off)."""
-        self._steer_offset, self._steer_sent = self._fusion.steer_offset(), delta
-        self._u_applied, self._low_applied = (F, delta), low
-        return delta
 
     def _start_from(self, t: float, X: float, Y: float, th: float, v: float, om: float) -> None:
         """Start from the first measurement (its garbage made harmless)."""
@@ -973,17 +971,6 @@ class Cascade:
             sat, low = False, 0.0
         count_step(self._ib_count, code, sat)
         return F, delta, sat, low
-
-
-class _NoCourse:
-    """The course fusion switched off (no ``fusion.course_slip``, ``course_speed`` nor
-    ``stiffness_estimate``): its per-step calls do nothing."""
-
-    def close_at(self, *args: Any) -> None:
-        """Nothing to close."""
-
-    def sample(self, *args: Any) -> None:
-        """Nothing to sample."""
 
 
 def _build_governor(cfg: Config) -> GovernBlockParams:

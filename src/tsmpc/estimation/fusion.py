@@ -1415,8 +1415,9 @@ def steer_command(delta: float, offset: float, d_min: float, d_max: float) -> tu
 
 
 class Fusion:
-    """The switches of ``cfg.fusion`` as one object the cascade calls (each part idle when its
-    switch is off)."""
+    """The records of ``cfg.fusion``'s estimators that the cascade holds: the course fusion, the
+    yaw-rate bias fit, the steering-offset fit and its parameters (the per-step glue around them,
+    each part idle when its switch is off, is :mod:`tsmpc.control.fusion_block`)."""
 
     def __init__(self, cfg: Config) -> None:
         self.settings: FusionSettings = cfg.fusion
@@ -1448,27 +1449,6 @@ class Fusion:
     def speed_offset(self) -> float:
         """The speed-sensor offset to remove (0 with ``course_speed`` off)."""
         return speed_offset(self.course.state.speed) if self.settings.course_speed else 0.0
-
-    def gyro_sample(self, has_heading: bool, theta: float, has_omega: bool, omega: float) -> None:
-        """One T_d sample into the yaw-rate bias fit (idle with ``gyro_bias`` off)."""
-        if self.settings.gyro_bias:
-            g = self.gyro  # (GyroFit.sample, one call less)
-            g.state = gyro_sample(g.params, g.state, has_heading, theta, has_omega, omega)
-
-    def gyro_bias(self) -> float:
-        """The yaw-rate sensor's bias to remove (0 with ``gyro_bias`` off)."""
-        return gyro_bias(self.gyro.state) if self.settings.gyro_bias else 0.0
-
-    def steer_sample(self, ok: bool, v: float, omega: float, delta_sent: float) -> None:
-        """One T_d sample into the steering-offset fit (:func:`steer_sample`; idle with
-        ``steering_offset`` off)."""
-        if self.settings.steering_offset:
-            self.steer = steer_sample(self.steer_p, self.steer, ok, v, omega, delta_sent)
-
-    def steer_offset(self) -> float:
-        """The steering offset to remove from the command (:func:`steer_correction`: the estimate
-        less its dead band; 0 with ``steering_offset`` off)."""
-        return steer_correction(self.steer_p, self.steer) if self.settings.steering_offset else 0.0
 
     def set_stiffness(self, C_f: float, C_r: float) -> None:
         """The stiffness fit gave the MHE (C_f, C_r): the steering-offset fit's balance uses them."""

@@ -45,6 +45,17 @@ from numba import njit
 from numba.core import cgutils, types
 from numba.extending import intrinsic as _numba_intrinsic
 
+from tsmpc.control.fusion_block import (
+    FB_OFF,
+    FB_OMEGA,
+    N_FB,
+    N_FBP,
+    after_at,
+    before_at,
+    given_steer,
+    servo_at,
+    unpack_fusion,
+)
 from tsmpc.control.gates import (
     GC_JUMP,
     GC_NAN,
@@ -92,32 +103,20 @@ from tsmpc.control.outer_block import (
     unpack_govern,
     unpack_outer,
 )
-from tsmpc.control.stiffness_block import N_SA, SA_CF, SA_CR, SA_HAS, stiffness_block
+from tsmpc.control.stiffness_block import N_SA, stiffness_block
 from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams, LQRLaw
 from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import (
     RING,
     CourseState,
-    GyroParams,
-    GyroState,
     Interval,
     MassParams,
     SlipFit,
     SpeedFit,
-    SteerParams,
-    SteerState,
     StiffFit,
-    course_close,
     course_params,
-    course_sample,
     delta_mass,
-    gyro_bias,
-    gyro_sample,
     speed_offset,
-    steer_command,
-    steer_correction,
-    steer_sample,
-    steer_stiffness,
 )
 from tsmpc.kernels.jit import cpython_hypot
 from tsmpc.kernels.mhe import (  # the MHE's records
@@ -186,10 +185,8 @@ EVENT_SLOTS = (EV_OUTER + OC_SOFT, EV_OUTER + OC_FALLBACK, EV_OUTER + OC_CLIPPED
  FP_BOUND,
  FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU, FP_VG,
  FP_A_GF, FP_A_GD, FP_A_RMAX, FP_A_DOFF, FP_FS_H, FP_REINIT) = range(35)
-FP_GYRO = 35  # the yaw-rate bias fit's GyroParams (Td, var_theta, var_omega, prior_w)
-FP_STEER = 39  # the steering-offset fit's SteerParams (N_STEER_P fields, in their order)
-N_STEER_P = 18
-FP_SENS = FP_STEER + N_STEER_P  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
+FP_FB = 35  # the fusion block's parameters (N_FBP values, tsmpc.control.fusion_block.pack_fusion)
+FP_SENS = FP_FB + N_FBP  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
 FP_OB = FP_SENS + N_SP  # the outer block's OuterBlockParams (N_OBP values, outer_block.pack_outer)
 FP_GB = FP_OB + N_OBP  # its GovernBlockParams (N_GBP values, outer_block.pack_govern)
 N_FP = FP_GB + N_GBP
@@ -198,7 +195,7 @@ N_FP = FP_GB + N_GBP
  IP_REPEAT, IP_ANYCOURSE, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, _IFREE0,
  IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV,
- IP_GYRO, IP_DEFER, IP_STEER) = range(26)
+ _IFREE0, IP_DEFER, _IFREE1) = range(26)
 N_IP = 26
 # ---------------------------------------------------------------------------- float state
 (SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, _FREE15, _FREE16, _FREE17, SF_UPREV, _U1, SF_UAPP, _A1,
@@ -209,14 +206,14 @@ N_IP = 26
  SF_VNOW, SF_ACT, _AC1, SF_LOW, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, SF_N2,
  SF_N1, _FREE13, _J1, _J2, _J3, _FREE14,
  _FREE19, _FREE20, _FREE21, _FREE22,
- SF_GYTH0, SF_GYINT, SF_GYWLAST, SF_GYSB, SF_GYSW,  # SF_GY*: the GyroState's floats
- SF_STOMF, SF_STDEF, SF_STDDF, SF_STS11, SF_STS12, SF_STS22, SF_STB1, SF_STB2,  # the SteerState's floats
- SF_STOFF, SF_STSENT) = range(85)  # the steering offset in force, the angle last sent (Cascade)
+ _FREE23, _FREE24, _FREE25, _FREE26, _FREE27, _FREE28, _FREE29, _FREE30, _FREE31, _FREE32, _FREE33,
+ _FREE34, _FREE35, _FREE36, _FREE37) = range(85)
 SF_IB = 85  # the inner block's state (N_IB values, tsmpc.control.inner_block's IB_* slots)
 SF_GS = SF_IB + N_IB  # the gate block's state (N_GS values, tsmpc.control.gates' GS_* slots)
 SF_SENS = SF_GS + N_GS  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
 SF_OB = SF_SENS + N_SS  # the outer block's state (N_OB values, tsmpc.control.outer_block's OB_* slots)
-N_SF = SF_OB + N_OB
+SF_FB = SF_OB + N_OB  # the fusion block's state (N_FB values, tsmpc.control.fusion_block's FB_* slots)
+N_SF = SF_FB + N_FB
 SF_TOFF = SF_OB + OB_TOFF  # (the reference time offset, the governed rate: the caller reads them)
 SF_GRATE = SF_OB + OB_RATE
 # ---------------------------------------------------------------------------- integer state
@@ -225,8 +222,7 @@ SF_GRATE = SF_OB + OB_RATE
  SI_FRESH, SI_SPOK, SI_POSEOK, _SFREE7, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
  SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, _SFREE3, _SFREE4,
  _SFREE8, _SFREE9, SI_GWIN,
- SI_GYOPEN, SI_GYN, SI_GYGAP, SI_GYCHORDS,  # SI_GY*: the GyroState's flags and counts
- SI_STINIT, SI_STN,  # the SteerState's flag and count
+ _SFREE11, _SFREE12, _SFREE13, _SFREE14, _SFREE15, _SFREE16,
  SI_CSINCE) = range(44)  # the CourseState's calls since its last interval ended
 N_SI = 44
 # the MHE's state slots are its records' (kernels.mhe: ms = [x̂, F̂, x̄_0], mi = [samples, rejected, failed])
@@ -333,8 +329,9 @@ def _sensor(m, n_in, Tc, Td, x, noise, u_drop, draws, sp, ss, fifo, y):
 
 
 # ============================================================================ fusion
-# The fusion's blocks are tsmpc.estimation.fusion's (one definition); here their records are
-# loaded from and stored to the engine's state slots around each call.
+# The course fusion's records (tsmpc.estimation.fusion's CourseState and Interval) loaded from and
+# stored to the engine's state slots around the fusion block's and the stiffness block's calls
+# (the gyro's and the steering fit's records are the fusion block's state vector, sf[SF_FB:]).
 assert RING == 8  # _course_load lists the ring's intervals one by one
 
 
@@ -396,16 +393,6 @@ def _course_store(s, sf, si, ivs):
 
 
 @njit(cache=True, fastmath=False)
-def _course_step(cp, mpc_step, has_pose, X, Y, th, v, omega, ay_ref, cur, ivs, sf, si):
-    """Every call, before its sample (``Cascade._step``): :func:`course_close` (an accepted pose
-    may end the open interval and a chord)."""
-    s, c = course_close(cp, _course_load(sf, si, ivs), _iv_load(cur), mpc_step, has_pose, X, Y, th, v,
-                        omega, ay_ref)
-    _course_store(s, sf, si, ivs)
-    _iv_store(c, cur)
-
-
-@njit(cache=True, fastmath=False)
 def _course_stiffness(cp, ivs, sf, si, mp, prm):
     """An MPC step with the stiffness fit (``Cascade._apply_stiffness``): the stiffness block
     :func:`~tsmpc.control.stiffness_block.stiffness_block` on the course state of the slots, the
@@ -413,79 +400,6 @@ def _course_stiffness(cp, ivs, sf, si, mp, prm):
     give, s = stiffness_block(cp, _course_load(sf, si, ivs), sf[SF_SA:SF_SA + N_SA], mp, prm)
     if give:
         _course_store(s, sf, si, ivs)  # (κ restarted when they replaced given ones)
-
-
-@njit(cache=True, fastmath=False)
-def _course_sample(cp, ok, has_pose, theta, v, alpha_hat, a_y, omega, delta, force, cur):
-    """One T_d sample into the open interval ``cur`` (:func:`course_sample`)."""
-    if cur[IV_OPEN] != 0.0:
-        _iv_store(course_sample(cp, _iv_load(cur), ok, has_pose, theta, v, alpha_hat, a_y, omega, delta,
-                                force), cur)
-
-
-@njit(cache=True, fastmath=False)
-def _gyro_load(sf, si):
-    """The :class:`~tsmpc.estimation.fusion.GyroState` of the engine's slots."""
-    return GyroState(si[SI_GYOPEN] != 0, sf[SF_GYTH0], si[SI_GYN], sf[SF_GYINT], sf[SF_GYWLAST],
-                     si[SI_GYGAP], sf[SF_GYSB], sf[SF_GYSW], si[SI_GYCHORDS])
-
-
-@njit(cache=True, fastmath=False)
-def _gyro_step(gp, has_heading, theta, has_omega, omega, sf, si):
-    """``Fusion.gyro_sample`` (:func:`gyro_sample`) on the engine's slots; returns the bias
-    estimate after the sample (:func:`gyro_bias`)."""
-    s = gyro_sample(gp, _gyro_load(sf, si), has_heading, theta, has_omega, omega)
-    si[SI_GYOPEN], si[SI_GYN], si[SI_GYGAP], si[SI_GYCHORDS] = 1 if s.open else 0, s.n, s.gap, s.n_chords
-    sf[SF_GYTH0], sf[SF_GYINT], sf[SF_GYWLAST] = s.th0, s.integ, s.w_last
-    sf[SF_GYSB], sf[SF_GYSW] = s.sb, s.sw
-    return gyro_bias(s)
-
-
-@njit(cache=True, fastmath=False)
-def _gyro_now(ip, sf, si):
-    """``Fusion.gyro_bias``: the yaw-rate bias to remove (0 with ``fusion.gyro_bias`` off)."""
-    return gyro_bias(_gyro_load(sf, si)) if ip[IP_GYRO] != 0 else 0.0
-
-
-@njit(cache=True, fastmath=False)
-def _steer_load(sf, si):
-    """The :class:`~tsmpc.estimation.fusion.SteerState` of the engine's slots."""
-    return SteerState(si[SI_STINIT] != 0, sf[SF_STOMF], sf[SF_STDEF], sf[SF_STDDF], sf[SF_STS11],
-                      sf[SF_STS12], sf[SF_STS22], sf[SF_STB1], sf[SF_STB2], si[SI_STN])
-
-
-@njit(cache=True, fastmath=False)
-def _steer_params(fp, sf, si):
-    """``Fusion.steer_p``: the SteerParams of the slots, with the stiffnesses the stiffness fit
-    gave the MHE once it has (``Fusion.set_stiffness``)."""
-    p = SteerParams(fp[FP_STEER], fp[FP_STEER + 1], fp[FP_STEER + 2], fp[FP_STEER + 3], fp[FP_STEER + 4],
-                    fp[FP_STEER + 5], fp[FP_STEER + 6], fp[FP_STEER + 7], fp[FP_STEER + 8],
-                    fp[FP_STEER + 9], fp[FP_STEER + 10], fp[FP_STEER + 11], fp[FP_STEER + 12],
-                    fp[FP_STEER + 13], fp[FP_STEER + 14], fp[FP_STEER + 15], fp[FP_STEER + 16],
-                    fp[FP_STEER + 17])
-    if sf[SF_SA + SA_HAS] != 0.0:
-        return steer_stiffness(p, sf[SF_SA + SA_CF], sf[SF_SA + SA_CR])
-    return p
-
-
-@njit(cache=True, fastmath=False)
-def _steer_step(fp, ok, v, omega, sf, si):
-    """``Fusion.steer_sample`` (:func:`steer_sample`) of the angle last sent, on the engine's slots."""
-    s = steer_sample(_steer_params(fp, sf, si), _steer_load(sf, si), ok, v, omega, sf[SF_STSENT])
-    si[SI_STINIT], si[SI_STN] = 1 if s.init else 0, s.n
-    sf[SF_STOMF], sf[SF_STDEF], sf[SF_STDDF] = s.om_f, s.de_f, s.dd_f
-    sf[SF_STS11], sf[SF_STS12], sf[SF_STS22], sf[SF_STB1], sf[SF_STB2] = s.s11, s.s12, s.s22, s.b1, s.b2
-
-
-@njit(cache=True, fastmath=False)
-def _steer_out(fp, sf, si, delta):
-    """The steering command of the inner loop's ``delta`` (Cascade._step): the angle sent (the
-    offset estimate in force taken off, :func:`steer_correction`, within the steering limits,
-    :func:`steer_command`) and the wheels' intended angle."""
-    off = steer_correction(_steer_params(fp, sf, si), _steer_load(sf, si))
-    sent, wheels = steer_command(delta, off, fp[FP_L_DMIN], fp[FP_L_DMAX])
-    sf[SF_STOFF], sf[SF_STSENT] = off, sent
-    return sent, wheels
 
 
 @njit(cache=True, fastmath=False)
@@ -575,6 +489,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     gates = GateParams(fp[FP_V_LO], fp[FP_V_HI], fp[FP_W_LIM], fp[FP_POSE_NOISE], fp[FP_HEAD_NOISE], Td)
     cpar = course_params(Tc, fp[FP_COURSE_SIGMA], True, fp[FP_CF0], fp[FP_CR0], fp[FP_VM], fp[FP_VI],
                          fp[FP_VA], fp[FP_VB], fp[FP_VG], Td, n_in)
+    fbp, sp0 = unpack_fusion(fp[FP_FB:FP_FB + N_FBP], cpar)  # the fusion block's (Cascade._fb_p, steer_p)
     # (each phase's records and state views are made in the phase: the batch enters run() about
     # three times a step, at its phases)
     while si[SI_M] < m_end:
@@ -608,21 +523,17 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             si[SI_FRESH] = 1 if fresh else 0
             si[SI_SPOK] = 1 if speeds_ok else 0
             si[SI_POSEOK] = 1 if pose_ok else 0
-            # fusion.gyro_bias: the raw ω against the accepted pose's heading; ω less the bias
-            # from here on (the course fusion, the MHE's measurement below)
-            gb = 0.0
-            if ip[IP_GYRO] != 0:
-                gpar = GyroParams(fp[FP_GYRO], fp[FP_GYRO + 1], fp[FP_GYRO + 2], fp[FP_GYRO + 3])
-                gb = _gyro_step(gpar, pose_ok, th, fresh and speeds_ok, omv, sf, si)
-            omv = omv - gb
             mpc_step = si[SI_CALLS] % n_in == 0
+            # the fusion block (Cascade._fuse): the gyro's sample, ω less its bias (kept for the
+            # MHE and the part after it), the course interval's close at an accepted pose
+            _om, cs, civ = before_at(fbp, sf[SF_FB:SF_FB + N_FB], _course_load(sf, si, ivs), _iv_load(cur),
+                                     pose_ok, X, Y, th, fresh and speeds_ok, v, omv, mpc_step, t, sf[SF_TOFF],
+                                     ref_v, ref_w)
+            if fbp.course:
+                _course_store(cs, sf, si, ivs)
+                _iv_store(civ, cur)
             kr = math.floor((t - sf[SF_TOFF]) / Tc + 1e-6)
             kw = kr if kr > 0 else 0
-            kc = kw if kw < ip[IP_REFLEN] - 1 else ip[IP_REFLEN] - 1
-            if ip[IP_ANYCOURSE] != 0:  # an accepted pose may end the course fusion's interval
-                meas_ok = fresh and speeds_ok
-                _course_step(cpar, mpc_step, pose_ok, X, Y, th, v if meas_ok else math.nan,
-                             omv if meas_ok else math.nan, ref_v[kc] * ref_w[kc], cur, ivs, sf, si)
             phase = PH_MHE
             if mpc_step:
                 if ip[IP_ANYCOURSE] != 0 and ip[IP_STIFF] != 0:
@@ -677,9 +588,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             mbp = MHEBlockParams(fp[FP_MHE_MASS], ip[IP_DEFER] != 0)
             mst = mhe_block(mbp, MHEWindow(mY, mW, mU, mXS, mA, mB, mX), mp, sf[SF_MX:SF_MX + N_MS],
                             si[SI_NY:SI_NY + N_MI], sc[SC_UK:SC_UK + 2], sc[SC_EST:SC_EST + N_EO],
-                            si[SI_FRESH] != 0 and si[SI_SPOK] != 0, y[3], y[4] - _gyro_now(ip, sf, si), off,
+                            si[SI_FRESH] != 0 and si[SI_SPOK] != 0, y[3], sf[SF_FB + FB_OMEGA], off,
                             sf[SF_UAPP], sf[SF_UAPP + 1], ip[IP_MFORCE] != 0, sf[SF_PLANTU],
-                            ip[IP_MSTEER] != 0, sf[SF_PLANTU + 1], sf[SF_STOFF], sf[SF_LOW])
+                            ip[IP_MSTEER] != 0, sf[SF_PLANTU + 1], sf[SF_FB + FB_OFF], sf[SF_LOW])
             sc[SC_UMHE], sc[SC_UMHE + 1] = mst.u0, mst.u1  # what the cascade gave (the course fusion's δ, F)
             si[SI_MHEN], si[SI_MHEOK] = mst.n, 1 if mst.ok else 0
             si[SI_MHEFULL] = 1 if mst.n == ip[IP_NW] else 0
@@ -695,14 +606,14 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             ev0, ev1, ev2 = sc[SC_EST], sc[SC_EST + 1], sc[SC_EST + 2]
             sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2] = dead_reckon(
                 gates, sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], ev0, ev1, ev2)
-            if ip[IP_ANYCOURSE] != 0:
-                _course_sample(cpar, si[SI_FRESH] != 0 and si[SI_SPOK] != 0, si[SI_POSEOK] != 0, y[2], y[3],
-                               ev1, ev0 * ev2, y[4] - _gyro_now(ip, sf, si), sc[SC_UMHE + 1], sc[SC_UMHE],
-                               cur)
-            if ip[IP_STEER] != 0:  # fusion.steering_offset: the yaw balance of the angle last sent
-                _steer_step(fp, si[SI_FRESH] != 0 and si[SI_SPOK] != 0 and si[SI_ESTSTAT] == ST_OK
-                            and not (si[SI_HASLAST] != 0 and si[SI_SAT] != 0), ev0,
-                            y[4] - _gyro_now(ip, sf, si), sf, si)
+            # the fusion block after the MHE (Cascade._fuse_after): the course fusion's sample, the
+            # steering-offset fit's (on the stiffnesses given, the angle last sent)
+            civ = after_at(fbp, sf[SF_FB:SF_FB + N_FB], given_steer(sp0, sf[SF_SA:SF_SA + N_SA]),
+                           _iv_load(cur), si[SI_FRESH] != 0 and si[SI_SPOK] != 0, si[SI_POSEOK] != 0, y[2],
+                           y[3], ev0, ev1, ev2, sc[SC_UMHE + 1], sc[SC_UMHE], si[SI_ESTSTAT], False,
+                           si[SI_HASLAST] != 0 and si[SI_SAT] != 0)
+            if fbp.course:
+                _iv_store(civ, cur)
             # the inner block (Cascade._inner): friction step, mass terms, TS-LQR, events; the
             # numpy law (a singular N̄) is the caller's, with the block's compensation and residual.
             # Its records (Cascade._ib; TSLQR._inner, TSLQR._law: the same values), state, counters
@@ -730,9 +641,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             phase = PH_POST_LQR
         if phase == PH_POST_LQR:
             # the command's bookkeeping (Cascade), the inner log and the plant (simulate)
-            wheels = sc[SC_OD]
-            if ip[IP_STEER] != 0:  # the servo gets the angle less the steering offset in force
-                sc[SC_OD], wheels = _steer_out(fp, sf, si, sc[SC_OD])
+            sp = given_steer(sp0, sf[SF_SA:SF_SA + N_SA])  # the servo (Cascade._servo)
+            sc[SC_OD], wheels = servo_at(fbp, sf[SF_FB:SF_FB + N_FB], sp, sc[SC_OD])
             sf[SF_UAPP], sf[SF_UAPP + 1] = sc[SC_OF], wheels
             st = si[SI_ESTSTAT]
             si[SI_CALLS] += 1

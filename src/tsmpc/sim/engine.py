@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
 from tsmpc.control.cascade import _MPC_STATUS_CODE, EVENT_NAMES, STATUS_CODE, Cascade, _Window
+from tsmpc.control.fusion_block import N_FB, N_FBP, fusion_state, pack_fusion
 from tsmpc.control.outer_block import N_GBP, N_OBP, OC_GACT, OC_GSTEPS, pack_govern, pack_outer, scratch_size
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
@@ -126,16 +127,10 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
 _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:simulate": "ba020e97f0f11213",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
-    "tsmpc.control.cascade:Cascade.__init__": "997c77c4bfef55cb",
+    "tsmpc.control.cascade:Cascade.__init__": "5d56edf92915dd92",
     "tsmpc.control.cascade:Cascade.reset": "61ea7ce539443769",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "14337833d5610532",
-    "tsmpc.control.cascade:Cascade._gyro": "d4f0749f2a101860",
-    "tsmpc.control.cascade:Cascade._ay_ref_at": "9a44f89a841913eb",
-    "tsmpc.control.cascade:Cascade._steer_fit": "1f125e94d12be522",
-    "tsmpc.control.cascade:Cascade._servo_offset": "393f0c29d7e8e37c",
-    "tsmpc.control.cascade:Cascade._servo_plain": "308054ab84aa02b6",
-    "tsmpc.control.cascade:_NoCourse": "35449a3e893bc074",
+    "tsmpc.control.cascade:Cascade._step": "5ea2319dca8c993c",
     "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
     "tsmpc.control.cascade:Cascade._gate": "696dd9b43cc81793",
     "tsmpc.control.cascade:Cascade._outer": "a8a41901f93c5023",
@@ -251,6 +246,11 @@ def _replaced_code() -> str | None:
         cas = importlib.import_module("tsmpc.control.cascade")
         if blk is not ke.stiffness_block or cas.stiffness_block is not blk:
             return "tsmpc.control.stiffness_block's block was replaced"
+        fb = importlib.import_module("tsmpc.control.fusion_block")  # the fusion's glue
+        parts = (fb.fusion_before, fb.fusion_after, fb.servo)
+        if (fb.before_at, fb.after_at, fb.servo_at) != (ke.before_at, ke.after_at, ke.servo_at) or (
+                cas.fusion_before, cas.fusion_after, cas.servo) != parts:
+            return "tsmpc.control.fusion_block's block was replaced"
         ob = importlib.import_module("tsmpc.control.outer_block")
         if ob.outer_errors is not ke.outer_errors or ob.outer_after is not ke.outer_after:
             return "tsmpc.control.outer_block's block was replaced"
@@ -591,11 +591,9 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     ip[ke.IP_ANYCOURSE] = fu.any_course
     ip[ke.IP_CSPEED] = fs.course_speed
     ip[ke.IP_STIFF], ip[ke.IP_MASSEST] = fs.stiffness_estimate, fs.mass_estimate
-    ip[ke.IP_GYRO] = fs.gyro_bias
-    fp[ke.FP_GYRO:ke.FP_GYRO + 4] = fu.gyro.params
-    ip[ke.IP_STEER] = fs.steering_offset
-    assert len(fu.steer_p) == ke.N_STEER_P  # (the kernel rebuilds the record from these slots)
-    fp[ke.FP_STEER:ke.FP_STEER + ke.N_STEER_P] = fu.steer_p
+    # the fusion block's records (Cascade._fb_p, the steering-offset fit's parameters as the config
+    # gives them; the kernel rebuilds them from these slots)
+    fp[ke.FP_FB:ke.FP_FB + N_FBP] = pack_fusion(cascade._fb_p, fu.steer_p)
     ip[ke.IP_SPEEDFB], ip[ke.IP_LQR_SFB] = cascade._ib.mass.speed_feedback, law.speed_feedback
     inner = lqr._inner
     ip[ke.IP_COMP], ip[ke.IP_UIO], ip[ke.IP_LOWRES] = inner.compensation, inner.raw_estimate, inner.low_speed
@@ -635,16 +633,9 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf[ke.SF_OMNOW], sf[ke.SF_VNOW], sf[ke.SF_CAGE] = cs.omega_now, cs.v_now, cs.age
     sf[ke.SF_SA:ke.SF_SA + ke.N_SA] = cascade._sa  # the stiffnesses given (a reset cascade: none)
     si[ke.SI_CSINCE] = cs.since
-    gs = cascade._fusion.gyro.state  # the yaw-rate bias fit (a reset cascade: its prior)
-    si[ke.SI_GYOPEN], si[ke.SI_GYN], si[ke.SI_GYGAP], si[ke.SI_GYCHORDS] = gs.open, gs.n, gs.gap, gs.n_chords
-    sf[ke.SF_GYTH0], sf[ke.SF_GYINT], sf[ke.SF_GYWLAST] = gs.th0, gs.integ, gs.w_last
-    sf[ke.SF_GYSB], sf[ke.SF_GYSW] = gs.sb, gs.sw
-    so = cascade._fusion.steer  # the steering-offset fit (a reset cascade: its prior)
-    si[ke.SI_STINIT], si[ke.SI_STN] = so.init, so.n
-    sf[ke.SF_STOMF], sf[ke.SF_STDEF], sf[ke.SF_STDDF] = so.om_f, so.de_f, so.dd_f
-    sf[ke.SF_STS11], sf[ke.SF_STS12], sf[ke.SF_STS22] = so.s11, so.s12, so.s22
-    sf[ke.SF_STB1], sf[ke.SF_STB2] = so.b1, so.b2
-    sf[ke.SF_STOFF], sf[ke.SF_STSENT] = cascade._steer_offset, cascade._steer_sent
+    fu = cascade._fusion  # the fusion block's (the yaw-rate and steering-offset fits, the servo)
+    sf[ke.SF_FB:ke.SF_FB + N_FB] = fusion_state(fu.gyro.state, fu.steer, cascade._steer_offset,
+                                                cascade._steer_sent)
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
     sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival

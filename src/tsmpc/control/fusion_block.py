@@ -1,0 +1,277 @@
+"""The fusion's glue in the cascade as one block (issue 34): what the cascade does every T_d around
+the estimators of :mod:`tsmpc.estimation.fusion` (``cfg.fusion``'s ``gyro_bias``, the course fits
+and ``steering_offset``).
+
+* :func:`fusion_before` — before the MPC and the MHE: the yaw-rate bias fit's sample (the raw ω
+  against the accepted pose's heading, :func:`~tsmpc.estimation.fusion.gyro_sample`) and ω less
+  the bias for every block after it; then the course fusion's close
+  (:func:`~tsmpc.estimation.fusion.course_close`: an accepted pose may end the open interval and a
+  chord) on the speed and bias-free ω when the gates accepted them (NaN else) and the reference's
+  lateral acceleration v_d ω_d at the sample of the call's time (:func:`ay_ref_at`).
+* :func:`fusion_after` — after the MHE: the course fusion's sample
+  (:func:`~tsmpc.estimation.fusion.course_sample`: the accepted speed, the estimate's α̂ and
+  v̂ ω̂, the bias-free ω, the input the MHE's model saw) and the steering-offset fit's sample
+  (:func:`~tsmpc.estimation.fusion.steer_sample`: the steady yaw balance of v̂ and ω against the
+  angle last sent), frozen (:func:`steer_usable`) while the sample is refused, the MHE's estimate
+  is not OK, the cascade is blind or the last command was saturated.
+* :func:`servo` — the angle sent: the inner loop's δ less the steering offset in force
+  (:func:`~tsmpc.estimation.fusion.steer_correction`) within the steering limits, and the wheels'
+  intended angle (:func:`~tsmpc.estimation.fusion.steer_command`); with ``steering_offset`` off
+  the inner loop's δ itself, unclipped, no offset.
+
+A part switched off does nothing (its state is returned as it came; the bias and the offset are
+0): the switches are the block's parameters (:class:`FusionParams`), not the caller's branches.
+
+One definition, three callers: :class:`~tsmpc.control.cascade.Cascade` calls the three functions
+as Python on the records its :class:`~tsmpc.estimation.fusion.Fusion` holds (a plain tuple back:
+a NamedTuple costs the cascade ≈ 0.2 µs a call); the run engine (``tsmpc.kernels.engine.run``)
+and the batch (which runs ``run`` per lane) compile the same functions through
+:func:`before_at`, :func:`after_at` and :func:`servo_at`, which keep the yaw-rate and steering
+fits' records and the servo's in a float vector of named slots (``FB_*``: :func:`gyro_load` /
+:func:`gyro_store`, :func:`steer_load` / :func:`steer_store`) and the bias-free ω of the call in
+``FB_OMEGA`` (the engine's phases resume between the parts). The course fusion's records
+(:class:`~tsmpc.estimation.fusion.CourseState`, the open
+:class:`~tsmpc.estimation.fusion.Interval`) are passed in and returned by both. The parameters
+cross into compiled code as one float vector (:func:`pack_fusion` / :func:`unpack_fusion`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tsmpc.control.inner_block import EST_OK
+from tsmpc.control.stiffness_block import SA_CF, SA_CR, SA_HAS
+from tsmpc.estimation.fusion import (
+    CourseParams,
+    CourseState,
+    GyroParams,
+    GyroState,
+    Interval,
+    SteerParams,
+    SteerState,
+    course_close,
+    course_sample,
+    gyro_bias,
+    gyro_sample,
+    steer_command,
+    steer_correction,
+    steer_sample,
+    steer_stiffness,
+)
+from tsmpc.kernels.jit import jitable
+
+__all__ = [
+    "FB_GYCHORDS", "FB_GYGAP", "FB_GYINT", "FB_GYN", "FB_GYOPEN", "FB_GYSB", "FB_GYSW", "FB_GYTH0",
+    "FB_GYWLAST", "FB_OFF", "FB_OMEGA", "FB_SENT", "FB_STB1", "FB_STB2", "FB_STDDF", "FB_STDEF",
+    "FB_STINIT", "FB_STN", "FB_STOMF", "FB_STS11", "FB_STS12", "FB_STS22", "N_FB", "N_FBP", "FusionParams",
+    "after_at", "ay_ref_at", "before_at", "fusion_after", "fusion_before", "fusion_state", "given_steer",
+    "gyro_load", "gyro_store", "pack_fusion", "servo", "servo_at", "steer_load", "steer_store",
+    "steer_usable", "unpack_fusion",
+]
+
+#: The block's state vector (floats; flags 1.0 / 0.0, counts whole numbers): the yaw-rate bias
+#: fit's GyroState, the steering-offset fit's SteerState (their fields in order), the steering
+#: offset the last command took off, the angle last sent, and the bias-free ω of the call.
+(FB_GYOPEN, FB_GYTH0, FB_GYN, FB_GYINT, FB_GYWLAST, FB_GYGAP, FB_GYSB, FB_GYSW, FB_GYCHORDS,
+ FB_STINIT, FB_STOMF, FB_STDEF, FB_STDDF, FB_STS11, FB_STS12, FB_STS22, FB_STB1, FB_STB2, FB_STN,
+ FB_OFF, FB_SENT, FB_OMEGA) = range(22)
+N_FB = 22
+
+
+class FusionParams(NamedTuple):
+    """The block's constants.
+
+    Attributes:
+        gyro: the yaw-rate bias fit runs and its bias is removed (``fusion.gyro_bias``).
+        course: the course fusion runs (``course_slip``, ``course_speed`` or ``stiffness_estimate``).
+        steer: the steering-offset fit runs and the servo takes its offset off
+            (``fusion.steering_offset``).
+        d_min: the servo's lower steering limit [rad] (the inner loop's).
+        d_max: its upper limit [rad].
+        gp: the yaw-rate bias fit's parameters.
+        cp: the course fusion's parameters.
+    """
+
+    gyro: bool
+    course: bool
+    steer: bool
+    d_min: float
+    d_max: float
+    gp: GyroParams
+    cp: CourseParams
+
+
+#: Values of :func:`pack_fusion`'s vector: the switches, the limits, GyroParams' 4 fields, the
+#: steering-offset fit's SteerParams (18 fields) as the config gives them.
+N_FBP = 27
+
+
+@jitable
+def ay_ref_at(Tc: float, t: float, t_off: float, v_d: Sequence[float] | NDArray[np.float64],
+              w_d: Sequence[float] | NDArray[np.float64]) -> float:
+    """The reference's lateral acceleration v_d ω_d at the sample of time ``t`` (the reference time
+    t − ``t_off``, within the reference's samples)."""
+    kc = min(max(math.floor((t - t_off) / Tc + 1e-6), 0), len(v_d) - 1)
+    return v_d[kc] * w_d[kc]
+
+
+@jitable
+def fusion_before(p: FusionParams, g: GyroState, cs: CourseState, cur: Interval, pose_ok: bool, X: float,
+                  Y: float, th: float, ok: bool, v: float, omega: float, mpc_step: bool, t: float,
+                  t_off: float, v_d: Sequence[float] | NDArray[np.float64],
+                  w_d: Sequence[float] | NDArray[np.float64]
+                  ) -> tuple[float, GyroState, CourseState, Interval]:
+    """The part before the MPC and the MHE, on the pose (X, Y, θ) (``pose_ok``: the gates accepted
+    it) and the speed v and raw yaw rate ω (``ok``: accepted and fresh): (ω less the bias, the
+    yaw-rate fit's state, the course state, the open interval)."""
+    b = 0.0
+    if p.gyro:
+        g = gyro_sample(p.gp, g, pose_ok, th, ok, omega)
+        b = gyro_bias(g)
+    om = omega - b
+    if p.course:  # an accepted pose may end the open interval (only samples the gates accepted)
+        cs, cur = course_close(p.cp, cs, cur, mpc_step, pose_ok, X, Y, th, v if ok else math.nan,
+                               om if ok else math.nan, ay_ref_at(p.cp.Tc, t, t_off, v_d, w_d))
+    return om, g, cs, cur
+
+
+@jitable
+def steer_usable(ok: bool, est_status: int, blind: bool, last_saturated: bool) -> bool:
+    """The steering-offset fit takes the sample: accepted, the MHE's estimate OK, not blind, the
+    last command not saturated."""
+    return ok and est_status == EST_OK and not blind and not last_saturated
+
+
+@jitable
+def fusion_after(p: FusionParams, sp: SteerParams, st: SteerState, cur: Interval, ok: bool, pose_ok: bool,
+                 th: float, v: float, v_hat: float, a_hat: float, w_hat: float, omega: float, delta: float,
+                 force: float, est_status: int, blind: bool, last_saturated: bool,
+                 sent: float) -> tuple[Interval, SteerState]:
+    """The part after the MHE, on the estimate (v̂, α̂, ω̂) and its status code, the bias-free ω,
+    the input [F_xR, δ] the MHE's model saw (``force``, ``delta``) and the angle last ``sent``:
+    (the open interval, the steering-offset fit's state). A rejected speed is garbage and a
+    rejected or missing heading the gyro's integral since the last accepted one (course_sample)."""
+    if p.course:
+        cur = course_sample(p.cp, cur, ok, pose_ok, th, v, a_hat, v_hat * w_hat, omega, delta, force)
+    if p.steer:
+        st = steer_sample(sp, st, steer_usable(ok, est_status, blind, last_saturated), v_hat, omega, sent)
+    return cur, st
+
+
+@jitable
+def servo(p: FusionParams, sp: SteerParams, st: SteerState, delta: float) -> tuple[float, float, float]:
+    """The inner loop's ``delta`` to the servo: (the angle sent, the wheels' intended angle — what
+    the MHE's model sees next —, the steering offset in force)."""
+    if not p.steer:
+        return delta, delta, 0.0
+    off = steer_correction(sp, st)
+    sent, wheels = steer_command(delta, off, p.d_min, p.d_max)
+    return sent, wheels, off
+
+
+@jitable
+def given_steer(sp: SteerParams, sa: NDArray[np.float64] | list[float]) -> SteerParams:
+    """The steering-offset fit's parameters ``sp`` (the config's) with the stiffnesses the stiffness
+    block gave the MHE, once it has (its record ``sa``: tsmpc.control.stiffness_block's SA_*)."""
+    if sa[SA_HAS] != 0.0:
+        return steer_stiffness(sp, sa[SA_CF], sa[SA_CR])
+    return sp
+
+
+# ---------------------------------------------------------------------------- the state vector
+@jitable
+def gyro_load(fb: NDArray[np.float64]) -> GyroState:
+    """The yaw-rate bias fit's record of the state vector."""
+    return GyroState(fb[FB_GYOPEN] != 0.0, fb[FB_GYTH0], int(fb[FB_GYN]), fb[FB_GYINT], fb[FB_GYWLAST],
+                     int(fb[FB_GYGAP]), fb[FB_GYSB], fb[FB_GYSW], int(fb[FB_GYCHORDS]))
+
+
+@jitable
+def gyro_store(s: GyroState, fb: NDArray[np.float64]) -> None:
+    """The yaw-rate bias fit's record into the state vector."""
+    fb[FB_GYOPEN], fb[FB_GYTH0], fb[FB_GYN] = 1.0 if s.open else 0.0, s.th0, float(s.n)
+    fb[FB_GYINT], fb[FB_GYWLAST], fb[FB_GYGAP] = s.integ, s.w_last, float(s.gap)
+    fb[FB_GYSB], fb[FB_GYSW], fb[FB_GYCHORDS] = s.sb, s.sw, float(s.n_chords)
+
+
+@jitable
+def steer_load(fb: NDArray[np.float64]) -> SteerState:
+    """The steering-offset fit's record of the state vector."""
+    return SteerState(fb[FB_STINIT] != 0.0, fb[FB_STOMF], fb[FB_STDEF], fb[FB_STDDF], fb[FB_STS11],
+                      fb[FB_STS12], fb[FB_STS22], fb[FB_STB1], fb[FB_STB2], int(fb[FB_STN]))
+
+
+@jitable
+def steer_store(s: SteerState, fb: NDArray[np.float64]) -> None:
+    """The steering-offset fit's record into the state vector."""
+    fb[FB_STINIT], fb[FB_STOMF], fb[FB_STDEF], fb[FB_STDDF] = 1.0 if s.init else 0.0, s.om_f, s.de_f, s.dd_f
+    fb[FB_STS11], fb[FB_STS12], fb[FB_STS22] = s.s11, s.s12, s.s22
+    fb[FB_STB1], fb[FB_STB2], fb[FB_STN] = s.b1, s.b2, float(s.n)
+
+
+def fusion_state(g: GyroState, st: SteerState, offset: float, sent: float) -> NDArray[np.float64]:
+    """The state vector of the records (a cascade's, for a compiled caller that starts from it)."""
+    fb = np.zeros(N_FB)
+    gyro_store(g, fb)
+    steer_store(st, fb)
+    fb[FB_OFF], fb[FB_SENT] = offset, sent
+    return fb
+
+
+@jitable
+def before_at(p: FusionParams, fb: NDArray[np.float64], cs: CourseState, cur: Interval, pose_ok: bool,
+              X: float, Y: float, th: float, ok: bool, v: float, omega: float, mpc_step: bool, t: float,
+              t_off: float,
+              v_d: NDArray[np.float64], w_d: NDArray[np.float64]) -> tuple[float, CourseState, Interval]:
+    """:func:`fusion_before` on the state vector ``fb`` (the bias-free ω kept in ``FB_OMEGA``):
+    (that ω, the course state, the open interval)."""
+    om, g, cs, cur = fusion_before(p, gyro_load(fb), cs, cur, pose_ok, X, Y, th, ok, v, omega, mpc_step, t,
+                                   t_off, v_d, w_d)
+    if p.gyro:
+        gyro_store(g, fb)
+    fb[FB_OMEGA] = om
+    return om, cs, cur
+
+
+@jitable
+def after_at(p: FusionParams, fb: NDArray[np.float64], sp: SteerParams, cur: Interval, ok: bool,
+             pose_ok: bool, th: float, v: float, v_hat: float, a_hat: float, w_hat: float, delta: float,
+             force: float, est_status: int, blind: bool, last_saturated: bool) -> Interval:
+    """:func:`fusion_after` on the state vector ``fb`` (the call's bias-free ω and the angle last
+    sent read from it): the open interval."""
+    cur, st = fusion_after(p, sp, steer_load(fb), cur, ok, pose_ok, th, v, v_hat, a_hat, w_hat, fb[FB_OMEGA],
+                           delta, force, est_status, blind, last_saturated, fb[FB_SENT])
+    if p.steer:
+        steer_store(st, fb)
+    return cur
+
+
+@jitable
+def servo_at(p: FusionParams, fb: NDArray[np.float64], sp: SteerParams, delta: float) -> tuple[float, float]:
+    """:func:`servo` on the state vector ``fb`` (the offset in force and the angle sent kept):
+    (the angle sent, the wheels' intended angle)."""
+    sent, wheels, off = servo(p, sp, steer_load(fb), delta)
+    fb[FB_OFF], fb[FB_SENT] = off, sent
+    return sent, wheels
+
+
+# ---------------------------------------------------------------------------- the parameters
+def pack_fusion(p: FusionParams, sp: SteerParams) -> NDArray[np.float64]:
+    """The record (but its course parameters, which the compiled caller builds) and the
+    steering-offset fit's parameters as the config gives them, as the float vector
+    :func:`unpack_fusion` reads."""
+    return np.array([p.gyro, p.course, p.steer, p.d_min, p.d_max, *p.gp, *sp], dtype=np.float64)
+
+
+@jitable
+def unpack_fusion(a: NDArray[np.float64], cp: CourseParams) -> tuple[FusionParams, SteerParams]:
+    """The records of :func:`pack_fusion`'s vector, with the course parameters ``cp``."""
+    gp = GyroParams(a[5], a[6], a[7], a[8])
+    sp = SteerParams(a[9], a[10], a[11], a[12], a[13], a[14], a[15], a[16], a[17], a[18], a[19], a[20], a[21],
+                     a[22], a[23], a[24], a[25], a[26])
+    return FusionParams(a[0] != 0.0, a[1] != 0.0, a[2] != 0.0, a[3], a[4], gp, cp), sp
