@@ -21,10 +21,14 @@ from tsmpc.control.fusion_block import (
     FB_OMEGA,
     FB_SENT,
     N_FB,
+    N_IV,
     FusionParams,
+    course_load,
     fusion_state,
     gyro_load,
+    iv_load,
     pack_fusion,
+    slip_load,
     steer_load,
 )
 from tsmpc.control.inner_block import EST_FAILED, EST_OK, EST_REJECTED
@@ -144,25 +148,45 @@ def test_the_steering_fit_refuses_a_sample_when_the_mhe_failed(way) -> None:
     assert cur4 == cur and st4 == st
 
 
+def _flat(x: object) -> list[object]:
+    """A record's numbers, flattened (NaN as the string "nan": equal to itself)."""
+    if isinstance(x, tuple):
+        return [v for item in x for v in _flat(item)]
+    return ["nan" if isinstance(x, float) and math.isnan(x) else x]
+
+
 def test_the_state_vector_forms_are_the_record_forms() -> None:
     """before_at / after_at / servo_at (the engine's) on the vector give the record forms' answers
     and keep the records, the call's bias-free ω, the offset and the angle sent in their slots."""
     p, sp = _params(), _steer_p()
     g = fu.gyro_start(p.gp)._replace(open=True, th0=0.1, n=3, integ=0.004, w_last=0.13, sb=1.0, sw=500.0)
     st = _offset_state(0.01)
-    v = fusion_state(g, st, 0.007, 0.05)
-    assert v.shape == (N_FB,) and gyro_load(v) == g and steer_load(v) == st
-    assert (v[FB_OFF], v[FB_SENT]) == (0.007, 0.05)
-    cs = fu.course_start(p.cp)
-    om, g1, cs1, cur1 = fb.fusion_before(p, g, cs, NO_INTERVAL, True, 1.0, 2.0, 0.11, True, 8.0, 0.14, True,
+    cs = fu.course_start(p.cp)._replace(n_chords=4, since=3, v_now=7.0)
+    cs = cs._replace(slip=cs.slip._replace(kappa=0.002, beta=-0.01))
+    cur0 = NO_INTERVAL._replace(open=True, ok=True, n=2, sx=1.0, sth=0.1, sv=3.0, th_last=0.1)
+    v, ivs, row = fusion_state(g, st, 0.007, 0.05, cs, cur0)
+    assert v.shape == (N_FB,) and ivs.shape == (fu.RING, N_IV) and row.shape == (N_IV,)
+    assert gyro_load(v) == g and steer_load(v) == st and (v[FB_OFF], v[FB_SENT]) == (0.007, 0.05)
+    assert course_load(v, ivs) == cs and iv_load(row) == cur0 and slip_load(v) == cs.slip
+    om, g1, cs1, cur1 = fb.fusion_before(p, g, cs, cur0, True, 1.0, 2.0, 0.11, True, 8.0, 0.14, True,
                                          0.0, 0.0, [2.0], [0.1])
-    om_v, cs_v, cur_v = fb.before_at(p, v, cs, NO_INTERVAL, True, 1.0, 2.0, 0.11, True, 8.0, 0.14, True, 0.0,
-                                     0.0, np.array([2.0]), np.array([0.1]))
-    assert (om_v, cs_v, cur_v) == (om, cs1, cur1) and gyro_load(v) == g1 and v[FB_OMEGA] == om
+    om_v = fb.before_at(p, v, ivs, row, True, 1.0, 2.0, 0.11, True, 8.0, 0.14, True, 0.0, 0.0,
+                        np.array([2.0]), np.array([0.1]))
+    assert om_v == om and v[FB_OMEGA] == om and gyro_load(v) == g1
+    assert _flat(course_load(v, ivs)) == _flat(cs1) and _flat(iv_load(row)) == _flat(cur1)
+    assert cur1 != cur0 and cs1.since == 0  # (an interval ended: a new one opened)
     cur2, st2 = fb.fusion_after(p, sp, st, cur1, True, True, 0.11, 8.0, 8.0, 0.0, 0.14, om, 0.01, 100.0,
                                 EST_OK, False, False, 0.05)
-    assert fb.after_at(p, v, sp, cur1, True, True, 0.11, 8.0, 8.0, 0.0, 0.14, 0.01, 100.0, EST_OK, False,
-                       False) == cur2 and steer_load(v) == st2 and st2 != st
+    fb.after_at(p, v, sp, row, True, True, 0.11, 8.0, 8.0, 0.0, 0.14, 0.01, 100.0, EST_OK, False, False)
+    assert _flat(iv_load(row)) == _flat(cur2) and steer_load(v) == st2 and st2 != st
+    off_p = p._replace(gyro=False, course=False, steer=False)  # all off: the records stay as they were
+    before = (v.copy(), ivs.copy(), row.copy())
+    assert fb.before_at(off_p, v, ivs, row, True, 1.0, 2.0, 0.2, True, 9.0, 0.3, True, 0.1, 0.0,
+                        np.array([2.0]), np.array([0.1])) == 0.3 and v[FB_OMEGA] == 0.3
+    fb.after_at(off_p, v, sp, row, True, True, 0.2, 9.0, 9.0, 0.0, 0.3, 0.01, 100.0, EST_OK, False, False)
+    v[FB_OMEGA] = before[0][FB_OMEGA]
+    for x, y in zip(before, (v, ivs, row), strict=True):
+        np.testing.assert_array_equal(x, y)
     sent, wheels, off = fb.servo(p, sp, st2, 0.2)
     assert fb.servo_at(p, v, sp, 0.2) == (sent, wheels) and (v[FB_OFF], v[FB_SENT]) == (off, sent)
     # the parameters cross as one vector; the stiffnesses given reach the steering fit's balance

@@ -48,12 +48,17 @@ from numba.extending import intrinsic as _numba_intrinsic
 from tsmpc.control.fusion_block import (
     FB_OFF,
     FB_OMEGA,
+    FB_SV,
+    FB_SW,
     N_FB,
     N_FBP,
     after_at,
     before_at,
+    course_load,
+    course_store,
     given_steer,
     servo_at,
+    slip_load,
     unpack_fusion,
 )
 from tsmpc.control.gates import (
@@ -107,13 +112,8 @@ from tsmpc.control.stiffness_block import N_SA, stiffness_block
 from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams, LQRLaw
 from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import (
-    RING,
-    CourseState,
-    Interval,
     MassParams,
-    SlipFit,
     SpeedFit,
-    StiffFit,
     course_params,
     delta_mass,
     speed_offset,
@@ -199,12 +199,13 @@ N_FP = FP_GB + N_GBP
 N_IP = 26
 # ---------------------------------------------------------------------------- float state
 (SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, _FREE15, _FREE16, _FREE17, SF_UPREV, _U1, SF_UAPP, _A1,
- SF_PLANTU, _PU1, SF_LASTA, _FREE12, _G1, _G2, _G3, _G4, SF_OMNOW, SF_THETA, _T1,
- SF_P, _Q1, _Q2, _Q3, SF_SV, SF_SW, SF_CNUM, _C1, SF_CDEN, _D1, SF_CAGE, _FREE1, SF_AHPREV,
+ SF_PLANTU, _PU1, SF_LASTA, _FREE12, _G1, _G2, _G3, _G4, _CFREE1, _CFREE2, _CFREE3,
+ _CFREE4, _CFREE5, _CFREE6, _CFREE7, _CFREE8, _CFREE9, _CFREE10, _CFREE11, _CFREE12, _CFREE13, _FREE18,
+ _FREE1, _CFREE14,
  _FREE4, _FREE5, _FREE6, _FREE7, SF_SA, _SA1, _SA2, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2,
- SF_VNOW, SF_ACT, _AC1, SF_LOW, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, SF_N2,
- SF_N1, _FREE13, _J1, _J2, _J3, _FREE14,
+ _CFREE15, SF_ACT, _AC1, SF_LOW, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, _CFREE16,
+ _CFREE17, _FREE13, _J1, _J2, _J3, _FREE14,
  _FREE19, _FREE20, _FREE21, _FREE22,
  _FREE23, _FREE24, _FREE25, _FREE26, _FREE27, _FREE28, _FREE29, _FREE30, _FREE31, _FREE32, _FREE33,
  _FREE34, _FREE35, _FREE36, _FREE37) = range(85)
@@ -217,13 +218,13 @@ N_SF = SF_FB + N_FB
 SF_TOFF = SF_OB + OB_TOFF  # (the reference time offset, the governed rate: the caller reads them)
 SF_GRATE = SF_OB + OB_RATE
 # ---------------------------------------------------------------------------- integer state
-(SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, _SFREE5, _SFREE6, SI_IVN, _SFREE0, SI_NCHORDS,
- SI_HASAH, _SFREE1, _SFREE2, _SFREE10, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
+(SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, _SFREE5, _SFREE6, _CFREE18, _SFREE0, _CFREE19,
+ _CFREE20, _SFREE1, _SFREE2, _SFREE10, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
  SI_FRESH, SI_SPOK, SI_POSEOK, _SFREE7, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
  SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, _SFREE3, _SFREE4,
  _SFREE8, _SFREE9, SI_GWIN,
  _SFREE11, _SFREE12, _SFREE13, _SFREE14, _SFREE15, _SFREE16,
- SI_CSINCE) = range(44)  # the CourseState's calls since its last interval ended
+ _CFREE21) = range(44)
 N_SI = 44
 # the MHE's state slots are its records' (kernels.mhe: ms = [x̂, F̂, x̄_0], mi = [samples, rejected, failed])
 assert SF_MF == SF_MX + MS_F and SF_ARR == SF_MX + MS_ARR
@@ -235,11 +236,7 @@ assert SI_NREJ == SI_NY + MI_NREJ and SI_NFAIL == SI_NY + MI_NFAIL
  SC_PU, _PU2, SC_UK, _UK1, _CFREE0, _CFREE1, _CFREE2, SC_GROW, _GR1, _GR2, _GR3, _GR4) = range(38)
 N_SC = 38  # then the MPC's window's v and ω, N + 1 each, then the outer block's scratch
 # (outer_block.scratch_size)
-# ---------------------------------------------------------------------------- course intervals
-(IV_OPEN, IV_OK, IV_SX, IV_SY, IV_STH, IV_N, IV_SV, IV_SVDTH, IV_SVALPHA, IV_SVAY, IV_SVFULL,
- IV_SDELTA, IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST, IV_THLAST,
- IV_WLAST) = range(20)  # Interval's fields
-N_IV = 20
+# course intervals: the fusion block's rows (tsmpc.control.fusion_block's IV_* slots, N_IV of them)
 # the log's columns are the recorder block's (tsmpc.sim.record_block: LI_*, LO_*, LOI_*)
 
 # friction programs (the profiles of tsmpc.scenarios / tsmpc.conditions as data)
@@ -329,77 +326,17 @@ def _sensor(m, n_in, Tc, Td, x, noise, u_drop, draws, sp, ss, fifo, y):
 
 
 # ============================================================================ fusion
-# The course fusion's records (tsmpc.estimation.fusion's CourseState and Interval) loaded from and
-# stored to the engine's state slots around the fusion block's and the stiffness block's calls
-# (the gyro's and the steering fit's records are the fusion block's state vector, sf[SF_FB:]).
-assert RING == 8  # _course_load lists the ring's intervals one by one
-
-
-@njit(cache=True, fastmath=False)
-def _iv_load(a):
-    """The :class:`~tsmpc.estimation.fusion.Interval` of a row of ``cur`` / ``ivs``."""
-    return Interval(a[IV_OPEN] != 0.0, a[IV_OK] != 0.0, a[IV_SX], a[IV_SY], a[IV_STH], int(a[IV_N]),
-                    a[IV_SV], a[IV_SVDTH], a[IV_SVALPHA], a[IV_SVAY], a[IV_SVFULL], a[IV_SDELTA],
-                    a[IV_SWV], a[IV_SVW], a[IV_SF], a[IV_WFIRST], a[IV_AYREF], a[IV_VFIRST], a[IV_THLAST],
-                    a[IV_WLAST])
-
-
-@njit(cache=True, fastmath=False)
-def _iv_store(iv, a):
-    """An interval into a row of ``cur`` / ``ivs``."""
-    a[IV_OPEN], a[IV_OK] = 1.0 if iv.open else 0.0, 1.0 if iv.ok else 0.0
-    a[IV_SX], a[IV_SY], a[IV_STH], a[IV_N] = iv.sx, iv.sy, iv.sth, float(iv.n)
-    a[IV_SV], a[IV_SVDTH], a[IV_SVALPHA], a[IV_SVAY] = iv.sv, iv.sv_dth, iv.sv_alpha, iv.sv_ay
-    a[IV_SVFULL], a[IV_SDELTA], a[IV_SWV], a[IV_SVW] = iv.sv_full, iv.s_delta, iv.s_w_v, iv.s_vw
-    a[IV_SF], a[IV_WFIRST], a[IV_AYREF], a[IV_VFIRST] = iv.s_F, iv.w_first, iv.ay_ref, iv.v_first
-    a[IV_THLAST], a[IV_WLAST] = iv.th_last, iv.w_last
-
-
-@njit(cache=True, fastmath=False)
-def _slip_load(sf):
-    """The :class:`~tsmpc.estimation.fusion.SlipFit` of the engine's slots."""
-    return SlipFit(sf[SF_THETA], sf[SF_THETA + 1], sf[SF_P], sf[SF_P + 1], sf[SF_P + 2], sf[SF_P + 3],
-                   sf[SF_N2], sf[SF_N1])
-
-
-@njit(cache=True, fastmath=False)
-def _course_load(sf, si, ivs):
-    """The :class:`~tsmpc.estimation.fusion.CourseState` of the engine's slots."""
-    ring = (_iv_load(ivs[0]), _iv_load(ivs[1]), _iv_load(ivs[2]), _iv_load(ivs[3]), _iv_load(ivs[4]),
-            _iv_load(ivs[5]), _iv_load(ivs[6]), _iv_load(ivs[7]))
-    slip = _slip_load(sf)
-    stiff = StiffFit(sf[SF_CNUM], sf[SF_CNUM + 1], sf[SF_CDEN], sf[SF_CDEN + 1], sf[SF_AHPREV],
-                     si[SI_HASAH] != 0)
-    return CourseState(ring, si[SI_IVN], sf[SF_OMNOW], sf[SF_VNOW], si[SI_NCHORDS], slip,
-                       SpeedFit(sf[SF_SV], sf[SF_SW]), stiff, si[SI_CSINCE], sf[SF_CAGE])
-
-
-@njit(cache=True, fastmath=False)
-def _course_store(s, sf, si, ivs):
-    """A course state into the engine's slots."""
-    for r in range(RING):
-        _iv_store(s.ring[r], ivs[r])
-    si[SI_IVN], si[SI_NCHORDS], si[SI_CSINCE] = s.n_iv, s.n_chords, s.since
-    sf[SF_OMNOW], sf[SF_VNOW], sf[SF_CAGE] = s.omega_now, s.v_now, s.age
-    f = s.slip
-    sf[SF_THETA], sf[SF_THETA + 1] = f.kappa, f.beta
-    sf[SF_P], sf[SF_P + 1], sf[SF_P + 2], sf[SF_P + 3] = f.P00, f.P01, f.P10, f.P11
-    sf[SF_N2], sf[SF_N1] = f.n2, f.n1
-    sf[SF_SV], sf[SF_SW] = s.speed.sv, s.speed.sw
-    c = s.stiff
-    sf[SF_CNUM], sf[SF_CNUM + 1], sf[SF_CDEN], sf[SF_CDEN + 1] = c.num_f, c.num_r, c.den_f, c.den_r
-    sf[SF_AHPREV] = c.alpha_prev
-    si[SI_HASAH] = 1 if c.has_prev else 0
-
-
+# The course fusion's state is the fusion block's (sf[SF_FB:], the ring ivs, the open interval
+# cur: tsmpc.control.fusion_block's FB_* and IV_* slots, its course_load / course_store).
 @njit(cache=True, fastmath=False)
 def _course_stiffness(cp, ivs, sf, si, mp, prm):
     """An MPC step with the stiffness fit (``Cascade._apply_stiffness``): the stiffness block
     :func:`~tsmpc.control.stiffness_block.stiffness_block` on the course state of the slots, the
     MHE's ``mp``, the TS-LQR's ``prm`` and the record ``sf[SF_SA:]`` of those given."""
-    give, s = stiffness_block(cp, _course_load(sf, si, ivs), sf[SF_SA:SF_SA + N_SA], mp, prm)
+    fb = sf[SF_FB:SF_FB + N_FB]  # (the course state: the fusion block's slots and ring)
+    give, s = stiffness_block(cp, course_load(fb, ivs), sf[SF_SA:SF_SA + N_SA], mp, prm)
     if give:
-        _course_store(s, sf, si, ivs)  # (κ restarted when they replaced given ones)
+        course_store(s, fb, ivs)  # (κ restarted when they replaced given ones)
 
 
 @njit(cache=True, fastmath=False)
@@ -526,12 +463,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             mpc_step = si[SI_CALLS] % n_in == 0
             # the fusion block (Cascade._fuse): the gyro's sample, ω less its bias (kept for the
             # MHE and the part after it), the course interval's close at an accepted pose
-            _om, cs, civ = before_at(fbp, sf[SF_FB:SF_FB + N_FB], _course_load(sf, si, ivs), _iv_load(cur),
-                                     pose_ok, X, Y, th, fresh and speeds_ok, v, omv, mpc_step, t, sf[SF_TOFF],
-                                     ref_v, ref_w)
-            if fbp.course:
-                _course_store(cs, sf, si, ivs)
-                _iv_store(civ, cur)
+            fbs = sf[SF_FB:SF_FB + N_FB]
+            before_at(fbp, fbs, ivs, cur, pose_ok, X, Y, th, fresh and speeds_ok, v, omv, mpc_step, t,
+                      sf[SF_TOFF], ref_v, ref_w)
             kr = math.floor((t - sf[SF_TOFF]) / Tc + 1e-6)
             kw = kr if kr > 0 else 0
             phase = PH_MHE
@@ -543,7 +477,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                                                          ref_w, th_tan, mv, mw)
                 wv, ww = sc[N_SC:N_SC + N + 1], sc[N_SC + N + 1:N_SC + 2 * (N + 1)]
                 has_prev = si[SI_HASPREV] != 0
-                governed = outer_errors(op, refs, obs, ocnt, gate, _slip_load(sf), t, kw, pose_ok,
+                governed = outer_errors(op, refs, obs, ocnt, gate, slip_load(fbs), t, kw, pose_ok,
                                         sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], si[SI_HASLAST] != 0,
                                         sf[SF_LASTA], has_prev, prevX[1, 1], sf[SF_UPREV], e_meas, wv, ww,
                                         obuf)
@@ -583,7 +517,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
         if phase == PH_MHE:
             # the MHE block (Cascade._estimate): its inputs, the window's update and solve, the estimate
             sc[SC_VREF], sc[SC_WREF] = sf[SF_UPREV], sf[SF_UPREV + 1]
-            off = speed_offset(SpeedFit(sf[SF_SV], sf[SF_SW])) if ip[IP_CSPEED] != 0 else 0.0
+            off = (speed_offset(SpeedFit(sf[SF_FB + FB_SV], sf[SF_FB + FB_SW])) if ip[IP_CSPEED] != 0
+                   else 0.0)
             si[SI_TICK0] = _ticks()
             mbp = MHEBlockParams(fp[FP_MHE_MASS], ip[IP_DEFER] != 0)
             mst = mhe_block(mbp, MHEWindow(mY, mW, mU, mXS, mA, mB, mX), mp, sf[SF_MX:SF_MX + N_MS],
@@ -608,12 +543,10 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 gates, sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], ev0, ev1, ev2)
             # the fusion block after the MHE (Cascade._fuse_after): the course fusion's sample, the
             # steering-offset fit's (on the stiffnesses given, the angle last sent)
-            civ = after_at(fbp, sf[SF_FB:SF_FB + N_FB], given_steer(sp0, sf[SF_SA:SF_SA + N_SA]),
-                           _iv_load(cur), si[SI_FRESH] != 0 and si[SI_SPOK] != 0, si[SI_POSEOK] != 0, y[2],
-                           y[3], ev0, ev1, ev2, sc[SC_UMHE + 1], sc[SC_UMHE], si[SI_ESTSTAT], False,
-                           si[SI_HASLAST] != 0 and si[SI_SAT] != 0)
-            if fbp.course:
-                _iv_store(civ, cur)
+            after_at(fbp, sf[SF_FB:SF_FB + N_FB], given_steer(sp0, sf[SF_SA:SF_SA + N_SA]), cur,
+                     si[SI_FRESH] != 0 and si[SI_SPOK] != 0, si[SI_POSEOK] != 0, y[2], y[3], ev0, ev1, ev2,
+                     sc[SC_UMHE + 1], sc[SC_UMHE], si[SI_ESTSTAT], False,
+                     si[SI_HASLAST] != 0 and si[SI_SAT] != 0)
             # the inner block (Cascade._inner): friction step, mass terms, TS-LQR, events; the
             # numpy law (a singular N̄) is the caller's, with the block's compensation and residual.
             # Its records (Cascade._ib; TSLQR._inner, TSLQR._law: the same values), state, counters

@@ -610,10 +610,12 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     return fp, ip
 
 
-def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """The kernel's float and integer state (``sf``, ``si``): the cascade's after reset(x0)."""
+def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64],
+                                               NDArray[np.float64]]:
+    """The kernel's float and integer state (``sf``, ``si``) and the course fusion's intervals
+    (``ivs``, ``cur``): the cascade's after reset(x0)."""
     sf, si = np.zeros(ke.N_SF), np.zeros(ke.N_SI, dtype=np.int64)
-    mhe, course = cascade.mhe, cascade._fusion.course
+    mhe = cascade.mhe
     sf[ke.SF_IB:ke.SF_IB + ke.N_IB] = cascade._ib_state  # the inner block's (friction step, mass fit)
     sf[ke.SF_POSE:ke.SF_POSE + 3] = cascade._pose
     sf[ke.SF_POSET] = cascade._pose_t
@@ -623,24 +625,16 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf[ke.SF_UPREV:ke.SF_UPREV + 2] = cascade._u_prev
     sf[ke.SF_UAPP:ke.SF_UAPP + 2] = cascade._u_applied
     sf[ke.SF_LOW] = cascade._low_applied
-    cs = course.state  # (a reset cascade: no interval held, the arrays' zeros)
-    sf[ke.SF_THETA:ke.SF_THETA + 2] = cs.slip.kappa, cs.slip.beta
-    sf[ke.SF_P:ke.SF_P + 4] = cs.slip.P00, cs.slip.P01, cs.slip.P10, cs.slip.P11
-    sf[ke.SF_N2], sf[ke.SF_N1] = cs.slip.n2, cs.slip.n1
-    sf[ke.SF_SV], sf[ke.SF_SW] = cs.speed.sv, cs.speed.sw
-    sf[ke.SF_CNUM:ke.SF_CNUM + 2] = cs.stiff.num_f, cs.stiff.num_r
-    sf[ke.SF_CDEN:ke.SF_CDEN + 2] = cs.stiff.den_f, cs.stiff.den_r
-    sf[ke.SF_OMNOW], sf[ke.SF_VNOW], sf[ke.SF_CAGE] = cs.omega_now, cs.v_now, cs.age
     sf[ke.SF_SA:ke.SF_SA + ke.N_SA] = cascade._sa  # the stiffnesses given (a reset cascade: none)
-    si[ke.SI_CSINCE] = cs.since
-    fu = cascade._fusion  # the fusion block's (the yaw-rate and steering-offset fits, the servo)
-    sf[ke.SF_FB:ke.SF_FB + N_FB] = fusion_state(fu.gyro.state, fu.steer, cascade._steer_offset,
-                                                cascade._steer_sent)
+    fu = cascade._fusion  # the fusion block's (the yaw-rate, steering-offset and course fits, the servo)
+    fb, ivs, cur = fusion_state(fu.gyro.state, fu.steer, cascade._steer_offset, cascade._steer_sent,
+                                fu.course.state, fu.course.cur)
+    sf[ke.SF_FB:ke.SF_FB + N_FB] = fb
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
     sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival
     sf[ke.SF_OB:ke.SF_OB + ke.N_OB] = cascade._ob  # the outer block's (held pose, offset, governor, …)
-    return sf, si
+    return sf, si, ivs, cur
 
 
 def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: int,
@@ -652,7 +646,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     M = K * n_in
     mpc, mhe, lqr = cascade.mpc, cascade.mhe, _static_lqr(cascade)
     fp, ip = _parameters(cfg, cascade, scenario, plant, ke)
-    sf, si = _state(cascade, ke)
+    sf, si, ivs, cur = _state(cascade, ke)
     law = lqr._law
     assert law is not None  # run() checked lqr._kern
     Kv, zlo, zhi, bits, prm = law.Kv, law.zlo, law.zhi, law.bits, law.prm
@@ -671,8 +665,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
         ev=np.zeros(ke.N_EVENTS, dtype=np.int64), noise=noise, u_drop=_f64(u_drop),
         gnss=_f64(gnss), fifo=sr.model.fifo, frb=frb, patches=_f64(patches), events=_f64(events),
         ref_x=rx, ref_y=ry, ref_th=rth, ref_v=rv, ref_w=rw, th_tan=rtan, mv=mv, mw=mw,
-        gate=cascade._gate_poses.copy(), cur=np.zeros(ke.N_IV),
-        ivs=np.zeros((ke.RING, ke.N_IV)), mass_v=cascade._ib_ring.copy(),
+        gate=cascade._gate_poses.copy(), cur=cur, ivs=ivs, mass_v=cascade._ib_ring.copy(),
         mY=mhe._Y, mW=mhe._W, mU=mhe._U, mXS=mhe._XS, mA=mhe._Ab, mB=mhe._Bb, mX=mhe._Xb, mp=mp,
         ls=lqr._s, Kv=Kv, zlo=zlo, zhi=zhi, bits=bits, prm=prm,
         mints=mpc._ints, mprm=mpc._prm, mPS=mpc._PS,
