@@ -292,6 +292,28 @@ def test_the_lateral_fits_wait_out_the_start_transient(b: _Blocks) -> None:
     assert settled.speed == s.speed  # the speed fit does not wait
 
 
+def test_the_first_cornering_chord_counts_its_alpha_change_as_force_noise(b: _Blocks) -> None:
+    """The first cornering chord has no previous one to take α̇ from: α̇ is 0 and α̂'s change
+    within the chord (its intervals' means −0.01 … −0.03 rad, centres 0.4 s apart: 0.05 rad/s) is
+    the error of M v α̇ = 1000 · 10 · 0.05 = 500 N, 6 mrad of front slip (F / C, b / L of it) beside
+    the chord's noise; a later chord with α̇ from its predecessor has none (no lag at T_c)."""
+    p = _params(b)
+    r = _corner_ring(p, -0.02)
+    ring = (*r.ring[:K0], r.ring[K0]._replace(sv_alpha=100.0 * -0.01), *r.ring[K0 + 1:-1],
+            r.ring[-1]._replace(sv_alpha=100.0 * -0.03))
+    first = b.course_chord(p, r._replace(ring=ring), K0, 5.0, 0.0, 0.0)
+    sig = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4
+    e_f = (1.5 / 2.5) * 500.0 / 50000.0
+    prior = (50000.0 / STIFF_PRIOR_REL) ** 2
+    w_f = 1.0 / (STIFF_CORRELATION * (sig * sig + e_f * e_f))
+    assert first.stiff.den_f == pytest.approx(prior + w_f * 3000.0 ** 2, rel=1e-12)
+    later = b.course_chord(p, r._replace(ring=ring, stiff=r.stiff._replace(alpha_prev=-0.02, has_prev=True)),
+                           K0, 5.0, 0.0, 0.0)
+    w = 1.0 / (STIFF_CORRELATION * sig * sig)
+    assert later.stiff.den_f == pytest.approx(prior + w * 3000.0 ** 2, rel=1e-12)
+    assert first.stiff.den_f - prior < 0.6 * (later.stiff.den_f - prior)  # the first counts for half
+
+
 def test_the_stiffness_fit_takes_only_steady_corners(b: _Blocks) -> None:
     """No stiffness update where the reference runs straight (min |v_d ω_d| < CORNER_ACCEL), where
     the car accelerates (|Δv| / span > STIFF_MAX_ACCEL g) or for an implausible F / α; on the

@@ -679,7 +679,8 @@ def course_chord(p: CourseParams, s: CourseState, k0: int, ex: float, ey: float,
         # noise through a 1/dt difference into the force)
         al_dot = (alpha_hat - stiff.alpha_prev) / dt if stiff.has_prev else 0.0
         stiff = _stiffness_fit(p, stiff, a_course, alpha_hat, al_dot, s_vw / n, v_meas, s_F / n,
-                               s.omega_now - first.w_first, s_wv / n, s_d / n, noise_sig, D, last.n)
+                               s.omega_now - first.w_first, s_wv / n, s_d / n, noise_sig, D, last.n,
+                               0.0 if stiff.has_prev else abs(al_rate))  # (no α̇ of its own)
     return CourseState(ring, s.n_iv, s.omega_now, s.v_now, s.n_chords + 1, slip, speed, stiff, s.since,
                        s.age + dt)
 
@@ -730,7 +731,7 @@ def _axle_pair(C0: float, force: float, slip: float) -> tuple[float, float]:
 @jitable
 def _stiffness_fit(p: CourseParams, f: StiffFit, a_course: float, alpha_hat: float, al_dot: float,
                    vw: float, v_meas: float, F_x: float, d_omega: float, w_v: float, delta: float,
-                   sig: float, span: float, n_last: int) -> StiffFit:
+                   sig: float, span: float, n_last: int, e_rate: float = 0.0) -> StiffFit:
     """One cornering chord in the compliance fits. Lateral force S = M (v ω + v α̇) + F_x α and
     yaw moment T = I ω̇ give F_yF = (b S + T)/L, F_yR = (a S − T)/L; slips α_F = δ − α − a ω/v,
     α_R = b ω/v − α (chord means: ``vw`` of v ω, ``w_v`` of ω / v, ``delta``, ``F_x``; ``d_omega``
@@ -745,8 +746,12 @@ def _stiffness_fit(p: CourseParams, f: StiffFit, a_course: float, alpha_hat: flo
     the step between them; the part of the step beyond T_c (none at the nominal sensors, 80 % of
     it at a 2 Hz pose) makes that share of M v α̇ force noise, slip noise F / C on each axle
     (a pose at 1–3 Hz drove the fit 3–4 % below the nominal car's stiffnesses without it, and max
-    |e_y| from 0.021 to 0.033 m on the paper reference). Forgetting is per second, towards the
-    prior (a fit without excitation returns to the model)."""
+    |e_y| from 0.021 to 0.033 m on the paper reference). The first cornering chord has no previous
+    one: its α̇ is taken as 0 and ``e_rate`` [rad/s], how fast α̂ changes within the chord, is its
+    error (M v ``e_rate`` of force noise): a corner's entry at speed, where the car's slip is still
+    building up (half its steady value on Brands Hatch at 30 m/s, α̇ ≈ 0.02 rad/s: a third of the
+    force), otherwise outweighed every later chord and set Ĉ +44 %. Forgetting is per second,
+    towards the prior (a fit without excitation returns to the model)."""
     S = p.mass * (vw + v_meas * al_dot) + F_x * a_course
     T = p.inertia * d_omega / span
     L = p.a + p.b
@@ -754,9 +759,10 @@ def _stiffness_fit(p: CourseParams, f: StiffFit, a_course: float, alpha_hat: flo
     F_r, a_r = _axle_pair(p.C_r, (p.a * S - T) / L, p.b * w_v - a_course)
     s_slip = max(sig, STIFF_SLIP_FLOOR)
     corr = max(1.0, STIFF_CORRELATION * p.n_inner / n_last)  # chords per independent one
-    # the α̇ term's error: the part of the step beyond T_c of M v α̇, per axle as slip (F / C)
+    # the α̇ term's error: the part of the step beyond T_c of M v α̇ (or, without a previous chord,
+    # α̂'s change within the chord), per axle as slip (F / C)
     lag = max(n_last - p.n_inner, 0) / n_last
-    e_S = p.mass * v_meas * abs(al_dot) * lag
+    e_S = p.mass * v_meas * (abs(al_dot) * lag + e_rate)
     e_f = (p.b / L) * e_S / p.C_f
     e_r = (p.a / L) * e_S / p.C_r
     w_f = 1.0 / (corr * s_slip * s_slip + corr * e_f * e_f)
