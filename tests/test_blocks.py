@@ -501,7 +501,46 @@ def test_pose_gate_by_hand() -> None:
     assert gates.speed_gate(G, c, 41.0, 0.0) is False and c[gates.GC_SPEED] == 1
 
 
-def test_pose_gate_compiled_equals_python() -> None:
+def test_gate_block_and_dead_reckoning_by_hand(way) -> None:
+    """The gate block's glue (gates.gate_block, gates.reckon_block: Cascade._gate and _dead_reckon,
+    the engine's gates and dead reckoning) on its pose record [X, Y, θ, t of the last accepted pose],
+    with T_d 0.25 s so that every expected value is exact: an accepted pose replaces the record
+    (its time t), an implausible speed is refused and counted while its pose is still gated, a jump
+    leaves the record; the dead reckoning moves X, Y, θ one T_d on (v̂ clipped to [0, v_hi]) and
+    keeps the time; the next pose is gated against the dead-reckoned one."""
+    gate, reckon = way(gates.gate_block), way(gates.reckon_block)
+    g = G._replace(Td=0.25)
+    gp = gates.GateBlockParams(g, False, 1.0, False)
+    gs, c = gates.gate_state()
+    pose = np.array([0.0, 0.0, 0.0, 0.0])
+    # 0.5 m at t = 0.5 s: within 1 + 2 * 0.5 + 0.05 m of the record: taken, with its time
+    assert gate(gp, gs, c, pose, 0.5, True, 0.5, 0.0, 0.0, 5.0, 0.1, -math.inf) == (True, True, True)
+    assert pose.tolist() == [0.5, 0.0, 0.0, 0.5] and c.sum() == 0
+    # 41 m/s (v_hi 40): the speeds refused and counted; a pose 0.25 m on is still taken
+    assert gate(gp, gs, c, pose, 0.75, True, 0.75, 0.0, 0.0, 41.0, 0.1, -math.inf) == (True, False, True)
+    assert pose.tolist() == [0.75, 0.0, 0.0, 0.75] and c[gates.GC_SPEED] == 1
+    # a jump (9.25 m in 0.25 s, allowance 1.55 m): rejected, counted, the record stands
+    assert gate(gp, gs, c, pose, 1.0, True, 10.0, 0.0, 0.0, 5.0, 0.1, -math.inf) == (True, True, False)
+    assert pose.tolist() == [0.75, 0.0, 0.0, 0.75] and c[gates.GC_JUMP] == 1
+    # not fresh: nothing taken, nothing counted
+    assert gate(gp, gs, c, pose, 1.0, False, 0.75, 0.0, 0.0, 5.0, 0.1, -math.inf) == (False, True, False)
+    assert c.tolist() == [1, 0, 0, 0, 1]
+    # dead reckoning: 2 m/s for 0.25 s on heading 0, ω̂ 0.5 rad/s; the time of the last pose kept
+    reckon(g, pose, 2.0, 0.0, 0.5)
+    assert pose.tolist() == [1.25, 0.0, 0.125, 0.75]
+    reckon(g, pose, math.nan, 0.0, 0.5)  # a non-finite estimate: the pose stands
+    assert pose.tolist() == [1.25, 0.0, 0.125, 0.75]
+    pose[2] = 0.0
+    reckon(g, pose, 100.0, 0.0, 0.0)  # v̂ clipped at v_hi 40: 10 m
+    reckon(g, pose, -3.0, 0.0, 0.0)  # and at 0
+    assert pose.tolist() == [11.25, 0.0, 0.0, 0.75]
+    # the next pose is gated against the dead-reckoned one: 11.5 m at t = 1.25 s (0.25 m from it,
+    # 10.75 m from the last accepted one) taken
+    assert gate(gp, gs, c, pose, 1.25, True, 11.5, 0.0, 0.0, 5.0, 0.1, -math.inf) == (True, True, True)
+    assert pose.tolist() == [11.5, 0.0, 0.0, 1.25]
+
+
+def test_gate_block_compiled_equals_python() -> None:
     """The cascade's compiled call of the gate block and the block as Python: the same answers,
     states and counters to the bit on random samples (jumps, repeats, NaN)."""
     kern = kernels.load("blocks")
@@ -522,8 +561,14 @@ def test_pose_gate_compiled_equals_python() -> None:
         if i % 13 == 0:
             Y = math.nan
         prev = (X, Y, th)
-        px, py, pth = (float(v) for v in rng.normal(0, 1, 3))
-        args = (t, bool(rng.random() > 0.1), X, Y, th, 5.0, 0.1, -math.inf, i > 0, px, py, pth, t - 0.01)
-        assert gates.pose_gate(gp, ga, ca, *args) == kern.pose_call(bp, gb, cb, *args), i
-        assert np.array_equal(ga, gb, equal_nan=True) and np.array_equal(ca, cb)
+        pa = np.array([*(float(v) for v in rng.normal(0, 1, 3)), t - 0.01])
+        pb = pa.copy()
+        v, om = (5.0, 0.1) if i % 11 else (99.0, 0.1)  # (an implausible speed)
+        args = (t, bool(rng.random() > 0.1), X, Y, th, v, om, -math.inf)
+        assert gates.gate_block(gp, ga, ca, pa, *args) == kern.gate_call(bp, gb, cb, pb, *args), i
+        assert np.array_equal(ga, gb, equal_nan=True) and np.array_equal(ca, cb) and np.array_equal(pa, pb)
+        gates.reckon_block(G, pa, 5.0, 0.01, 0.1)
+        kern.reckon_call(bp, pb, 5.0, 0.01, 0.1)
+        assert np.array_equal(pa, pb)
     assert ca[gates.GC_REPEATED] > 0 and ca[gates.GC_NAN] > 0 and ca[gates.GC_REINIT] > 0
+    assert ca[gates.GC_SPEED] > 0

@@ -54,15 +54,16 @@ from tsmpc.control.gates import (
     GC_REPEATED,
     GC_SPEED,
     GS_FREE,
+    PO_T,
     GateBlockParams,
     GateParams,
     blind_stop,
-    dead_reckon,
+    gate_block,
     gate_state,
     nearest_sample,
-    pose_gate,
+    plausible_speeds,
+    reckon_block,
     speed_bounded_yaw_rate,
-    speed_gate,
 )
 from tsmpc.control.governor import GovernorParams, GripParams, governed_window
 from tsmpc.control.inner_block import (
@@ -239,8 +240,8 @@ def build_outer_controller(
 
 
 def _xyz(p: NDArray[np.float64]) -> tuple[float, float, float]:
-    """The three floats of a pose array."""
-    x, y, th = p.tolist()
+    """The three floats (X, Y, θ) of the gate block's pose record (gates.PO_*)."""
+    x, y, th, _t = p.tolist()
     return x, y, th
 
 
@@ -383,11 +384,12 @@ class Cascade:
         self.mpc.reset()
         self._calls = 0
         self._t_last: float | None = None
-        self._pose = None if self._x0 is None else self._x0[:3].copy()
+        # the gate block's pose record (gates.PO_*): the accepted or dead-reckoned pose, the time of
+        # the last accepted pose
+        self._pose = None if self._x0 is None else np.array([*self._x0[:3].tolist(), 0.0])
         # the outer block's state (held pose, slip gate count, offset estimate, reference time
         # offset, governor) and its counters (outer_block.py)
-        self._ob, self._oc = outer_state(self._pose)
-        self._pose_t = 0.0  # time of the last accepted pose
+        self._ob, self._oc = outer_state(None if self._x0 is None else self._x0[:3])
         self._pose_fresh = False
         self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
         self._u_applied = (0.0, 0.0)  # [F_xR, δ] the plant got over the last T_d
@@ -575,12 +577,9 @@ class Cascade:
 
     def _dead_reckon(self, v: float, alpha: float, omega: float) -> None:
         """Advance the pose by one T_d on the estimate (v̂, α̂, ω̂) (until the next accepted
-        measurement)."""
-        p = self._pose
-        if p is None:
-            return
-        X, Y, th = p.tolist()
-        self._pose = np.array(dead_reckon(self._gates, X, Y, th, v, alpha, omega))
+        measurement): the gate block's gates.reckon_block (compiled, or as Python)."""
+        call = self._reckon_call
+        call[0](call[1], self._pose, v, alpha, omega)
 
     def _step(self, t: float, m: Measurement) -> Command:
         """One call: the block diagram of paper Fig. 1 (gates → outer MPC every T_c/T_d calls →
@@ -656,31 +655,20 @@ class Cascade:
         x0[5] = min(max(x0[5], -self._w_limit), self._w_limit)
         t_last = self._t_last
         self.reset(x0)
-        self._t_last, self._pose_t = t_last, t
+        self._t_last = t_last
+        self._pose[PO_T] = t  # type: ignore[index]
 
     def _gate(self, t: float, m: Measurement, X: float, Y: float, th: float, v: float,
               om: float) -> tuple[bool, bool, bool]:
-        """The sample gates (gates.py): (fresh, speeds plausible, pose accepted)."""
+        """The sample gates (gates.gate_block, compiled or as Python): (fresh, speeds plausible, pose
+        accepted). The pose, every call: accepted when fresh, finite and where the car can be; else
+        the dead-reckoned pose stands (advanced at the end of the call) for the plausibility gate."""
         fresh = m.stamp is None or self._fresh(t, m)
-        speeds_ok = speed_gate(self._gates, self._gate_count, v, om)
-        if self._recovery is not None:
-            self._watch_samples(t, fresh and speeds_ok and _finite(v, om))
+        if self._recovery is not None:  # (the speed gate's answer, before the block counts it)
+            self._watch_samples(t, fresh and plausible_speeds(self._gates, v, om) and _finite(v, om))
         stamp = -math.inf if m.stamp is None else float(m.stamp)  # a new stamp is a new sample
-        # The pose, every call: accepted when fresh, finite and where the car can be; else the
-        # dead-reckoned pose stands (advanced at the end of the call) for the plausibility gate.
-        p = self._pose
-        has = p is not None
-        px, py, pth = _xyz(p) if has else (0.0, 0.0, 0.0)  # type: ignore[arg-type]
         call = self._gate_call
-        if call is not None:
-            fresh, pose_ok = call[0](call[1], self._gs, self._gate_count, t, fresh, X, Y, th, v, om, stamp,
-                                     has, px, py, pth, self._pose_t)
-        else:  # TSMPC_NO_JIT: the block as Python
-            fresh, pose_ok = pose_gate(self._gate_p, self._gs, self._gate_count, t, fresh, X, Y, th, v, om,
-                                       stamp, has, px, py, pth, self._pose_t)
-        if pose_ok:
-            self._pose, self._pose_t = np.array([X, Y, th]), t
-        return fresh, speeds_ok, pose_ok
+        return call[0](call[1], self._gs, self._gate_count, self._pose, t, fresh, X, Y, th, v, om, stamp)
 
     def _outer(self, t: float, X: float, Y: float, th: float, v: float, om: float, fresh: bool,
                speeds_ok: bool, pose_ok: bool) -> tuple[MPCResult, NDArray[np.float64], float]:
@@ -904,12 +892,15 @@ class Cascade:
             inner if isinstance(inner, InnerParams) else InnerParams(False, False, False, 1.0, 0.0))
         law = getattr(self.lqr, "_law", None)
         self._ib_call: Any = None
-        self._gate_call: Any = None
         from tsmpc import kernels
 
         kern = kernels.load("blocks")
-        if kern is not None:  # the gate block's compiled call
-            self._gate_call = (kern.pose_call, kern.pack_gates(self._gate_p))
+        # the gate block's calls: compiled, or as Python (TSMPC_NO_JIT)
+        self._gate_call: Any = (gate_block, self._gate_p)
+        self._reckon_call: Any = (reckon_block, self._gates)
+        if kern is not None:
+            gbp = kern.pack_gates(self._gate_p)
+            self._gate_call, self._reckon_call = (kern.gate_call, gbp), (kern.reckon_call, gbp)
         # the TS-LQR whose step is the block's (the as-run law's is its own)
         self._ib_lqr: TSLQR | None = self.lqr if isinstance(inner, InnerParams) else None  # type: ignore[assignment]
         if self._ib_lqr is not None and law is not None and self._ib_lqr._kern is not None:

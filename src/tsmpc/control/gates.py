@@ -13,6 +13,13 @@ calls it as Python, the run engine and the batch compile it.
 * :func:`dead_reckon`: between accepted poses the pose advances by one T_d on the estimate
   (v̂, α̂, ω̂): the course is θ + α̂ (paper eq. "kinematic model": Ẋ = v cos(θ + α)).
 
+The block's glue — what the cascade does with them every T_d — is one definition too:
+:func:`gate_block` (the speed gate, the pose gate and the accepted pose written into the block's
+pose record, ``PO_*``: X, Y, θ and the last accepted pose's time) and :func:`reckon_block` (the
+record advanced by :func:`dead_reckon`). :class:`~tsmpc.control.cascade.Cascade` calls them
+(``_gate``, ``_dead_reckon``; compiled through :mod:`tsmpc.kernels.blocks`, as Python under
+``TSMPC_NO_JIT``), the run engine on its state slots ``SF_POSE`` … ``SF_POSET``, the batch per lane.
+
 Recovery (``[recovery]``, issue 38): whatever came before, a run of valid samples brings the cascade
 back —
 
@@ -58,11 +65,13 @@ __all__ = [
     "GateParams",
     "blind_stop",
     "dead_reckon",
+    "gate_block",
     "jump_run",
     "nearest_sample",
     "plausible_speeds",
     "pose_consistent",
     "pose_gate",
+    "reckon_block",
     "speed_bounded_yaw_rate",
     "speed_gate",
 ]
@@ -122,6 +131,10 @@ N_GS = 13
 #: after a run of jumps, poses rejected as jumps.
 GC_SPEED, GC_REPEATED, GC_NAN, GC_REINIT, GC_JUMP = range(5)
 N_GC = 5
+#: The pose the block keeps (a float vector; the run engine's SF_POSE … SF_POSET): the last accepted
+#: pose or, after it, the dead-reckoned one (X, Y, θ), and the time of the last accepted pose.
+PO_X, PO_Y, PO_TH, PO_T = range(4)
+N_PO = 4
 
 
 def gate_state() -> tuple[NDArray[np.float64], NDArray[np.int64]]:
@@ -177,6 +190,29 @@ def pose_gate(p: GateBlockParams, gs: NDArray[np.float64], cnt: NDArray[np.int64
             return fresh, True
     cnt[GC_JUMP] += 1
     return fresh, False
+
+
+@jitable
+def gate_block(p: GateBlockParams, gs: NDArray[np.float64], cnt: NDArray[np.int64], pose: NDArray[np.float64],
+               t: float, fresh: bool, X: float, Y: float, theta: float, v: float, omega: float,
+               stamp: float) -> tuple[bool, bool, bool]:
+    """The gates of a call at time ``t`` (the cascade's ``_gate``, the engine's every step): (fresh,
+    speeds plausible, pose accepted) — :func:`speed_gate`, then :func:`pose_gate` against the pose
+    record ``pose`` (``PO_*``: the dead-reckoned pose, the last accepted pose's time), which an
+    accepted pose replaces (its time ``t``)."""
+    speeds_ok = speed_gate(p.gates, cnt, v, omega)
+    fresh, pose_ok = pose_gate(p, gs, cnt, t, fresh, X, Y, theta, v, omega, stamp, True, pose[PO_X],
+                               pose[PO_Y], pose[PO_TH], pose[PO_T])
+    if pose_ok:
+        pose[PO_X], pose[PO_Y], pose[PO_TH], pose[PO_T] = X, Y, theta, t
+    return fresh, speeds_ok, pose_ok
+
+
+@jitable
+def reckon_block(p: GateParams, pose: NDArray[np.float64], v: float, alpha: float, omega: float) -> None:
+    """The pose record ``pose`` (``PO_*``) one T_d on (:func:`dead_reckon` on the estimate
+    (v̂, α̂, ω̂)); the last accepted pose's time stays."""
+    pose[PO_X], pose[PO_Y], pose[PO_TH] = dead_reckon(p, pose[PO_X], pose[PO_Y], pose[PO_TH], v, alpha, omega)
 
 
 @jitable

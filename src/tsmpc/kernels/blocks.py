@@ -1,5 +1,6 @@
 """The cascade's compiled calls of its blocks (their one definitions: the inner block
-:func:`tsmpc.control.inner_block.inner_block`, the pose gate :func:`tsmpc.control.gates.pose_gate`,
+:func:`tsmpc.control.inner_block.inner_block`, the gates :func:`tsmpc.control.gates.gate_block` and
+the dead reckoning :func:`tsmpc.control.gates.reckon_block`,
 the outer step's :func:`tsmpc.control.outer_block.outer_errors` and
 :func:`tsmpc.control.outer_block.outer_after`, the MHE-UIO's step :func:`tsmpc.control.mhe_block.mhe_block`):
 the blocks' records rebuilt from arrays inside the compiled code, because numba's dispatcher types
@@ -8,9 +9,9 @@ a record argument field by field (≈ 0.15 µs a field, more than the block's wo
 :func:`pack` writes :class:`~tsmpc.control.inner_block.InnerBlockParams` and the TS-LQR's
 :class:`~tsmpc.control.ts_lqr.LQRLaw` scalars into one float vector (slots ``BP_*``); :func:`inner_call`
 rebuilds both records from it (and the law's arrays, passed as they are: ``prm`` is written in place
-by the stiffness fit) and runs the block. :func:`pack_gates` and :func:`pose_call` do the same for the
-gate block's :class:`~tsmpc.control.gates.GateBlockParams`; :func:`outer_call` and :func:`after_call`
-rebuild the outer block's records from their packed vectors
+by the stiffness fit) and runs the block. :func:`pack_gates`, :func:`gate_call` and
+:func:`reckon_call` do the same for the gate block's :class:`~tsmpc.control.gates.GateBlockParams`;
+:func:`outer_call` and :func:`after_call` rebuild the outer block's records from their packed vectors
 (:func:`~tsmpc.control.outer_block.pack_outer`, :func:`~tsmpc.control.outer_block.pack_govern`) and
 its reference from one (8, L) array (:class:`~tsmpc.control.outer_block.RefArrays`' rows).
 
@@ -24,7 +25,7 @@ import numpy as np
 from numba import njit
 
 from tsmpc import kernels
-from tsmpc.control.gates import GateBlockParams, GateParams, gate_state, pose_gate
+from tsmpc.control.gates import GateBlockParams, GateParams, gate_block, gate_state, reckon_block
 from tsmpc.control.inner_block import InnerBlockParams, inner_block, start_state
 from tsmpc.control.mhe_block import MHEBlockParams, MHEWindow, mhe_block
 from tsmpc.control.outer_block import RefArrays, outer_after, outer_errors, unpack_govern, unpack_outer
@@ -33,7 +34,8 @@ from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import MassParams
 from tsmpc.kernels.jit import BLOCK_MODULES
 
-__all__ = ["after_call", "inner_call", "mhe_call", "outer_call", "pack", "pack_gates", "pose_call", "warm"]
+__all__ = ["after_call", "gate_call", "inner_call", "mhe_call", "outer_call", "pack", "pack_gates",
+           "reckon_call", "warm"]
 
 # entries compiled from other versions of the blocks (or of the law, kernels/lqr.py) are deleted
 # before the first call below loads one
@@ -78,17 +80,29 @@ def inner_call(bp, Kv, zlo, zhi, bits, prm, s, st, ring, cnt, v, alpha, omega, F
 
 
 def pack_gates(p: GateBlockParams) -> np.ndarray:
-    """The gate block's record as the float vector :func:`pose_call` reads (GateParams' fields, then
+    """The gate block's record as the float vector :func:`gate_call` reads (GateParams' fields, then
     recovery, reinit_s, repeat)."""
     return np.array([*p.gates, p.recovery, p.reinit_s, p.repeat], dtype=np.float64)
 
 
 @njit(cache=True, fastmath=False)
-def pose_call(gbp, gs, cnt, t, fresh, X, Y, theta, v, omega, stamp, has_pose, px, py, pth, pose_t):
-    """:func:`~tsmpc.control.gates.pose_gate` of the packed record: (fresh, pose accepted)."""
-    p = GateBlockParams(GateParams(gbp[0], gbp[1], gbp[2], gbp[3], gbp[4], gbp[5]), gbp[6] != 0.0, gbp[7],
-                        gbp[8] != 0.0)
-    return pose_gate(p, gs, cnt, t, fresh, X, Y, theta, v, omega, stamp, has_pose, px, py, pth, pose_t)
+def _gate_params(gbp):
+    """GateParams of the packed record."""
+    return GateParams(gbp[0], gbp[1], gbp[2], gbp[3], gbp[4], gbp[5])
+
+
+@njit(cache=True, fastmath=False)
+def gate_call(gbp, gs, cnt, pose, t, fresh, X, Y, theta, v, omega, stamp):
+    """:func:`~tsmpc.control.gates.gate_block` of the packed record: (fresh, speeds plausible, pose
+    accepted)."""
+    p = GateBlockParams(_gate_params(gbp), gbp[6] != 0.0, gbp[7], gbp[8] != 0.0)
+    return gate_block(p, gs, cnt, pose, t, fresh, X, Y, theta, v, omega, stamp)
+
+
+@njit(cache=True, fastmath=False)
+def reckon_call(gbp, pose, v, alpha, omega):
+    """:func:`~tsmpc.control.gates.reckon_block` of the packed record."""
+    reckon_block(_gate_params(gbp), pose, v, alpha, omega)
 
 
 @njit(cache=True, fastmath=False)
@@ -129,8 +143,9 @@ def warm() -> None:
     """Compile (or load from the cache) the signatures the cascade uses."""
     gs, gcnt = gate_state()
     gp = GateBlockParams(GateParams(-1.0, 40.0, 4.0, 0.05, 0.01, 0.01), True, 2.0, True)
-    pose_call(pack_gates(gp), gs, gcnt, 0.01, True, 1.0, 2.0, 0.1, 10.0, 0.1, -np.inf, True, 1.0, 2.0, 0.1,
-              0.0)
+    pose = np.array([1.0, 2.0, 0.1, 0.0])
+    gate_call(pack_gates(gp), gs, gcnt, pose, 0.01, True, 1.0, 2.0, 0.1, 10.0, 0.1, -np.inf)
+    reckon_call(pack_gates(gp), pose, 10.0, 0.0, 0.1)
     Kv = np.zeros((8, 2, 6))
     Kv[:, 0, 0] = -100.0
     Kv[:, 1, 2] = -0.1

@@ -69,11 +69,12 @@ from tsmpc.control.gates import (
     GC_SPEED,
     N_GC,
     N_GS,
+    N_PO,
+    PO_T,
     GateBlockParams,
     GateParams,
-    dead_reckon,
-    pose_gate,
-    speed_gate,
+    gate_block,
+    reckon_block,
 )
 from tsmpc.control.inner_block import (
     EST_FAILED,
@@ -210,6 +211,7 @@ N_IP = 26
  _FREE23, _FREE24, _FREE25, _FREE26, _FREE27, _FREE28, _FREE29, _FREE30, _FREE31, _FREE32, _FREE33,
  _FREE34, _FREE35, _FREE36, _FREE37) = range(85)
 SF_IB = 85  # the inner block's state (N_IB values, tsmpc.control.inner_block's IB_* slots)
+assert SF_POSET == SF_POSE + PO_T  # the gate block's pose record (tsmpc.control.gates' PO_* slots)
 SF_GS = SF_IB + N_IB  # the gate block's state (N_GS values, tsmpc.control.gates' GS_* slots)
 SF_SENS = SF_GS + N_GS  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
 SF_OB = SF_SENS + N_SS  # the outer block's state (N_OB values, tsmpc.control.outer_block's OB_* slots)
@@ -445,18 +447,13 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                                                          ref_w, th_tan, mv, mw)
                 if _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, fp, sc):
                     return DIVERGED
-            # ---- Cascade._step: gates
+            # ---- Cascade._step: the gate block (Cascade._gate: Cascade._gate_p, its state, counters and
+            # pose record; the simulator's samples carry no stamp)
             X, Y, th, v, omv = y[0], y[1], y[2], y[3], y[4]
-            # the gate block (Cascade._gate_p, its state and counters; the simulator's samples carry no stamp)
             gbp = GateBlockParams(gates, ip[IP_RECOV] != 0, fp[FP_REINIT], ip[IP_REPEAT] != 0)
-            gsv = sf[SF_GS:SF_GS + N_GS]
-            gcnt = ev[EV_GATES:EV_GATES + N_GC]
-            speeds_ok = speed_gate(gates, gcnt, v, omv)
-            fresh, pose_ok = pose_gate(gbp, gsv, gcnt, t, True, X, Y, th, v, omv, -math.inf, True,
-                                       sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], sf[SF_POSET])
-            if pose_ok:
-                sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2] = X, Y, th
-                sf[SF_POSET] = t
+            fresh, speeds_ok, pose_ok = gate_block(gbp, sf[SF_GS:SF_GS + N_GS], ev[EV_GATES:EV_GATES + N_GC],
+                                                   sf[SF_POSE:SF_POSE + N_PO], t, True, X, Y, th, v, omv,
+                                                   -math.inf)
             si[SI_FRESH] = 1 if fresh else 0
             si[SI_SPOK] = 1 if speeds_ok else 0
             si[SI_POSEOK] = 1 if pose_ok else 0
@@ -537,10 +534,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             phase = PH_POST_MHE
         if phase == PH_POST_MHE:
             tick = _ticks()
-            # Cascade._dead_reckon
             ev0, ev1, ev2 = sc[SC_EST], sc[SC_EST + 1], sc[SC_EST + 2]
-            sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2] = dead_reckon(
-                gates, sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], ev0, ev1, ev2)
+            reckon_block(gates, sf[SF_POSE:SF_POSE + N_PO], ev0, ev1, ev2)  # the gate block's (_dead_reckon)
             # the fusion block after the MHE (Cascade._fuse_after): the course fusion's sample, the
             # steering-offset fit's (on the stiffnesses given, the angle last sent)
             after_at(fbp, sf[SF_FB:SF_FB + N_FB], given_steer(sp0, sf[SF_SA:SF_SA + N_SA]), cur,

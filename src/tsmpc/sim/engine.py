@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
 from tsmpc.control.cascade import _MPC_STATUS_CODE, EVENT_NAMES, STATUS_CODE, Cascade, _Window
 from tsmpc.control.fusion_block import N_FB, N_FBP, fusion_state, pack_fusion
+from tsmpc.control.gates import N_PO
 from tsmpc.control.outer_block import N_GBP, N_OBP, OC_GACT, OC_GSTEPS, pack_govern, pack_outer, scratch_size
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
@@ -128,13 +129,11 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:simulate": "ba020e97f0f11213",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
     "tsmpc.control.cascade:Cascade.__init__": "5d56edf92915dd92",
-    "tsmpc.control.cascade:Cascade.reset": "61ea7ce539443769",
+    "tsmpc.control.cascade:Cascade.reset": "767bd52561140f0b",
     "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
     "tsmpc.control.cascade:Cascade._step": "5ea2319dca8c993c",
-    "tsmpc.control.cascade:Cascade._start_from": "b50c85e408443bfb",
-    "tsmpc.control.cascade:Cascade._gate": "696dd9b43cc81793",
+    "tsmpc.control.cascade:Cascade._start_from": "ec50854f219e3425",
     "tsmpc.control.cascade:Cascade._outer": "a8a41901f93c5023",
-    "tsmpc.control.cascade:Cascade._dead_reckon": "d73049a3445880ad",
     "tsmpc.control.cascade:Cascade._watch_samples": "a2b6f37a111ff688",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
@@ -251,6 +250,10 @@ def _replaced_code() -> str | None:
         if (fb.before_at, fb.after_at, fb.servo_at) != (ke.before_at, ke.after_at, ke.servo_at) or (
                 cas.fusion_before, cas.fusion_after, cas.servo) != parts:
             return "tsmpc.control.fusion_block's block was replaced"
+        gt = importlib.import_module("tsmpc.control.gates")  # the gates' glue and the dead reckoning
+        if (gt.gate_block, gt.reckon_block) != (ke.gate_block, ke.reckon_block) or (
+                cas.gate_block, cas.reckon_block) != (gt.gate_block, gt.reckon_block):
+            return "tsmpc.control.gates' block was replaced"
         ob = importlib.import_module("tsmpc.control.outer_block")
         if ob.outer_errors is not ke.outer_errors or ob.outer_after is not ke.outer_after:
             return "tsmpc.control.outer_block's block was replaced"
@@ -617,8 +620,7 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf, si = np.zeros(ke.N_SF), np.zeros(ke.N_SI, dtype=np.int64)
     mhe = cascade.mhe
     sf[ke.SF_IB:ke.SF_IB + ke.N_IB] = cascade._ib_state  # the inner block's (friction step, mass fit)
-    sf[ke.SF_POSE:ke.SF_POSE + 3] = cascade._pose
-    sf[ke.SF_POSET] = cascade._pose_t
+    sf[ke.SF_POSE:ke.SF_POSE + N_PO] = cascade._pose  # the gate block's pose record (gates.PO_*)
     # recovery: the run of poses rejected as jumps (the blind stop is not reproduced:
     # applicability() keeps runs that can blind the cascade in Python)
     sf[ke.SF_GS:ke.SF_GS + ke.N_GS] = cascade._gs  # the gate block's (the jump run, the repeat guard)
