@@ -182,6 +182,14 @@ def _corner_ring(p, alpha_hat: float = -0.01, ay_ref: float = 5.0, v_first: floa
 K0 = RING - BASELINE  #: the ring index of :func:`_corner_ring`'s first interval
 
 
+def _transient_ring(p) -> CourseState:
+    """:func:`_corner_ring` with α̂ = −0.02 on average, changing along the chord: its first
+    interval's mean −0.01, its last's −0.03 rad (centres 0.4 s apart: α̇ = −0.05 rad/s)."""
+    r = _corner_ring(p, -0.02)
+    return r._replace(ring=(*r.ring[:K0], r.ring[K0]._replace(sv_alpha=100.0 * -0.01), *r.ring[K0 + 1:-1],
+                            r.ring[-1]._replace(sv_alpha=100.0 * -0.03)))
+
+
 def test_one_cornering_chord_in_the_slip_and_stiffness_fits(b: _Blocks) -> None:
     """The chord of :func:`_corner_ring` to (5, 0, 0): course 0, so the slip error z = 0.01 rad at
     ā_y = 5, one recursive least-squares step from the prior; the axle forces of S = M v ω =
@@ -254,10 +262,8 @@ def test_a_chord_through_a_transient_counts_its_alpha_rate_as_slip_error(b: _Blo
     chord's 5.9 mrad of position noise in the recursive least-squares step (a steady chord, the
     test above, has none)."""
     p = _params(b)
-    r = _corner_ring(p, -0.02)
-    ring = (*r.ring[:K0], r.ring[K0]._replace(sv_alpha=100.0 * -0.01), *r.ring[K0 + 1:-1],
-            r.ring[-1]._replace(sv_alpha=100.0 * -0.03))
-    s = b.course_chord(p, r._replace(ring=ring), K0, 5.0, 0.0, 0.0)
+    r = _transient_ring(p)
+    s = b.course_chord(p, r, K0, 5.0, 0.0, 0.0)
     sig = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4
     e_tr = fu.SLIP_TRANSIENT_S * 0.05
     lam = 1.0 - 0.1 / fu.SLIP_MEMORY_S
@@ -298,16 +304,14 @@ def test_the_first_cornering_chord_counts_its_alpha_change_as_force_noise(b: _Bl
     the error of M v α̇ = 1000 · 10 · 0.05 = 500 N, 6 mrad of front slip (F / C, b / L of it) beside
     the chord's noise; a later chord with α̇ from its predecessor has none (no lag at T_c)."""
     p = _params(b)
-    r = _corner_ring(p, -0.02)
-    ring = (*r.ring[:K0], r.ring[K0]._replace(sv_alpha=100.0 * -0.01), *r.ring[K0 + 1:-1],
-            r.ring[-1]._replace(sv_alpha=100.0 * -0.03))
-    first = b.course_chord(p, r._replace(ring=ring), K0, 5.0, 0.0, 0.0)
+    r = _transient_ring(p)
+    first = b.course_chord(p, r, K0, 5.0, 0.0, 0.0)
     sig = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4
     e_f = (1.5 / 2.5) * 500.0 / 50000.0
     prior = (50000.0 / STIFF_PRIOR_REL) ** 2
     w_f = 1.0 / (STIFF_CORRELATION * (sig * sig + e_f * e_f))
     assert first.stiff.den_f == pytest.approx(prior + w_f * 3000.0 ** 2, rel=1e-12)
-    later = b.course_chord(p, r._replace(ring=ring, stiff=r.stiff._replace(alpha_prev=-0.02, has_prev=True)),
+    later = b.course_chord(p, r._replace(stiff=r.stiff._replace(alpha_prev=-0.02, has_prev=True)),
                            K0, 5.0, 0.0, 0.0)
     w = 1.0 / (STIFF_CORRELATION * sig * sig)
     assert later.stiff.den_f == pytest.approx(prior + w * 3000.0 ** 2, rel=1e-12)
