@@ -21,6 +21,7 @@ from scipy.optimize import fsolve
 from tsmpc.conditions import apply_conditions
 from tsmpc.config import Config, apply_overrides, replace
 from tsmpc.control.cascade import Cascade, Measurement
+from tsmpc.control.fusion_block import steer_load
 from tsmpc.estimation import fusion as fu
 from tsmpc.models.dynamic import continuous_matrices
 from tsmpc.planning.circuit import builtin_circuit
@@ -239,9 +240,9 @@ def test_a_blind_stop_keeps_the_correction_and_freezes_the_fit(cfg: Config) -> N
             continue
         blind += 1
         if steer0 is None:
-            steer0, off = cas._fusion.steer, cas._steer_offset
+            steer0, off = steer_load(cas._fb), cas._steer_offset
             assert 0.7 * DEG < off < 1.1 * DEG, off
-        assert cas._fusion.steer == steer0  # frozen
+        assert steer_load(cas._fb) == steer0  # frozen
         assert cmd.delta == pytest.approx(float(cas._u_applied[1]) - off, abs=1e-15)
     assert blind > 50 and cas.events["blind_steps"] == blind
 
@@ -258,7 +259,7 @@ def test_the_python_cascade_learns_the_offset(cfg: Config) -> None:
         if on:
             assert -1.1 * DEG < off < -0.7 * DEG, off
         else:
-            assert off == 0.0 and cas._fusion.steer == fu.steer_start(cas._fusion.steer_p)
+            assert off == 0.0 and steer_load(cas._fb) == fu.steer_start(cas._fusion.steer_p)
 
 
 def _run(cfg: Config, sets: list[str], reference) -> tuple[float, float]:

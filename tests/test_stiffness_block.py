@@ -10,6 +10,7 @@ import pytest
 
 from tsmpc.config import Config, Method
 from tsmpc.control.cascade import Cascade
+from tsmpc.control.fusion_block import course_store, slip_load
 from tsmpc.control.stiffness_block import (
     MP_CF,
     MP_CR,
@@ -78,7 +79,7 @@ def test_the_cascade_hands_over_through_the_block_and_reset_takes_them_back() ->
     veh = cfg.vehicle
     cas = Cascade(cfg, Method.REF, builtin_circuit(), x0=np.array([0.0, 0.0, 0.0, 10.0, 0.0, 0.0]))
     fu = cas._fusion
-    fu.course.state = _course(cfg, 0.8, 1.1).state
+    course_store(_course(cfg, 0.8, 1.1).state, cas._fb, cas._ivs)  # (the fusion block's vectors)
     cas._apply_stiffness()
     cf, cr = 0.8 * veh.C_f, 1.1 * veh.C_r
     assert cas._sa == pytest.approx([1.0, cf, cr], rel=1e-12)
@@ -91,7 +92,7 @@ def test_the_cascade_hands_over_through_the_block_and_reset_takes_them_back() ->
         assert tuple(mhe._mp[[MP_CF, MP_CR]]) == C and mhe._kargs[10:12] == C
     if lqr._law is not None:
         assert tuple(lqr._law.prm[[PRM_CF, PRM_CR]]) == C
-    assert fu.course.state.slip.kappa == 0.003  # the first hand-over: κ kept
+    assert slip_load(cas._fb).kappa == 0.003  # the first hand-over: κ kept
     cas.reset(np.array([0.0, 0.0, 0.0, 10.0, 0.0, 0.0]))  # back to the config's everywhere
     C0 = (veh.C_f, veh.C_r)
     assert not any(cas._sa)

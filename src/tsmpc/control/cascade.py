@@ -46,7 +46,33 @@ from numpy.typing import ArrayLike, NDArray
 
 from tsmpc._records import quick_init
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
-from tsmpc.control.fusion_block import FusionParams, fusion_after, fusion_before, servo
+from tsmpc.control._back import (
+    CM_ALPHA,
+    CM_CALLS,
+    CM_D,
+    CM_F,
+    CM_HASLAST,
+    CM_LOW,
+    CM_SAT,
+    BackParams,
+    BackState,
+    back_start,
+    cascade_back,
+    cascade_command,
+    command_state,
+)
+from tsmpc.control.fusion_block import (
+    FB_OFF,
+    FB_SENT,
+    FB_SV,
+    FB_SW,
+    FusionParams,
+    before_at,
+    course_load,
+    course_store,
+    fusion_state,
+    slip_load,
+)
 from tsmpc.control.gates import (
     GC_JUMP,
     GC_NAN,
@@ -62,7 +88,6 @@ from tsmpc.control.gates import (
     gate_state,
     nearest_sample,
     plausible_speeds,
-    reckon_block,
     speed_bounded_yaw_rate,
 )
 from tsmpc.control.governor import GovernorParams, GripParams, governed_window
@@ -79,7 +104,6 @@ from tsmpc.control.inner_block import (
     block_delta_mass,
     compensated_force,
     count_step,
-    inner_block,
     start_state,
 )
 from tsmpc.control.mhe_block import N_EO, mhe_inputs
@@ -113,7 +137,7 @@ from tsmpc.control.stiffness_block import MP_CR, N_SA, PRM_CR, SA_CF, SA_CR, SA_
 from tsmpc.control.ts_lqr import LQR_NUMPY, TSLQR, InnerParams
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep, FrictionStepParams
-from tsmpc.estimation.fusion import MassParams
+from tsmpc.estimation.fusion import MassParams, SpeedFit, speed_offset
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.planning.reference import Reference
 
@@ -356,6 +380,7 @@ class Cascade:
         #: the speed governor's block record (issue 36; None: off)
         self.governor: GovernBlockParams | None = _build_governor(cfg) if cfg.governor.enabled else None
         self._build_outer_block(cfg)
+        self._build_back(cfg)
         self.road_mu = math.nan  # governor.grip_source = "oracle": the true μ(road), set by the simulator
         self.reset(x0)
 
@@ -372,17 +397,22 @@ class Cascade:
         self.mhe.reset(None if self._x0 is None else self._x0[3:6].copy())
         self.lqr.reset()
         self._gate_poses = np.zeros((BASELINE + 1, 3))  # the slip gate's MPC poses (slip_aware.py)
-        self._fusion.reset(None if self._x0 is None else self._x0[:3])
+        fu = self._fusion
+        fu.reset(None if self._x0 is None else self._x0[:3])
+        # the fusion block's state (fusion_block.py: its vector, the course fusion's ring and open
+        # interval), the stiffnesses given (stiffness_block.SA_*), the command record (_back.CM_*)
+        self._fb, self._ivs, self._cur = fusion_state(fu.gyro.state, fu.steer, 0.0, 0.0, fu.course.state,
+                                                      fu.course.cur)
+        self._cmd = command_state()
         self._ib_state, self._ib_ring, self._ib_count = start_state(self.cfg.mhe.N)
-        sa: list[float] | None = getattr(self, "_sa", None)
+        sa: NDArray[np.float64] | None = getattr(self, "_sa", None)
         if sa is not None and sa[SA_HAS]:  # back to the config's stiffnesses
             for b in (self.mhe, self.lqr):
                 setter = getattr(b, "set_cornering_stiffness", None)
                 if setter is not None:
                     setter(self.cfg.vehicle.C_f, self.cfg.vehicle.C_r)
-        self._sa = [0.0] * N_SA  # the stiffness block's record of those given (stiffness_block.py)
+        self._sa = np.zeros(N_SA)  # the stiffness block's record of those given (stiffness_block.py)
         self.mpc.reset()
-        self._calls = 0
         self._t_last: float | None = None
         # the gate block's pose record (gates.PO_*): the accepted or dead-reckoned pose, the time of
         # the last accepted pose
@@ -392,12 +422,11 @@ class Cascade:
         self._ob, self._oc = outer_state(None if self._x0 is None else self._x0[:3])
         self._pose_fresh = False
         self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
-        self._u_applied = (0.0, 0.0)  # [F_xR, δ] the plant got over the last T_d
-        self._low_applied = 0.0  # lqr.low_speed_resistance's part of the applied force
-        # fusion.steering_offset: the offset estimate the last command took off, and the angle sent
-        # (_u_applied[1] is the wheels' intended angle, sent + offset: what the MHE's model sees)
-        self._steer_offset = 0.0
-        self._steer_sent = 0.0
+        # the phase after the MHE's state (_back.BackState: the blocks' vectors above; None until
+        # the pose record exists)
+        self._back_s = None if self._pose is None else BackState(
+            self._pose, self._fb, self._cur, self._sa, self._cmd, getattr(self.lqr, "_s", self._cmd[:0]),
+            self._ib_state, self._ib_ring, self._ib_count)
         # recovery (gates.py): the last accepted speed / yaw-rate sample, the blind stop, the
         # reference time offset, the run of poses rejected as jumps
         self._t_meas: float | None = None
@@ -437,6 +466,33 @@ class Cascade:
         return ev
 
     @property
+    def _calls(self) -> int:
+        """Calls made since the reset (the command record's)."""
+        return int(self._cmd[CM_CALLS])
+
+    @property
+    def _u_applied(self) -> tuple[float, float]:
+        """[F_xR, δ] the plant got over the last T_d (δ: the wheels' intended angle, sent + the
+        steering offset: what the MHE's model sees)."""
+        c = self._cmd
+        return float(c[CM_F]), float(c[CM_D])
+
+    @property
+    def _low_applied(self) -> float:
+        """lqr.low_speed_resistance's part of the applied force."""
+        return float(self._cmd[CM_LOW])
+
+    @property
+    def _steer_offset(self) -> float:
+        """fusion.steering_offset: the offset estimate the last command took off."""
+        return float(self._fb[FB_OFF])
+
+    @property
+    def _steer_sent(self) -> float:
+        """The angle last sent to the servo."""
+        return float(self._fb[FB_SENT])
+
+    @property
     def last_plan(self) -> MPCResult | None:
         """The last MPC result (predicted errors, planned inputs), None before the first."""
         return self._plan
@@ -454,12 +510,15 @@ class Cascade:
     # --------------------------------------------------------------------------- step
     def step(self, t: float, measurement: Measurement) -> Command:
         """One call every T_d: the command to apply until the next call. Never raises."""
+        calls = self._calls
         try:
-            cmd = self._step(self._clock(t), measurement)
+            cmd = self._step(self._clock(t), measurement)  # (its last phase keeps the command record)
         except Exception as err:  # the contract: a guidance step never raises
             self._caught(err)
             cmd = self._hold()
-        self._calls += 1
+            c = self._cmd  # the held command in the command record
+            c[CM_CALLS], c[CM_HASLAST] = calls + 1, 1.0
+            c[CM_ALPHA], c[CM_SAT] = float(cmd.estimate.x[1]), 1.0 if cmd.saturated else 0.0
         self._last = cmd
         return cmd
 
@@ -500,8 +559,13 @@ class Cascade:
         axle stiffnesses to the MHE's and the TS-LQR's parameters when they moved by over 1 % (the
         fusion decides, and restarts the slip fit's gain κ when they replace given ones); the
         Python models around those arrays and the steering-offset fit's balance follow."""
-        course, sa = self._fusion.course, self._sa
-        give, course.state = stiffness_block(course.params, course.state, sa, self._stiff_mp, self._stiff_prm)
+        sa, call = self._sa, self._stiff_call
+        if call is not None:
+            give = call[0](call[1], self._fb, self._ivs, sa, self._stiff_mp, self._stiff_prm)
+        else:  # TSMPC_NO_JIT: the block as Python on the fusion block's vectors
+            give, s = stiffness_block(self._fusion.course.params, course_load(self._fb, self._ivs), sa,
+                                      self._stiff_mp, self._stiff_prm)
+            course_store(s, self._fb, self._ivs)
         if give:
             C_f, C_r = sa[SA_CF], sa[SA_CR]
             for b in (self.mhe, self.lqr):
@@ -575,12 +639,6 @@ class Cascade:
         if _finite(v, om):
             self._u_prev = np.array([max(v, 0.0), om])
 
-    def _dead_reckon(self, v: float, alpha: float, omega: float) -> None:
-        """Advance the pose by one T_d on the estimate (v̂, α̂, ω̂) (until the next accepted
-        measurement): the gate block's gates.reckon_block (compiled, or as Python)."""
-        call = self._reckon_call
-        call[0](call[1], self._pose, v, alpha, omega)
-
     def _step(self, t: float, m: Measurement) -> Command:
         """One call: the block diagram of paper Fig. 1 (gates → outer MPC every T_c/T_d calls →
         MHE-UIO → friction compensation → TS-LQR), each block a method below; the fusion's blocks
@@ -604,49 +662,74 @@ class Cascade:
         t1 = time.perf_counter()
         est, u_model = self._estimate(m, v, om, ok, t1)
         t2 = time.perf_counter()
-        v_hat, a_hat, w_hat = est.x.tolist()
-        self._dead_reckon(v_hat, a_hat, w_hat)
-        self._fuse_after(ok, pose_ok, th, v, est, v_hat, a_hat, w_hat, om, u_model)
-        F, delta, sat, low = self._inner(m, est, v_hat, a_hat, w_hat, v_ref, w_ref)
+        F, delta, sat = self._back(m, est, u_model, ok, pose_ok, th, v, v_ref, w_ref)
         t3 = time.perf_counter()
-        delta = self._servo(F, delta, low)
         return Command(F, delta, sat, v_ref, w_ref, est, plan, e_meas, t_mpc, t2 - t1, t3 - t2)
 
     def _fuse(self, t: float, pose_ok: bool, X: float, Y: float, th: float, ok: bool, v: float, om: float,
               mpc_step: bool) -> float:
-        """The fusion block before the MPC and the MHE (fusion_block.fusion_before): the yaw-rate
-        bias fit's sample of the raw ω against the accepted pose's heading, and the course
-        fusion's close at an accepted pose; ω less the bias for every block after it (the MHE,
-        hence ω̂ for the TS-LQR and the dead reckoning; the course fits)."""
-        fu = self._fusion
-        gy, course = fu.gyro, fu.course
-        om, gy.state, course.state, course.cur = fusion_before(
-            self._fb_p, gy.state, course.state, course.cur, pose_ok, X, Y, th, ok, v, om, mpc_step, t,
-            self._t_offset, self._ref_v, self._ref_w)
-        return om
+        """The fusion block before the MPC and the MHE (fusion_block.before_at, compiled or as
+        Python, on the block's vectors): the yaw-rate bias fit's sample of the raw ω against the
+        accepted pose's heading, and the course fusion's close at an accepted pose; ω less the bias
+        for every block after it (the MHE, hence ω̂ for the TS-LQR and the dead reckoning; the
+        course fits)."""
+        call = self._fuse_call
+        if call is not None:
+            return call[0](call[1], self._fb, self._ivs, self._cur, pose_ok, X, Y, th, ok, v, om, mpc_step, t,
+                           self._t_offset, call[2], call[3])
+        return before_at(self._fb_p, self._fb, self._ivs, self._cur, pose_ok, X, Y, th, ok, v, om, mpc_step,
+                         t, self._t_offset, self._ref_v, self._ref_w)
 
-    def _fuse_after(self, ok: bool, pose_ok: bool, th: float, v: float, est: Estimate, v_hat: float,
-                    a_hat: float, w_hat: float, om: float, u_model: tuple[float, float]) -> None:
-        """The fusion block after the MHE (fusion_block.fusion_after): the course fusion's sample
-        and the steering-offset fit's (the steady yaw balance of the bias-free ω against the angle
-        last sent; frozen while the sample, the MHE or the inner loop is unusable)."""
-        fu, last = self._fusion, self._last
-        course = fu.course
-        course.cur, fu.steer = fusion_after(
-            self._fb_p, fu.steer_p, fu.steer, course.cur, ok, pose_ok, th, v, v_hat, a_hat, w_hat, om,
-            float(u_model[1]), float(u_model[0]), STATUS_CODE[est.status], self._blind_since is not None,
-            last is not None and last.saturated, self._steer_sent)
+    def _back(self, m: Measurement, est: Estimate, u_model: tuple[float, float], ok: bool, pose_ok: bool,
+              th: float, v: float, v_ref: float, w_ref: float) -> tuple[float, float, bool]:
+        """The phase after the MHE (_back.cascade_back: one compiled call on the default path): the
+        dead reckoning, the fusion block after the MHE, the inner block (friction step, mass terms,
+        TS-LQR, events), the servo and the command record — (F_xR, the angle sent, saturated). The
+        numpy law (no compiled law, or N̄ singular), the oracle, the published run's law, the blind
+        stop and a replaced ``lqr.step`` decide the inner loop in Python between the phase's parts."""
+        v_hat, a_hat, w_hat = est.x.tolist()
+        lqr, code = self._ib_lqr, STATUS_CODE[est.status]
+        d_m, F_m = float(u_model[1]), float(u_model[0])
+        if (m.state is not None or self._blind_since is not None or lqr is None or "step" in lqr.__dict__
+                or type(lqr).step is not _TSLQR_STEP):  # (a replaced step: the Python path calls it)
+            self._back_start(ok, pose_ok, th, v, v_hat, a_hat, w_hat, code, d_m, F_m)
+            F, d, sat, low = self._inner_other(m, est, v_hat, v_ref, w_ref, code)
+            return F, self._command(F, d, sat, low, a_hat), sat
+        args = (ok, pose_ok, th, v, v_hat, a_hat, w_hat, float(est.F_fr), float(est.F_fr_raw), code, d_m, F_m,
+                v_ref, w_ref)
+        call = self._back_call
+        if call is not None:
+            F, d, sat, st, comp, low = call[0](*call[1:], *self._back_s, *args)  # type: ignore[misc]
+        else:  # TSMPC_NO_JIT, or a TS-LQR without its compiled law: the phase as Python
+            law = lqr._law if lqr._kern is not None else None
+            F, d, sat, st, comp, low = cascade_back(self._back_p, law, self._back_s, *args)  # type: ignore[arg-type]
+        if st != LQR_NUMPY:
+            return F, d, bool(sat)
+        c = lqr._numpy_step(v_hat, a_hat, w_hat, v_ref, w_ref, comp, low)  # the numpy law decides
+        count_step(self._ib_count, code, bool(c.saturated))
+        sat = bool(c.saturated)
+        return c.F_xR, self._command(c.F_xR, c.delta, sat, c.F_low_speed, a_hat), sat
 
-    def _servo(self, F: float, delta: float, low: float) -> float:
-        """The angle sent (fusion_block.servo): the wheels' angle less the steering offset in force
-        (held while blind: the fit is frozen then), within the steering limits — the inner loop's
-        angle, unclipped, with fusion.steering_offset off; _u_applied keeps the wheels' intended
-        angle (what the MHE's model sees)."""
-        fu = self._fusion
-        sent, wheels, self._steer_offset = servo(self._fb_p, fu.steer_p, fu.steer, delta)
-        self._steer_sent = sent
-        self._u_applied, self._low_applied = (F, wheels), low
-        return sent
+    def _back_start(self, ok: bool, pose_ok: bool, th: float, v: float, v_hat: float, a_hat: float,
+                    w_hat: float, code: int, d_m: float, F_m: float) -> None:
+        """The phase's part before the inner block (_back.back_start): dead reckoning, fusion."""
+        blind = self._blind_since is not None
+        call = self._start_call
+        if call is not None:
+            call[0](call[1], self._pose, self._fb, self._cur, self._sa, self._cmd, ok, pose_ok, th, v, v_hat,
+                    a_hat, w_hat, code, d_m, F_m, blind)
+        else:
+            back_start(self._back_p, self._back_s, ok, pose_ok, th, v, v_hat, a_hat, w_hat, code, d_m, F_m,  # type: ignore[arg-type]
+                       blind)
+
+    def _command(self, F: float, delta: float, sat: bool, low: float, alpha: float) -> float:
+        """The phase's part after the inner loop (_back.cascade_command): the angle sent (the
+        wheels' angle less the steering offset in force, within the steering limits), the
+        command record."""
+        call = self._command_call
+        if call is not None:
+            return float(call[0](call[1], self._fb, self._sa, self._cmd, F, delta, sat, low, alpha))
+        return cascade_command(self._back_p, self._back_s, F, delta, sat, low, alpha)  # type: ignore[arg-type]
 
     def _start_from(self, t: float, X: float, Y: float, th: float, v: float, om: float) -> None:
         """Start from the first measurement (its garbage made harmless)."""
@@ -712,7 +795,7 @@ class Cascade:
         has_pred = xp is not None and len(xp) >= 2
         n = self.cfg.mpc.N + 1
         e, wv, ww = np.empty(3), np.empty(n), np.empty(n)
-        args = (self._ob, self._oc, self._gate_poses, self._fusion.course.state.slip, t, k, pose_ok, X, Y, th,
+        args = (self._ob, self._oc, self._gate_poses, slip_load(self._fb), t, k, pose_ok, X, Y, th,
                 last is not None, float(last.estimate.x[1]) if last is not None else 0.0, has_pred,
                 float(xp[1][1]) if has_pred else 0.0, float(self._u_prev[0]), e, wv, ww,  # type: ignore[index]
                 self._ob_buf)
@@ -835,7 +918,9 @@ class Cascade:
         f, s, mhe = m.force, m.steering, self.mhe
         hf, hs = f is not None, s is not None
         F, S = (0.0 if f is None else float(f)), (0.0 if s is None else float(s))
-        off, (Fa, da) = self._fusion.speed_offset(), self._u_applied
+        fb = self._fb
+        off = speed_offset(SpeedFit(fb[FB_SV], fb[FB_SW])) if self._course_speed else 0.0
+        Fa, da = self._u_applied
         so, low = self._steer_offset, self._low_applied
         try:
             call = self._mhe_call
@@ -890,49 +975,38 @@ class Cascade:
             MassParams(float(cfg.vehicle.mass), self.Td, int(N), float(lq.speed_time_constant),
                        bool(lq.speed_feedback)),
             inner if isinstance(inner, InnerParams) else InnerParams(False, False, False, 1.0, 0.0))
-        law = getattr(self.lqr, "_law", None)
-        self._ib_call: Any = None
         from tsmpc import kernels
 
         kern = kernels.load("blocks")
-        # the gate block's calls: compiled, or as Python (TSMPC_NO_JIT)
+        # the gate block's call: compiled, or as Python (TSMPC_NO_JIT)
         self._gate_call: Any = (gate_block, self._gate_p)
-        self._reckon_call: Any = (reckon_block, self._gates)
         if kern is not None:
-            gbp = kern.pack_gates(self._gate_p)
-            self._gate_call, self._reckon_call = (kern.gate_call, gbp), (kern.reckon_call, gbp)
+            self._gate_call = (kern.gate_call, kern.pack_gates(self._gate_p))
         # the TS-LQR whose step is the block's (the as-run law's is its own)
         self._ib_lqr: TSLQR | None = self.lqr if isinstance(inner, InnerParams) else None  # type: ignore[assignment]
-        if self._ib_lqr is not None and law is not None and self._ib_lqr._kern is not None:
-            if kern is not None:
-                bp = kern.pack(self._ib, law)
-                self._ib_call = (kern.inner_call, bp, law.Kv, law.zlo, law.zhi, law.bits, law.prm)
 
-    def _inner(self, m: Measurement, est: Estimate, v_hat: float, a_hat: float, w_hat: float, v_ref: float,
-               w_ref: float) -> tuple[float, float, bool, float]:
-        """The inner block after the MHE (inner_block.py): the compensated friction, the TS-LQR's
-        command (F_xR, δ, saturated, its low-speed part) and the step's events — one compiled call
-        on the default path; the oracle, the published run's law, the blind stop (and a replaced
-        ``lqr.step``) take the same block's parts around their own law."""
-        lqr, code = self._ib_lqr, STATUS_CODE[est.status]
-        if (m.state is not None or self._blind_since is not None or lqr is None or "step" in lqr.__dict__
-                or type(lqr).step is not _TSLQR_STEP):  # (a replaced step: the Python path calls it)
-            return self._inner_other(m, est, v_hat, v_ref, w_ref, code)
-        call = self._ib_call
-        if call is not None:
-            F, d, sat, comp, low, st = call[0](*call[1:], lqr._s, self._ib_state, self._ib_ring,
-                                               self._ib_count, v_hat, a_hat, w_hat, float(est.F_fr),
-                                               float(est.F_fr_raw), code, v_ref, w_ref)
-        else:  # TSMPC_NO_JIT, or a TS-LQR without its compiled law: the block as Python
-            out = inner_block(self._ib, lqr._law if lqr._kern is not None else None, lqr._s, self._ib_state,
-                              self._ib_ring, self._ib_count, v_hat, a_hat, w_hat, float(est.F_fr),
-                              float(est.F_fr_raw), code, v_ref, w_ref)
-            F, d, sat, comp, low, st = out
-        if st == LQR_NUMPY:  # no compiled law, or it found N̄ singular: the numpy law decides
-            c = lqr._numpy_step(v_hat, a_hat, w_hat, v_ref, w_ref, comp, low)
-            count_step(self._ib_count, code, bool(c.saturated))
-            return c.F_xR, c.delta, bool(c.saturated), c.F_low_speed
-        return F, d, bool(sat), low
+    def _build_back(self, cfg: Config) -> None:
+        """The phase after the MHE's record (_back.BackParams) and the compiled calls of it, of its
+        parts and of the fusion block before the MHE (kernels/blocks.py)."""
+        from tsmpc import kernels
+
+        self._back_p = BackParams(self._gates, self._fb_p, self._fusion.steer_p, self._ib)
+        self._course_speed = bool(cfg.fusion.course_speed)
+        kern = kernels.load("blocks")
+        self._back_call: Any = None
+        self._start_call: Any = None
+        self._command_call: Any = None
+        self._fuse_call: Any = None
+        self._stiff_call: Any = None
+        if kern is None:
+            return
+        lqr, law = self._ib_lqr, getattr(self.lqr, "_law", None)
+        pk = kern.pack_back(self._back_p, law)
+        self._start_call, self._command_call = (kern.start_call, pk), (kern.command_call, pk)
+        self._fuse_call = (kern.fuse_call, pk, self._refs[3], self._refs[4])  # (the reference's v_d, ω_d)
+        self._stiff_call = (kern.stiffness_call, pk)
+        if lqr is not None and law is not None and lqr._kern is not None:
+            self._back_call = (kern.back_call, pk, law.Kv, law.zlo, law.zhi, law.bits, law.prm)
 
     def _inner_other(self, m: Measurement, est: Estimate, v_hat: float, v_ref: float, w_ref: float,
                      code: int) -> tuple[float, float, bool, float]:

@@ -25,17 +25,20 @@ import numpy as np
 from numba import njit
 
 from tsmpc import kernels
+from tsmpc.control._back import BackParams, BackState, back_start, cascade_back, cascade_command
+from tsmpc.control.fusion_block import N_FBP, before_at, course_load, course_store, unpack_fusion
 from tsmpc.control.gates import GateBlockParams, GateParams, gate_block, gate_state, reckon_block
 from tsmpc.control.inner_block import InnerBlockParams, inner_block, start_state
 from tsmpc.control.mhe_block import MHEBlockParams, MHEWindow, mhe_block
 from tsmpc.control.outer_block import RefArrays, outer_after, outer_errors, unpack_govern, unpack_outer
+from tsmpc.control.stiffness_block import stiffness_block
 from tsmpc.control.ts_lqr import InnerParams, LQRLaw
 from tsmpc.estimation.friction_step import FrictionStepParams
-from tsmpc.estimation.fusion import MassParams
+from tsmpc.estimation.fusion import CourseParams, MassParams
 from tsmpc.kernels.jit import BLOCK_MODULES
 
-__all__ = ["after_call", "gate_call", "inner_call", "mhe_call", "outer_call", "pack", "pack_gates",
-           "reckon_call", "warm"]
+__all__ = ["after_call", "back_call", "command_call", "fuse_call", "gate_call", "inner_call", "mhe_call",
+           "outer_call", "pack", "pack_back", "pack_gates", "reckon_call", "stiffness_call", "warm"]
 
 # entries compiled from other versions of the blocks (or of the law, kernels/lqr.py) are deleted
 # before the first call below loads one
@@ -137,6 +140,92 @@ def mhe_call(mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, est, speeds_ok, v, omeg
                   speeds_ok, v, omega, speed_offset, F_applied, delta_applied, has_force, force, has_steering,
                   steering, steer_offset, low)
     return r.status, r.F_raw, r.n, r.ok, r.u0, r.u1
+
+
+# ---------------------------------------------------------------------------- the phase after the MHE
+#: The packed vector of :func:`pack_back`: GateParams' 6 fields, the fusion block's record
+#: (fusion_block.pack_fusion), the course fusion's CourseParams (19 fields), the inner block's
+#: (:func:`pack`).
+BK_GATE, BK_FUS = 0, 6
+BK_COURSE = BK_FUS + N_FBP
+BK_INNER = BK_COURSE + 19
+N_BK = BK_INNER + N_BP
+
+
+def pack_back(p: BackParams, law: LQRLaw | None) -> np.ndarray:
+    """The phase's records (and the law's scalars; zeros without a compiled law) as the float
+    vector :func:`back_call` reads."""
+    from tsmpc.control.fusion_block import pack_fusion
+
+    inner = pack(p.inner, law) if law is not None else np.zeros(N_BP)
+    out = np.concatenate([np.array(p.gates, dtype=np.float64), pack_fusion(p.fusion, p.steer),
+                          np.array(p.fusion.cp, dtype=np.float64), inner])
+    assert out.size == N_BK
+    return out
+
+
+@njit(cache=True, fastmath=False)
+def _course_params(a):
+    """CourseParams of its packed fields."""
+    return CourseParams(a[0], a[1], a[2] != 0.0, a[3], a[4], a[5], a[6], a[7], a[8], a[9], a[10], a[11],
+                        a[12], a[13], a[14], int(a[15]), int(a[16]), int(a[17]), int(a[18]))
+
+
+@njit(cache=True, fastmath=False)
+def _back_params(pk):
+    """BackParams of the packed vector (the inner block's record without the law)."""
+    fbp, sp = unpack_fusion(pk[BK_FUS:BK_FUS + N_FBP], _course_params(pk[BK_COURSE:BK_INNER]))
+    bp = pk[BK_INNER:]
+    ib = InnerBlockParams(
+        bp[BP_FSTEP] != 0.0, FrictionStepParams(int(bp[BP_FS_WINDOW]), bp[BP_FS_H]), bp[BP_MASSEST] != 0.0,
+        MassParams(bp[BP_M_MASS], bp[BP_M_TD], int(bp[BP_M_WINDOW]), bp[BP_M_TAU], bp[BP_M_SFB] != 0.0),
+        InnerParams(bp[BP_COMP] != 0.0, bp[BP_RAW] != 0.0, bp[BP_LOW] != 0.0, bp[BP_VMIN], bp[BP_RES]))
+    return BackParams(_gate_params(pk), fbp, sp, ib)
+
+
+@njit(cache=True, fastmath=False)
+def back_call(pk, Kv, zlo, zhi, bits, prm, pose, fb, cur, sa, cmd, s, st, ring, cnt, ok, pose_ok, th, v,
+              v_hat, a_hat, w_hat, F_fr, F_raw, status, delta, force, v_ref, w_ref):
+    """:func:`~tsmpc.control._back.cascade_back` of the packed records: (F_xR, δ sent, saturated,
+    the TS-LQR step's status, compensation, low-speed residual)."""
+    _p, law = _records(pk[BK_INNER:], Kv, zlo, zhi, bits, prm)
+    state = BackState(pose, fb, cur, sa, cmd, s, st, ring, cnt)
+    out = cascade_back(_back_params(pk), law, state, ok, pose_ok, th, v, v_hat, a_hat, w_hat, F_fr, F_raw,
+                       status, delta, force, v_ref, w_ref)
+    return out.F_xR, out.delta, out.saturated, out.status, out.F_comp, out.F_low_speed
+
+
+@njit(cache=True, fastmath=False)
+def start_call(pk, pose, fb, cur, sa, cmd, ok, pose_ok, th, v, v_hat, a_hat, w_hat, status, delta, force,
+               blind):
+    """:func:`~tsmpc.control._back.back_start` of the packed records (the command record read only)."""
+    back_start(_back_params(pk), BackState(pose, fb, cur, sa, cmd, fb, fb, fb, np.empty(0, np.int64)), ok,
+               pose_ok, th, v, v_hat, a_hat, w_hat, status, delta, force, blind)
+
+
+@njit(cache=True, fastmath=False)
+def command_call(pk, fb, sa, cmd, F, delta, saturated, low, alpha):
+    """:func:`~tsmpc.control._back.cascade_command` of the packed records: the angle sent."""
+    e = cmd[:0]
+    return cascade_command(_back_params(pk), BackState(e, fb, e, sa, cmd, e, e, e, np.empty(0, np.int64)), F,
+                           delta, saturated, low, alpha)
+
+
+@njit(cache=True, fastmath=False)
+def fuse_call(pk, fb, ivs, cur, pose_ok, X, Y, th, ok, v, omega, mpc_step, t, t_off, v_d, w_d):
+    """:func:`~tsmpc.control.fusion_block.before_at` of the packed records: ω less the bias."""
+    fbp, _sp = unpack_fusion(pk[BK_FUS:BK_FUS + N_FBP], _course_params(pk[BK_COURSE:BK_INNER]))
+    return before_at(fbp, fb, ivs, cur, pose_ok, X, Y, th, ok, v, omega, mpc_step, t, t_off, v_d, w_d)
+
+
+@njit(cache=True, fastmath=False)
+def stiffness_call(pk, fb, ivs, sa, mp, prm):
+    """The stiffness block on the course state of the fusion block's vectors: True when it gave
+    the stiffnesses (then in ``sa``, ``mp`` and ``prm``)."""
+    give, s = stiffness_block(_course_params(pk[BK_COURSE:BK_INNER]), course_load(fb, ivs), sa, mp, prm)
+    if give:
+        course_store(s, fb, ivs)
+    return give
 
 
 def warm() -> None:

@@ -45,6 +45,20 @@ from numba import njit
 from numba.core import cgutils, types
 from numba.extending import intrinsic as _numba_intrinsic
 
+from tsmpc.control._back import (
+    CM_ALPHA,
+    CM_CALLS,
+    CM_D,
+    CM_F,
+    CM_HASLAST,
+    CM_LOW,
+    CM_SAT,
+    N_CM,
+    BackParams,
+    BackState,
+    cascade_back,
+    cascade_command,
+)
 from tsmpc.control.fusion_block import (
     FB_OFF,
     FB_OMEGA,
@@ -52,12 +66,9 @@ from tsmpc.control.fusion_block import (
     FB_SW,
     N_FB,
     N_FBP,
-    after_at,
     before_at,
     course_load,
     course_store,
-    given_steer,
-    servo_at,
     slip_load,
     unpack_fusion,
 )
@@ -74,7 +85,6 @@ from tsmpc.control.gates import (
     GateBlockParams,
     GateParams,
     gate_block,
-    reckon_block,
 )
 from tsmpc.control.inner_block import (
     EST_FAILED,
@@ -88,7 +98,6 @@ from tsmpc.control.inner_block import (
     N_IB,
     N_IC,
     InnerBlockParams,
-    inner_block,
     mass_load,
 )
 from tsmpc.control.mhe_block import MHE_DENSE, N_EO, MHEBlockParams, MHEWindow, mhe_block
@@ -163,6 +172,7 @@ __all__ = ["friction_mu", "hypot_py", "run", "ticks", "warm"]
 DONE, NEED_MPC, NEED_MHE, NEED_LQR, NEED_PLANT, DIVERGED = range(6)
 # phases of a step (where a resumed call continues)
 PH_START, PH_PLAN, PH_MHE, PH_POST_MHE, PH_POST_LQR, PH_POST_PLANT = range(6)
+PH_PLANT = 6  # (within a call: the command is made, the plant steps)
 # MHE statuses (EstimatorStatus) and MPC statuses (MPCStatus) as codes
 ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP = MHE_OK, MHE_REJECTED, MHE_FAILED, MHE_WARMUP
 assert (ST_OK, ST_REJECTED, ST_FAILED, ST_WARMUP) == (EST_OK, EST_REJECTED, EST_FAILED, EST_WARMUP)
@@ -199,13 +209,13 @@ N_FP = FP_GB + N_GBP
  _IFREE0, IP_DEFER, _IFREE1) = range(26)
 N_IP = 26
 # ---------------------------------------------------------------------------- float state
-(SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, _FREE15, _FREE16, _FREE17, SF_UPREV, _U1, SF_UAPP, _A1,
- SF_PLANTU, _PU1, SF_LASTA, _FREE12, _G1, _G2, _G3, _G4, _CFREE1, _CFREE2, _CFREE3,
+(SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, _FREE15, _FREE16, _FREE17, SF_UPREV, _U1, _FREE38, _FREE39,
+ SF_PLANTU, _PU1, _FREE40, _FREE12, _G1, _G2, _G3, _G4, _CFREE1, _CFREE2, _CFREE3,
  _CFREE4, _CFREE5, _CFREE6, _CFREE7, _CFREE8, _CFREE9, _CFREE10, _CFREE11, _CFREE12, _CFREE13, _FREE18,
  _FREE1, _CFREE14,
  _FREE4, _FREE5, _FREE6, _FREE7, SF_SA, _SA1, _SA2, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2,
- _CFREE15, SF_ACT, _AC1, SF_LOW, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, _CFREE16,
+ _CFREE15, SF_ACT, _AC1, _FREE41, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, _CFREE16,
  _CFREE17, _FREE13, _J1, _J2, _J3, _FREE14,
  _FREE19, _FREE20, _FREE21, _FREE22,
  _FREE23, _FREE24, _FREE25, _FREE26, _FREE27, _FREE28, _FREE29, _FREE30, _FREE31, _FREE32, _FREE33,
@@ -216,14 +226,15 @@ SF_GS = SF_IB + N_IB  # the gate block's state (N_GS values, tsmpc.control.gates
 SF_SENS = SF_GS + N_GS  # the sensor block's state (N_SS values, tsmpc.sensors.pack_state)
 SF_OB = SF_SENS + N_SS  # the outer block's state (N_OB values, tsmpc.control.outer_block's OB_* slots)
 SF_FB = SF_OB + N_OB  # the fusion block's state (N_FB values, tsmpc.control.fusion_block's FB_* slots)
-N_SF = SF_FB + N_FB
+SF_CMD = SF_FB + N_FB  # the command record (N_CM values, tsmpc.control._back's CM_* slots)
+N_SF = SF_CMD + N_CM
 SF_TOFF = SF_OB + OB_TOFF  # (the reference time offset, the governed rate: the caller reads them)
 SF_GRATE = SF_OB + OB_RATE
 # ---------------------------------------------------------------------------- integer state
-(SI_M, SI_PHASE, SI_CALLS, SI_HASLAST, _SFREE5, _SFREE6, _CFREE18, _SFREE0, _CFREE19,
+(SI_M, SI_PHASE, _SFREE17, _SFREE18, _SFREE5, _SFREE6, _CFREE18, _SFREE0, _CFREE19,
  _CFREE20, _SFREE1, _SFREE2, _SFREE10, SI_NY, SI_NREJ, SI_NFAIL, SI_HASPREV,
  SI_FRESH, SI_SPOK, SI_POSEOK, _SFREE7, SI_MHEN, SI_MHEFULL, SI_MHEOK, SI_ESTSTAT,
- SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, SI_SAT, SI_TICK0, SI_ACTHAS, _SFREE3, _SFREE4,
+ SI_PSTAT, SI_PIT, SI_PQPIT, SI_PCLIP, _SFREE19, SI_TICK0, SI_ACTHAS, _SFREE3, _SFREE4,
  _SFREE8, _SFREE9, SI_GWIN,
  _SFREE11, _SFREE12, _SFREE13, _SFREE14, _SFREE15, _SFREE16,
  _CFREE21) = range(44)
@@ -234,7 +245,7 @@ assert SF_SA + N_SA == SF_MX  # the stiffness block's record (stiffness_block.SA
 assert SI_NREJ == SI_NY + MI_NREJ and SI_NFAIL == SI_NY + MI_NFAIL
 # ---------------------------------------------------------------------------- step scratch
 (SC_Y, _Y1, _Y2, _Y3, _Y4, SC_EMEAS, _E1, _E2, SC_EST, _S1, _S2, SC_ESTF, SC_ESTFR, SC_VREF,
- SC_WREF, SC_UMHE, _UM1, _SCF1, _SCF2, _SCF3, SC_COMP, SC_LOWF, SC_OF, SC_OD, SC_MU, SC_EY,
+ SC_WREF, SC_UMHE, _UM1, SC_SAT, _SCF2, _SCF3, SC_COMP, SC_LOWF, SC_OF, SC_OD, SC_MU, SC_EY,
  SC_PU, _PU2, SC_UK, _UK1, _CFREE0, _CFREE1, _CFREE2, SC_GROW, _GR1, _GR2, _GR3, _GR4) = range(38)
 N_SC = 38  # then the MPC's window's v and ω, N + 1 each, then the outer block's scratch
 # (outer_block.scratch_size)
@@ -383,6 +394,22 @@ def _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp):
                 si[SI_PIT], si[SI_PQPIT], si[SI_PCLIP])  # (the recorder block)
 
 
+@njit(cache=True, fastmath=False, inline="always")
+def _back_records(fp, ip, sf, ev, gates, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm, cur):
+    """The phase after the MHE's records of the slots (Cascade._back_p; TSLQR._inner, TSLQR._law:
+    the same values) and its state (the blocks' slots, the open interval ``cur``)."""
+    lqr_p = InnerParams(ip[IP_COMP] != 0, ip[IP_UIO] != 0, ip[IP_LOWRES] != 0, zlo[1], prm[6] * prm[0])
+    law = LQRLaw(Kv, zlo, zhi, bits, prm, fp[FP_L_LAM], fp[FP_L_AF], fp[FP_L_TD], fp[FP_L_FMIN],
+                 fp[FP_L_FMAX], fp[FP_L_DMIN], fp[FP_L_DMAX], ip[IP_LQR_SFB] != 0, fp[FP_L_TAU])
+    ibp = InnerBlockParams(ip[IP_FSTEP] != 0, FrictionStepParams(ip[IP_NW], fp[FP_FS_H]),
+                           ip[IP_MASSEST] != 0,
+                           MassParams(fp[FP_VM], fp[FP_TD], ip[IP_NW], fp[FP_TAU], ip[IP_SPEEDFB] != 0),
+                           lqr_p)
+    bs = BackState(sf[SF_POSE:SF_POSE + N_PO], sf[SF_FB:SF_FB + N_FB], cur, sf[SF_SA:SF_SA + N_SA],
+                   sf[SF_CMD:SF_CMD + N_CM], ls, sf[SF_IB:SF_IB + N_IB], mass_v, ev[EV_INNER:EV_INNER + N_IC])
+    return BackParams(gates, fbp, sp0, ibp), law, bs
+
+
 @njit(cache=True, fastmath=False)
 def _actuated(x, Fc, dc, mu, act, fp, ip, sf, si, cst):
     """``ActuatedPlant.step`` over T_d: per sub-step the actuators' block
@@ -457,7 +484,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             si[SI_FRESH] = 1 if fresh else 0
             si[SI_SPOK] = 1 if speeds_ok else 0
             si[SI_POSEOK] = 1 if pose_ok else 0
-            mpc_step = si[SI_CALLS] % n_in == 0
+            cmd = sf[SF_CMD:SF_CMD + N_CM]  # the command record (the phase after the MHE keeps it)
+            mpc_step = int(cmd[CM_CALLS]) % n_in == 0
             # the fusion block (Cascade._fuse): the gyro's sample, ω less its bias (kept for the
             # MHE and the part after it), the course interval's close at an accepted pose
             fbs = sf[SF_FB:SF_FB + N_FB]
@@ -475,8 +503,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 wv, ww = sc[N_SC:N_SC + N + 1], sc[N_SC + N + 1:N_SC + 2 * (N + 1)]
                 has_prev = si[SI_HASPREV] != 0
                 governed = outer_errors(op, refs, obs, ocnt, gate, slip_load(fbs), t, kw, pose_ok,
-                                        sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], si[SI_HASLAST] != 0,
-                                        sf[SF_LASTA], has_prev, prevX[1, 1], sf[SF_UPREV], e_meas, wv, ww,
+                                        sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], cmd[CM_HASLAST] != 0,
+                                        cmd[CM_ALPHA], has_prev, prevX[1, 1], sf[SF_UPREV], e_meas, wv, ww,
                                         obuf)
                 si[SI_GWIN] = 1 if governed else 0
                 # ---- TSMPC.step: its compiled step (checks, schedule, Riccati fast path); a
@@ -507,8 +535,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             oracle = op.governor and govp.grip.oracle  # (the oracle row reads the road's μ)
             road_mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events) if oracle else math.nan
             dm = _delta_mass(sf, fp) if op.governor and govp.mass_estimate else 0.0
-            outer_after(op, govp, refs, obs, ocnt, si[SI_PSTAT], si[SI_PCLIP], t, si[SI_HASLAST] != 0,
-                        si[SI_ESTSTAT], sc[SC_EST], sc[SC_ESTF], si[SI_SAT] != 0, sf[SF_UAPP], road_mu, dm,
+            cmd = sf[SF_CMD:SF_CMD + N_CM]
+            outer_after(op, govp, refs, obs, ocnt, si[SI_PSTAT], si[SI_PCLIP], t, cmd[CM_HASLAST] != 0,
+                        si[SI_ESTSTAT], sc[SC_EST], sc[SC_ESTF], cmd[CM_SAT] != 0, cmd[CM_F], road_mu, dm,
                         obuf)
             phase = PH_MHE
         if phase == PH_MHE:
@@ -518,11 +547,12 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                    else 0.0)
             si[SI_TICK0] = _ticks()
             mbp = MHEBlockParams(fp[FP_MHE_MASS], ip[IP_DEFER] != 0)
+            cmd = sf[SF_CMD:SF_CMD + N_CM]
             mst = mhe_block(mbp, MHEWindow(mY, mW, mU, mXS, mA, mB, mX), mp, sf[SF_MX:SF_MX + N_MS],
                             si[SI_NY:SI_NY + N_MI], sc[SC_UK:SC_UK + 2], sc[SC_EST:SC_EST + N_EO],
                             si[SI_FRESH] != 0 and si[SI_SPOK] != 0, y[3], sf[SF_FB + FB_OMEGA], off,
-                            sf[SF_UAPP], sf[SF_UAPP + 1], ip[IP_MFORCE] != 0, sf[SF_PLANTU],
-                            ip[IP_MSTEER] != 0, sf[SF_PLANTU + 1], sf[SF_FB + FB_OFF], sf[SF_LOW])
+                            cmd[CM_F], cmd[CM_D], ip[IP_MFORCE] != 0, sf[SF_PLANTU],
+                            ip[IP_MSTEER] != 0, sf[SF_PLANTU + 1], sf[SF_FB + FB_OFF], cmd[CM_LOW])
             sc[SC_UMHE], sc[SC_UMHE + 1] = mst.u0, mst.u1  # what the cascade gave (the course fusion's δ, F)
             si[SI_MHEN], si[SI_MHEOK] = mst.n, 1 if mst.ok else 0
             si[SI_MHEFULL] = 1 if mst.n == ip[IP_NW] else 0
@@ -533,54 +563,35 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             li[m, LI_TMHE] = float(_ticks() - si[SI_TICK0])
             phase = PH_POST_MHE
         if phase == PH_POST_MHE:
+            # the phase after the MHE (Cascade._back): dead reckoning, the fusion block after the
+            # MHE, the inner block, the servo and the command record; the numpy law (a singular N̄)
+            # is the caller's, with the block's compensation and residual
             tick = _ticks()
-            ev0, ev1, ev2 = sc[SC_EST], sc[SC_EST + 1], sc[SC_EST + 2]
-            reckon_block(gates, sf[SF_POSE:SF_POSE + N_PO], ev0, ev1, ev2)  # the gate block's (_dead_reckon)
-            # the fusion block after the MHE (Cascade._fuse_after): the course fusion's sample, the
-            # steering-offset fit's (on the stiffnesses given, the angle last sent)
-            after_at(fbp, sf[SF_FB:SF_FB + N_FB], given_steer(sp0, sf[SF_SA:SF_SA + N_SA]), cur,
-                     si[SI_FRESH] != 0 and si[SI_SPOK] != 0, si[SI_POSEOK] != 0, y[2], y[3], ev0, ev1, ev2,
-                     sc[SC_UMHE + 1], sc[SC_UMHE], si[SI_ESTSTAT], False,
-                     si[SI_HASLAST] != 0 and si[SI_SAT] != 0)
-            # the inner block (Cascade._inner): friction step, mass terms, TS-LQR, events; the
-            # numpy law (a singular N̄) is the caller's, with the block's compensation and residual.
-            # Its records (Cascade._ib; TSLQR._inner, TSLQR._law: the same values), state, counters
-            lqr_p = InnerParams(ip[IP_COMP] != 0, ip[IP_UIO] != 0, ip[IP_LOWRES] != 0, zlo[1],
-                                prm[6] * prm[0])
-            law = LQRLaw(Kv, zlo, zhi, bits, prm, fp[FP_L_LAM], fp[FP_L_AF], fp[FP_L_TD], fp[FP_L_FMIN],
-                         fp[FP_L_FMAX], fp[FP_L_DMIN], fp[FP_L_DMAX], ip[IP_LQR_SFB] != 0, fp[FP_L_TAU])
-            ibp = InnerBlockParams(ip[IP_FSTEP] != 0, FrictionStepParams(ip[IP_NW], fp[FP_FS_H]),
-                                   ip[IP_MASSEST] != 0,
-                                   MassParams(fp[FP_VM], Td, ip[IP_NW], fp[FP_TAU], ip[IP_SPEEDFB] != 0),
-                                   lqr_p)
-            ibs = sf[SF_IB:SF_IB + N_IB]
-            icnt = ev[EV_INNER:EV_INNER + N_IC]
-            out = inner_block(ibp, law, ls, ibs, mass_v, icnt, ev0, ev1, ev2, sc[SC_ESTF], sc[SC_ESTFR],
-                              si[SI_ESTSTAT], sc[SC_VREF], sc[SC_WREF])
+            bp, law, bs = _back_records(fp, ip, sf, ev, gates, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm,
+                                        cur)
+            out = cascade_back(bp, law, bs, si[SI_FRESH] != 0 and si[SI_SPOK] != 0, si[SI_POSEOK] != 0, y[2],
+                               y[3], sc[SC_EST], sc[SC_EST + 1], sc[SC_EST + 2], sc[SC_ESTF], sc[SC_ESTFR],
+                               si[SI_ESTSTAT], sc[SC_UMHE + 1], sc[SC_UMHE], sc[SC_VREF], sc[SC_WREF])
+            li[m, LI_TLQR] = float(_ticks() - tick)
             if out.status == LQR_NUMPY:
                 sc[SC_COMP], sc[SC_LOWF] = out.F_comp, out.F_low_speed
-                li[m, LI_TLQR] = float(_ticks() - tick)
                 si[SI_PHASE] = PH_POST_LQR
                 return NEED_LQR
             sc[SC_OF], sc[SC_OD] = out.F_xR, out.delta
-            si[SI_SAT] = 1 if out.saturated else 0
-            sf[SF_LOW] = out.F_low_speed
-            li[m, LI_TLQR] = float(_ticks() - tick)
-            phase = PH_POST_LQR
-        if phase == PH_POST_LQR:
-            # the command's bookkeeping (Cascade), the inner log and the plant (simulate)
-            sp = given_steer(sp0, sf[SF_SA:SF_SA + N_SA])  # the servo (Cascade._servo)
-            sc[SC_OD], wheels = servo_at(fbp, sf[SF_FB:SF_FB + N_FB], sp, sc[SC_OD])
-            sf[SF_UAPP], sf[SF_UAPP + 1] = sc[SC_OF], wheels
-            st = si[SI_ESTSTAT]
-            si[SI_CALLS] += 1
-            si[SI_HASLAST] = 1
-            sf[SF_LASTA] = sc[SC_EST + 1]
+            phase = PH_PLANT
+        if phase == PH_POST_LQR:  # the numpy law decided (the caller's: F, δ, saturated, residual in sc)
+            bp, law, bs = _back_records(fp, ip, sf, ev, gates, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm,
+                                        cur)
+            sc[SC_OD] = cascade_command(bp, bs, sc[SC_OF], sc[SC_OD], sc[SC_SAT] != 0.0, sc[SC_LOWF],
+                                        sc[SC_EST + 1])
+            phase = PH_PLANT
+        if phase == PH_PLANT:
+            # the inner log (the recorder block; the true F_fr: VehiclePlant's), the plant (simulate)
             mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events)
             sc[SC_MU] = mu
             record_inner(li, lstat, lsat, m, x, sc[SC_EST:SC_EST + 3], y[3], y[4], sc[SC_ESTF], sc[SC_ESTFR],
-                         friction_force(fp[FP_MU_NOM], fp[FP_MG], mu), mu, sc[SC_OF], sc[SC_OD], st,
-                         si[SI_SAT] != 0)  # (the recorder block; the plant's true F_fr: VehiclePlant's)
+                         friction_force(fp[FP_MU_NOM], fp[FP_MG], mu), mu, sc[SC_OF], sc[SC_OD],
+                         si[SI_ESTSTAT], sf[SF_CMD + CM_SAT] != 0)
             if ip[IP_ACT] == 0:
                 if ip[IP_DEFER] != 0:  # the batch integrates its lanes at once (kernels.batch)
                     xn, ok = x, False

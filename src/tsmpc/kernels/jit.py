@@ -34,6 +34,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 #: The modules that define ``@jitable`` blocks (their sources are part of the engine's cache key;
 #: tests/test_blocks.py checks the list is complete).
 BLOCK_MODULES = (
+    "tsmpc.control._back",
     "tsmpc.control.fusion_block",
     "tsmpc.control.gates",
     "tsmpc.control.governor",

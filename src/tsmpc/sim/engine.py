@@ -44,7 +44,7 @@ from numpy.typing import NDArray
 
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
 from tsmpc.control.cascade import _MPC_STATUS_CODE, EVENT_NAMES, STATUS_CODE, Cascade, _Window
-from tsmpc.control.fusion_block import N_FB, N_FBP, fusion_state, pack_fusion
+from tsmpc.control.fusion_block import N_FB, N_FBP, pack_fusion
 from tsmpc.control.gates import N_PO
 from tsmpc.control.outer_block import N_GBP, N_OBP, OC_GACT, OC_GSTEPS, pack_govern, pack_outer, scratch_size
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
@@ -128,10 +128,10 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
 _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:simulate": "ba020e97f0f11213",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
-    "tsmpc.control.cascade:Cascade.__init__": "5d56edf92915dd92",
-    "tsmpc.control.cascade:Cascade.reset": "767bd52561140f0b",
-    "tsmpc.control.cascade:Cascade.step": "429511b15ee8c2d3",
-    "tsmpc.control.cascade:Cascade._step": "5ea2319dca8c993c",
+    "tsmpc.control.cascade:Cascade.__init__": "3ca6145a5fdd53f7",
+    "tsmpc.control.cascade:Cascade.reset": "5cca8f710649aea6",
+    "tsmpc.control.cascade:Cascade.step": "153443d2b249fd93",
+    "tsmpc.control.cascade:Cascade._step": "b2bf4932265371fc",
     "tsmpc.control.cascade:Cascade._start_from": "ec50854f219e3425",
     "tsmpc.control.cascade:Cascade._outer": "a8a41901f93c5023",
     "tsmpc.control.cascade:Cascade._watch_samples": "a2b6f37a111ff688",
@@ -239,20 +239,23 @@ def _replaced_code() -> str | None:
             return "tsmpc.kernels.lqr.lqr_step was replaced"
         if ts_lqr.inner_step is not importlib.import_module("tsmpc.control.inner_block").inner_step:
             return "tsmpc.control.ts_lqr.inner_step was replaced"
-        if importlib.import_module("tsmpc.control.inner_block").inner_block is not ke.inner_block:
+        if importlib.import_module("tsmpc.control.inner_block").inner_block is not importlib.import_module(
+                "tsmpc.control._back").inner_block:
             return "tsmpc.control.inner_block.inner_block was replaced"
         blk = importlib.import_module("tsmpc.control.stiffness_block").stiffness_block  # the hand-over
         cas = importlib.import_module("tsmpc.control.cascade")
         if blk is not ke.stiffness_block or cas.stiffness_block is not blk:
             return "tsmpc.control.stiffness_block's block was replaced"
         fb = importlib.import_module("tsmpc.control.fusion_block")  # the fusion's glue
-        parts = (fb.fusion_before, fb.fusion_after, fb.servo)
-        if (fb.before_at, fb.after_at, fb.servo_at) != (ke.before_at, ke.after_at, ke.servo_at) or (
-                cas.fusion_before, cas.fusion_after, cas.servo) != parts:
+        if fb.before_at is not ke.before_at or cas.before_at is not fb.before_at:
             return "tsmpc.control.fusion_block's block was replaced"
-        gt = importlib.import_module("tsmpc.control.gates")  # the gates' glue and the dead reckoning
-        if (gt.gate_block, gt.reckon_block) != (ke.gate_block, ke.reckon_block) or (
-                cas.gate_block, cas.reckon_block) != (gt.gate_block, gt.reckon_block):
+        bk = importlib.import_module("tsmpc.control._back")  # the phase after the MHE
+        parts = (bk.back_start, bk.cascade_back, bk.cascade_command)
+        if (ke.cascade_back, ke.cascade_command) != parts[1:] or (
+                cas.back_start, cas.cascade_back, cas.cascade_command) != parts:
+            return "tsmpc.control._back's phase was replaced"
+        gt = importlib.import_module("tsmpc.control.gates")  # the gates' glue
+        if gt.gate_block is not ke.gate_block or cas.gate_block is not gt.gate_block:
             return "tsmpc.control.gates' block was replaced"
         ob = importlib.import_module("tsmpc.control.outer_block")
         if ob.outer_errors is not ke.outer_errors or ob.outer_after is not ke.outer_after:
@@ -625,13 +628,11 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     # applicability() keeps runs that can blind the cascade in Python)
     sf[ke.SF_GS:ke.SF_GS + ke.N_GS] = cascade._gs  # the gate block's (the jump run, the repeat guard)
     sf[ke.SF_UPREV:ke.SF_UPREV + 2] = cascade._u_prev
-    sf[ke.SF_UAPP:ke.SF_UAPP + 2] = cascade._u_applied
-    sf[ke.SF_LOW] = cascade._low_applied
+    sf[ke.SF_CMD:ke.SF_CMD + ke.N_CM] = cascade._cmd  # the command record (_back.CM_*)
     sf[ke.SF_SA:ke.SF_SA + ke.N_SA] = cascade._sa  # the stiffnesses given (a reset cascade: none)
-    fu = cascade._fusion  # the fusion block's (the yaw-rate, steering-offset and course fits, the servo)
-    fb, ivs, cur = fusion_state(fu.gyro.state, fu.steer, cascade._steer_offset, cascade._steer_sent,
-                                fu.course.state, fu.course.cur)
-    sf[ke.SF_FB:ke.SF_FB + N_FB] = fb
+    # the fusion block's (the yaw-rate, steering-offset and course fits, the servo)
+    sf[ke.SF_FB:ke.SF_FB + N_FB] = cascade._fb
+    ivs, cur = cascade._ivs.copy(), cascade._cur.copy()
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
     sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival
@@ -752,8 +753,8 @@ class _Run:
         self.sec_lqr[int(a.si[ke.SI_M])] = time.perf_counter() - t0
         count_step(a.ev[ke.EV_INNER:ke.EV_INNER + ke.N_IC], int(a.si[ke.SI_ESTSTAT]), bool(out.saturated))
         a.sc[ke.SC_OF], a.sc[ke.SC_OD] = out.F_xR, out.delta
-        a.sf[ke.SF_LOW] = out.F_low_speed
-        a.si[ke.SI_SAT] = bool(out.saturated)
+        a.sc[ke.SC_LOWF] = out.F_low_speed
+        a.sc[ke.SC_SAT] = 1.0 if out.saturated else 0.0
 
     def _plant(self) -> str | None:
         """The plant's non-finite step in Python: its error message, or (rounding of the float
