@@ -33,7 +33,7 @@ from tsmpc.control.gates import GateParams, reckon_block
 from tsmpc.control.inner_block import InnerBlockParams, inner_block
 from tsmpc.control.ts_lqr import LQR_NUMPY, LQRLaw
 from tsmpc.estimation.fusion import SteerParams
-from tsmpc.kernels.jit import jitable, jitable_inline
+from tsmpc.kernels.jit import jitable_inline
 
 __all__ = ["CM_ALPHA", "CM_CALLS", "CM_D", "CM_F", "CM_HASLAST", "CM_LOW", "CM_SAT", "N_CM", "BackOut",
            "BackParams", "BackState", "back_start", "cascade_back", "cascade_command", "command_state"]
@@ -125,7 +125,7 @@ def back_start(p: BackParams, s: BackState, ok: bool, pose_ok: bool, th: float, 
              delta, force, est_status, blind, cmd[CM_HASLAST] != 0.0 and cmd[CM_SAT] != 0.0)
 
 
-@jitable
+@jitable_inline
 def cascade_command(p: BackParams, s: BackState, F: float, delta: float, saturated: bool, low: float,
                     alpha: float) -> float:
     """The command of the inner loop's (F_xR, ``delta``): the angle sent (the servo), and the

@@ -61,13 +61,13 @@ from tsmpc.control._back import (
     cascade_command,
     command_state,
 )
+from tsmpc.control._front import FrontParams, FrontState, cascade_front
 from tsmpc.control.fusion_block import (
     FB_OFF,
     FB_SENT,
     FB_SV,
     FB_SW,
     FusionParams,
-    before_at,
     course_load,
     course_store,
     fusion_state,
@@ -84,7 +84,6 @@ from tsmpc.control.gates import (
     GateBlockParams,
     GateParams,
     blind_stop,
-    gate_block,
     gate_state,
     nearest_sample,
     plausible_speeds,
@@ -422,11 +421,6 @@ class Cascade:
         self._ob, self._oc = outer_state(None if self._x0 is None else self._x0[:3])
         self._pose_fresh = False
         self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
-        # the phase after the MHE's state (_back.BackState: the blocks' vectors above; None until
-        # the pose record exists)
-        self._back_s = None if self._pose is None else BackState(
-            self._pose, self._fb, self._cur, self._sa, self._cmd, getattr(self.lqr, "_s", self._cmd[:0]),
-            self._ib_state, self._ib_ring, self._ib_count)
         # recovery (gates.py): the last accepted speed / yaw-rate sample, the blind stop, the
         # reference time offset, the run of poses rejected as jumps
         self._t_meas: float | None = None
@@ -435,6 +429,13 @@ class Cascade:
         self._outage_s = 0.0
         self._catch_up = False  # after a re-anchoring: the reference waits for the car's speed
         self._gs, self._gate_count = gate_state()  # the gate block's state and counters
+        # the phases' states (_front.FrontState, _back.BackState: the blocks' vectors above; None
+        # until the pose record exists)
+        self._front_s = None if self._pose is None else FrontState(
+            self._gs, self._gate_count, self._pose, self._fb, self._ivs, self._cur, self._cmd)
+        self._back_s = None if self._pose is None else BackState(
+            self._pose, self._fb, self._cur, self._sa, self._cmd, getattr(self.lqr, "_s", self._cmd[:0]),
+            self._ib_state, self._ib_ring, self._ib_count)
         self._last: Command | None = None
         self._plan: MPCResult | None = None
         self._events = dict.fromkeys(EVENT_NAMES, 0)
@@ -648,12 +649,9 @@ class Cascade:
         v, om = float(m.v), float(m.omega)
         if self._x0 is None:
             self._start_from(t, X, Y, th, v, om)
-        fresh, speeds_ok, pose_ok = self._gate(t, m, X, Y, th, v, om)
+        # the gates, the MPC's turn, the fusion block before the MPC: ω less its bias from here on
+        fresh, speeds_ok, pose_ok, mpc_step, om = self._front(t, m, X, Y, th, v, om)
         ok = fresh and speeds_ok
-        mpc_step = self._calls % self.n_inner == 0
-        # the fusion block (fusion_block.py): the gyro's sample, ω less its bias from here on, and
-        # the course interval's close at an accepted pose
-        om = self._fuse(t, pose_ok, X, Y, th, ok, v, om, mpc_step)
         plan, e_meas, t_mpc = (self._outer(t, X, Y, th, v, om, fresh, speeds_ok, pose_ok) if mpc_step
                                else (None, None, 0.0))
         # (_u_prev and _pose are set by _start_from above; ignores, not asserts: the syntax tree
@@ -665,20 +663,6 @@ class Cascade:
         F, delta, sat = self._back(m, est, u_model, ok, pose_ok, th, v, v_ref, w_ref)
         t3 = time.perf_counter()
         return Command(F, delta, sat, v_ref, w_ref, est, plan, e_meas, t_mpc, t2 - t1, t3 - t2)
-
-    def _fuse(self, t: float, pose_ok: bool, X: float, Y: float, th: float, ok: bool, v: float, om: float,
-              mpc_step: bool) -> float:
-        """The fusion block before the MPC and the MHE (fusion_block.before_at, compiled or as
-        Python, on the block's vectors): the yaw-rate bias fit's sample of the raw ω against the
-        accepted pose's heading, and the course fusion's close at an accepted pose; ω less the bias
-        for every block after it (the MHE, hence ω̂ for the TS-LQR and the dead reckoning; the
-        course fits)."""
-        call = self._fuse_call
-        if call is not None:
-            return call[0](call[1], self._fb, self._ivs, self._cur, pose_ok, X, Y, th, ok, v, om, mpc_step, t,
-                           self._t_offset, call[2], call[3])
-        return before_at(self._fb_p, self._fb, self._ivs, self._cur, pose_ok, X, Y, th, ok, v, om, mpc_step,
-                         t, self._t_offset, self._ref_v, self._ref_w)
 
     def _back(self, m: Measurement, est: Estimate, u_model: tuple[float, float], ok: bool, pose_ok: bool,
               th: float, v: float, v_ref: float, w_ref: float) -> tuple[float, float, bool]:
@@ -741,17 +725,25 @@ class Cascade:
         self._t_last = t_last
         self._pose[PO_T] = t  # type: ignore[index]
 
-    def _gate(self, t: float, m: Measurement, X: float, Y: float, th: float, v: float,
-              om: float) -> tuple[bool, bool, bool]:
-        """The sample gates (gates.gate_block, compiled or as Python): (fresh, speeds plausible, pose
-        accepted). The pose, every call: accepted when fresh, finite and where the car can be; else
-        the dead-reckoned pose stands (advanced at the end of the call) for the plausibility gate."""
+    def _front(self, t: float, m: Measurement, X: float, Y: float, th: float, v: float,
+               om: float) -> tuple[bool, bool, bool, bool, float]:
+        """The phase before the outer loop (_front.cascade_front: one compiled call on the default
+        path; as Python with TSMPC_NO_JIT): the sample gates, the MPC's turn and the fusion block
+        before the MPC and the MHE — (fresh, speeds plausible, pose accepted, the MPC runs, ω less
+        the gyro's bias). The pose, every call: accepted when fresh, finite and where the car can
+        be; else the dead-reckoned pose stands (advanced at the end of the call) for the
+        plausibility gate. The yaw-rate bias fit takes the raw ω against the accepted pose's
+        heading, the course fusion closes its interval at an accepted pose."""
         fresh = m.stamp is None or self._fresh(t, m)
         if self._recovery is not None:  # (the speed gate's answer, before the block counts it)
             self._watch_samples(t, fresh and plausible_speeds(self._gates, v, om) and _finite(v, om))
         stamp = -math.inf if m.stamp is None else float(m.stamp)  # a new stamp is a new sample
-        call = self._gate_call
-        return call[0](call[1], self._gs, self._gate_count, self._pose, t, fresh, X, Y, th, v, om, stamp)
+        call, s = self._front_call, self._front_s
+        if call is not None:
+            return call[0](call[1], call[2], call[3], *s, t, fresh, X, Y, th, v, om, stamp,  # type: ignore[misc]
+                           self._t_offset, call[4], call[5])
+        return cascade_front(self._front_p, s, t, fresh, X, Y, th, v, om, stamp, self._t_offset,  # type: ignore[arg-type]
+                             self._ref_v, self._ref_w)
 
     def _outer(self, t: float, X: float, Y: float, th: float, v: float, om: float, fresh: bool,
                speeds_ok: bool, pose_ok: bool) -> tuple[MPCResult, NDArray[np.float64], float]:
@@ -975,13 +967,6 @@ class Cascade:
             MassParams(float(cfg.vehicle.mass), self.Td, int(N), float(lq.speed_time_constant),
                        bool(lq.speed_feedback)),
             inner if isinstance(inner, InnerParams) else InnerParams(False, False, False, 1.0, 0.0))
-        from tsmpc import kernels
-
-        kern = kernels.load("blocks")
-        # the gate block's call: compiled, or as Python (TSMPC_NO_JIT)
-        self._gate_call: Any = (gate_block, self._gate_p)
-        if kern is not None:
-            self._gate_call = (kern.gate_call, kern.pack_gates(self._gate_p))
         # the TS-LQR whose step is the block's (the as-run law's is its own)
         self._ib_lqr: TSLQR | None = self.lqr if isinstance(inner, InnerParams) else None  # type: ignore[assignment]
 
@@ -991,19 +976,21 @@ class Cascade:
         from tsmpc import kernels
 
         self._back_p = BackParams(self._gates, self._fb_p, self._fusion.steer_p, self._ib)
+        self._front_p = FrontParams(self._gate_p, self._fb_p, self.n_inner)
         self._course_speed = bool(cfg.fusion.course_speed)
         kern = kernels.load("blocks")
         self._back_call: Any = None
         self._start_call: Any = None
         self._command_call: Any = None
-        self._fuse_call: Any = None
+        self._front_call: Any = None
         self._stiff_call: Any = None
         if kern is None:
             return
         lqr, law = self._ib_lqr, getattr(self.lqr, "_law", None)
         pk = kern.pack_back(self._back_p, law)
         self._start_call, self._command_call = (kern.start_call, pk), (kern.command_call, pk)
-        self._fuse_call = (kern.fuse_call, pk, self._refs[3], self._refs[4])  # (the reference's v_d, ω_d)
+        self._front_call = (kern.front_call, kern.pack_gates(self._gate_p), pk, self.n_inner, self._refs[3],
+                            self._refs[4])  # (the reference's v_d, ω_d)
         self._stiff_call = (kern.stiffness_call, pk)
         if lqr is not None and law is not None and lqr._kern is not None:
             self._back_call = (kern.back_call, pk, law.Kv, law.zlo, law.zhi, law.bits, law.prm)

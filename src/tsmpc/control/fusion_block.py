@@ -308,7 +308,8 @@ def fusion_state(g: GyroState, st: SteerState, offset: float, sent: float, cs: C
 @jitable_inline
 def before_at(p: FusionParams, fb: NDArray[np.float64], ivs: NDArray[np.float64], row: NDArray[np.float64],
               pose_ok: bool, X: float, Y: float, th: float, ok: bool, v: float, omega: float, mpc_step: bool,
-              t: float, t_off: float, v_d: NDArray[np.float64], w_d: NDArray[np.float64]) -> float:
+              t: float, t_off: float, v_d: Sequence[float] | NDArray[np.float64],
+              w_d: Sequence[float] | NDArray[np.float64]) -> float:
     """:func:`fusion_before` on the state vector ``fb``, the ring's rows ``ivs`` and the open
     interval's ``row``: ω less the bias (kept in ``FB_OMEGA`` too)."""
     om, g, cs, cur = fusion_before(p, gyro_load(fb), course_load(fb, ivs), iv_load(row), pose_ok, X, Y, th,

@@ -26,7 +26,8 @@ from numba import njit
 
 from tsmpc import kernels
 from tsmpc.control._back import BackParams, BackState, back_start, cascade_back, cascade_command
-from tsmpc.control.fusion_block import N_FBP, before_at, course_load, course_store, unpack_fusion
+from tsmpc.control._front import FrontParams, FrontState, cascade_front
+from tsmpc.control.fusion_block import N_FBP, course_load, course_store, unpack_fusion
 from tsmpc.control.gates import GateBlockParams, GateParams, gate_block, gate_state, reckon_block
 from tsmpc.control.inner_block import InnerBlockParams, inner_block, start_state
 from tsmpc.control.mhe_block import MHEBlockParams, MHEWindow, mhe_block
@@ -37,7 +38,7 @@ from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import CourseParams, MassParams
 from tsmpc.kernels.jit import BLOCK_MODULES
 
-__all__ = ["after_call", "back_call", "command_call", "fuse_call", "gate_call", "inner_call", "mhe_call",
+__all__ = ["after_call", "back_call", "command_call", "front_call", "gate_call", "inner_call", "mhe_call",
            "outer_call", "pack", "pack_back", "pack_gates", "reckon_call", "stiffness_call", "warm"]
 
 # entries compiled from other versions of the blocks (or of the law, kernels/lqr.py) are deleted
@@ -212,10 +213,17 @@ def command_call(pk, fb, sa, cmd, F, delta, saturated, low, alpha):
 
 
 @njit(cache=True, fastmath=False)
-def fuse_call(pk, fb, ivs, cur, pose_ok, X, Y, th, ok, v, omega, mpc_step, t, t_off, v_d, w_d):
-    """:func:`~tsmpc.control.fusion_block.before_at` of the packed records: ω less the bias."""
+def front_call(gbp, pk, n_inner, gs, gcnt, pose, fb, ivs, cur, cmd, t, fresh, X, Y, th, v, omega, stamp,
+               t_off, v_d, w_d):
+    """:func:`~tsmpc.control._front.cascade_front` of the packed records (the gate block's,
+    :func:`pack_gates`; the fusion block's, :func:`pack_back`): (fresh, speeds plausible, pose
+    accepted, the MPC runs, ω less the bias)."""
     fbp, _sp = unpack_fusion(pk[BK_FUS:BK_FUS + N_FBP], _course_params(pk[BK_COURSE:BK_INNER]))
-    return before_at(fbp, fb, ivs, cur, pose_ok, X, Y, th, ok, v, omega, mpc_step, t, t_off, v_d, w_d)
+    gp = GateBlockParams(_gate_params(gbp), gbp[6] != 0.0, gbp[7], gbp[8] != 0.0)
+    state = FrontState(gs, gcnt, pose, fb, ivs, cur, cmd)
+    out = cascade_front(FrontParams(gp, fbp, n_inner), state, t, fresh, X, Y, th, v, omega, stamp, t_off, v_d,
+                        w_d)
+    return out.fresh, out.speeds_ok, out.pose_ok, out.mpc_step, out.omega
 
 
 @njit(cache=True, fastmath=False)
@@ -254,3 +262,27 @@ def warm() -> None:
     st, ring, cnt = start_state(30)
     inner_call(pack(p, law), law.Kv, law.zlo, law.zhi, law.bits, law.prm, np.zeros(6), st, ring, cnt, 10.0,
                0.0, 0.0, 100.0, 90.0, 1, 10.0, 0.0)
+    _warm_phases(gp, p, law, pose, gs, gcnt)
+
+
+def _warm_phases(gp: GateBlockParams, p: InnerBlockParams, law: LQRLaw, pose: np.ndarray, gs: np.ndarray,
+                 gcnt: np.ndarray) -> None:
+    """Compile (or load) the phases' calls for the cascade's types (the warm-up's records)."""
+    from tsmpc.control.fusion_block import FusionParams, fusion_state
+    from tsmpc.estimation import fusion as fu
+
+    cp = fu.course_params(0.1, 0.05, True, 25000.0, 25000.0, 683.0, 560.0, 0.758, 1.036, 9.81, 0.01, 10)
+    gyro = fu.gyro_params(0.01, 0.01, 0.01)
+    sp = fu.steer_params(0.01, 25000.0, 25000.0, 0.758, 1.036, 683.0, 560.0)
+    bpk = pack_back(BackParams(gp.gates, FusionParams(True, True, True, -0.4, 0.4, gyro, cp), sp, p), law)
+    fb, ivs, cur = fusion_state(fu.gyro_start(gyro), fu.steer_start(sp), 0.0, 0.0, fu.course_start(cp),
+                                fu.NO_INTERVAL)
+    cmd, sa, ref = np.zeros(7), np.zeros(3), np.ones((2, 20)) * 10.0
+    front_call(pack_gates(gp), bpk, 10, gs, gcnt, pose, fb, ivs, cur, cmd, 0.02, True, 1.0, 2.0, 0.1, 10.0,
+               0.1, -np.inf, 0.0, ref[0], ref[1])
+    st, ring, cnt = start_state(30)
+    back_call(bpk, law.Kv, law.zlo, law.zhi, law.bits, law.prm, pose, fb, cur, sa, cmd, np.zeros(6), st, ring,
+              cnt, True, True, 0.1, 10.0, 10.0, 0.0, 0.1, 100.0, 90.0, 1, 0.0, 0.0, 10.0, 0.1)
+    start_call(bpk, pose, fb, cur, sa, cmd, True, True, 0.1, 10.0, 10.0, 0.0, 0.1, 1, 0.0, 0.0, False)
+    command_call(bpk, fb, sa, cmd, 0.0, 0.0, False, 0.0, 0.0)
+    stiffness_call(bpk, fb, ivs, sa, np.zeros(64), np.zeros(8))

@@ -47,7 +47,6 @@ from numba.extending import intrinsic as _numba_intrinsic
 
 from tsmpc.control._back import (
     CM_ALPHA,
-    CM_CALLS,
     CM_D,
     CM_F,
     CM_HASLAST,
@@ -59,6 +58,7 @@ from tsmpc.control._back import (
     cascade_back,
     cascade_command,
 )
+from tsmpc.control._front import FrontParams, FrontState, cascade_front
 from tsmpc.control.fusion_block import (
     FB_OFF,
     FB_OMEGA,
@@ -66,7 +66,6 @@ from tsmpc.control.fusion_block import (
     FB_SW,
     N_FB,
     N_FBP,
-    before_at,
     course_load,
     course_store,
     slip_load,
@@ -84,7 +83,6 @@ from tsmpc.control.gates import (
     PO_T,
     GateBlockParams,
     GateParams,
-    gate_block,
 )
 from tsmpc.control.inner_block import (
     EST_FAILED,
@@ -474,23 +472,19 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                                                          ref_w, th_tan, mv, mw)
                 if _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, fp, sc):
                     return DIVERGED
-            # ---- Cascade._step: the gate block (Cascade._gate: Cascade._gate_p, its state, counters and
-            # pose record; the simulator's samples carry no stamp)
-            X, Y, th, v, omv = y[0], y[1], y[2], y[3], y[4]
-            gbp = GateBlockParams(gates, ip[IP_RECOV] != 0, fp[FP_REINIT], ip[IP_REPEAT] != 0)
-            fresh, speeds_ok, pose_ok = gate_block(gbp, sf[SF_GS:SF_GS + N_GS], ev[EV_GATES:EV_GATES + N_GC],
-                                                   sf[SF_POSE:SF_POSE + N_PO], t, True, X, Y, th, v, omv,
-                                                   -math.inf)
-            si[SI_FRESH] = 1 if fresh else 0
-            si[SI_SPOK] = 1 if speeds_ok else 0
-            si[SI_POSEOK] = 1 if pose_ok else 0
-            cmd = sf[SF_CMD:SF_CMD + N_CM]  # the command record (the phase after the MHE keeps it)
-            mpc_step = int(cmd[CM_CALLS]) % n_in == 0
-            # the fusion block (Cascade._fuse): the gyro's sample, ω less its bias (kept for the
-            # MHE and the part after it), the course interval's close at an accepted pose
+            # ---- Cascade._step: the phase before the outer loop (Cascade._front: the gate block, the
+            # MPC's turn, the fusion block before the MPC and the MHE; the simulator's samples carry
+            # no stamp)
             fbs = sf[SF_FB:SF_FB + N_FB]
-            before_at(fbp, fbs, ivs, cur, pose_ok, X, Y, th, fresh and speeds_ok, v, omv, mpc_step, t,
-                      sf[SF_TOFF], ref_v, ref_w)
+            gbp = GateBlockParams(gates, ip[IP_RECOV] != 0, fp[FP_REINIT], ip[IP_REPEAT] != 0)
+            fst = FrontState(sf[SF_GS:SF_GS + N_GS], ev[EV_GATES:EV_GATES + N_GC], sf[SF_POSE:SF_POSE + N_PO],
+                             fbs, ivs, cur, sf[SF_CMD:SF_CMD + N_CM])
+            fo = cascade_front(FrontParams(gbp, fbp, n_in), fst, t, True, y[0], y[1], y[2], y[3], y[4],
+                               -math.inf, sf[SF_TOFF], ref_v, ref_w)
+            si[SI_FRESH] = 1 if fo.fresh else 0
+            si[SI_SPOK] = 1 if fo.speeds_ok else 0
+            si[SI_POSEOK] = 1 if fo.pose_ok else 0
+            mpc_step, pose_ok = fo.mpc_step, fo.pose_ok
             kr = math.floor((t - sf[SF_TOFF]) / Tc + 1e-6)
             kw = kr if kr > 0 else 0
             phase = PH_MHE
@@ -503,9 +497,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                 wv, ww = sc[N_SC:N_SC + N + 1], sc[N_SC + N + 1:N_SC + 2 * (N + 1)]
                 has_prev = si[SI_HASPREV] != 0
                 governed = outer_errors(op, refs, obs, ocnt, gate, slip_load(fbs), t, kw, pose_ok,
-                                        sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2], cmd[CM_HASLAST] != 0,
-                                        cmd[CM_ALPHA], has_prev, prevX[1, 1], sf[SF_UPREV], e_meas, wv, ww,
-                                        obuf)
+                                        sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2],
+                                        sf[SF_CMD + CM_HASLAST] != 0, sf[SF_CMD + CM_ALPHA], has_prev,
+                                        prevX[1, 1], sf[SF_UPREV], e_meas, wv, ww, obuf)
                 si[SI_GWIN] = 1 if governed else 0
                 # ---- TSMPC.step: its compiled step (checks, schedule, Riccati fast path); a
                 # declined step (a constraint active, a non-finite input) is the caller's

@@ -129,9 +129,9 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:simulate": "ba020e97f0f11213",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
     "tsmpc.control.cascade:Cascade.__init__": "3ca6145a5fdd53f7",
-    "tsmpc.control.cascade:Cascade.reset": "5cca8f710649aea6",
+    "tsmpc.control.cascade:Cascade.reset": "536ca6e339fe8c53",
     "tsmpc.control.cascade:Cascade.step": "153443d2b249fd93",
-    "tsmpc.control.cascade:Cascade._step": "b2bf4932265371fc",
+    "tsmpc.control.cascade:Cascade._step": "14053a91095a8707",
     "tsmpc.control.cascade:Cascade._start_from": "ec50854f219e3425",
     "tsmpc.control.cascade:Cascade._outer": "a8a41901f93c5023",
     "tsmpc.control.cascade:Cascade._watch_samples": "a2b6f37a111ff688",
@@ -246,16 +246,16 @@ def _replaced_code() -> str | None:
         cas = importlib.import_module("tsmpc.control.cascade")
         if blk is not ke.stiffness_block or cas.stiffness_block is not blk:
             return "tsmpc.control.stiffness_block's block was replaced"
-        fb = importlib.import_module("tsmpc.control.fusion_block")  # the fusion's glue
-        if fb.before_at is not ke.before_at or cas.before_at is not fb.before_at:
-            return "tsmpc.control.fusion_block's block was replaced"
+        fr = importlib.import_module("tsmpc.control._front")  # the phase before the outer loop
+        if fr.cascade_front is not ke.cascade_front or cas.cascade_front is not fr.cascade_front or (
+                fr.before_at is not importlib.import_module("tsmpc.control.fusion_block").before_at):
+            return "tsmpc.control._front's phase was replaced"
         bk = importlib.import_module("tsmpc.control._back")  # the phase after the MHE
         parts = (bk.back_start, bk.cascade_back, bk.cascade_command)
         if (ke.cascade_back, ke.cascade_command) != parts[1:] or (
                 cas.back_start, cas.cascade_back, cas.cascade_command) != parts:
             return "tsmpc.control._back's phase was replaced"
-        gt = importlib.import_module("tsmpc.control.gates")  # the gates' glue
-        if gt.gate_block is not ke.gate_block or cas.gate_block is not gt.gate_block:
+        if importlib.import_module("tsmpc.control.gates").gate_block is not fr.gate_block:  # the gates' glue
             return "tsmpc.control.gates' block was replaced"
         ob = importlib.import_module("tsmpc.control.outer_block")
         if ob.outer_errors is not ke.outer_errors or ob.outer_after is not ke.outer_after:
