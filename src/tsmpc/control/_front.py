@@ -13,8 +13,16 @@ call's clock, the sample's stamp, the recovery's watch of the speed samples — 
 call's start from the measurement are not part of it (the run engine's samples carry no stamp and
 its runs cannot blind the cascade).
 
+At an MPC step, :func:`cascade_outer` is the part before the solve: the stiffness block
+(:func:`~tsmpc.control.stiffness_block.stiffness_block`, ``fusion.stiffness_estimate``: the course
+fits' stiffnesses handed to the MHE's and the TS-LQR's parameters) and the outer block's errors and
+window (:func:`~tsmpc.control.outer_block.outer_errors` on the pose record, the slip fit of the
+fusion block's state and the last estimate's α̂ of the command record). The Python models around
+the parameters the stiffness block wrote follow in the cascade; the reference sample ``k`` (the
+time base) and the recovery's re-anchoring are the caller's.
+
 Records: :class:`FrontParams`, :class:`FrontState` (the blocks' state vectors, changed in place),
-the result :class:`FrontOut`.
+the result :class:`FrontOut`; :class:`OuterParams`, :class:`OuterState`.
 """
 
 from __future__ import annotations
@@ -25,12 +33,16 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from tsmpc.control._back import CM_CALLS
-from tsmpc.control.fusion_block import FusionParams, before_at
-from tsmpc.control.gates import GateBlockParams, gate_block
-from tsmpc.kernels.jit import jitable_inline
+from tsmpc.control._back import CM_ALPHA, CM_CALLS, CM_HASLAST
+from tsmpc.control.fusion_block import FusionParams, before_at, course_load, course_store, slip_load
+from tsmpc.control.gates import PO_TH, PO_X, PO_Y, GateBlockParams, gate_block
+from tsmpc.control.outer_block import OuterBlockParams, RefArrays, outer_errors
+from tsmpc.control.stiffness_block import stiffness_block
+from tsmpc.estimation.fusion import CourseParams
+from tsmpc.kernels.jit import jitable, jitable_inline
 
-__all__ = ["FrontOut", "FrontParams", "FrontState", "cascade_front"]
+__all__ = ["FrontOut", "FrontParams", "FrontState", "OuterParams", "OuterState", "cascade_front",
+           "cascade_outer", "stiffness_step"]
 
 
 class FrontParams(NamedTuple):
@@ -101,3 +113,74 @@ def cascade_front(p: FrontParams, s: FrontState, t: float, fresh: bool, X: float
     om = before_at(p.fusion, s.fb, s.ivs, s.cur, pose_ok, X, Y, th, fresh and speeds_ok, v, omega, mpc_step,
                    t, t_off, v_d, w_d)
     return FrontOut(fresh, speeds_ok, pose_ok, mpc_step, om)
+
+
+class OuterParams(NamedTuple):
+    """The MPC step's part before the solve: its parameters.
+
+    Attributes:
+        stiffness: the stiffness block runs (``fusion.stiffness_estimate`` with the course fusion).
+        cp: the course fusion's parameters.
+        outer: the outer block's record.
+    """
+
+    stiffness: bool
+    cp: CourseParams
+    outer: OuterBlockParams
+
+
+class OuterState(NamedTuple):
+    """Its state: the blocks' vectors, changed in place.
+
+    Attributes:
+        fb: the fusion block's state vector (``fusion_block.FB_*``).
+        ivs: the course fusion's ring of intervals.
+        sa: the stiffnesses given (``stiffness_block.SA_*``).
+        mp: the MHE's parameters (the stiffness block writes C_f, C_r).
+        prm: the TS-LQR law's parameters (the same).
+        ob: the outer block's state (``outer_block.OB_*``).
+        oc: the outer block's counters (``outer_block.OC_*``).
+        gate: the slip gate's MPC poses.
+        pose: the gate block's pose record (``gates.PO_*``).
+        cmd: the command record (``_back.CM_*``; read only).
+    """
+
+    fb: NDArray[np.float64]
+    ivs: NDArray[np.float64]
+    sa: NDArray[np.float64]
+    mp: NDArray[np.float64]
+    prm: NDArray[np.float64]
+    ob: NDArray[np.float64]
+    oc: NDArray[np.int64]
+    gate: NDArray[np.float64]
+    pose: NDArray[np.float64]
+    cmd: NDArray[np.float64]
+
+
+@jitable
+def stiffness_step(cp: CourseParams, fb: NDArray[np.float64], ivs: NDArray[np.float64],
+                   sa: NDArray[np.float64], mp: NDArray[np.float64], prm: NDArray[np.float64]) -> bool:
+    """The stiffness block on the course state of the fusion block's vectors: True when it gave the
+    stiffnesses (then in ``sa``, ``mp``, ``prm``; κ restarted when they replaced given ones — the
+    state is unchanged otherwise). (A call of its own in compiled callers: inlined, the course
+    state's 8 intervals cost the batch about 4 %.)"""
+    give, cs = stiffness_block(cp, course_load(fb, ivs), sa, mp, prm)
+    if give:
+        course_store(cs, fb, ivs)
+    return give
+
+
+@jitable_inline
+def cascade_outer(p: OuterParams, r: RefArrays, s: OuterState, t: float, k: int, pose_ok: bool,
+                  has_pred: bool, pred_y: float, v_prev: float, e: NDArray[np.float64],
+                  win_v: NDArray[np.float64], win_w: NDArray[np.float64],
+                  buf: NDArray[np.float64]) -> tuple[bool, bool]:
+    """An MPC step before the solve (see the module docstring) at reference sample ``k``; the
+    previous plan's prediction of e_y now (``has_pred``), the MPC's previous speed command: (the
+    stiffness block gave the stiffnesses, the errors and window are the governed reference's)."""
+    give = stiffness_step(p.cp, s.fb, s.ivs, s.sa, s.mp, s.prm) if p.stiffness else False
+    pose, cmd = s.pose, s.cmd
+    governed = outer_errors(p.outer, r, s.ob, s.oc, s.gate, slip_load(s.fb), t, k, pose_ok, pose[PO_X],
+                            pose[PO_Y], pose[PO_TH], cmd[CM_HASLAST] != 0.0, cmd[CM_ALPHA], has_pred, pred_y,
+                            v_prev, e, win_v, win_w, buf)
+    return give, governed

@@ -61,17 +61,21 @@ from tsmpc.control._back import (
     cascade_command,
     command_state,
 )
-from tsmpc.control._front import FrontParams, FrontState, cascade_front
+from tsmpc.control._front import (
+    FrontParams,
+    FrontState,
+    OuterParams,
+    OuterState,
+    cascade_front,
+    cascade_outer,
+)
 from tsmpc.control.fusion_block import (
     FB_OFF,
     FB_SENT,
     FB_SV,
     FB_SW,
     FusionParams,
-    course_load,
-    course_store,
     fusion_state,
-    slip_load,
 )
 from tsmpc.control.gates import (
     GC_JUMP,
@@ -125,14 +129,13 @@ from tsmpc.control.outer_block import (
     RefArrays,
     governed_sample,
     outer_after,
-    outer_errors,
     outer_state,
     pack_govern,
     pack_outer,
     scratch_size,
 )
 from tsmpc.control.slip_aware import BASELINE
-from tsmpc.control.stiffness_block import MP_CR, N_SA, PRM_CR, SA_CF, SA_CR, SA_HAS, stiffness_block
+from tsmpc.control.stiffness_block import MP_CR, N_SA, PRM_CR, SA_CF, SA_CR, SA_HAS
 from tsmpc.control.ts_lqr import LQR_NUMPY, TSLQR, InnerParams
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep, FrictionStepParams
@@ -260,12 +263,6 @@ def build_outer_controller(
     from tsmpc.control.ts_mpc import TSMPC
 
     return TSMPC(cfg.mpc, model, P, S, mode=method)
-
-
-def _xyz(p: NDArray[np.float64]) -> tuple[float, float, float]:
-    """The three floats (X, Y, θ) of the gate block's pose record (gates.PO_*)."""
-    x, y, th, _t = p.tolist()
-    return x, y, th
 
 
 def _finite(*xs: float) -> bool:
@@ -433,6 +430,9 @@ class Cascade:
         # until the pose record exists)
         self._front_s = None if self._pose is None else FrontState(
             self._gs, self._gate_count, self._pose, self._fb, self._ivs, self._cur, self._cmd)
+        self._outer_s = None if self._pose is None else OuterState(
+            self._fb, self._ivs, self._sa, self._stiff_mp, self._stiff_prm, self._ob, self._oc,
+            self._gate_poses, self._pose, self._cmd)
         self._back_s = None if self._pose is None else BackState(
             self._pose, self._fb, self._cur, self._sa, self._cmd, getattr(self.lqr, "_s", self._cmd[:0]),
             self._ib_state, self._ib_ring, self._ib_count)
@@ -555,25 +555,18 @@ class Cascade:
         self._t_last = tt
         return tt
 
-    def _apply_stiffness(self) -> None:
-        """fusion.stiffness_estimate: the stiffness block (stiffness_block.py) gives the fitted
-        axle stiffnesses to the MHE's and the TS-LQR's parameters when they moved by over 1 % (the
-        fusion decides, and restarts the slip fit's gain κ when they replace given ones); the
-        Python models around those arrays and the steering-offset fit's balance follow."""
-        sa, call = self._sa, self._stiff_call
-        if call is not None:
-            give = call[0](call[1], self._fb, self._ivs, sa, self._stiff_mp, self._stiff_prm)
-        else:  # TSMPC_NO_JIT: the block as Python on the fusion block's vectors
-            give, s = stiffness_block(self._fusion.course.params, course_load(self._fb, self._ivs), sa,
-                                      self._stiff_mp, self._stiff_prm)
-            course_store(s, self._fb, self._ivs)
-        if give:
-            C_f, C_r = sa[SA_CF], sa[SA_CR]
-            for b in (self.mhe, self.lqr):
-                follow = getattr(b, "model_stiffness", None) or getattr(b, "set_cornering_stiffness", None)
-                if follow is not None:
-                    follow(C_f, C_r)
-            self._fusion.set_stiffness(C_f, C_r)  # the steering-offset fit's balance too
+    def _stiffness_given(self) -> None:
+        """fusion.stiffness_estimate: the stiffness block (stiffness_block.py, in the outer phase:
+        _front.cascade_outer) gave the fitted axle stiffnesses (they moved by over 1 %; the slip
+        fit's gain κ restarted when they replaced given ones) to the MHE's and the TS-LQR's
+        parameter arrays: the Python models around those arrays and the steering-offset fit's
+        balance follow."""
+        C_f, C_r = float(self._sa[SA_CF]), float(self._sa[SA_CR])
+        for b in (self.mhe, self.lqr):
+            follow = getattr(b, "model_stiffness", None) or getattr(b, "set_cornering_stiffness", None)
+            if follow is not None:
+                follow(C_f, C_r)
+        self._fusion.set_stiffness(C_f, C_r)  # the steering-offset fit's balance too
 
     def _fresh(self, t: float, m: Measurement) -> bool:
         if m.stamp is None:
@@ -750,9 +743,6 @@ class Cascade:
         """An MPC step: (the plan, the errors it saw, its wall time). The outer block
         (outer_block.py) before the solve (the errors, the window) and after it (the plan's events,
         the governor); the recovery's restart around them."""
-        fu, fs = self._fusion, self.cfg.fusion
-        if fu.any_course and fs.stiffness_estimate:  # the course fits' stiffnesses (_step closed)
-            self._apply_stiffness()
         if self._reanchor and pose_ok:
             self._reanchored(t, X, Y, v, om)
         elif self._catch_up:
@@ -777,25 +767,24 @@ class Cascade:
         return plan, e_meas, t_mpc
 
     def _outer_block(self, t: float, k: int, pose_ok: bool) -> tuple[NDArray[np.float64], Any]:
-        """The outer block before the solve (outer_block.outer_errors, one compiled call): the
-        errors the MPC sees of the pose against reference sample ``k`` (or the governed time's) and
-        its window (v_d, ω_d; a baseline's: the reference's window)."""
-        X, Y, th = _xyz(self._pose)  # type: ignore[arg-type]
-        last = self._last
+        """The MPC step before the solve (_front.cascade_outer, one compiled call; as Python with
+        TSMPC_NO_JIT): the stiffness block (fusion.stiffness_estimate; the Python models follow
+        when it gave), the errors the MPC sees of the pose against reference sample ``k`` (or the
+        governed time's) and its window (v_d, ω_d; a baseline's: the reference's window)."""
         plan = None if self._catch_up else self._plan  # (a restart waiting for the car: no learning)
         xp = None if plan is None else plan.x_pred
         has_pred = xp is not None and len(xp) >= 2
         n = self.cfg.mpc.N + 1
         e, wv, ww = np.empty(3), np.empty(n), np.empty(n)
-        args = (self._ob, self._oc, self._gate_poses, slip_load(self._fb), t, k, pose_ok, X, Y, th,
-                last is not None, float(last.estimate.x[1]) if last is not None else 0.0, has_pred,
-                float(xp[1][1]) if has_pred else 0.0, float(self._u_prev[0]), e, wv, ww,  # type: ignore[index]
-                self._ob_buf)
+        args = (t, k, pose_ok, has_pred, float(xp[1][1]) if has_pred else 0.0,  # type: ignore[index]
+                float(self._u_prev[0]), e, wv, ww, self._ob_buf)  # type: ignore[index]
         call = self._outer_call
         if call is not None:
-            governed = call[0](call[1], self._refs, *args)
-        else:  # TSMPC_NO_JIT: the block as Python
-            governed = outer_errors(self._ob_p, self._ref_rec, *args)
+            give, governed = call[0](call[1], call[2], call[3], self._refs, *self._outer_s, *args)  # type: ignore[misc]
+        else:  # TSMPC_NO_JIT: the phase as Python
+            give, governed = cascade_outer(self._outer_p, self._ref_rec, self._outer_s, *args)  # type: ignore[arg-type]
+        if give:
+            self._stiffness_given()
         if not self._window_only:  # a baseline reads the whole reference window
             tau, rate = t - self._t_offset, float(self._ob[OB_RATE])
             return e, (governed_window(self._mpc_reference, tau, rate, n) if governed
@@ -846,12 +835,9 @@ class Cascade:
         from tsmpc import kernels
 
         kern = kernels.load("blocks")
-        self._outer_call: Any = None
         self._after_call: Any = None
         if kern is not None:
-            opk = pack_outer(self._ob_p)
-            self._outer_call = (kern.outer_call, opk)
-            self._after_call = (kern.after_call, opk, pack_govern(self._gov_p))
+            self._after_call = (kern.after_call, pack_outer(self._ob_p), pack_govern(self._gov_p))
 
     def _bound_yaw_rate(self, v: float) -> None:
         """recovery.yaw_rate_bound, from the end of a blind stop until the car has the reference's
@@ -977,13 +963,16 @@ class Cascade:
 
         self._back_p = BackParams(self._gates, self._fb_p, self._fusion.steer_p, self._ib)
         self._front_p = FrontParams(self._gate_p, self._fb_p, self.n_inner)
+        fu = self._fusion
+        stiff = bool(fu.any_course and cfg.fusion.stiffness_estimate)  # (with the course fits only)
+        self._outer_p = OuterParams(stiff, fu.course.params, self._ob_p)
         self._course_speed = bool(cfg.fusion.course_speed)
         kern = kernels.load("blocks")
         self._back_call: Any = None
         self._start_call: Any = None
         self._command_call: Any = None
         self._front_call: Any = None
-        self._stiff_call: Any = None
+        self._outer_call: Any = None
         if kern is None:
             return
         lqr, law = self._ib_lqr, getattr(self.lqr, "_law", None)
@@ -991,7 +980,7 @@ class Cascade:
         self._start_call, self._command_call = (kern.start_call, pk), (kern.command_call, pk)
         self._front_call = (kern.front_call, kern.pack_gates(self._gate_p), pk, self.n_inner, self._refs[3],
                             self._refs[4])  # (the reference's v_d, ω_d)
-        self._stiff_call = (kern.stiffness_call, pk)
+        self._outer_call = (kern.outer_phase_call, pk, pack_outer(self._ob_p), stiff)
         if lqr is not None and law is not None and lqr._kern is not None:
             self._back_call = (kern.back_call, pk, law.Kv, law.zlo, law.zhi, law.bits, law.prm)
 

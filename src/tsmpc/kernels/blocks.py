@@ -26,20 +26,26 @@ from numba import njit
 
 from tsmpc import kernels
 from tsmpc.control._back import BackParams, BackState, back_start, cascade_back, cascade_command
-from tsmpc.control._front import FrontParams, FrontState, cascade_front
-from tsmpc.control.fusion_block import N_FBP, course_load, course_store, unpack_fusion
+from tsmpc.control._front import (
+    FrontParams,
+    FrontState,
+    OuterParams,
+    OuterState,
+    cascade_front,
+    cascade_outer,
+)
+from tsmpc.control.fusion_block import N_FBP, unpack_fusion
 from tsmpc.control.gates import GateBlockParams, GateParams, gate_block, gate_state, reckon_block
 from tsmpc.control.inner_block import InnerBlockParams, inner_block, start_state
 from tsmpc.control.mhe_block import MHEBlockParams, MHEWindow, mhe_block
 from tsmpc.control.outer_block import RefArrays, outer_after, outer_errors, unpack_govern, unpack_outer
-from tsmpc.control.stiffness_block import stiffness_block
 from tsmpc.control.ts_lqr import InnerParams, LQRLaw
 from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import CourseParams, MassParams
 from tsmpc.kernels.jit import BLOCK_MODULES
 
 __all__ = ["after_call", "back_call", "command_call", "front_call", "gate_call", "inner_call", "mhe_call",
-           "outer_call", "pack", "pack_back", "pack_gates", "reckon_call", "stiffness_call", "warm"]
+           "outer_call", "outer_phase_call", "pack", "pack_back", "pack_gates", "reckon_call", "warm"]
 
 # entries compiled from other versions of the blocks (or of the law, kernels/lqr.py) are deleted
 # before the first call below loads one
@@ -227,13 +233,14 @@ def front_call(gbp, pk, n_inner, gs, gcnt, pose, fb, ivs, cur, cmd, t, fresh, X,
 
 
 @njit(cache=True, fastmath=False)
-def stiffness_call(pk, fb, ivs, sa, mp, prm):
-    """The stiffness block on the course state of the fusion block's vectors: True when it gave
-    the stiffnesses (then in ``sa``, ``mp`` and ``prm``)."""
-    give, s = stiffness_block(_course_params(pk[BK_COURSE:BK_INNER]), course_load(fb, ivs), sa, mp, prm)
-    if give:
-        course_store(s, fb, ivs)
-    return give
+def outer_phase_call(pk, opk, stiffness, refs, fb, ivs, sa, mp, prm, ob, oc, gate, pose, cmd, t, k, pose_ok,
+                     has_pred, pred_y, v_prev, e, win_v, win_w, buf):
+    """:func:`~tsmpc.control._front.cascade_outer` of the packed records (the course fusion's of
+    :func:`pack_back`, the outer block's of ``outer_block.pack_outer``) and the (8, L) reference:
+    (the stiffnesses given, governed)."""
+    p = OuterParams(stiffness, _course_params(pk[BK_COURSE:BK_INNER]), unpack_outer(opk))
+    state = OuterState(fb, ivs, sa, mp, prm, ob, oc, gate, pose, cmd)
+    return cascade_outer(p, _refs(refs), state, t, k, pose_ok, has_pred, pred_y, v_prev, e, win_v, win_w, buf)
 
 
 def warm() -> None:
@@ -285,4 +292,3 @@ def _warm_phases(gp: GateBlockParams, p: InnerBlockParams, law: LQRLaw, pose: np
               cnt, True, True, 0.1, 10.0, 10.0, 0.0, 0.1, 100.0, 90.0, 1, 0.0, 0.0, 10.0, 0.1)
     start_call(bpk, pose, fb, cur, sa, cmd, True, True, 0.1, 10.0, 10.0, 0.0, 0.1, 1, 0.0, 0.0, False)
     command_call(bpk, fb, sa, cmd, 0.0, 0.0, False, 0.0, 0.0)
-    stiffness_call(bpk, fb, ivs, sa, np.zeros(64), np.zeros(8))

@@ -46,7 +46,6 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic as _numba_intrinsic
 
 from tsmpc.control._back import (
-    CM_ALPHA,
     CM_D,
     CM_F,
     CM_HASLAST,
@@ -58,7 +57,14 @@ from tsmpc.control._back import (
     cascade_back,
     cascade_command,
 )
-from tsmpc.control._front import FrontParams, FrontState, cascade_front
+from tsmpc.control._front import (
+    FrontParams,
+    FrontState,
+    OuterParams,
+    OuterState,
+    cascade_front,
+    cascade_outer,
+)
 from tsmpc.control.fusion_block import (
     FB_OFF,
     FB_OMEGA,
@@ -66,9 +72,6 @@ from tsmpc.control.fusion_block import (
     FB_SW,
     N_FB,
     N_FBP,
-    course_load,
-    course_store,
-    slip_load,
     unpack_fusion,
 )
 from tsmpc.control.gates import (
@@ -112,11 +115,10 @@ from tsmpc.control.outer_block import (
     OC_SOFT,
     RefArrays,
     outer_after,
-    outer_errors,
     unpack_govern,
     unpack_outer,
 )
-from tsmpc.control.stiffness_block import N_SA, stiffness_block
+from tsmpc.control.stiffness_block import N_SA
 from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams, LQRLaw
 from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import (
@@ -340,17 +342,6 @@ def _sensor(m, n_in, Tc, Td, x, noise, u_drop, draws, sp, ss, fifo, y):
 # The course fusion's state is the fusion block's (sf[SF_FB:], the ring ivs, the open interval
 # cur: tsmpc.control.fusion_block's FB_* and IV_* slots, its course_load / course_store).
 @njit(cache=True, fastmath=False)
-def _course_stiffness(cp, ivs, sf, si, mp, prm):
-    """An MPC step with the stiffness fit (``Cascade._apply_stiffness``): the stiffness block
-    :func:`~tsmpc.control.stiffness_block.stiffness_block` on the course state of the slots, the
-    MHE's ``mp``, the TS-LQR's ``prm`` and the record ``sf[SF_SA:]`` of those given."""
-    fb = sf[SF_FB:SF_FB + N_FB]  # (the course state: the fusion block's slots and ring)
-    give, s = stiffness_block(cp, course_load(fb, ivs), sf[SF_SA:SF_SA + N_SA], mp, prm)
-    if give:
-        course_store(s, fb, ivs)  # (κ restarted when they replaced given ones)
-
-
-@njit(cache=True, fastmath=False)
 def _delta_mass(sf, fp):
     """ΔM̂ of the inner block's mass fit (:func:`delta_mass`)."""
     return delta_mass(MassParams(fp[FP_VM], fp[FP_TD], 0, fp[FP_TAU], False),
@@ -489,17 +480,17 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             kw = kr if kr > 0 else 0
             phase = PH_MHE
             if mpc_step:
-                if ip[IP_ANYCOURSE] != 0 and ip[IP_STIFF] != 0:
-                    _course_stiffness(cpar, ivs, sf, si, mp, prm)
-                # the outer block (Cascade._outer_block): the errors the MPC sees, its window
+                # the MPC step before the solve (Cascade._outer_block): the stiffness block, the errors
+                # the MPC sees, its window
                 op, refs, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v,
                                                          ref_w, th_tan, mv, mw)
                 wv, ww = sc[N_SC:N_SC + N + 1], sc[N_SC + N + 1:N_SC + 2 * (N + 1)]
                 has_prev = si[SI_HASPREV] != 0
-                governed = outer_errors(op, refs, obs, ocnt, gate, slip_load(fbs), t, kw, pose_ok,
-                                        sf[SF_POSE], sf[SF_POSE + 1], sf[SF_POSE + 2],
-                                        sf[SF_CMD + CM_HASLAST] != 0, sf[SF_CMD + CM_ALPHA], has_prev,
-                                        prevX[1, 1], sf[SF_UPREV], e_meas, wv, ww, obuf)
+                ost = OuterState(fbs, ivs, sf[SF_SA:SF_SA + N_SA], mp, prm, obs, ocnt, gate,
+                                 sf[SF_POSE:SF_POSE + N_PO], sf[SF_CMD:SF_CMD + N_CM])
+                opp = OuterParams(ip[IP_ANYCOURSE] != 0 and ip[IP_STIFF] != 0, cpar, op)
+                _give, governed = cascade_outer(opp, refs, ost, t, kw, pose_ok, has_prev, prevX[1, 1],
+                                                sf[SF_UPREV], e_meas, wv, ww, obuf)
                 si[SI_GWIN] = 1 if governed else 0
                 # ---- TSMPC.step: its compiled step (checks, schedule, Riccati fast path); a
                 # declined step (a constraint active, a non-finite input) is the caller's

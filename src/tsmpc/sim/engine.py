@@ -129,11 +129,11 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:simulate": "ba020e97f0f11213",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
     "tsmpc.control.cascade:Cascade.__init__": "3ca6145a5fdd53f7",
-    "tsmpc.control.cascade:Cascade.reset": "536ca6e339fe8c53",
+    "tsmpc.control.cascade:Cascade.reset": "97e29f530e71a377",
     "tsmpc.control.cascade:Cascade.step": "153443d2b249fd93",
     "tsmpc.control.cascade:Cascade._step": "14053a91095a8707",
     "tsmpc.control.cascade:Cascade._start_from": "ec50854f219e3425",
-    "tsmpc.control.cascade:Cascade._outer": "a8a41901f93c5023",
+    "tsmpc.control.cascade:Cascade._outer": "e6836b06f13473bd",
     "tsmpc.control.cascade:Cascade._watch_samples": "a2b6f37a111ff688",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
@@ -242,14 +242,14 @@ def _replaced_code() -> str | None:
         if importlib.import_module("tsmpc.control.inner_block").inner_block is not importlib.import_module(
                 "tsmpc.control._back").inner_block:
             return "tsmpc.control.inner_block.inner_block was replaced"
-        blk = importlib.import_module("tsmpc.control.stiffness_block").stiffness_block  # the hand-over
         cas = importlib.import_module("tsmpc.control.cascade")
-        if blk is not ke.stiffness_block or cas.stiffness_block is not blk:
-            return "tsmpc.control.stiffness_block's block was replaced"
-        fr = importlib.import_module("tsmpc.control._front")  # the phase before the outer loop
-        if fr.cascade_front is not ke.cascade_front or cas.cascade_front is not fr.cascade_front or (
+        fr = importlib.import_module("tsmpc.control._front")  # the phases before the outer loop and the solve
+        if (fr.cascade_front, fr.cascade_outer) != (ke.cascade_front, ke.cascade_outer) or (
+                cas.cascade_front, cas.cascade_outer) != (fr.cascade_front, fr.cascade_outer) or (
                 fr.before_at is not importlib.import_module("tsmpc.control.fusion_block").before_at):
             return "tsmpc.control._front's phase was replaced"
+        if importlib.import_module("tsmpc.control.stiffness_block").stiffness_block is not fr.stiffness_block:
+            return "tsmpc.control.stiffness_block's block was replaced"
         bk = importlib.import_module("tsmpc.control._back")  # the phase after the MHE
         parts = (bk.back_start, bk.cascade_back, bk.cascade_command)
         if (ke.cascade_back, ke.cascade_command) != parts[1:] or (
@@ -258,7 +258,7 @@ def _replaced_code() -> str | None:
         if importlib.import_module("tsmpc.control.gates").gate_block is not fr.gate_block:  # the gates' glue
             return "tsmpc.control.gates' block was replaced"
         ob = importlib.import_module("tsmpc.control.outer_block")
-        if ob.outer_errors is not ke.outer_errors or ob.outer_after is not ke.outer_after:
+        if ob.outer_errors is not fr.outer_errors or ob.outer_after is not ke.outer_after:
             return "tsmpc.control.outer_block's block was replaced"
         rb = importlib.import_module("tsmpc.sim.record_block")  # the recorder's and the sensors' blocks
         if any(getattr(rb, f) is not getattr(ke, f) for f in (
