@@ -1049,7 +1049,7 @@ class _Window:
         self.v, self.omega = v, omega
 
 
-#: TSLQR.step as defined (Cascade._inner calls the block in its place unless it was replaced)
+#: TSLQR.step as defined (Cascade._back calls the block in its place unless it was replaced)
 _TSLQR_STEP = TSLQR.step
 
 #: The plan's status as the outer block's code (outer_block.MPC_*)

@@ -16,8 +16,9 @@ calls it as Python, the run engine and the batch compile it.
 The block's glue — what the cascade does with them every T_d — is one definition too:
 :func:`gate_block` (the speed gate, the pose gate and the accepted pose written into the block's
 pose record, ``PO_*``: X, Y, θ and the last accepted pose's time) and :func:`reckon_block` (the
-record advanced by :func:`dead_reckon`). :class:`~tsmpc.control.cascade.Cascade` calls them
-(``_gate``, ``_dead_reckon``; compiled through :mod:`tsmpc.kernels.blocks`, as Python under
+record advanced by :func:`dead_reckon`). The cascade's phases call them
+(:func:`tsmpc.control._front.cascade_front`, :func:`tsmpc.control._back.cascade_back`):
+:class:`~tsmpc.control.cascade.Cascade` through :mod:`tsmpc.kernels.blocks` (as Python under
 ``TSMPC_NO_JIT``), the run engine on its state slots ``SF_POSE`` … ``SF_POSET``, the batch per lane.
 
 Recovery (``[recovery]``, issue 38): whatever came before, a run of valid samples brings the cascade

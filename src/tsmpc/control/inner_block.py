@@ -2,9 +2,11 @@
 the force it compensates, the mass error's inertia terms, the estimate handed to the TS-LQR, the
 TS-LQR's step and the step's events.
 
-One definition, three callers: :class:`~tsmpc.control.cascade.Cascade` calls :func:`inner_block`
-through one compiled call (``tsmpc.kernels.blocks.inner_call``; as Python with ``TSMPC_NO_JIT``), the
-run engine (``tsmpc.kernels.engine.run``) and the batch compile it into their step. Its parts are
+One definition, three callers: the cascade's phase after the MHE
+(:func:`tsmpc.control._back.cascade_back`) runs it, and :class:`~tsmpc.control.cascade.Cascade` calls
+that phase through one compiled call (``tsmpc.kernels.blocks.back_call``; as Python with
+``TSMPC_NO_JIT``), the run engine (``tsmpc.kernels.engine.run``) and the batch compile it into their
+step. Its parts are
 the blocks of their own modules: :func:`~tsmpc.estimation.friction_step.friction_step_update`,
 :func:`~tsmpc.estimation.fusion.mass_update` / :func:`~tsmpc.estimation.fusion.inertia_force` and
 :func:`~tsmpc.control.ts_lqr.inner_step` around the compiled law.

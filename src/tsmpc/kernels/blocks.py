@@ -2,7 +2,10 @@
 :func:`tsmpc.control.inner_block.inner_block`, the gates :func:`tsmpc.control.gates.gate_block` and
 the dead reckoning :func:`tsmpc.control.gates.reckon_block`,
 the outer step's :func:`tsmpc.control.outer_block.outer_errors` and
-:func:`tsmpc.control.outer_block.outer_after`, the MHE-UIO's step :func:`tsmpc.control.mhe_block.mhe_block`):
+:func:`tsmpc.control.outer_block.outer_after`, the MHE-UIO's step :func:`tsmpc.control.mhe_block.mhe_block`;
+the cascade's phases :func:`tsmpc.control._front.cascade_front`, :func:`tsmpc.control._front.cascade_outer`,
+:func:`tsmpc.control._back.cascade_back` and its parts: :func:`front_call`, :func:`outer_phase_call`,
+:func:`back_call`, :func:`start_call`, :func:`command_call` on :func:`pack_back`'s vector):
 the blocks' records rebuilt from arrays inside the compiled code, because numba's dispatcher types
 a record argument field by field (≈ 0.15 µs a field, more than the block's work), an array at once.
 

@@ -20,8 +20,16 @@ and the plant's RK4 block (the single-track plant; :func:`~tsmpc.kernels.plant.r
 :mod:`tsmpc.estimation.fusion`, friction-step detection, the outer step's errors, window, offset
 correction and speed governor of :mod:`tsmpc.control.outer_block`, …) are the cascade's own
 functions, compiled in, their records loaded from and stored to the state slots around each call.
-The glue between them is ported operation by operation (same order, same rounding, Python's
-``min``/``max``/``%`` and ``math.hypot``), so the engine reproduces the Python loop to the last bit.
+The cascade's glue between them is written once too, as its phases (issue 34), which
+``Cascade._step`` calls and this kernel compiles in: :func:`~tsmpc.control._front.cascade_front`
+(the gates, the MPC's turn, the fusion block before the MPC), :func:`~tsmpc.control._front.cascade_outer`
+(an MPC step before the solve: the stiffness block, the outer block's errors and window) and
+:func:`~tsmpc.control._back.cascade_back` (after the MHE: dead reckoning, the fusion block after it,
+the inner block, the servo and the command record). What remains here is ported operation by
+operation (same order, same rounding, Python's ``min``/``max``/``%`` and ``math.hypot``): the
+simulator's loop, the MPC's fast path and the plan's bookkeeping, the MHE block's inputs, and
+the parts of ``Cascade._outer`` around the phases (``_PORTED`` in :mod:`tsmpc.sim.engine`), so the
+engine reproduces the Python loop to the last bit.
 
 Where a block's compiled fast path does not decide a step (the MPC's condensed QP / SOCP path, the
 MHE's dense QP with an active state bound, a singular reference gain of the TS-LQR, a non-finite

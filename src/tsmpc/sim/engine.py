@@ -745,7 +745,7 @@ class _Run:
             lqr.model_stiffness(float(a.sf[ke.SF_SA + ke.SA_CF]), float(a.sf[ke.SF_SA + ke.SA_CR]))
         v, al, om = a.sc[ke.SC_EST:ke.SC_EST + 3].tolist()
         t0 = time.perf_counter()
-        try:  # as Cascade._inner: the block's compensation and residual, the numpy law, the events
+        try:  # as Cascade._back: the block's compensation and residual, the numpy law, the events
             out = lqr._numpy_step(v, al, om, float(a.sc[ke.SC_VREF]), float(a.sc[ke.SC_WREF]),
                                   float(a.sc[ke.SC_COMP]), float(a.sc[ke.SC_LOWF]))
         except Exception as err:
