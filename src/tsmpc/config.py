@@ -707,6 +707,23 @@ class MHESettings(_Frozen):
     form: MHEForm = Field(
         default=MHEForm.WINDOW, description="'window' (ours: window-constant friction force, compiled) or "
         "'uio' (the paper's form: friction eliminated through E_d; numpy path, slower)")
+    # beyond the paper: the yaw-model margin (issue 35; tsmpc.estimation.mhe_margin)
+    margin_slip_rate: NonNegFloat = Field(
+        default=0.01, le=10.0, description="yaw-model margin: RMS of the window's slip-equation residual "
+        "[rad/s] at which Q_omega starts to grow (the model's slip dynamics do not fit the car), 0 to 10; "
+        "0 = off (the paper)")
+    margin_max: FiniteFloat = Field(
+        default=15.0, ge=1.0, le=1e4, description="yaw-model margin: largest factor on Q_omega, 1 to 1e4")
+    margin_rise_s: PositiveFloat = Field(
+        default=1.0, le=1e4, description="yaw-model margin: time constant of a growing margin [s], "
+        "up to 1e4")
+    margin_decay_s: PositiveFloat = Field(
+        default=20.0, le=1e4, description="yaw-model margin: time constant of a shrinking margin [s] "
+        "(a wrong model stays wrong), up to 1e4")
+    margin_linear_share: NonNegFloat = Field(
+        default=0.5, le=1.0, description="yaw-model margin: only windows whose axle slips stay within this "
+        "share of the model's saturation slip mu F_z / C count (the linear tyre the model has), 0 to 1; "
+        "0 = every window")
 
     @model_validator(mode="after")
     def _check(self) -> MHESettings:
@@ -1219,7 +1236,8 @@ PRESETS: dict[str, dict[str, Any]] = {
                       "friction_step": False, "force_min": -2000.0, "force_max": 10000.0},
               "mpc": {"slip_aware": False, "tangent_heading": False, "step_average_reference": False,
                       "offset_free_s": 0.0},
-              "fusion": _FUSION_OFF, "recovery": {"enabled": False}, "governor": {"enabled": False}},
+              "fusion": _FUSION_OFF, "recovery": {"enabled": False}, "governor": {"enabled": False},
+              "mhe": {"margin_slip_rate": 0.0}},
     # The paper as it was run (the published run): the ``paper`` preset plus every quirk of the published
     # simulation, each its own switch. Quirks of that run, not recommendations; never the default.
     "paper-as-run": {
@@ -1243,6 +1261,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "fusion": _FUSION_OFF,
         "recovery": {"enabled": False},
         "governor": {"enabled": False},
+        "mhe": {"margin_slip_rate": 0.0},
     },
 }
 

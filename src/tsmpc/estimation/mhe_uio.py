@@ -44,9 +44,13 @@ from tsmpc._records import StateField, quick_init
 from tsmpc.config import MHESettings, VehicleParams
 from tsmpc.control.qp import QPStatus, solve_daqp
 from tsmpc.errors import ConfigError
+from tsmpc.estimation.mhe_margin import MP_MARGIN, MS_MARGIN, N_MARGIN_MP, margin_params, margin_update
 from tsmpc.models.dynamic import Discretization, DynamicTS
 
 __all__ = ["MHEUIO", "Estimate", "EstimatorStatus", "WindowQP"]
+
+#: The yaw-rate process weight's slot in ``mp`` (tsmpc.kernels.mhe's MP_Q + 2)
+MP_QW = 2
 
 #: Weight of the friction-force prior (the previous window's F̂), per N²: a weak tie that keeps
 #: F̂ continuous between windows without biasing it (σ_F ≈ 1 / √p_F ≈ 300 N).
@@ -138,7 +142,7 @@ class MHEUIO:
         self._tiles: dict[tuple[str, int], Any] = {}
         # The estimator's state as the compiled step's records (tsmpc.kernels.mhe: ms = [x̂ (3), F̂,
         # arrival (3)], mi = [samples in the window, rejected, failed]; _x, _F, … are their views).
-        self._ms, self._mi = np.zeros(7), np.zeros(3, dtype=np.int64)
+        self._ms, self._mi = np.zeros(MS_MARGIN + 1), np.zeros(3, dtype=np.int64)
         self._uk = np.zeros(2)  # the input the window holds for this step (the block's scratch)
         self._kern: Any = None  # the compiled block (tsmpc.kernels.load("mhe")), or None
         if jit is None or jit:
@@ -168,9 +172,27 @@ class MHEUIO:
                 # The model is not the one the kernel evaluates: numpy evaluates it, the kernel solves.
                 self._kargs = (*self._kargs[:-1], False)
             k = self._kargs  # the block's parameters mp (tsmpc.kernels.mhe.MP_*: the same values)
-            self._mp = np.array([*k[0], *k[1], *k[2], k[3], *k[4], *k[5], *k[6], *k[7], *k[8:17]],
+            self._mp = np.array([*k[0], *k[1], *k[2], k[3], *k[4], *k[5], *k[6], *k[7], *k[8:17],
+                                 *self._margin_params()],
                                 dtype=float)
+        else:  # the numpy path's: the yaw-model margin's slots (its own, the model's M … μ_o g)
+            self._mp = np.zeros(MP_MARGIN + N_MARGIN_MP)
+            self._mp[MP_MARGIN:] = self._margin_params()
+            p = getattr(model, "params", vehicle)
+            try:  # (the stiffness fit's changes do not reach them here: the test's slips only)
+                cf = getattr(p, "C_f", p.cornering_stiffness)
+                cr = getattr(p, "C_r", p.cornering_stiffness)
+                self._mp[21:28] = [float(p.mass), float(p.inertia), float(cf), float(cr), float(p.a),
+                                   float(p.b), float(p.mu_nominal * p.g)]
+            except (AttributeError, TypeError):  # a model without them: no linear-tyre test
+                self._mp[MP_MARGIN + 5] = 0.0
         self.reset(x0)
+
+    def _margin_params(self) -> list[float]:
+        """The yaw-model margin's entries of ``mp`` (tsmpc.estimation.mhe_margin)."""
+        s = self.settings
+        return margin_params(float(s.margin_slip_rate), float(s.margin_max), float(s.margin_rise_s),
+                             float(s.margin_decay_s), float(s.Q[2]), self.Td, float(s.margin_linear_share))
 
     def _model_agrees_once(self) -> bool:
         """:meth:`_kernel_model_agrees`, answered once per model in a process (a batch builds one
@@ -248,6 +270,8 @@ class MHEUIO:
         self._arrival = self._x.copy()
         self._n_rejected = 0
         self._n_failed = 0
+        self._ms[MS_MARGIN] = 0.0  # the yaw-model margin: none, the configured Q_ω
+        self._mp[MP_QW] = self._mp[MP_MARGIN + 4]
 
     # the state, views of the block's records (_ms, _mi; kernels.mhe's MS_* and MI_* slots)
     _x: StateField = StateField("_ms", slice(0, 3))
@@ -318,6 +342,7 @@ class MHEUIO:
         t = self._tiles.get(("q", n))
         if t is None:
             t = self._tiles[("q", n)] = np.tile(self._q, n)
+        t[2::3] = self._mp[MP_QW]  # the yaw-rate weight in force (the yaw-model margin's)
         return t
 
     def _bounds_tiled(self, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -509,4 +534,6 @@ class MHEUIO:
         self._x = X[-1].copy()
         self._F = float(z[3])
         status = EstimatorStatus.OK if full else EstimatorStatus.WARMUP
+        if full:  # the yaw-model margin on the solved window (the compiled step's, mhe_margin.py)
+            margin_update(self._mp, self._ms, xs, A, B, us, n)
         return Estimate(self._x.copy(), self._F, F_raw, status, time.perf_counter() - t0)

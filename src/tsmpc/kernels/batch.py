@@ -762,7 +762,7 @@ def _mhe_gather(s, slot, n, mY, mW, mU, mXS, mp, sf, si, key, sn, cs):
 
 
 @njit(**_NJ)
-def _mhe_finish(s, slot, n, mXS, mA, mB, mp, sf, si, sc):
+def _mhe_finish(s, slot, n, mXS, mA, mB, mU, mp, sf, si, sc):
     """window_step's and the MHE block's ends for one lane from its solved slot: True when the
     estimate is in (the window's minimiser within the state bounds), False when the dense QP must
     decide (the model matrices then in mA, mB as window_step leaves them)."""
@@ -790,6 +790,16 @@ def _mhe_finish(s, slot, n, mXS, mA, mB, mp, sf, si, sc):
             mXS[k, i] = s[o + (MR_X + i) * LANES]
     ms = sf[ke.SF_MX:ke.SF_MX + km.N_MS]  # the estimate: the MHE's own ends (kernels.mhe, mhe_block.py)
     si[ke.SI_ESTSTAT] = km.mhe_solved(ms, mXS, n, F, si[ke.SI_MHEFULL] != 0)
+    if si[ke.SI_ESTSTAT] == km.MHE_OK and mp[km.MP_MARGIN] > 0.0:
+        # the yaw-model margin (estimation/mhe_margin.py, as kernels.mhe.mhe_solve): the model's slip
+        # rows, all it reads, into the lane's mA, mB
+        for k in range(n):
+            o = (k + 1) * MR * LANES + slot
+            for j in range(3):
+                mA[k, 1, j] = s[o + (MR_A + 3 + j) * LANES]
+            mB[k, 1, 0] = s[o + (MR_B + 2) * LANES]
+            mB[k, 1, 1] = s[o + (MR_B + 3) * LANES]
+        km.margin_update(mp, ms, mXS, mA, mB, mU, n)
     estimate_out(ms, sc[ke.SC_EST:ke.SC_EST + N_EO], sc[ke.SC_ESTFR])
     return True
 
@@ -902,7 +912,7 @@ def _mhe_groups(state, need, tally, mws, lanes, akey, asin, acos, sf, si, sc, li
         mhe_window_lanes(mws, n)
         for j in range(n_sel):
             b = lanes[j]
-            if _mhe_finish(mws, j, n, mXS[b], mA[b], mB[b], mp[b], sf[b], si[b], sc[b]):
+            if _mhe_finish(mws, j, n, mXS[b], mA[b], mB[b], mU[b], mp[b], sf[b], si[b], sc[b]):
                 state[b] = READY
             else:
                 state[b], need[b] = NEEDS_PYTHON, ke.NEED_MHE

@@ -146,6 +146,7 @@ from tsmpc.kernels.mhe import (  # the MHE's records
     MI_NREJ,
     MS_ARR,
     MS_F,
+    MS_MARGIN,
     N_MI,
     N_MS,
 )
@@ -223,7 +224,7 @@ N_IP = 26
  _FREE1, _CFREE14,
  _FREE4, _FREE5, _FREE6, _FREE7, SF_SA, _SA1, _SA2, SF_MX, _MX1, _MX2, SF_MF,
  SF_ARR, _AR1, _AR2,
- _CFREE15, SF_ACT, _AC1, _FREE41, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, _CFREE16,
+ _MSMARGIN, SF_ACT, _AC1, _FREE41, _FREE9, _FREE10, _FREE11, _FREE2, _FREE3, _CFREE16,
  _CFREE17, _FREE13, _J1, _J2, _J3, _FREE14,
  _FREE19, _FREE20, _FREE21, _FREE22,
  _FREE23, _FREE24, _FREE25, _FREE26, _FREE27, _FREE28, _FREE29, _FREE30, _FREE31, _FREE32, _FREE33,
@@ -248,7 +249,7 @@ SF_GRATE = SF_OB + OB_RATE
  _CFREE21) = range(44)
 N_SI = 44
 # the MHE's state slots are its records' (kernels.mhe: ms = [x̂, F̂, x̄_0], mi = [samples, rejected, failed])
-assert SF_MF == SF_MX + MS_F and SF_ARR == SF_MX + MS_ARR
+assert SF_MF == SF_MX + MS_F and SF_ARR == SF_MX + MS_ARR and _MSMARGIN == SF_MX + MS_MARGIN
 assert SF_SA + N_SA == SF_MX  # the stiffness block's record (stiffness_block.SA_*)
 assert SI_NREJ == SI_NY + MI_NREJ and SI_NFAIL == SI_NY + MI_NFAIL
 # ---------------------------------------------------------------------------- step scratch

@@ -48,6 +48,7 @@ BLOCK_MODULES = (
     "tsmpc.control.ts_lqr",
     "tsmpc.estimation.friction_step",
     "tsmpc.estimation.fusion",
+    "tsmpc.estimation.mhe_margin",
     "tsmpc.kernels.jit",
     "tsmpc.sim.record_block",
     "tsmpc.scenarios",

@@ -24,19 +24,45 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.extending import register_jitable
+
+from tsmpc import kernels
+from tsmpc.estimation import mhe_margin
+from tsmpc.estimation.mhe_margin import MP_MARGIN, MS_MARGIN, N_MARGIN_MP
+
+#: The yaw-model margin's update (estimation/mhe_margin.py), compiled into the callers below
+margin_update = register_jitable(mhe_margin.margin_update)
 
 __all__ = ["MHE_DENSE", "MHE_FAILED", "MHE_OK", "MHE_REJECTED", "MHE_WARMUP", "mhe_push", "mhe_solve",
            "mhe_solved", "mhe_step", "warm", "window_step"]
+
+
+def _forget_stale_entries() -> None:
+    """numba keys this module's cache entries by this file only, but the margin's arithmetic is
+    estimation/mhe_margin.py's, compiled in: entries of another version of it are deleted (a stamp
+    of its hash beside them; tsmpc.kernels.forget_stale)."""
+    try:
+        kernels.forget_stale(kernels._tree_folder(kernels.numba_cache_dir()), "mhe", (), "mhe.blocks-sha256",
+                             ("tsmpc.estimation.mhe_margin",))
+    except OSError:  # an unwritable cache: numba refuses it too (kernels.cache_problem)
+        pass
+
+
+_forget_stale_entries()  # before the first call below loads an entry
 
 # ---------------------------------------------------------------------------- the estimator's records
 # mp = [q(3), r(2), p(3), p_F, x_min(3), x_max(3), box lo(3), box hi(3), M, I, C_f, C_r, a, b, μ_o g,
 #       drag, T_d]: the window's parameters (C_f, C_r change with the stiffness fit)
 MP_Q, MP_R, MP_P, MP_PF, MP_XMIN, MP_XMAX, MP_LO, MP_HI = 0, 3, 5, 8, 9, 12, 15, 18
 MP_M, MP_I, MP_CF, MP_CR, MP_A, MP_B, MP_MUG, MP_KD, MP_TD = range(21, 30)
-N_MP = 30
-# ms = [x̂ (3), F̂, the arrival prior x̄_0 (3)]: the estimator's float state
+# then the yaw-model margin's (tsmpc.estimation.mhe_margin: MP_MARGIN …)
+N_MP = MP_MARGIN + N_MARGIN_MP
+assert MP_MARGIN == MP_TD + 1
+# ms = [x̂ (3), F̂, the arrival prior x̄_0 (3), the margin's smoothed ratio]: the estimator's float state
 MS_X, MS_F, MS_ARR = 0, 3, 4
-N_MS = 7
+N_MS = 8
+assert MS_MARGIN == MS_ARR + 3
+
 # mi = [samples in the window, samples rejected, solver failures]: its integer state
 MI_NY, MI_NREJ, MI_NFAIL = 0, 1, 2
 N_MI = 3
@@ -383,7 +409,10 @@ def mhe_solve(y0, ok, n, mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, eval_model,
         return (MHE_WARMUP if ok else MHE_REJECTED), F_raw
     if code == 1:
         return MHE_DENSE, F_raw
-    return mhe_solved(ms, XS, n, F, full), F_raw
+    st = mhe_solved(ms, XS, n, F, full)
+    if st == MHE_OK:  # the yaw-model margin (estimation/mhe_margin.py) on the solved window
+        margin_update(mp, ms, XS, A, B, U, n)
+    return st, F_raw
 
 
 @njit(cache=True, fastmath=False, inline="always")  # (no call layers in the engine)
@@ -420,7 +449,7 @@ def warm() -> None:
                 -o3 * 100, o3 * 100, -o3, o3 * 20, 683.0, 560.0, 25000.0, 25000.0, 0.7, 1.0, 4.9, 0.4,
                 0.01, True, np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3)), False)
     mp = np.concatenate([o3, np.ones(2), o3, [1e-10], -o3 * 100, o3 * 100, -o3, o3 * 20,
-                         [683.0, 560.0, 25000.0, 25000.0, 0.7, 1.0, 4.9, 0.4, 0.01]])
+                         [683.0, 560.0, 25000.0, 25000.0, 0.7, 1.0, 4.9, 0.4, 0.01], np.zeros(N_MARGIN_MP)])
     ms, mi = np.ones(N_MS) * 5.0, np.zeros(N_MI, dtype=np.int64)
     for _ in range(2):
         mhe_step(5.0, 0.1, 0.0, 0.0, 683.0, Y, W, U, XS, np.zeros((n, 3, 3)), np.zeros((n, 3, 2)),

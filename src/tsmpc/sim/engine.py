@@ -137,7 +137,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.control.cascade:Cascade._watch_samples": "a2b6f37a111ff688",
     "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
     "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
-    "tsmpc.estimation.mhe_uio:MHEUIO.reset": "91c37b33d40113cb",
+    "tsmpc.estimation.mhe_uio:MHEUIO.reset": "18aee6b646c04a73",
     "tsmpc.control.ts_lqr:TSLQR.reset": "87b87f561a20499d",
     "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
@@ -636,6 +636,7 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
     sf[ke.SF_MF] = mhe._F
     sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival
+    sf[ke.SF_MX + ke.MS_MARGIN] = mhe._ms[ke.MS_MARGIN]  # the yaw-model margin's (estimation/mhe_margin.py)
     sf[ke.SF_OB:ke.SF_OB + ke.N_OB] = cascade._ob  # the outer block's (held pose, offset, governor, …)
     return sf, si, ivs, cur
 
@@ -724,11 +725,16 @@ class _Run:
         mhe._ms[:] = a.sf[ke.SF_MX:ke.SF_MX + ke.N_MS]
         mhe._mi[:] = a.si[ke.SI_NY:ke.SI_NY + ke.N_MI]
         mhe._uk[:] = a.sc[ke.SC_UK:ke.SC_UK + 2]
+        own = mhe._mp.copy()  # the run's parameters (the yaw-model margin's weight, the fits') in
+        mhe._mp[:] = a.mp
         t0 = time.perf_counter()
         try:
             est = mhe.dense_step(bool(a.si[ke.SI_MHEOK]), int(a.si[ke.SI_MHEN]), float(a.sc[ke.SC_ESTFR]), t0)
         except Exception as err:
             raise EngineFallback(f"MHE raised {type(err).__name__}") from err
+        finally:  # and back: the margin's update of the dense window into the run's
+            a.mp[:] = mhe._mp
+            mhe._mp[:] = own
         self.sec_mhe[int(a.si[ke.SI_M])] = time.perf_counter() - t0
         a.sf[ke.SF_MX:ke.SF_MX + ke.N_MS] = mhe._ms
         a.si[ke.SI_NY:ke.SI_NY + ke.N_MI] = mhe._mi
