@@ -74,7 +74,7 @@ def test_start_mean_and_offset(way) -> None:
 def test_compiled_equals_python_to_the_bit() -> None:
     if kernels.load("plant") is None:
         pytest.skip("compiled kernels unavailable")
-    from tests._blocks import compiled
+    from _blocks import compiled
 
     nb_step, nb_mean = compiled(actuator_substep), compiled(applied_mean)
     rng = np.random.default_rng(11)

@@ -46,6 +46,7 @@ def test_paper_preset_is_the_published_cascade() -> None:
     assert paper.lqr.low_speed_resistance is False and default.lqr.low_speed_resistance is True
     assert paper.lqr.friction_step is False and default.lqr.friction_step is True
     assert paper.recovery.enabled is False and default.recovery.enabled is True  # issue 38
+    assert paper.mhe.margin_slip_rate == 0.0 and default.mhe.margin_slip_rate > 0.0  # issue 35
     # the force limits: the published absolute [-2000, 10000] N in the paper presets, per kg in
     # ours (issue 36: they follow the mass) — the same limits at the paper's vehicle
     assert paper.lqr.force_limits(paper.vehicle) == default.lqr.force_limits(default.vehicle) == \
@@ -56,6 +57,7 @@ def test_paper_preset_is_the_published_cascade() -> None:
               "mpc": {*outer, "offset_free_s"},
               "fusion": fusion,
               "recovery": {"enabled"},
+              "mhe": {"margin_slip_rate"},  # issue 35: the yaw-model margin
               "governor": {"enabled"}}  # issue 36: beyond the paper
     assert paper.model_dump(exclude=beyond) == default.model_dump(exclude=beyond)
     assert Config.preset("default") == default
