@@ -45,7 +45,8 @@ MECHANISMS = {
     "no-stiffness": ("fusion.stiffness_estimate", "cornering stiffness fit"),
     "no-mass": ("fusion.mass_estimate", "mass-error inertia out of the friction estimate"),
     "no-governor": ("governor.enabled", "speed governor (the plan re-timed to the grip)"),
-    "no-yaw-margin": ("mhe.margin_slip_rate", "the MHE's yaw-model margin (Q_ω grows with the slip residual)"),
+    "no-yaw-margin": ("mhe.margin_slip_rate",
+                      "the MHE's yaw-model margin (Q_ω grows with the slip residual)"),
 }
 COLUMNS = {"rmse_x": "RMSE x", "rmse_y": "RMSE y", "rmse_theta": "RMSE θ", "rmse_v": "RMSE v",
            "rmse_omega": "RMSE ω", "max_abs_lateral_m": "max abs e_y"}

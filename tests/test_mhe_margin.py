@@ -126,3 +126,17 @@ def test_the_compiled_window_step_has_the_numpy_paths_margin() -> None:
     assert a._ms[MS_MARGIN] == pytest.approx(b._ms[MS_MARGIN], rel=1e-6)
     assert a._mp[2] == pytest.approx(b._mp[2], rel=1e-6)
     np.testing.assert_allclose(a._x, b._x, rtol=1e-7, atol=1e-9)
+
+
+def test_its_slots_are_the_estimators() -> None:
+    """The margin's slot numbers (the module imports no numba, so it names them itself) are the
+    kernel's records'."""
+    km = kernels.load("mhe")
+    if km is None:
+        pytest.skip("compiled kernels unavailable")
+    from tsmpc.estimation import mhe_margin as mm
+
+    assert (mm._MP_M, mm._MP_CF, mm._MP_CR, mm._MP_A, mm._MP_B, mm._MP_MUG) == (
+        km.MP_M, km.MP_CF, km.MP_CR, km.MP_A, km.MP_B, km.MP_MUG)
+    assert (mm._MP_QW, mm._MS_F) == (km.MP_Q + 2, km.MS_F)
+    assert (mm.MP_MARGIN, mm.MS_MARGIN) == (km.N_MP - mm.N_MARGIN_MP, km.N_MS - 1)
