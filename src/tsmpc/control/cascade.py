@@ -69,6 +69,7 @@ from tsmpc.control._front import (
     cascade_front,
     cascade_outer,
 )
+from tsmpc.control._mid import AfterState, cascade_after_plan
 from tsmpc.control.fusion_block import (
     FB_OFF,
     FB_SENT,
@@ -128,7 +129,6 @@ from tsmpc.control.outer_block import (
     OuterBlockParams,
     RefArrays,
     governed_sample,
-    outer_after,
     outer_state,
     pack_govern,
     pack_outer,
@@ -792,22 +792,23 @@ class Cascade:
         return e, _Window(wv, ww)
 
     def _after_plan(self, t: float, plan: MPCResult) -> None:
-        """The outer block after the solve (outer_block.outer_after, one compiled call): the plan's
-        events and the governor's rate for the next step from the last estimate's grip."""
+        """The plan's bookkeeping (_mid.cascade_after_plan, one compiled call; as Python with
+        TSMPC_NO_JIT): the outer block after the solve (outer_block.outer_after: the plan's events
+        and the governor's rate for the next step from the last estimate's grip) on the command
+        record."""
         last, gov = self._last, self.governor
-        has = last is not None
         est = last.estimate if last is not None else None
         dm = block_delta_mass(self._ib, self._ib_state) if gov is not None and gov.mass_estimate else 0.0
         code, v_hat, F_fr = ((STATUS_CODE[est.status], float(est.x[0]), float(est.F_fr)) if est is not None
                              else (0, math.nan, math.nan))
-        sat = has and bool(last.saturated)  # type: ignore[union-attr]
-        args = (self._ob, self._oc, _MPC_STATUS_CODE[plan.status], int(plan.n_clipped), t, has, code, v_hat,
-                F_fr, sat, float(self._u_applied[0]), self.road_mu, dm, self._ob_buf)
+        args = (_MPC_STATUS_CODE[plan.status], int(plan.n_clipped), t, code, v_hat, F_fr, self.road_mu, dm,
+                self._ob_buf)
         call = self._after_call
         if call is not None:
-            call[0](call[1], call[2], self._refs, *args)
-        else:  # TSMPC_NO_JIT: the block as Python
-            outer_after(self._ob_p, self._gov_p, self._ref_rec, *args)
+            call[0](call[1], call[2], self._refs, self._ob, self._oc, self._cmd, *args)
+        else:  # TSMPC_NO_JIT: the phase as Python
+            state = AfterState(self._ob, self._oc, self._cmd)
+            cascade_after_plan(self._ob_p, self._gov_p, self._ref_rec, state, *args)
 
     def _build_outer_block(self, cfg: Config) -> None:
         """The outer block's records (outer_block.py), the reference it reads, its scratch and its
@@ -837,7 +838,7 @@ class Cascade:
         kern = kernels.load("blocks")
         self._after_call: Any = None
         if kern is not None:
-            self._after_call = (kern.after_call, pack_outer(self._ob_p), pack_govern(self._gov_p))
+            self._after_call = (kern.after_plan_call, pack_outer(self._ob_p), pack_govern(self._gov_p))
 
     def _bound_yaw_rate(self, v: float) -> None:
         """recovery.yaw_rate_bound, from the end of a blind stop until the car has the reference's
@@ -889,17 +890,14 @@ class Cascade:
 
     def _estimate(self, m: Measurement, v: float, om: float, speeds_ok: bool,
                   t1: float) -> tuple[Estimate, tuple[float, float]]:
-        """The MHE block (mhe_block.py: one compiled call on the default path): the MHE-UIO's step
-        on the measured speeds (NaN when the gates refused them) and the input the plant received
-        — (the estimate, that input as the MHE's model sees it). Without the compiled kernel (or a
-        replaced ``mhe.step``) the block's inputs go to the estimator's own step."""
+        """The MHE phase (_mid.cascade_estimate around mhe_block.py: one compiled call on the default
+        path): the MHE-UIO's step on the measured speeds (NaN when the gates refused them) and the
+        input the plant received — (the estimate, that input as the MHE's model sees it). Without
+        the compiled kernel (or a replaced ``mhe.step``) the same inputs (_mhe_inputs) go to the
+        estimator's own step."""
         f, s, mhe = m.force, m.steering, self.mhe
         hf, hs = f is not None, s is not None
         F, S = (0.0 if f is None else float(f)), (0.0 if s is None else float(s))
-        fb = self._fb
-        off = speed_offset(SpeedFit(fb[FB_SV], fb[FB_SW])) if self._course_speed else 0.0
-        Fa, da = self._u_applied
-        so, low = self._steer_offset, self._low_applied
         try:
             call = self._mhe_call
             if call is not None and "step" not in mhe.__dict__:
@@ -908,9 +906,10 @@ class Cascade:
                     arrays = self._mhe_arrays = (mhe.vehicle.mass, mhe._Y, mhe._W, mhe._U, mhe._XS, mhe._Ab,
                                                  mhe._Bb, mhe._Xb, mhe._mp, mhe._ms, mhe._mi, mhe._uk,
                                                  self._est_buf)
-                st, F_raw, n, ok, u0, u1 = call(*arrays, speeds_ok, v, om, off, Fa, da, hf, F, hs, S, so, low)
+                st, F_raw, n, ok, u0, u1 = call(*arrays, self._fb, self._cmd, self._course_speed, speeds_ok,
+                                                v, hf, F, hs, S)
                 return mhe.estimate(st, F_raw, n, ok, t1), (u0, u1)
-            y0, y1, u0, u1 = mhe_inputs(speeds_ok, v, om, off, Fa, da, hf, F, hs, S, so, low)
+            y0, y1, u0, u1 = self._mhe_inputs(speeds_ok, v, om, hf, F, hs, S)
             return mhe.step((y0, y1), (u0, u1)), (u0, u1)
         except Exception as err:  # e.g. a LinAlgError: keep the last estimate, flagged FAILED
             self._caught(err)
@@ -918,12 +917,22 @@ class Cascade:
             x_hat = last.x.copy() if last is not None else np.array([v, 0.0, om])
             est = Estimate(x_hat, last.F_fr if last is not None else 0.0, 0.0,
                            EstimatorStatus.FAILED, time.perf_counter() - t1)
-            y0, y1, u0, u1 = mhe_inputs(speeds_ok, v, om, off, Fa, da, hf, F, hs, S, so, low)
+            y0, y1, u0, u1 = self._mhe_inputs(speeds_ok, v, om, hf, F, hs, S)
             return est, (u0, u1)
 
+    def _mhe_inputs(self, speeds_ok: bool, v: float, om: float, hf: bool, F: float, hs: bool,
+                    S: float) -> tuple[float, float, float, float]:
+        """The MHE block's inputs (mhe_block.mhe_inputs) in Python, as _mid.cascade_estimate gives
+        them: the sample less the course fit's speed offset, the input applied or measured."""
+        fb = self._fb
+        off = speed_offset(SpeedFit(fb[FB_SV], fb[FB_SW])) if self._course_speed else 0.0
+        Fa, da = self._u_applied
+        return mhe_inputs(speeds_ok, v, om, off, Fa, da, hf, F, hs, S, self._steer_offset, self._low_applied)
+
     def _build_mhe_block(self) -> None:
-        """The MHE block's compiled call (kernels/blocks.py mhe_call) when the estimator runs the
-        compiled window kernel with its model in it (Euler) and its step is MHEUIO's own."""
+        """The MHE phase's compiled call (kernels/blocks.py estimate_call: _mid.cascade_estimate) when
+        the estimator runs the compiled window kernel with its model in it (Euler) and its step is
+        MHEUIO's own."""
         from tsmpc import kernels
         from tsmpc.estimation.mhe_uio import MHEUIO
 
@@ -938,7 +947,7 @@ class Cascade:
         self._mhe_call: Any = None
         if (kern is not None and mhe._kern is not None and mhe._kargs[-1] and type(mhe).step is MHEUIO.step
                 and type(mhe).step_values is MHEUIO.step_values):
-            self._mhe_call = kern.mhe_call
+            self._mhe_call = kern.estimate_call
 
     def _build_inner_block(self, cfg: Config) -> None:
         """The inner block's records (inner_block.py: lqr.friction_step's detector, beyond the paper;

@@ -37,7 +37,8 @@ from tsmpc.control._front import (
     cascade_front,
     cascade_outer,
 )
-from tsmpc.control.fusion_block import N_FBP, unpack_fusion
+from tsmpc.control._mid import AfterState, EstimateParams, EstimateState, cascade_after_plan, cascade_estimate
+from tsmpc.control.fusion_block import N_FB, N_FBP, unpack_fusion
 from tsmpc.control.gates import GateBlockParams, GateParams, gate_block, gate_state, reckon_block
 from tsmpc.control.inner_block import InnerBlockParams, inner_block, start_state
 from tsmpc.control.mhe_block import MHEBlockParams, MHEWindow, mhe_block
@@ -47,8 +48,9 @@ from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import CourseParams, MassParams
 from tsmpc.kernels.jit import BLOCK_MODULES
 
-__all__ = ["after_call", "back_call", "command_call", "front_call", "gate_call", "inner_call", "mhe_call",
-           "outer_call", "outer_phase_call", "pack", "pack_back", "pack_gates", "reckon_call", "warm"]
+__all__ = ["after_call", "after_plan_call", "back_call", "command_call", "estimate_call", "front_call",
+           "gate_call", "inner_call", "mhe_call", "outer_call", "outer_phase_call", "pack", "pack_back",
+           "pack_gates", "reckon_call", "warm"]
 
 # entries compiled from other versions of the blocks (or of the law, kernels/lqr.py) are deleted
 # before the first call below loads one
@@ -149,6 +151,25 @@ def mhe_call(mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, est, speeds_ok, v, omeg
     r = mhe_block(MHEBlockParams(mass, False), MHEWindow(Y, W, U, XS, A, B, X), mp, ms, mi, uk, est,
                   speeds_ok, v, omega, speed_offset, F_applied, delta_applied, has_force, force, has_steering,
                   steering, steer_offset, low)
+    return r.status, r.F_raw, r.n, r.ok, r.u0, r.u1
+
+
+@njit(cache=True, fastmath=False)
+def after_plan_call(opk, gpk, refs, ob, cnt, cmd, status, n_clipped, t, est_status, v_hat, F_fr, road_mu,
+                    dmass, buf):
+    """:func:`~tsmpc.control._mid.cascade_after_plan` of the packed records."""
+    cascade_after_plan(unpack_outer(opk), unpack_govern(gpk), _refs(refs), AfterState(ob, cnt, cmd), status,
+                       n_clipped, t, est_status, v_hat, F_fr, road_mu, dmass, buf)
+
+
+@njit(cache=True, fastmath=False)
+def estimate_call(mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, est, fb, cmd, course_speed, speeds_ok, v,
+                  has_force, force, has_steering, steering):
+    """:func:`~tsmpc.control._mid.cascade_estimate` of the estimator's arrays and the blocks' vectors:
+    (status, F̂_raw, n, sample accepted, u0, u1) as a plain tuple."""
+    r = cascade_estimate(EstimateParams(MHEBlockParams(mass, False), course_speed),
+                         MHEWindow(Y, W, U, XS, A, B, X), EstimateState(mp, ms, mi, uk, est, fb, cmd),
+                         speeds_ok, v, has_force, force, has_steering, steering)
     return r.status, r.F_raw, r.n, r.ok, r.u0, r.u1
 
 
@@ -265,10 +286,10 @@ def warm() -> None:
     o3, n = np.ones(3), 3  # the MHE block (a window of 3; the types are the cascade's)
     mp = np.concatenate([o3, np.ones(2), o3, [1e-10], -o3 * 100, o3 * 100, -o3, o3 * 20,
                          [683.0, 560.0, 25000.0, 25000.0, 0.7, 1.0, 4.9, 0.4, 0.01]])
-    mhe_call(683.0, np.zeros((n + 1, 2)), np.ones(n + 1), np.zeros((n, 2)), np.ones((n + 1, 3)) * 5.0,
-             np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3)), mp, np.ones(7) * 5.0,
-             np.zeros(3, dtype=np.int64), np.zeros(2), np.zeros(5), True, 5.0, 0.1, 0.0, 0.0, 0.0, False, 0.0,
-             False, 0.0, 0.0, 0.0)
+    estimate_call(683.0, np.zeros((n + 1, 2)), np.ones(n + 1), np.zeros((n, 2)), np.ones((n + 1, 3)) * 5.0,
+                  np.zeros((n, 3, 3)), np.zeros((n, 3, 2)), np.zeros((n + 1, 3)), mp, np.ones(7) * 5.0,
+                  np.zeros(3, dtype=np.int64), np.zeros(2), np.zeros(5), np.zeros(N_FB), np.zeros(7), False,
+                  True, 5.0, False, 0.0, False, 0.0)
     st, ring, cnt = start_state(30)
     inner_call(pack(p, law), law.Kv, law.zlo, law.zhi, law.bits, law.prm, np.zeros(6), st, ring, cnt, 10.0,
                0.0, 0.0, 100.0, 90.0, 1, 10.0, 0.0)

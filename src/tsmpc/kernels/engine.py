@@ -23,13 +23,16 @@ functions, compiled in, their records loaded from and stored to the state slots 
 The cascade's glue between them is written once too, as its phases (issue 34), which
 ``Cascade._step`` calls and this kernel compiles in: :func:`~tsmpc.control._front.cascade_front`
 (the gates, the MPC's turn, the fusion block before the MPC), :func:`~tsmpc.control._front.cascade_outer`
-(an MPC step before the solve: the stiffness block, the outer block's errors and window) and
+(an MPC step before the solve: the stiffness block, the outer block's errors and window),
+:func:`~tsmpc.control._mid.cascade_after_plan` (the plan's bookkeeping: the outer block after the
+solve), :func:`~tsmpc.control._mid.cascade_estimate` (the MHE block on its inputs) and
 :func:`~tsmpc.control._back.cascade_back` (after the MHE: dead reckoning, the fusion block after it,
 the inner block, the servo and the command record). What remains here is ported operation by
 operation (same order, same rounding, Python's ``min``/``max``/``%`` and ``math.hypot``): the
-simulator's loop, the MPC's fast path and the plan's bookkeeping, the MHE block's inputs, and
-the parts of ``Cascade._outer`` around the phases (``_PORTED`` in :mod:`tsmpc.sim.engine`), so the
-engine reproduces the Python loop to the last bit.
+simulator's loop, the MPC's fast path and the plan's copy, and the parts of ``Cascade._outer``
+around the phases (``_PORTED`` in :mod:`tsmpc.sim.engine`), so the engine reproduces the Python
+loop to the last bit. (``run`` keeps its phases inline: split into inlined phase functions it ran
+4-5 % slower, measured, issue 34.)
 
 Where a block's compiled fast path does not decide a step (the MPC's condensed QP / SOCP path, the
 MHE's dense QP with an active state bound, a singular reference gain of the TS-LQR, a non-finite
@@ -54,10 +57,6 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic as _numba_intrinsic
 
 from tsmpc.control._back import (
-    CM_D,
-    CM_F,
-    CM_HASLAST,
-    CM_LOW,
     CM_SAT,
     N_CM,
     BackParams,
@@ -73,11 +72,14 @@ from tsmpc.control._front import (
     cascade_front,
     cascade_outer,
 )
+from tsmpc.control._mid import (
+    AfterState,
+    EstimateParams,
+    EstimateState,
+    cascade_after_plan,
+    cascade_estimate,
+)
 from tsmpc.control.fusion_block import (
-    FB_OFF,
-    FB_OMEGA,
-    FB_SV,
-    FB_SW,
     N_FB,
     N_FBP,
     unpack_fusion,
@@ -109,7 +111,7 @@ from tsmpc.control.inner_block import (
     InnerBlockParams,
     mass_load,
 )
-from tsmpc.control.mhe_block import MHE_DENSE, N_EO, MHEBlockParams, MHEWindow, mhe_block
+from tsmpc.control.mhe_block import MHE_DENSE, N_EO, MHEBlockParams, MHEWindow
 from tsmpc.control.outer_block import (
     N_GBP,
     N_OB,
@@ -122,7 +124,6 @@ from tsmpc.control.outer_block import (
     OC_POSE_REJ,
     OC_SOFT,
     RefArrays,
-    outer_after,
     unpack_govern,
     unpack_outer,
 )
@@ -131,10 +132,8 @@ from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams, LQRLaw
 from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import (
     MassParams,
-    SpeedFit,
     course_params,
     delta_mass,
-    speed_offset,
 )
 from tsmpc.kernels.jit import cpython_hypot
 from tsmpc.kernels.mhe import (  # the MHE's records
@@ -529,24 +528,19 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             oracle = op.governor and govp.grip.oracle  # (the oracle row reads the road's μ)
             road_mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events) if oracle else math.nan
             dm = _delta_mass(sf, fp) if op.governor and govp.mass_estimate else 0.0
-            cmd = sf[SF_CMD:SF_CMD + N_CM]
-            outer_after(op, govp, refs, obs, ocnt, si[SI_PSTAT], si[SI_PCLIP], t, cmd[CM_HASLAST] != 0,
-                        si[SI_ESTSTAT], sc[SC_EST], sc[SC_ESTF], cmd[CM_SAT] != 0, cmd[CM_F], road_mu, dm,
-                        obuf)
+            cascade_after_plan(op, govp, refs, AfterState(obs, ocnt, sf[SF_CMD:SF_CMD + N_CM]), si[SI_PSTAT],
+                               si[SI_PCLIP], t, si[SI_ESTSTAT], sc[SC_EST], sc[SC_ESTF], road_mu, dm, obuf)
             phase = PH_MHE
         if phase == PH_MHE:
             # the MHE block (Cascade._estimate): its inputs, the window's update and solve, the estimate
             sc[SC_VREF], sc[SC_WREF] = sf[SF_UPREV], sf[SF_UPREV + 1]
-            off = (speed_offset(SpeedFit(sf[SF_FB + FB_SV], sf[SF_FB + FB_SW])) if ip[IP_CSPEED] != 0
-                   else 0.0)
             si[SI_TICK0] = _ticks()
-            mbp = MHEBlockParams(fp[FP_MHE_MASS], ip[IP_DEFER] != 0)
-            cmd = sf[SF_CMD:SF_CMD + N_CM]
-            mst = mhe_block(mbp, MHEWindow(mY, mW, mU, mXS, mA, mB, mX), mp, sf[SF_MX:SF_MX + N_MS],
-                            si[SI_NY:SI_NY + N_MI], sc[SC_UK:SC_UK + 2], sc[SC_EST:SC_EST + N_EO],
-                            si[SI_FRESH] != 0 and si[SI_SPOK] != 0, y[3], sf[SF_FB + FB_OMEGA], off,
-                            cmd[CM_F], cmd[CM_D], ip[IP_MFORCE] != 0, sf[SF_PLANTU],
-                            ip[IP_MSTEER] != 0, sf[SF_PLANTU + 1], sf[SF_FB + FB_OFF], cmd[CM_LOW])
+            ep = EstimateParams(MHEBlockParams(fp[FP_MHE_MASS], ip[IP_DEFER] != 0), ip[IP_CSPEED] != 0)
+            est = EstimateState(mp, sf[SF_MX:SF_MX + N_MS], si[SI_NY:SI_NY + N_MI], sc[SC_UK:SC_UK + 2],
+                                sc[SC_EST:SC_EST + N_EO], sf[SF_FB:SF_FB + N_FB], sf[SF_CMD:SF_CMD + N_CM])
+            mst = cascade_estimate(ep, MHEWindow(mY, mW, mU, mXS, mA, mB, mX), est,
+                                   si[SI_FRESH] != 0 and si[SI_SPOK] != 0, y[3], ip[IP_MFORCE] != 0,
+                                   sf[SF_PLANTU], ip[IP_MSTEER] != 0, sf[SF_PLANTU + 1])
             sc[SC_UMHE], sc[SC_UMHE + 1] = mst.u0, mst.u1  # what the cascade gave (the course fusion's δ, F)
             si[SI_MHEN], si[SI_MHEOK] = mst.n, 1 if mst.ok else 0
             si[SI_MHEFULL] = 1 if mst.n == ip[IP_NW] else 0

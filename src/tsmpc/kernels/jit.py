@@ -36,6 +36,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 BLOCK_MODULES = (
     "tsmpc.control._back",
     "tsmpc.control._front",
+    "tsmpc.control._mid",
     "tsmpc.control.fusion_block",
     "tsmpc.control.gates",
     "tsmpc.control.governor",

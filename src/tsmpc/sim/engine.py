@@ -230,10 +230,15 @@ def _replaced_code() -> str | None:
         for block, fn in (("mpc", "guarded_step"), ("plant", "rk4_block")):
             if getattr(importlib.import_module(f"tsmpc.kernels.{block}"), fn) is not getattr(ke, fn):
                 return f"tsmpc.kernels.{block}.{fn} was replaced"
+        cas = importlib.import_module("tsmpc.control.cascade")
         mb = importlib.import_module("tsmpc.control.mhe_block")  # the MHE block calls the window kernel
-        if (mb.mhe_block is not ke.mhe_block
+        mid = importlib.import_module("tsmpc.control._mid")  # the plan's bookkeeping, the MHE phase
+        if (mb.mhe_block is not mid.mhe_block
                 or mb.mhe_step is not importlib.import_module("tsmpc.kernels.mhe").mhe_step):
             return "tsmpc.control.mhe_block's block or its kernel was replaced"
+        if (ke.cascade_after_plan, ke.cascade_estimate) != (mid.cascade_after_plan, mid.cascade_estimate) or (
+                cas.cascade_after_plan is not mid.cascade_after_plan):
+            return "tsmpc.control._mid's phase was replaced"
         ts_lqr = importlib.import_module("tsmpc.control.ts_lqr")  # its block calls the law
         if importlib.import_module("tsmpc.kernels.lqr").lqr_step is not ts_lqr.lqr_step:
             return "tsmpc.kernels.lqr.lqr_step was replaced"
@@ -242,7 +247,6 @@ def _replaced_code() -> str | None:
         if importlib.import_module("tsmpc.control.inner_block").inner_block is not importlib.import_module(
                 "tsmpc.control._back").inner_block:
             return "tsmpc.control.inner_block.inner_block was replaced"
-        cas = importlib.import_module("tsmpc.control.cascade")
         fr = importlib.import_module("tsmpc.control._front")  # the phases before the outer loop and the solve
         if (fr.cascade_front, fr.cascade_outer) != (ke.cascade_front, ke.cascade_outer) or (
                 cas.cascade_front, cas.cascade_outer) != (fr.cascade_front, fr.cascade_outer) or (
@@ -258,7 +262,7 @@ def _replaced_code() -> str | None:
         if importlib.import_module("tsmpc.control.gates").gate_block is not fr.gate_block:  # the gates' glue
             return "tsmpc.control.gates' block was replaced"
         ob = importlib.import_module("tsmpc.control.outer_block")
-        if ob.outer_errors is not fr.outer_errors or ob.outer_after is not ke.outer_after:
+        if ob.outer_errors is not fr.outer_errors or ob.outer_after is not mid.outer_after:
             return "tsmpc.control.outer_block's block was replaced"
         rb = importlib.import_module("tsmpc.sim.record_block")  # the recorder's and the sensors' blocks
         if any(getattr(rb, f) is not getattr(ke, f) for f in (
