@@ -77,6 +77,14 @@ def test_only_windows_within_the_linear_tyre_count() -> None:
         mp0, ms0 = _mp(1e-4, linear=0.0), np.zeros(8)  # 0: every window
         margin_update(mp0, ms0, XS, A, B, U, n)
         assert ms0[MS_MARGIN] > 0.0
+    # the rear axle's slip b ω / v − α against μ_o g M a / (L C_r), the front one held at 0
+    sat_r = 0.65 * 9.81 * 683.0 * 0.758 / (1.794 * 25000.0)
+    for share, counts in ((0.49, True), (0.51, False)):
+        w = share * sat_r * 8.0 / 1.036
+        XS[:, 2], U[:, 1] = w, 0.758 * w / 8.0
+        mp, ms = _mp(1e-4, linear=0.5), np.zeros(8)
+        margin_update(mp, ms, XS, A, B, U, n)
+        assert (ms[MS_MARGIN] > 0.0) == counts, share
 
 
 def test_the_parameters_of_the_config() -> None:
