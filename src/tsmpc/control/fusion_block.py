@@ -63,6 +63,7 @@ from tsmpc.estimation.fusion import (
     SteerState,
     StiffFit,
     course_close,
+    course_ends,
     course_sample,
     gyro_bias,
     gyro_sample,
@@ -154,15 +155,22 @@ def fusion_before(p: FusionParams, g: GyroState, cs: CourseState, cur: Interval,
     """The part before the MPC and the MHE, on the pose (X, Y, θ) (``pose_ok``: the gates accepted
     it) and the speed v and raw yaw rate ω (``ok``: accepted and fresh): (ω less the bias, the
     yaw-rate fit's state, the course state, the open interval)."""
-    b = 0.0
-    if p.gyro:
-        g = gyro_sample(p.gp, g, pose_ok, th, ok, omega)
-        b = gyro_bias(g)
-    om = omega - b
+    om, g = gyro_before(p, g, pose_ok, th, ok, omega)
     if p.course:  # an accepted pose may end the open interval (only samples the gates accepted)
         cs, cur = course_close(p.cp, cs, cur, mpc_step, pose_ok, X, Y, th, v if ok else math.nan,
                                om if ok else math.nan, ay_ref_at(p.cp.Tc, t, t_off, v_d, w_d))
     return om, g, cs, cur
+
+
+@jitable
+def gyro_before(p: FusionParams, g: GyroState, pose_ok: bool, th: float, ok: bool,
+                omega: float) -> tuple[float, GyroState]:
+    """:func:`fusion_before`'s yaw-rate bias fit: (ω less the bias, the fit's state)."""
+    b = 0.0
+    if p.gyro:
+        g = gyro_sample(p.gp, g, pose_ok, th, ok, omega)
+        b = gyro_bias(g)
+    return omega - b, g
 
 
 @jitable
@@ -312,13 +320,19 @@ def before_at(p: FusionParams, fb: NDArray[np.float64], ivs: NDArray[np.float64]
               w_d: Sequence[float] | NDArray[np.float64]) -> float:
     """:func:`fusion_before` on the state vector ``fb``, the ring's rows ``ivs`` and the open
     interval's ``row``: ω less the bias (kept in ``FB_OMEGA`` too)."""
-    om, g, cs, cur = fusion_before(p, gyro_load(fb), course_load(fb, ivs), iv_load(row), pose_ok, X, Y, th,
-                                   ok, v, omega, mpc_step, t, t_off, v_d, w_d)
+    if p.course and not course_ends(p.cp, int(fb[FB_SINCE]) + 1, mpc_step, pose_ok, X, Y, th):
+        # no interval ends (most calls): course_close would only count the call, so the ring's
+        # round trip through the records is skipped (the same state, a fraction of the batch's time)
+        om, g = gyro_before(p, gyro_load(fb), pose_ok, th, ok, omega)
+        fb[FB_SINCE] += 1.0
+    else:
+        om, g, cs, cur = fusion_before(p, gyro_load(fb), course_load(fb, ivs), iv_load(row), pose_ok, X, Y,
+                                       th, ok, v, omega, mpc_step, t, t_off, v_d, w_d)
+        if p.course:
+            course_store(cs, fb, ivs)
+            iv_store(cur, row)
     if p.gyro:
         gyro_store(g, fb)
-    if p.course:
-        course_store(cs, fb, ivs)
-        iv_store(cur, row)
     fb[FB_OMEGA] = om
     return om
 

@@ -150,8 +150,9 @@ __all__ = [
     "BASELINE", "MASS_START", "NO_INTERVAL", "REPEAT_START", "RING", "CourseFusion", "CourseParams",
     "CourseState", "Fusion", "GyroFit", "GyroParams", "GyroState", "Interval", "MassEstimator", "MassParams",
     "MassState", "RepeatGuard", "RepeatState", "SlipFit", "SpeedFit", "SteerParams", "SteerState", "StiffFit",
-    "course_chord", "course_close", "course_params", "course_sample", "course_start", "delta_mass",
-    "gyro_bias", "gyro_params", "gyro_sample", "gyro_start", "inertia_force", "mass_update", "model_changed",
+    "course_chord", "course_close", "course_ends", "course_params", "course_sample", "course_start",
+    "delta_mass", "gyro_bias", "gyro_params", "gyro_sample", "gyro_start", "inertia_force", "mass_update",
+    "model_changed",
     "noise_scale", "repeat_check", "slip_correction", "speed_offset", "steer_command", "steer_correction",
     "steer_gain", "steer_offset", "steer_params", "steer_sample", "steer_sigma", "steer_start",
     "steer_stiffness", "stiffness", "stiffness_update",
@@ -535,6 +536,15 @@ def course_sample(p: CourseParams, cur: Interval, ok: bool, has_pose: bool, thet
 
 
 @jitable
+def course_ends(p: CourseParams, since: int, mpc_step: bool, has_pose: bool, X: float, Y: float,
+                theta: float) -> bool:
+    """Does an interval end at this call (:func:`course_close`), ``since`` calls after the last end
+    (this one counted)? At an accepted, finite pose, at an MPC step or a T_c after the last end."""
+    good_pose = has_pose and math.isfinite(X) and math.isfinite(Y) and math.isfinite(theta)
+    return good_pose and (mpc_step or since >= p.n_inner)
+
+
+@jitable
 def course_close(p: CourseParams, s: CourseState, cur: Interval, mpc_step: bool, has_pose: bool, X: float,
                  Y: float, theta: float, v: float, omega: float,
                  ay_ref: float) -> tuple[CourseState, Interval]:
@@ -551,8 +561,7 @@ def course_close(p: CourseParams, s: CourseState, cur: Interval, mpc_step: bool,
     next interval opens. ``omega``: measured yaw rate now, ``ay_ref``: the reference's lateral
     acceleration v_d ω_d now. Returns (the state, the open interval)."""
     since = s.since + 1
-    good_pose = has_pose and math.isfinite(X) and math.isfinite(Y) and math.isfinite(theta)
-    if not (good_pose and (mpc_step or since >= p.n_inner)):  # no interval ends here
+    if not course_ends(p, since, mpc_step, has_pose, X, Y, theta):
         return CourseState(s.ring, s.n_iv, s.omega_now, s.v_now, s.n_chords, s.slip, s.speed, s.stiff,
                            since, s.age), cur
     ay = abs(ay_ref) if math.isfinite(ay_ref) else 0.0
