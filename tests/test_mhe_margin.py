@@ -11,7 +11,14 @@ import pytest
 
 from tsmpc import kernels
 from tsmpc.config import Config, replace
-from tsmpc.estimation.mhe_margin import MP_MARGIN, MS_MARGIN, N_MARGIN_MP, margin_params, margin_update
+from tsmpc.estimation.mhe_margin import (
+    MP_MARGIN,
+    MS_MARGIN,
+    N_MARGIN_MP,
+    margin_params,
+    margin_residual,
+    margin_update,
+)
 from tsmpc.estimation.mhe_uio import MHEUIO
 from tsmpc.models.dynamic import DynamicTS
 
@@ -148,3 +155,49 @@ def test_its_slots_are_the_estimators() -> None:
         km.MP_M, km.MP_CF, km.MP_CR, km.MP_A, km.MP_B, km.MP_MUG)
     assert (mm._MP_QW, mm._MS_F) == (km.MP_Q + 2, km.MS_F)
     assert (mm.MP_MARGIN, mm.MS_MARGIN) == (km.N_MP - mm.N_MARGIN_MP, km.N_MS - 1)
+
+
+def test_the_batch_lanes_window_arithmetic_is_the_scalar_one() -> None:
+    """tsmpc.kernels.batch.margin_lanes (the batch's second form of :func:`margin_residual`, lane
+    innermost) equals the scalar function bit for bit on random windows, the linear-tyre flag too
+    (lanes with large slips, and a share of 0: every window)."""
+    from tsmpc.kernels import batch as kb
+
+    rng = np.random.default_rng(53)
+    L = kb.LANES
+    for n in (2, 7, 30):
+        s = np.zeros(kb.mhe_workspace(n).size)
+        hdr = {kb.MH_M: rng.uniform(500, 900, L), kb.MH_CF: rng.uniform(1.5e4, 3.5e4, L),
+               kb.MH_CR: rng.uniform(1.5e4, 3.5e4, L), kb.MH_AA: rng.uniform(0.6, 1.0, L),
+               kb.MH_BB: rng.uniform(0.8, 1.2, L), kb.MH_MUG: rng.uniform(3.0, 9.0, L),
+               kb.MH_F: rng.normal(300.0, 100.0, L), kb.MH_LIN: np.where(rng.random(L) < 0.2, 0.0, 0.5)}
+        for f, v in hdr.items():
+            s[f * L:(f + 1) * L] = v
+        XS = np.stack([rng.uniform(0.5, 20.0, (L, n + 1)), rng.normal(0, 0.02, (L, n + 1)),
+                       rng.normal(0, 0.3, (L, n + 1))], axis=-1)
+        XS[::5, n // 2, 1] = 0.2  # (a large slip: outside the linear tyres)
+        A, B = rng.normal(0, 1, (L, n, 3, 3)), rng.normal(0, 1e-3, (L, n, 3, 2))
+        U = np.stack([rng.normal(500, 200, (L, n)), rng.normal(0, 0.05, (L, n))], axis=-1)
+        for k in range(n + 1):
+            o = (k + 1) * kb.MR * L
+            for i in range(3):
+                s[o + (kb.MR_X + i) * L:o + (kb.MR_X + i + 1) * L] = XS[:, k, i]
+            if k < n:
+                for j in range(3):
+                    s[o + (kb.MR_A + 3 + j) * L:o + (kb.MR_A + 4 + j) * L] = A[:, k, 1, j]
+                for j in range(2):
+                    s[o + (kb.MR_B + 2 + j) * L:o + (kb.MR_B + 3 + j) * L] = B[:, k, 1, j]
+                    s[o + (kb.MR_U + j) * L:o + (kb.MR_U + j + 1) * L] = U[:, k, j]
+        kb.margin_lanes(s, n)
+        flags = []
+        for lane in range(L):
+            mp = np.zeros(MP_MARGIN + N_MARGIN_MP)
+            mp[21], mp[23], mp[24] = hdr[kb.MH_M][lane], hdr[kb.MH_CF][lane], hdr[kb.MH_CR][lane]
+            mp[25], mp[26], mp[27] = hdr[kb.MH_AA][lane], hdr[kb.MH_BB][lane], hdr[kb.MH_MUG][lane]
+            mp[MP_MARGIN + 5] = hdr[kb.MH_LIN][lane]
+            msq, linear = margin_residual(mp, hdr[kb.MH_F][lane], XS[lane], A[lane], B[lane], U[lane], n)
+            assert (s[kb.MH_MOK * L + lane] != 0.0) == linear, (n, lane)
+            if linear:
+                assert s[kb.MH_MSQ * L + lane] == msq, (n, lane)
+            flags.append(linear)
+        assert 0 < sum(flags) < L  # both kinds of window were compared

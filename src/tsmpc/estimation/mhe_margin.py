@@ -42,7 +42,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["MP_MARGIN", "MS_MARGIN", "N_MARGIN_MP", "margin_params", "margin_update"]
+__all__ = ["MP_MARGIN", "MS_MARGIN", "N_MARGIN_MP", "margin_apply", "margin_params", "margin_residual",
+           "margin_update"]
 
 #: The margin's parameters in the estimator's ``mp`` (after the window's, tsmpc.kernels.mhe's
 #: N_MP = 30): [slip residual reference per step [rad], f_max, rise gain T_d/rise_s, decay gain
@@ -74,11 +75,21 @@ def margin_update(mp: NDArray[np.float64], ms: NDArray[np.float64], XS: NDArray[
     """One window solved within its bounds (x̂_0 … x̂_n in ``XS``, the model along it in ``A``,
     ``B`` — only their slip rows are read — the inputs in ``U``, F̂ in ``ms``): the smoothed
     ratio of the slip residual's mean square to its reference into ``ms``, the yaw-rate process
-    weight it gives into ``mp``. Off (reference 0): nothing."""
-    ref = mp[MP_MARGIN]
-    if not ref > 0.0 or n < 1:
+    weight it gives into ``mp`` (:func:`margin_residual`, then :func:`margin_apply`). Off
+    (reference 0): nothing."""
+    if not mp[MP_MARGIN] > 0.0 or n < 1:
         return
-    F = ms[_MS_F]
+    msq, linear = margin_residual(mp, ms[_MS_F], XS, A, B, U, n)
+    margin_apply(mp, ms, msq, linear)
+
+
+def margin_residual(mp: NDArray[np.float64], F: float, XS: NDArray[np.float64], A: NDArray[np.float64],
+                    B: NDArray[np.float64], U: NDArray[np.float64], n: int) -> tuple[float, bool]:
+    """The window's arithmetic (n ≥ 1; F̂ = ``F``): (the mean square of the slip equation's
+    process residual over the window's n transitions, whether every sample's axle slips stay
+    within the linear tyres' share of the saturation slip — always, at share 0). The batch's
+    lanes compute the same in their own form (``tsmpc.kernels.batch``, compared in
+    tests/test_mhe_margin.py)."""
     lin = mp[MP_MARGIN + 5]
     if lin > 0.0:  # only windows where the model's tyres are linear (see the module docstring)
         L = mp[_MP_A] + mp[_MP_B]
@@ -90,14 +101,23 @@ def margin_update(mp: NDArray[np.float64], ms: NDArray[np.float64], XS: NDArray[
             a_f = d - XS[k, 1] - mp[_MP_A] * XS[k, 2] / v
             a_r = mp[_MP_B] * XS[k, 2] / v - XS[k, 1]
             if abs(a_f) > lin * sat_f or abs(a_r) > lin * sat_r:
-                return
+                return 0.0, False
     acc = 0.0
     for k in range(n):
         pred = (A[k, 1, 0] * XS[k, 0] + A[k, 1, 1] * XS[k, 1] + A[k, 1, 2] * XS[k, 2]
                 + B[k, 1, 0] * (U[k, 0] - F) + B[k, 1, 1] * U[k, 1])  # (E = −B[:, 0])
         w = XS[k + 1, 1] - pred
         acc += w * w
-    ratio = acc / n / (ref * ref)
+    return acc / n, True
+
+
+def margin_apply(mp: NDArray[np.float64], ms: NDArray[np.float64], msq: float, linear: bool) -> None:
+    """The margin's step on a window's residual mean square ``msq`` (counted when ``linear``):
+    the smoothed ratio to the reference's square into ``ms``, the yaw-rate weight into ``mp``."""
+    ref = mp[MP_MARGIN]
+    if not linear or not ref > 0.0:
+        return
+    ratio = msq / (ref * ref)
     f = ms[MS_MARGIN]
     g = mp[MP_MARGIN + 2] if ratio > f else mp[MP_MARGIN + 3]
     f += g * (ratio - f)

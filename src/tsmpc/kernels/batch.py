@@ -300,6 +300,8 @@ MR = 53
 MH_Q, MH_R, MH_P, MH_PF, MH_ARR, MH_FP, MH_HFF, MH_GF, MH_BAD, MH_HG, MH_HH, MH_F = (
     0, 3, 5, 8, 9, 12, 13, 14, 15, 16, 17, 18)
 MH_TD, MH_M, MH_I, MH_CF, MH_CR, MH_AA, MH_BB, MH_MUG, MH_KD = range(19, 28)
+#: the yaw-model margin's linear-tyre share (in), its window's residual mean square and linear flag (out)
+MH_LIN, MH_MSQ, MH_MOK = 28, 29, 30
 #: window rows the workspace holds at most (blocks 1 … KMAX + 1); the bound also lets LLVM prove
 #: the row offsets non-negative (else numba's negative-index wrap-around blocks vectorisation)
 KMAX = 126
@@ -746,6 +748,7 @@ def _mhe_gather(s, slot, n, mY, mW, mU, mXS, mp, sf, si, key, sn, cs):
     s[(MH_R + 1) * LANES + slot] = mp[km.MP_R + 1]
     s[MH_PF * LANES + slot] = mp[km.MP_PF]
     s[MH_FP * LANES + slot] = sf[ke.SF_MF]
+    s[MH_LIN * LANES + slot] = mp[km.MP_MARGIN + 5]
     _angle_cache(mU, n, mp[km.MP_LO], mp[km.MP_HI], key, sn, cs)
     lo1, hi1 = mp[km.MP_LO + 1], mp[km.MP_HI + 1]
     for k in range(n + 1):
@@ -759,6 +762,47 @@ def _mhe_gather(s, slot, n, mY, mW, mU, mXS, mp, sf, si, key, sn, cs):
             s[o + MR_V * LANES] = min(max(mXS[k, 0], lo1), hi1)
             s[o + MR_SD * LANES] = sn[k]
             s[o + MR_CD * LANES] = cs[k]
+
+
+@njit(**_NJ)
+def margin_lanes(s, n):
+    """tsmpc.estimation.mhe_margin.margin_residual for every lane of a solved workspace (window of n
+    intervals; F̂ in MH_F, the states in MR_X): the same arithmetic in the same order, lane
+    innermost — the residual mean square into MH_MSQ, 1/0 into MH_MOK for a window within the
+    linear tyres (tests/test_mhe_margin.py compares the two forms)."""
+    for lane in range(LANES):
+        s[MH_MSQ * LANES + lane] = 0.0
+        s[MH_MOK * LANES + lane] = 1.0
+    for k in range(n + 1):
+        o = _rows(k)[1]
+        ou = _rows(min(k, n - 1))[1]
+        for lane in range(LANES):
+            lin = s[MH_LIN * LANES + lane]
+            a, b = s[MH_AA * LANES + lane], s[MH_BB * LANES + lane]
+            L = a + b
+            mug, M = s[MH_MUG * LANES + lane], s[MH_M * LANES + lane]
+            sat_f = mug * M * b / (L * s[MH_CF * LANES + lane])
+            sat_r = mug * M * a / (L * s[MH_CR * LANES + lane])
+            x0, x1, x2 = s[o + MR_X * LANES + lane], s[o + (MR_X + 1) * LANES + lane], \
+                s[o + (MR_X + 2) * LANES + lane]
+            v = max(x0, 1.0)
+            a_f = s[ou + (MR_U + 1) * LANES + lane] - x1 - a * x2 / v
+            a_r = b * x2 / v - x1
+            out = lin > 0.0 and (abs(a_f) > lin * sat_f or abs(a_r) > lin * sat_r)
+            s[MH_MOK * LANES + lane] = 0.0 if out else s[MH_MOK * LANES + lane]
+    for k in range(n):
+        o, o1 = _rows(k)[1], _rows(k + 1)[1]
+        for lane in range(LANES):
+            F = s[MH_F * LANES + lane]
+            pred = (s[o + (MR_A + 3) * LANES + lane] * s[o + MR_X * LANES + lane]
+                    + s[o + (MR_A + 4) * LANES + lane] * s[o + (MR_X + 1) * LANES + lane]
+                    + s[o + (MR_A + 5) * LANES + lane] * s[o + (MR_X + 2) * LANES + lane]
+                    + s[o + (MR_B + 2) * LANES + lane] * (s[o + MR_U * LANES + lane] - F)
+                    + s[o + (MR_B + 3) * LANES + lane] * s[o + (MR_U + 1) * LANES + lane])
+            w = s[o1 + (MR_X + 1) * LANES + lane] - pred
+            s[MH_MSQ * LANES + lane] += w * w
+    for lane in range(LANES):
+        s[MH_MSQ * LANES + lane] = s[MH_MSQ * LANES + lane] / n
 
 
 @njit(**_NJ)
@@ -791,15 +835,9 @@ def _mhe_finish(s, slot, n, mXS, mA, mB, mU, mp, sf, si, sc):
     ms = sf[ke.SF_MX:ke.SF_MX + km.N_MS]  # the estimate: the MHE's own ends (kernels.mhe, mhe_block.py)
     si[ke.SI_ESTSTAT] = km.mhe_solved(ms, mXS, n, F, si[ke.SI_MHEFULL] != 0)
     if si[ke.SI_ESTSTAT] == km.MHE_OK and mp[km.MP_MARGIN] > 0.0:
-        # the yaw-model margin (estimation/mhe_margin.py, as kernels.mhe.mhe_solve): the model's slip
-        # rows, all it reads, into the lane's mA, mB
-        for k in range(n):
-            o = (k + 1) * MR * LANES + slot
-            for j in range(3):
-                mA[k, 1, j] = s[o + (MR_A + 3 + j) * LANES]
-            mB[k, 1, 0] = s[o + (MR_B + 2) * LANES]
-            mB[k, 1, 1] = s[o + (MR_B + 3) * LANES]
-        km.margin_update(mp, ms, mXS, mA, mB, mU, n)
+        # the yaw-model margin (estimation/mhe_margin.py's margin_update, as kernels.mhe.mhe_solve): its
+        # window arithmetic done by margin_lanes for every lane, its step here
+        km.margin_apply(mp, ms, s[MH_MSQ * LANES + slot], s[MH_MOK * LANES + slot] != 0.0)
     estimate_out(ms, sc[ke.SC_EST:ke.SC_EST + N_EO], sc[ke.SC_ESTFR])
     return True
 
@@ -910,6 +948,7 @@ def _mhe_groups(state, need, tally, mws, lanes, akey, asin, acos, sf, si, sc, li
             _mhe_gather(mws, j, n, mY[b], mW[b], mU[b], mXS[b], mp[b], sf[b], si[b],
                         akey[b], asin[b], acos[b])
         mhe_window_lanes(mws, n)
+        margin_lanes(mws, n)
         for j in range(n_sel):
             b = lanes[j]
             if _mhe_finish(mws, j, n, mXS[b], mA[b], mB[b], mU[b], mp[b], sf[b], si[b], sc[b]):

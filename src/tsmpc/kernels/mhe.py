@@ -31,6 +31,8 @@ from tsmpc.estimation import mhe_margin
 from tsmpc.estimation.mhe_margin import MP_MARGIN, MS_MARGIN, N_MARGIN_MP
 
 #: The yaw-model margin's update (estimation/mhe_margin.py), compiled into the callers below
+margin_residual = register_jitable(mhe_margin.margin_residual)
+margin_apply = register_jitable(mhe_margin.margin_apply)
 margin_update = register_jitable(mhe_margin.margin_update)
 
 __all__ = ["MHE_DENSE", "MHE_FAILED", "MHE_OK", "MHE_REJECTED", "MHE_WARMUP", "mhe_push", "mhe_solve",
