@@ -295,6 +295,26 @@ def _fma(typingctx, a, b, c):
     return types.float64(types.float64, types.float64, types.float64), codegen
 
 
+@intrinsic
+def _borrowed(typingctx, arr):
+    """``arr`` as a view *without* a reference count (no meminfo, like numba.carray's arrays), for
+    :func:`run_borrowed`: every view run() takes of its ~55 arrays (slices, records of arrays, the
+    phases' arguments) would otherwise count references atomically, about a hundred times a step;
+    the caller's arrays outlive the call."""
+    if not isinstance(arr, types.Array):
+        return None
+
+    def codegen(context, builder, signature, args):
+        from numba.np.arrayobj import populate_array
+
+        a = context.make_array(arr)(context, builder, args[0])
+        out = context.make_array(arr)(context, builder)
+        populate_array(out, data=a.data, shape=cgutils.unpack_tuple(builder, a.shape),
+                       strides=cgutils.unpack_tuple(builder, a.strides), itemsize=a.itemsize, meminfo=None)
+        return out._getvalue()
+    return arr(arr), codegen
+
+
 @njit(cache=True, fastmath=False)
 def _pmax(a, b):
     """Python's ``max(a, b)`` (the first argument unless the second is greater)."""
@@ -603,6 +623,21 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
         si[SI_M] = m + 1
         si[SI_PHASE] = PH_START
     return DONE
+
+
+@njit(cache=True, fastmath=False)
+def run_borrowed(m_end, x, fp, ip, sf, si, sc, ev, noise, u_drop, gnss, fifo, frb, patches, events,
+                 ref_x, ref_y, ref_th, ref_v, ref_w, th_tan, mv, mw, gate, cur, ivs, mass_v,
+                 mY, mW, mU, mXS, mA, mB, mX, mp, ls, Kv, zlo, zhi, bits, prm,
+                 mints, mprm, mPS, prevX, prevU, pX, pU, cst, lo, loi, lxp, li, lstat, lsat):
+    """:func:`run` on the caller's arrays as borrowed views (:func:`_borrowed`): the engine's entry
+    from Python (the batch's lanes are borrowed views already)."""
+    b = _borrowed
+    return run(m_end, b(x), b(fp), b(ip), b(sf), b(si), b(sc), b(ev), b(noise), b(u_drop), b(gnss), b(fifo),
+               b(frb), b(patches), b(events), b(ref_x), b(ref_y), b(ref_th), b(ref_v), b(ref_w), b(th_tan),
+               b(mv), b(mw), b(gate), b(cur), b(ivs), b(mass_v), b(mY), b(mW), b(mU), b(mXS), b(mA), b(mB),
+               b(mX), b(mp), b(ls), b(Kv), b(zlo), b(zhi), b(bits), b(prm), b(mints), b(mprm), b(mPS),
+               b(prevX), b(prevU), b(pX), b(pU), b(cst), b(lo), b(loi), b(lxp), b(li), b(lstat), b(lsat))
 
 
 @njit(cache=True, fastmath=False)

@@ -469,7 +469,7 @@ def _compiled(ke: Any, args: tuple[Any, ...]) -> bool:
     for attempt in range(2):
         try:
             with kernels.compile_lock("engine"):  # another process compiling it: wait, then load
-                ke.run(0, *args)
+                ke.run_borrowed(0, *args)
             return True
         except NumbaError:  # a typing or lowering error is a bug of the kernel: say so loudly
             raise
@@ -808,7 +808,7 @@ class _Run:
         while True:
             m_end = min(M, (int(a.si[ke.SI_M]) // chunk + 1) * chunk)
             try:
-                code = ke.run(m_end, *self.args)
+                code = ke.run_borrowed(m_end, *self.args)
             except Exception as err:  # e.g. a float division by zero the cascade would catch
                 raise EngineFallback(f"the kernel raised {type(err).__name__}: {err}") from err
             m = int(a.si[ke.SI_M])
