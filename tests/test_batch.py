@@ -202,6 +202,26 @@ def test_runs_the_engine_does_not_take_run_one_by_one(setup) -> None:
     _close(logs[2], _single(cfg, "REF", sc, designs, 6, 50))
 
 
+def test_a_lane_that_blinds_the_cascade_runs_one_by_one(setup, monkeypatch) -> None:
+    """A lane whose sensors blind the cascade (the guard of applicability() switched off, so the
+    lane is batched): the kernel returns when the blind stop begins and the lane falls back to
+    simulate(), the Python loop; the other lane stays batched."""
+    from tsmpc.sensors import NaNBurstFault
+    from tsmpc.sim import engine as eng
+
+    cfg, sc, designs = setup
+    blind = dc_replace(sc, sensor_fault=NaNBurstFault(period_s=9.0, duration_s=1.2, start_s=2.0))
+    monkeypatch.setattr(eng, "_blinding_fault", lambda *a: None)
+    logs = batch.simulate_batch(cfg, "REF", [blind, sc], seeds=[4, 5], kinematic_design=designs[0],
+                                dynamic_design=designs[1], max_steps=40)
+    assert batch.LAST_BATCH["batched"] == 1
+    lp = simulate(replace(cfg, seed=4), "REF", blind, kinematic_design=designs[0], dynamic_design=designs[1],
+                  max_steps=40, engine=False)
+    assert lp.events["blind_steps"] > 0
+    _bits_equal(logs[0], lp)
+    _close(logs[1], _single(cfg, "REF", sc, designs, 5, 40))
+
+
 def test_bad_arguments(setup) -> None:
     cfg, sc, designs = setup
     with pytest.raises(ValueError, match="2 seeds for 3 scenarios"):

@@ -288,6 +288,26 @@ def test_a_block_that_raises_runs_in_python(paper_reference_path: Path, monkeypa
     _assert_same(le, lp)
 
 
+def test_a_run_that_blinds_the_cascade_runs_in_python(cfg: Config, monkeypatch) -> None:
+    """The recovery's blind stop and restart are the Python loop's: the kernel runs the cascade's
+    time phases (control/_clock.py) and returns when the blind stop begins, and simulate() runs
+    the Python loop. Here applicability()'s guard against blinding faults is switched off, so a
+    NaN burst longer than recovery.blind_after_s reaches the kernel (without the kernel's check it
+    ran on with the TS-LQR instead of the blind stop: 0 blind steps)."""
+    from tsmpc.sensors import NaNBurstFault
+
+    sc = dc_replace(load_scenario(cfg), sensor_fault=NaNBurstFault(period_s=9.0, duration_s=1.2, start_s=4.0))
+    assert "blind" in (eng.applicability(cfg, "REF", sc) or "")
+    monkeypatch.setattr(eng, "_blinding_fault", lambda *a: None)
+    assert eng.applicability(cfg, "REF", sc) is None
+    eng.LAST_RUN.clear()
+    le = simulate(cfg, "REF", sc, engine=True, max_steps=100)
+    assert not eng.LAST_RUN  # the engine gave up
+    lp = simulate(cfg, "REF", sc, engine=False, max_steps=100)
+    assert lp.events["blind_steps"] > 0 and lp.events["recoveries"] >= 1
+    _assert_same(le, lp)
+
+
 def test_progress_is_reported_for_every_outer_step(cfg: Config) -> None:
     sc = load_scenario(cfg)
     seen: dict[bool, list[tuple[int, int]]] = {True: [], False: []}

@@ -80,7 +80,8 @@ def test_the_cascade_hands_over_through_the_block_and_reset_takes_them_back() ->
     cas = Cascade(cfg, Method.REF, builtin_circuit(), x0=np.array([0.0, 0.0, 0.0, 10.0, 0.0, 0.0]))
     fu = cas._fusion
     course_store(_course(cfg, 0.8, 1.1).state, cas._fb, cas._ivs)  # (the fusion block's vectors)
-    cas._outer_block(0.0, 0, True)  # an MPC step's phase before the solve: the stiffness block in it
+    cas._outer_block(0.0, 0.0, 0.0, 10.0, 0.0, True)  # an MPC step's phase before the solve: the stiffness
+    # block in it
     cf, cr = 0.8 * veh.C_f, 1.1 * veh.C_r
     assert cas._sa == pytest.approx([1.0, cf, cr], rel=1e-12)
     C = (cas._sa[SA_CF], cas._sa[SA_CR])

@@ -3,7 +3,9 @@ the glue written once that :meth:`Cascade._step <tsmpc.control.cascade.Cascade>`
 ``tsmpc.kernels.blocks.after_call`` and ``mhe_call``; as Python with ``TSMPC_NO_JIT``) and the
 run engine (``tsmpc.kernels.engine.run``) and the batch compile into their step.
 
-:func:`cascade_after_plan`: after an MPC step, the outer block's part after the solve
+:func:`cascade_after_plan`: after an MPC step, the plan's first input kept as the MPC's previous
+input (:func:`~tsmpc.control._clock.plan_taken`: within what the car can turn during a restart),
+then the outer block's part after the solve
 (:func:`~tsmpc.control.outer_block.outer_after`: the plan's events, the speed governor's rate) on
 the last call's command as the command record of :mod:`tsmpc.control._back` keeps it (a command
 was made, it saturated, the drive force applied) and the last estimate (its status code, v̂, F̂).
@@ -25,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.control._back import CM_D, CM_F, CM_HASLAST, CM_LOW, CM_SAT
+from tsmpc.control._clock import ClockParams, plan_taken
 from tsmpc.control.fusion_block import FB_OFF, FB_OMEGA, FB_SV, FB_SW
 from tsmpc.control.mhe_block import MHEBlockParams, MHEStep, MHEWindow, mhe_block
 from tsmpc.control.outer_block import GovernBlockParams, OuterBlockParams, RefArrays, outer_after
@@ -41,20 +44,27 @@ class AfterState(NamedTuple):
         ob: the outer block's state (``outer_block.OB_*``).
         oc: the outer block's counters (``outer_block.OC_*``).
         cmd: the command record (``_back.CM_*``; read only).
+        ck: the cascade's time's state (``_clock.CK_*``; read only).
+        up: the MPC's previous input [v, ω] (the plan's first input is written into it).
     """
 
     ob: NDArray[np.float64]
     oc: NDArray[np.int64]
     cmd: NDArray[np.float64]
+    ck: NDArray[np.float64]
+    up: NDArray[np.float64]
 
 
 @jitable_inline
-def cascade_after_plan(p: OuterBlockParams, g: GovernBlockParams, r: RefArrays, s: AfterState, status: int,
-                       n_clipped: int, t: float, est_status: int, v_hat: float, F_fr: float, road_mu: float,
-                       dmass: float, buf: NDArray[np.float64]) -> None:
-    """The plan's bookkeeping after the MPC step at time ``t`` (see the module docstring): its status
-    code and clipped steps, the last estimate's status code, v̂ and F̂ (read when a command was
-    made), the road's μ (the oracle's grip), the mass fit's ΔM̂, the outer block's scratch."""
+def cascade_after_plan(p: OuterBlockParams, g: GovernBlockParams, c: ClockParams, r: RefArrays, s: AfterState,
+                       u0: float, u1: float, v: float, status: int, n_clipped: int, t: float, est_status: int,
+                       v_hat: float, F_fr: float, road_mu: float, dmass: float,
+                       buf: NDArray[np.float64]) -> None:
+    """The plan's bookkeeping after the MPC step at time ``t`` (see the module docstring): its first
+    input (u0, u1), the measured speed ``v`` (NaN: not accepted), its status code and clipped
+    steps, the last estimate's status code, v̂ (NaN: none) and F̂ (read when a command was made),
+    the road's μ (the oracle's grip), the mass fit's ΔM̂, the outer block's scratch."""
+    plan_taken(c, s.ck, s.up, u0, u1, v, v_hat)
     cmd = s.cmd
     outer_after(p, g, r, s.ob, s.oc, status, n_clipped, t, cmd[CM_HASLAST] != 0.0, est_status, v_hat, F_fr,
                 cmd[CM_SAT] != 0.0, cmd[CM_F], road_mu, dmass, buf)

@@ -61,6 +61,22 @@ from tsmpc.control._back import (
     cascade_command,
     command_state,
 )
+from tsmpc.control._clock import (
+    CC_BLIND,
+    CC_RECOVER,
+    CC_STALE,
+    CC_STAMP,
+    CC_TIME,
+    CK_BLIND,
+    CK_CATCHUP,
+    CK_REANCHOR,
+    CK_TLAST,
+    ClockParams,
+    cascade_clock,
+    cascade_sample,
+    clock_state,
+    pack_clock,
+)
 from tsmpc.control._front import (
     FrontParams,
     FrontState,
@@ -84,15 +100,11 @@ from tsmpc.control.gates import (
     GC_REINIT,
     GC_REPEATED,
     GC_SPEED,
-    GS_FREE,
     PO_T,
     GateBlockParams,
     GateParams,
     blind_stop,
     gate_state,
-    nearest_sample,
-    plausible_speeds,
-    speed_bounded_yaw_rate,
 )
 from tsmpc.control.governor import GovernorParams, GripParams, governed_window
 from tsmpc.control.inner_block import (
@@ -116,7 +128,6 @@ from tsmpc.control.outer_block import (
     MPC_FALLBACK,
     MPC_OPTIMAL,
     MPC_SOFT,
-    OB_OFFB,
     OB_RATE,
     OB_TOFF,
     OC_CLIPPED,
@@ -265,13 +276,6 @@ def build_outer_controller(
     return TSMPC(cfg.mpc, model, P, S, mode=method)
 
 
-def _finite(*xs: float) -> bool:
-    for x in xs:  # (a loop: all() over a generator costs 0.3 µs more a call)
-        if not math.isfinite(x):
-            return False
-    return True
-
-
 class Cascade:
     """Outer MPC (every T_c) + MHE-UIO and TS-LQR (every T_d), called every T_d.
 
@@ -363,6 +367,12 @@ class Cascade:
         rc = cfg.recovery
         self._curvature_max = (math.tan(cfg.lqr.delta_max) / cfg.vehicle.wheelbase
                                if rc.enabled and rc.yaw_rate_bound else None)
+        # the cascade's time (_clock.py): the clock, the stamp's age, the blind clock, the time base
+        self._clock_p = ClockParams(
+            float(self.Td), float(self.Tc), float(self.max_time_jump_s), float(self.max_age_s),
+            self._recovery is not None, float(rc.blind_after_s), int(self.n_inner),
+            cfg.rates.inner_steps_per_outer is not None, self._curvature_max is not None,
+            0.0 if self._curvature_max is None else float(self._curvature_max))
         from tsmpc.estimation.fusion import Fusion
 
         self._fusion = Fusion(cfg)  # beyond the paper: cfg.fusion's switches (issue 21)
@@ -409,7 +419,6 @@ class Cascade:
                     setter(self.cfg.vehicle.C_f, self.cfg.vehicle.C_r)
         self._sa = np.zeros(N_SA)  # the stiffness block's record of those given (stiffness_block.py)
         self.mpc.reset()
-        self._t_last: float | None = None
         # the gate block's pose record (gates.PO_*): the accepted or dead-reckoned pose, the time of
         # the last accepted pose
         self._pose = None if self._x0 is None else np.array([*self._x0[:3].tolist(), 0.0])
@@ -417,22 +426,21 @@ class Cascade:
         # offset, governor) and its counters (outer_block.py)
         self._ob, self._oc = outer_state(None if self._x0 is None else self._x0[:3])
         self._pose_fresh = False
-        self._u_prev = None if self._x0 is None else np.array([self._x0[3], self._x0[5]])
-        # recovery (gates.py): the last accepted speed / yaw-rate sample, the blind stop, the
-        # reference time offset, the run of poses rejected as jumps
-        self._t_meas: float | None = None
-        self._blind_since: float | None = None
-        self._reanchor = False
-        self._outage_s = 0.0
-        self._catch_up = False  # after a re-anchoring: the reference waits for the car's speed
+        # the MPC's previous input [v, ω] (the TS-LQR's references until the next MPC step; set by
+        # the first call's start without x0)
+        self._up = np.zeros(2) if self._x0 is None else np.array([self._x0[3], self._x0[5]])
+        # the cascade's time (_clock.py: the last call's time, the recovery's blind clock, the
+        # blind stop, the re-anchoring due and the catch-up after it) and its counters
+        self._ck, self._cc = clock_state()
         self._gs, self._gate_count = gate_state()  # the gate block's state and counters
         # the phases' states (_front.FrontState, _back.BackState: the blocks' vectors above; None
         # until the pose record exists)
         self._front_s = None if self._pose is None else FrontState(
-            self._gs, self._gate_count, self._pose, self._fb, self._ivs, self._cur, self._cmd)
+            self._gs, self._gate_count, self._pose, self._fb, self._ivs, self._cur, self._cmd, self._ck,
+            self._cc)
         self._outer_s = None if self._pose is None else OuterState(
             self._fb, self._ivs, self._sa, self._stiff_mp, self._stiff_prm, self._ob, self._oc,
-            self._gate_poses, self._pose, self._cmd)
+            self._gate_poses, self._pose, self._cmd, self._ck, self._up)
         self._back_s = None if self._pose is None else BackState(
             self._pose, self._fb, self._cur, self._sa, self._cmd, getattr(self.lqr, "_s", self._cmd[:0]),
             self._ib_state, self._ib_ring, self._ib_count)
@@ -455,6 +463,9 @@ class Cascade:
         ``repeated_rejected``, stalled samples, and ``friction_steps``, steps of the friction force
         declared by ``lqr.friction_step``)."""
         ev, c, g = dict(self._events), self._ib_count.tolist(), self._gate_count.tolist()
+        k = self._cc.tolist()  # the cascade's time's (_clock.py)
+        ev["time_rejected"], ev["stamp_rejected"], ev["stale_rejected"] = k[CC_TIME], k[CC_STAMP], k[CC_STALE]
+        ev["blind_steps"], ev["recoveries"] = k[CC_BLIND], k[CC_RECOVER]
         ev["speed_rejected"], ev["repeated_rejected"], ev["pose_nan"] = g[GC_SPEED], g[GC_REPEATED], g[GC_NAN]
         ev["pose_reinit"], ev["pose_jump_rejected"] = g[GC_REINIT], g[GC_JUMP]
         ev["mhe_rejected"], ev["mhe_failed"] = c[IC_REJECTED], c[IC_FAILED]
@@ -465,6 +476,27 @@ class Cascade:
         if self.governor is not None:
             ev["governor_actions"], ev["governor_steps"] = o[OC_GACT], o[OC_GSTEPS]
         return ev
+
+    @property
+    def _blind_since(self) -> float | None:
+        """recovery: when the blind stop began (None: not blind; the clock's state, _clock.CK_BLIND)."""
+        b = float(self._ck[CK_BLIND])
+        return None if math.isnan(b) else b
+
+    @property
+    def _blind(self) -> bool:
+        """In the blind stop (recovery)."""
+        return not math.isnan(self._ck[CK_BLIND])
+
+    @property
+    def _reanchor(self) -> bool:
+        """recovery: the reference is re-anchored at the car at the next MPC step with a pose."""
+        return bool(self._ck[CK_REANCHOR] != 0.0)
+
+    @property
+    def _catch_up(self) -> bool:
+        """recovery: after a re-anchoring, the reference time advances at the car's speed."""
+        return bool(self._ck[CK_CATCHUP] != 0.0)
 
     @property
     def _calls(self) -> int:
@@ -537,23 +569,17 @@ class Cascade:
                        last.estimate, held=True)
 
     def _clock(self, t: Any) -> float:
-        """The call's time: ``t`` when it follows the previous call (later by at most
-        ``max_time_jump_s``), else the cascade's own clock, previous + T_d (``time_rejected``)."""
+        """The call's time (_clock.cascade_clock, one compiled call; as Python with TSMPC_NO_JIT):
+        ``t`` when it follows the previous call (later by at most ``max_time_jump_s``), else the
+        cascade's own clock, previous + T_d (``time_rejected``)."""
         try:
             tt = float(t)
         except (TypeError, ValueError):
             tt = math.nan
-        last = self._t_last
-        if last is None:
-            ok = math.isfinite(tt) and abs(tt) < 1e9
-            tt = tt if ok else 0.0
-        else:
-            ok = math.isfinite(tt) and last < tt <= last + self.max_time_jump_s + 1e-9
-            tt = tt if ok else last + self.Td
-        if not ok:
-            self._events["time_rejected"] += 1
-        self._t_last = tt
-        return tt
+        call = self._clock_call
+        if call is not None:
+            return float(call[0](call[1], self._ck, self._cc, tt))
+        return float(cascade_clock(self._clock_p, self._ck, self._cc, tt))
 
     def _stiffness_given(self) -> None:
         """fusion.stiffness_estimate: the stiffness block (stiffness_block.py, in the outer phase:
@@ -567,71 +593,6 @@ class Cascade:
             if follow is not None:
                 follow(C_f, C_r)
         self._fusion.set_stiffness(C_f, C_r)  # the steering-offset fit's balance too
-
-    def _fresh(self, t: float, m: Measurement) -> bool:
-        if m.stamp is None:
-            return True
-        try:
-            stamp = float(m.stamp)
-        except (TypeError, ValueError):
-            stamp = math.nan
-        if not math.isfinite(stamp) or stamp > t + self.Td + 1e-9:  # from the future: garbage
-            self._events["stamp_rejected"] += 1
-            return False
-        if t - stamp <= self.max_age_s + 1e-12:
-            return True
-        self._events["stale_rejected"] += 1
-        return False
-
-    def _watch_samples(self, t: float, ok: bool) -> None:
-        """recovery: the blind stop begins after ``blind_after_s`` without a usable speed / yaw-rate
-        sample and ends at the next one (the gates then take the next pose, and the reference is
-        re-anchored at the car at the next MPC step)."""
-        rc = self._recovery
-        if rc is None:
-            return
-        if self._t_meas is None:
-            self._t_meas = t  # the blind clock starts at the first call
-        if ok:
-            if self._blind_since is not None:
-                self._events["recoveries"] += 1
-                self._reanchor = True
-                self._gs[GS_FREE] = 1.0  # the gates take the next pose
-                self._outage_s = t - self._t_meas
-                self.lqr.reset()  # its filter did not run while blind
-            self._t_meas, self._blind_since = t, None
-        elif self._blind_since is None and t - self._t_meas > rc.blind_after_s:
-            self._blind_since = t
-
-    def _wait_for_car(self, t: float) -> None:
-        """After a re-anchoring, until the car has the reference's speed: the reference time advances
-        at the car's speed over the reference's (it waits for the car instead of running ahead of
-        a car that starts from rest); 1 again once the car is as fast."""
-        Tc, ref = self.Tc, self.reference
-        kr = min(max(math.floor((t - self._t_offset) / Tc + 1e-6), 0), len(ref) - 1)
-        last = self._last
-        v_hat = float(last.estimate.x[0]) if last is not None else math.nan
-        rate = min(max(v_hat / ref.v[kr], 0.0), 1.0) if ref.v[kr] > 0.0 and math.isfinite(v_hat) else 1.0
-        if rate >= 1.0:
-            self._catch_up = False
-        else:
-            self._t_offset += (1.0 - rate) * Tc
-
-    def _reanchored(self, t: float, X: float, Y: float, v: float, om: float) -> None:
-        """After a blind stop: the reference time moves back to the reference sample nearest to the
-        car (searched over the blind time and one more second), the MPC starts afresh."""
-        Tc, ref = self.Tc, self.reference
-        kr = min(max(math.floor((t - self._t_offset) / Tc + 1e-6), 0), len(ref) - 1)
-        back = math.ceil((self._outage_s + 1.0) / Tc)
-        k = nearest_sample(ref.x, ref.y, max(kr - back, 0), kr, X, Y)
-        self._t_offset += (kr - k) * Tc
-        self._reanchor = False
-        self._catch_up = True
-        self.mpc.reset()
-        self._ob[OB_OFFB] = 0.0  # the offset-free estimate: what it integrated while blind was no course
-        self._plan = None
-        if _finite(v, om):
-            self._u_prev = np.array([max(v, 0.0), om])
 
     def _step(self, t: float, m: Measurement) -> Command:
         """One call: the block diagram of paper Fig. 1 (gates → outer MPC every T_c/T_d calls →
@@ -647,9 +608,8 @@ class Cascade:
         ok = fresh and speeds_ok
         plan, e_meas, t_mpc = (self._outer(t, X, Y, th, v, om, fresh, speeds_ok, pose_ok) if mpc_step
                                else (None, None, 0.0))
-        # (_u_prev and _pose are set by _start_from above; ignores, not asserts: the syntax tree
-        # of these methods is fingerprinted for the run engine, tsmpc.sim.engine._PORTED)
-        v_ref, w_ref = float(self._u_prev[0]), float(self._u_prev[1])  # type: ignore[index]
+        up = self._up  # the MPC's previous input: the TS-LQR's references
+        v_ref, w_ref = float(up[0]), float(up[1])
         t1 = time.perf_counter()
         est, u_model = self._estimate(m, v, om, ok, t1)
         t2 = time.perf_counter()
@@ -667,7 +627,7 @@ class Cascade:
         v_hat, a_hat, w_hat = est.x.tolist()
         lqr, code = self._ib_lqr, STATUS_CODE[est.status]
         d_m, F_m = float(u_model[1]), float(u_model[0])
-        if (m.state is not None or self._blind_since is not None or lqr is None or "step" in lqr.__dict__
+        if (m.state is not None or self._blind or lqr is None or "step" in lqr.__dict__
                 or type(lqr).step is not _TSLQR_STEP):  # (a replaced step: the Python path calls it)
             self._back_start(ok, pose_ok, th, v, v_hat, a_hat, w_hat, code, d_m, F_m)
             F, d, sat, low = self._inner_other(m, est, v_hat, v_ref, w_ref, code)
@@ -690,7 +650,7 @@ class Cascade:
     def _back_start(self, ok: bool, pose_ok: bool, th: float, v: float, v_hat: float, a_hat: float,
                     w_hat: float, code: int, d_m: float, F_m: float) -> None:
         """The phase's part before the inner block (_back.back_start): dead reckoning, fusion."""
-        blind = self._blind_since is not None
+        blind = self._blind
         call = self._start_call
         if call is not None:
             call[0](call[1], self._pose, self._fb, self._cur, self._sa, self._cmd, ok, pose_ok, th, v, v_hat,
@@ -713,102 +673,114 @@ class Cascade:
         x0 = np.nan_to_num(np.array([X, Y, th, v, 0.0, om]), posinf=0.0, neginf=0.0)
         x0[3] = min(max(x0[3], 0.0), self._v_range[1])
         x0[5] = min(max(x0[5], -self._w_limit), self._w_limit)
-        t_last = self._t_last
+        t_last = self._ck[CK_TLAST]  # (the clock's: this call's time)
         self.reset(x0)
-        self._t_last = t_last
+        self._ck[CK_TLAST] = t_last
         self._pose[PO_T] = t  # type: ignore[index]
 
     def _front(self, t: float, m: Measurement, X: float, Y: float, th: float, v: float,
                om: float) -> tuple[bool, bool, bool, bool, float]:
         """The phase before the outer loop (_front.cascade_front: one compiled call on the default
-        path; as Python with TSMPC_NO_JIT): the sample gates, the MPC's turn and the fusion block
-        before the MPC and the MHE — (fresh, speeds plausible, pose accepted, the MPC runs, ω less
-        the gyro's bias). The pose, every call: accepted when fresh, finite and where the car can
-        be; else the dead-reckoned pose stands (advanced at the end of the call) for the
-        plausibility gate. The yaw-rate bias fit takes the raw ω against the accepted pose's
-        heading, the course fusion closes its interval at an accepted pose."""
-        fresh = m.stamp is None or self._fresh(t, m)
-        if self._recovery is not None:  # (the speed gate's answer, before the block counts it)
-            self._watch_samples(t, fresh and plausible_speeds(self._gates, v, om) and _finite(v, om))
-        stamp = -math.inf if m.stamp is None else float(m.stamp)  # a new stamp is a new sample
+        path; as Python with TSMPC_NO_JIT): the sample's stamp and the recovery's watch, the sample
+        gates, the MPC's turn and the fusion block before the MPC and the MHE — (fresh, speeds
+        plausible, pose accepted, the MPC runs, ω less the gyro's bias). The pose, every call:
+        accepted when fresh, finite and where the car can be; else the dead-reckoned pose stands
+        (advanced at the end of the call) for the plausibility gate. The yaw-rate bias fit takes
+        the raw ω against the accepted pose's heading, the course fusion closes its interval at an
+        accepted pose. A stamp that is no number is refused (``stamp_rejected``), then fails the
+        call."""
+        has_stamp, stamp = m.stamp is not None, -math.inf  # (a new stamp is a new sample)
+        if has_stamp:
+            try:
+                stamp = float(m.stamp)  # type: ignore[arg-type]
+            except (TypeError, ValueError):  # refused (and watched), then the call's error
+                if cascade_sample(self._clock_p, self._gates, self._ck, self._cc, self._gs, t, True, math.nan,
+                                  v, om)[1]:
+                    self.lqr.reset()
+                raise
         call, s = self._front_call, self._front_s
         if call is not None:
-            return call[0](call[1], call[2], call[3], *s, t, fresh, X, Y, th, v, om, stamp,  # type: ignore[misc]
-                           self._t_offset, call[4], call[5])
-        return cascade_front(self._front_p, s, t, fresh, X, Y, th, v, om, stamp, self._t_offset,  # type: ignore[arg-type]
-                             self._ref_v, self._ref_w)
+            out = call[0](call[1], call[2], call[3], call[4], *s, t, has_stamp, X, Y, th, v, om,  # type: ignore[misc]
+                          stamp, self._t_offset, call[5], call[6])
+        else:
+            out = cascade_front(self._front_p, s, t, has_stamp, X, Y, th, v, om, stamp,  # type: ignore[arg-type]
+                                self._t_offset, self._ref_v, self._ref_w)
+        if out[5]:  # the blind stop ended: the TS-LQR's filter did not run while blind
+            self.lqr.reset()
+        return out[0], out[1], out[2], out[3], out[4]
 
     def _outer(self, t: float, X: float, Y: float, th: float, v: float, om: float, fresh: bool,
                speeds_ok: bool, pose_ok: bool) -> tuple[MPCResult, NDArray[np.float64], float]:
-        """An MPC step: (the plan, the errors it saw, its wall time). The outer block
-        (outer_block.py) before the solve (the errors, the window) and after it (the plan's events,
-        the governor); the recovery's restart around them."""
-        if self._reanchor and pose_ok:
-            self._reanchored(t, X, Y, v, om)
-        elif self._catch_up:
-            self._wait_for_car(t)
-        if self.cfg.rates.inner_steps_per_outer is None:
-            k = max(math.floor((t - self._t_offset) / self.Tc + 1e-6), 0)
-        else:  # a fixed number of calls per reference sample (the published run's time base)
-            k = self._calls // self.n_inner
-        e_meas, window = self._outer_block(t, k, pose_ok)
+        """An MPC step: (the plan, the errors it saw, its wall time). The phase before the solve
+        (_front.cascade_outer: the recovery's restart, the reference sample, the errors and the
+        window) and the one after it (_mid.cascade_after_plan: the plan's input kept, the plan's
+        events, the governor)."""
+        e_meas, window = self._outer_block(t, X, Y, v, om, pose_ok)
+        u_prev = self._up.copy()  # (the plan may keep what it is given)
         t0 = time.perf_counter()
         try:
-            plan = self.mpc.step(e_meas, self._u_prev, window)
+            plan = self.mpc.step(e_meas, u_prev, window)
         except Exception as err:  # a solver bug must not stop the car: shifted plan
             self._caught(err)
-            plan = shifted_plan(self._plan, e_meas, self._u_prev, self.cfg.mpc.N, t0, 0, 0, 0)  # type: ignore[arg-type]
+            plan = shifted_plan(self._plan, e_meas, u_prev, self.cfg.mpc.N, t0, 0, 0, 0)
         t_mpc = time.perf_counter() - t0
-        self._u_prev = np.asarray(plan.u, dtype=float)
-        if self._curvature_max is not None and (self._reanchor or self._catch_up):
-            self._bound_yaw_rate(v if fresh and speeds_ok else math.nan)  # restarting from rest
         self._plan = plan
-        self._after_plan(t, plan)
+        self._after_plan(t, plan, v if fresh and speeds_ok else math.nan)
         return plan, e_meas, t_mpc
 
-    def _outer_block(self, t: float, k: int, pose_ok: bool) -> tuple[NDArray[np.float64], Any]:
+    def _outer_block(self, t: float, X: float, Y: float, v: float, om: float,
+                     pose_ok: bool) -> tuple[NDArray[np.float64], Any]:
         """The MPC step before the solve (_front.cascade_outer, one compiled call; as Python with
-        TSMPC_NO_JIT): the stiffness block (fusion.stiffness_estimate; the Python models follow
-        when it gave), the errors the MPC sees of the pose against reference sample ``k`` (or the
-        governed time's) and its window (v_d, ω_d; a baseline's: the reference's window)."""
-        plan = None if self._catch_up else self._plan  # (a restart waiting for the car: no learning)
-        xp = None if plan is None else plan.x_pred
+        TSMPC_NO_JIT): the recovery's restart (re-anchored at the sample's pose: the MPC and the
+        last plan forgotten) and the reference sample k, the stiffness block
+        (fusion.stiffness_estimate; the Python models follow when it gave), the errors the MPC sees
+        of the pose against reference sample ``k`` (or the governed time's) and its window (v_d,
+        ω_d; a baseline's: the reference's window)."""
+        xp = None if self._plan is None else self._plan.x_pred
         has_pred = xp is not None and len(xp) >= 2
+        last = self._last
         n = self.cfg.mpc.N + 1
         e, wv, ww = np.empty(3), np.empty(n), np.empty(n)
-        args = (t, k, pose_ok, has_pred, float(xp[1][1]) if has_pred else 0.0,  # type: ignore[index]
-                float(self._u_prev[0]), e, wv, ww, self._ob_buf)  # type: ignore[index]
-        call = self._outer_call
+        v_hat = float(last.estimate.x[0]) if last is not None else math.nan
+        args = (t, pose_ok, X, Y, v, om, v_hat, has_pred, float(xp[1][1]) if has_pred else 0.0,  # type: ignore[index]
+                e, wv, ww, self._ob_buf)
+        call, s = self._outer_call, self._outer_s
         if call is not None:
-            give, governed = call[0](call[1], call[2], call[3], self._refs, *self._outer_s, *args)  # type: ignore[misc]
+            k, restarted, give, governed = call[0](call[1], call[2], call[3], call[4], self._refs, *s, *args)  # type: ignore[misc]
         else:  # TSMPC_NO_JIT: the phase as Python
-            give, governed = cascade_outer(self._outer_p, self._ref_rec, self._outer_s, *args)  # type: ignore[arg-type]
+            k, restarted, give, governed = cascade_outer(self._outer_p, self._ref_rec, s, *args)  # type: ignore[arg-type]
+        if restarted:  # re-anchored: the MPC starts afresh
+            self.mpc.reset()
+            self._plan = None
         if give:
             self._stiffness_given()
         if not self._window_only:  # a baseline reads the whole reference window
             tau, rate = t - self._t_offset, float(self._ob[OB_RATE])
             return e, (governed_window(self._mpc_reference, tau, rate, n) if governed
-                       else self._mpc_reference.window(k, n))
+                       else self._mpc_reference.window(int(k), n))
         return e, _Window(wv, ww)
 
-    def _after_plan(self, t: float, plan: MPCResult) -> None:
+    def _after_plan(self, t: float, plan: MPCResult, v: float) -> None:
         """The plan's bookkeeping (_mid.cascade_after_plan, one compiled call; as Python with
-        TSMPC_NO_JIT): the outer block after the solve (outer_block.outer_after: the plan's events
-        and the governor's rate for the next step from the last estimate's grip) on the command
-        record."""
+        TSMPC_NO_JIT): the plan's first input kept as the MPC's previous input (within what the car
+        can turn at the measured speed ``v``, NaN: not accepted, during a restart), the outer block
+        after the solve (outer_block.outer_after: the plan's events and the governor's rate for the
+        next step from the last estimate's grip) on the command record."""
         last, gov = self._last, self.governor
         est = last.estimate if last is not None else None
         dm = block_delta_mass(self._ib, self._ib_state) if gov is not None and gov.mass_estimate else 0.0
         code, v_hat, F_fr = ((STATUS_CODE[est.status], float(est.x[0]), float(est.F_fr)) if est is not None
                              else (0, math.nan, math.nan))
-        args = (_MPC_STATUS_CODE[plan.status], int(plan.n_clipped), t, code, v_hat, F_fr, self.road_mu, dm,
-                self._ob_buf)
+        u = plan.u
+        args = (float(u[0]), float(u[1]), v, _MPC_STATUS_CODE[plan.status], int(plan.n_clipped), t, code,
+                v_hat, F_fr, self.road_mu, dm, self._ob_buf)
         call = self._after_call
         if call is not None:
-            call[0](call[1], call[2], self._refs, self._ob, self._oc, self._cmd, *args)
+            call[0](call[1], call[2], call[3], self._refs, self._ob, self._oc, self._cmd, self._ck, self._up,
+                    *args)
         else:  # TSMPC_NO_JIT: the phase as Python
-            state = AfterState(self._ob, self._oc, self._cmd)
-            cascade_after_plan(self._ob_p, self._gov_p, self._ref_rec, state, *args)
+            state = AfterState(self._ob, self._oc, self._cmd, self._ck, self._up)
+            cascade_after_plan(self._ob_p, self._gov_p, self._clock_p, self._ref_rec, state, *args)
 
     def _build_outer_block(self, cfg: Config) -> None:
         """The outer block's records (outer_block.py), the reference it reads, its scratch and its
@@ -837,26 +809,11 @@ class Cascade:
 
         kern = kernels.load("blocks")
         self._after_call: Any = None
+        self._clock_call: Any = None
         if kern is not None:
-            self._after_call = (kern.after_plan_call, pack_outer(self._ob_p), pack_govern(self._gov_p))
-
-    def _bound_yaw_rate(self, v: float) -> None:
-        """recovery.yaw_rate_bound, from the end of a blind stop until the car has the reference's
-        speed again: the yaw rate the TS-LQR gets until the next MPC step (and the MPC's previous
-        input, so its next step starts from what was applied) within what the car can turn at its
-        speed — the accepted measured speed ``v``, else the last estimate's
-        (gates.speed_bounded_yaw_rate). The plan itself is left as the MPC made it. Like the blind
-        stop, the run engine never reaches it (applicability: runs that can blind the cascade run
-        in the Python loop)."""
-        u, k_max = self._u_prev, self._curvature_max
-        if u is None or k_max is None:  # (both set when the MPC ran with the bound on)
-            return
-        if not math.isfinite(v):
-            last = self._last
-            v = float(last.estimate.x[0]) if last is not None else math.nan
-        w = speed_bounded_yaw_rate(float(u[1]), v, k_max)
-        if w != u[1]:  # a new array: the plan's own u is not changed
-            self._u_prev = np.array([u[0], w])
+            ckp = pack_clock(self._clock_p)
+            self._after_call = (kern.after_plan_call, pack_outer(self._ob_p), pack_govern(self._gov_p), ckp)
+            self._clock_call = (kern.clock_call, ckp)
 
     # ------------------------------------------------------------------ speed governor (issue 36)
     @property
@@ -971,10 +928,10 @@ class Cascade:
         from tsmpc import kernels
 
         self._back_p = BackParams(self._gates, self._fb_p, self._fusion.steer_p, self._ib)
-        self._front_p = FrontParams(self._gate_p, self._fb_p, self.n_inner)
+        self._front_p = FrontParams(self._gate_p, self._fb_p, self.n_inner, self._clock_p)
         fu = self._fusion
         stiff = bool(fu.any_course and cfg.fusion.stiffness_estimate)  # (with the course fits only)
-        self._outer_p = OuterParams(stiff, fu.course.params, self._ob_p)
+        self._outer_p = OuterParams(stiff, fu.course.params, self._ob_p, self._clock_p)
         self._course_speed = bool(cfg.fusion.course_speed)
         kern = kernels.load("blocks")
         self._back_call: Any = None
@@ -987,9 +944,10 @@ class Cascade:
         lqr, law = self._ib_lqr, getattr(self.lqr, "_law", None)
         pk = kern.pack_back(self._back_p, law)
         self._start_call, self._command_call = (kern.start_call, pk), (kern.command_call, pk)
-        self._front_call = (kern.front_call, kern.pack_gates(self._gate_p), pk, self.n_inner, self._refs[3],
-                            self._refs[4])  # (the reference's v_d, ω_d)
-        self._outer_call = (kern.outer_phase_call, pk, pack_outer(self._ob_p), stiff)
+        ckp = pack_clock(self._clock_p)
+        self._front_call = (kern.front_call, kern.pack_gates(self._gate_p), pk, ckp, self.n_inner,
+                            self._refs[3], self._refs[4])  # (the reference's v_d, ω_d)
+        self._outer_call = (kern.outer_phase_call, pk, pack_outer(self._ob_p), ckp, stiff)
         if lqr is not None and law is not None and lqr._kern is not None:
             self._back_call = (kern.back_call, pk, law.Kv, law.zlo, law.zhi, law.bits, law.prm)
 
@@ -1009,7 +967,7 @@ class Cascade:
                              est.status, est.solve_time_s)
         else:
             inner = _oracle_estimate(m.state)
-        if self._blind_since is None:
+        if not self._blind:
             out = self.lqr.step(inner, v_ref, w_ref)
             F, delta, sat, low = out.F_xR, out.delta, bool(out.saturated), out.F_low_speed
         else:
@@ -1017,7 +975,7 @@ class Cascade:
             assert rc is not None
             F, delta = blind_stop(float(est.x[0]), float(self._u_applied[1]), self.cfg.vehicle.mass,
                                   rc.stop_decel, *self._force_limits)
-            self._events["blind_steps"] += 1
+            self._cc[CC_BLIND] += 1
             sat, low = False, 0.0
         count_step(self._ib_count, code, sat)
         return F, delta, sat, low

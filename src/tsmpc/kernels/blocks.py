@@ -3,7 +3,8 @@
 the dead reckoning :func:`tsmpc.control.gates.reckon_block`,
 the outer step's :func:`tsmpc.control.outer_block.outer_errors` and
 :func:`tsmpc.control.outer_block.outer_after`, the MHE-UIO's step :func:`tsmpc.control.mhe_block.mhe_block`;
-the cascade's phases :func:`tsmpc.control._front.cascade_front`, :func:`tsmpc.control._front.cascade_outer`,
+the cascade's phases :func:`tsmpc.control._clock.cascade_clock` (:func:`clock_call`),
+:func:`tsmpc.control._front.cascade_front`, :func:`tsmpc.control._front.cascade_outer`,
 :func:`tsmpc.control._back.cascade_back` and its parts: :func:`front_call`, :func:`outer_phase_call`,
 :func:`back_call`, :func:`start_call`, :func:`command_call` on :func:`pack_back`'s vector):
 the blocks' records rebuilt from arrays inside the compiled code, because numba's dispatcher types
@@ -29,6 +30,7 @@ from numba import njit
 
 from tsmpc import kernels
 from tsmpc.control._back import BackParams, BackState, back_start, cascade_back, cascade_command
+from tsmpc.control._clock import ClockParams, cascade_clock, clock_state, pack_clock, unpack_clock
 from tsmpc.control._front import (
     FrontParams,
     FrontState,
@@ -48,9 +50,9 @@ from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import CourseParams, MassParams
 from tsmpc.kernels.jit import BLOCK_MODULES
 
-__all__ = ["after_call", "after_plan_call", "back_call", "command_call", "estimate_call", "front_call",
-           "gate_call", "inner_call", "mhe_call", "outer_call", "outer_phase_call", "pack", "pack_back",
-           "pack_gates", "reckon_call", "warm"]
+__all__ = ["after_call", "after_plan_call", "back_call", "clock_call", "command_call", "estimate_call",
+           "front_call", "gate_call", "inner_call", "mhe_call", "outer_call", "outer_phase_call", "pack",
+           "pack_back", "pack_gates", "reckon_call", "warm"]
 
 # entries compiled from other versions of the blocks (or of the law, kernels/lqr.py) are deleted
 # before the first call below loads one
@@ -155,11 +157,19 @@ def mhe_call(mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, est, speeds_ok, v, omeg
 
 
 @njit(cache=True, fastmath=False)
-def after_plan_call(opk, gpk, refs, ob, cnt, cmd, status, n_clipped, t, est_status, v_hat, F_fr, road_mu,
-                    dmass, buf):
-    """:func:`~tsmpc.control._mid.cascade_after_plan` of the packed records."""
-    cascade_after_plan(unpack_outer(opk), unpack_govern(gpk), _refs(refs), AfterState(ob, cnt, cmd), status,
-                       n_clipped, t, est_status, v_hat, F_fr, road_mu, dmass, buf)
+def after_plan_call(opk, gpk, ckp, refs, ob, cnt, cmd, ck, up, u0, u1, v, status, n_clipped, t, est_status,
+                    v_hat, F_fr, road_mu, dmass, buf):
+    """:func:`~tsmpc.control._mid.cascade_after_plan` of the packed records (the clock's:
+    :func:`~tsmpc.control._clock.pack_clock`)."""
+    cascade_after_plan(unpack_outer(opk), unpack_govern(gpk), unpack_clock(ckp), _refs(refs),
+                       AfterState(ob, cnt, cmd, ck, up), u0, u1, v, status, n_clipped, t, est_status, v_hat,
+                       F_fr, road_mu, dmass, buf)
+
+
+@njit(cache=True, fastmath=False)
+def clock_call(ckp, ck, cc, t):
+    """:func:`~tsmpc.control._clock.cascade_clock` of the packed record: the call's time."""
+    return cascade_clock(unpack_clock(ckp), ck, cc, t)
 
 
 @njit(cache=True, fastmath=False)
@@ -243,28 +253,30 @@ def command_call(pk, fb, sa, cmd, F, delta, saturated, low, alpha):
 
 
 @njit(cache=True, fastmath=False)
-def front_call(gbp, pk, n_inner, gs, gcnt, pose, fb, ivs, cur, cmd, t, fresh, X, Y, th, v, omega, stamp,
-               t_off, v_d, w_d):
+def front_call(gbp, pk, ckp, n_inner, gs, gcnt, pose, fb, ivs, cur, cmd, ck, cc, t, has_stamp, X, Y, th, v,
+               omega, stamp, t_off, v_d, w_d):
     """:func:`~tsmpc.control._front.cascade_front` of the packed records (the gate block's,
-    :func:`pack_gates`; the fusion block's, :func:`pack_back`): (fresh, speeds plausible, pose
-    accepted, the MPC runs, ω less the bias)."""
+    :func:`pack_gates`; the fusion block's, :func:`pack_back`; the clock's,
+    :func:`~tsmpc.control._clock.pack_clock`): (fresh, speeds plausible, pose accepted, the MPC
+    runs, ω less the bias, the blind stop ended)."""
     fbp, _sp = unpack_fusion(pk[BK_FUS:BK_FUS + N_FBP], _course_params(pk[BK_COURSE:BK_INNER]))
     gp = GateBlockParams(_gate_params(gbp), gbp[6] != 0.0, gbp[7], gbp[8] != 0.0)
-    state = FrontState(gs, gcnt, pose, fb, ivs, cur, cmd)
-    out = cascade_front(FrontParams(gp, fbp, n_inner), state, t, fresh, X, Y, th, v, omega, stamp, t_off, v_d,
-                        w_d)
-    return out.fresh, out.speeds_ok, out.pose_ok, out.mpc_step, out.omega
+    state = FrontState(gs, gcnt, pose, fb, ivs, cur, cmd, ck, cc)
+    out = cascade_front(FrontParams(gp, fbp, n_inner, unpack_clock(ckp)), state, t, has_stamp, X, Y, th, v,
+                        omega, stamp, t_off, v_d, w_d)
+    return out.fresh, out.speeds_ok, out.pose_ok, out.mpc_step, out.omega, out.recovered
 
 
 @njit(cache=True, fastmath=False)
-def outer_phase_call(pk, opk, stiffness, refs, fb, ivs, sa, mp, prm, ob, oc, gate, pose, cmd, t, k, pose_ok,
-                     has_pred, pred_y, v_prev, e, win_v, win_w, buf):
+def outer_phase_call(pk, opk, ckp, stiffness, refs, fb, ivs, sa, mp, prm, ob, oc, gate, pose, cmd, ck, up, t,
+                     pose_ok, X, Y, v, omega, v_hat, has_pred, pred_y, e, win_v, win_w, buf):
     """:func:`~tsmpc.control._front.cascade_outer` of the packed records (the course fusion's of
-    :func:`pack_back`, the outer block's of ``outer_block.pack_outer``) and the (8, L) reference:
-    (the stiffnesses given, governed)."""
-    p = OuterParams(stiffness, _course_params(pk[BK_COURSE:BK_INNER]), unpack_outer(opk))
-    state = OuterState(fb, ivs, sa, mp, prm, ob, oc, gate, pose, cmd)
-    return cascade_outer(p, _refs(refs), state, t, k, pose_ok, has_pred, pred_y, v_prev, e, win_v, win_w, buf)
+    :func:`pack_back`, the outer block's of ``outer_block.pack_outer``, the clock's) and the (8, L)
+    reference: (k, re-anchored, the stiffnesses given, governed)."""
+    p = OuterParams(stiffness, _course_params(pk[BK_COURSE:BK_INNER]), unpack_outer(opk), unpack_clock(ckp))
+    state = OuterState(fb, ivs, sa, mp, prm, ob, oc, gate, pose, cmd, ck, up)
+    return cascade_outer(p, _refs(refs), state, t, pose_ok, X, Y, v, omega, v_hat, has_pred, pred_y, e, win_v,
+                         win_w, buf)
 
 
 def warm() -> None:
@@ -309,8 +321,11 @@ def _warm_phases(gp: GateBlockParams, p: InnerBlockParams, law: LQRLaw, pose: np
     fb, ivs, cur = fusion_state(fu.gyro_start(gyro), fu.steer_start(sp), 0.0, 0.0, fu.course_start(cp),
                                 fu.NO_INTERVAL)
     cmd, sa, ref = np.zeros(7), np.zeros(3), np.ones((2, 20)) * 10.0
-    front_call(pack_gates(gp), bpk, 10, gs, gcnt, pose, fb, ivs, cur, cmd, 0.02, True, 1.0, 2.0, 0.1, 10.0,
-               0.1, -np.inf, 0.0, ref[0], ref[1])
+    ckp = pack_clock(ClockParams(0.01, 0.1, 0.1, 0.1, True, 0.5, 10, False, True, 0.8))
+    ck, cc = clock_state()
+    clock_call(ckp, ck, cc, 0.02)
+    front_call(pack_gates(gp), bpk, ckp, 10, gs, gcnt, pose, fb, ivs, cur, cmd, ck, cc, 0.02, False, 1.0, 2.0,
+               0.1, 10.0, 0.1, -np.inf, 0.0, ref[0], ref[1])
     st, ring, cnt = start_state(30)
     back_call(bpk, law.Kv, law.zlo, law.zhi, law.bits, law.prm, pose, fb, cur, sa, cmd, np.zeros(6), st, ring,
               cnt, True, True, 0.1, 10.0, 10.0, 0.0, 0.1, 100.0, 90.0, 1, 0.0, 0.0, 10.0, 0.1)

@@ -21,18 +21,22 @@ and the plant's RK4 block (the single-track plant; :func:`~tsmpc.kernels.plant.r
 correction and speed governor of :mod:`tsmpc.control.outer_block`, …) are the cascade's own
 functions, compiled in, their records loaded from and stored to the state slots around each call.
 The cascade's glue between them is written once too, as its phases (issue 34), which
-``Cascade._step`` calls and this kernel compiles in: :func:`~tsmpc.control._front.cascade_front`
-(the gates, the MPC's turn, the fusion block before the MPC), :func:`~tsmpc.control._front.cascade_outer`
-(an MPC step before the solve: the stiffness block, the outer block's errors and window),
-:func:`~tsmpc.control._mid.cascade_after_plan` (the plan's bookkeeping: the outer block after the
-solve), :func:`~tsmpc.control._mid.cascade_estimate` (the MHE block on its inputs) and
-:func:`~tsmpc.control._back.cascade_back` (after the MHE: dead reckoning, the fusion block after it,
-the inner block, the servo and the command record). What remains here is ported operation by
-operation (same order, same rounding, Python's ``min``/``max``/``%`` and ``math.hypot``): the
-simulator's loop, the MPC's fast path and the plan's copy, and the parts of ``Cascade._outer``
-around the phases (``_PORTED`` in :mod:`tsmpc.sim.engine`), so the engine reproduces the Python
-loop to the last bit. (``run`` keeps its phases inline: split into inlined phase functions it ran
-4-5 % slower, measured, issue 34.)
+``Cascade.step`` calls and this kernel compiles in: :func:`~tsmpc.control._clock.cascade_clock`
+(the call's time), :func:`~tsmpc.control._front.cascade_front` (the stamp and the recovery's
+watch, the gates, the MPC's turn, the fusion block before the MPC),
+:func:`~tsmpc.control._front.cascade_outer` (an MPC step before the solve: the recovery's restart
+and the reference sample, the stiffness block, the outer block's errors and window),
+:func:`~tsmpc.control._mid.cascade_after_plan` (the plan's bookkeeping: its input kept, the outer
+block after the solve), :func:`~tsmpc.control._mid.cascade_estimate` (the MHE block on its inputs)
+and :func:`~tsmpc.control._back.cascade_back` (after the MHE: dead reckoning, the fusion block after
+it, the inner block, the servo and the command record). The recovery's blind stop is the Python
+loop's: the kernel returns BLINDED when it begins and the caller gives up (the run goes to the
+Python loop). What remains here is ported operation by operation (same order, same rounding,
+Python's ``min``/``max``/``%`` and ``math.hypot``): the simulator's loop, the MPC's fast path and
+the plan's copy, the order of the phases in ``Cascade._step`` and the start state
+(``_PORTED`` in :mod:`tsmpc.sim.engine`), so the engine reproduces the Python loop to the last
+bit. (``run`` keeps its phases inline: split into inlined phase functions it ran 4-5 % slower,
+measured, issue 34.)
 
 Where a block's compiled fast path does not decide a step (the MPC's condensed QP / SOCP path, the
 MHE's dense QP with an active state bound, a singular reference gain of the TS-LQR, a non-finite
@@ -57,12 +61,27 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic as _numba_intrinsic
 
 from tsmpc.control._back import (
+    CM_HASLAST,
     CM_SAT,
     N_CM,
     BackParams,
     BackState,
     cascade_back,
     cascade_command,
+)
+from tsmpc.control._clock import (
+    CC_BLIND,
+    CC_RECOVER,
+    CC_STALE,
+    CC_STAMP,
+    CC_TIME,
+    CK_BLIND,
+    CK_TLAST,
+    N_CC,
+    N_CK,
+    N_CKP,
+    cascade_clock,
+    unpack_clock,
 )
 from tsmpc.control._front import (
     FrontParams,
@@ -177,7 +196,8 @@ from tsmpc.vehicle.single_track import friction_force
 __all__ = ["friction_mu", "hypot_py", "run", "ticks", "warm"]
 
 # ---------------------------------------------------------------------------- return codes
-DONE, NEED_MPC, NEED_MHE, NEED_LQR, NEED_PLANT, DIVERGED = range(6)
+# (BLINDED: the blind stop began — recovery's blind stop and restart run in the Python loop)
+DONE, NEED_MPC, NEED_MHE, NEED_LQR, NEED_PLANT, DIVERGED, BLINDED = range(7)
 # phases of a step (where a resumed call continues)
 PH_START, PH_PLAN, PH_MHE, PH_POST_MHE, PH_POST_LQR, PH_POST_PLANT = range(6)
 PH_PLANT = 6  # (within a call: the command is made, the plant steps)
@@ -188,6 +208,9 @@ MPC_OPTIMAL, MPC_SOFT, MPC_FALLBACK = 1, 2, 3
 # event counters: the cascade's own, then the gate block's, the inner block's and the outer block's
 # (their GC_*, IC_* and OC_* counters, views of ev)
 (EV_TIME_REJ, EV_STAMP_REJ, EV_BLIND, EV_RECOVER, EV_STALE_REJ, EV_STEP_ERR, EV_GATES) = range(7)
+# (the first N_CC are the cascade's time's counters, tsmpc.control._clock's CC_* slots)
+assert (CC_TIME, CC_STAMP, CC_BLIND, CC_RECOVER, CC_STALE, N_CC) == (
+    EV_TIME_REJ, EV_STAMP_REJ, EV_BLIND, EV_RECOVER, EV_STALE_REJ, EV_STEP_ERR)
 EV_INNER = EV_GATES + N_GC
 EV_OUTER = EV_INNER + N_IC
 N_EVENTS = EV_OUTER + N_OC
@@ -208,7 +231,8 @@ FP_FB = 35  # the fusion block's parameters (N_FBP values, tsmpc.control.fusion_
 FP_SENS = FP_FB + N_FBP  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
 FP_OB = FP_SENS + N_SP  # the outer block's OuterBlockParams (N_OBP values, outer_block.pack_outer)
 FP_GB = FP_OB + N_OBP  # its GovernBlockParams (N_GBP values, outer_block.pack_govern)
-N_FP = FP_GB + N_GBP
+FP_CK = FP_GB + N_GBP  # the cascade's time's ClockParams (N_CKP values, _clock.pack_clock)
+N_FP = FP_CK + N_CKP
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
  IP_REPEAT, IP_ANYCOURSE, IP_CSPEED, IP_STIFF,
@@ -235,7 +259,8 @@ SF_SENS = SF_GS + N_GS  # the sensor block's state (N_SS values, tsmpc.sensors.p
 SF_OB = SF_SENS + N_SS  # the outer block's state (N_OB values, tsmpc.control.outer_block's OB_* slots)
 SF_FB = SF_OB + N_OB  # the fusion block's state (N_FB values, tsmpc.control.fusion_block's FB_* slots)
 SF_CMD = SF_FB + N_FB  # the command record (N_CM values, tsmpc.control._back's CM_* slots)
-N_SF = SF_CMD + N_CM
+SF_CK = SF_CMD + N_CM  # the cascade's time's state (N_CK values, tsmpc.control._clock's CK_* slots)
+N_SF = SF_CK + N_CK
 SF_TOFF = SF_OB + OB_TOFF  # (the reference time offset, the governed rate: the caller reads them)
 SF_GRATE = SF_OB + OB_RATE
 # ---------------------------------------------------------------------------- integer state
@@ -399,9 +424,8 @@ def _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, fp, sc):
 
 @njit(cache=True, fastmath=False, inline="always")
 def _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp):
-    """The plan of MPC step ``k`` (the fast path's or the caller's): the previous input and plan
-    for the next step (Cascade._outer, TSMPC's), the outer log's record of it."""
-    sf[SF_UPREV], sf[SF_UPREV + 1] = sc[SC_PU], sc[SC_PU + 1]
+    """The plan of MPC step ``k`` (the fast path's or the caller's): the plan for the next step
+    (TSMPC's), the outer log's record of it."""
     for i in range(N):
         prevU[i, 0], prevU[i, 1] = pU[i, 0], pU[i, 1]
     for i in range(N + 1):
@@ -491,21 +515,25 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                                                          ref_w, th_tan, mv, mw)
                 if _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, fp, sc):
                     return DIVERGED
-            # ---- Cascade._step: the phase before the outer loop (Cascade._front: the gate block, the
+            # ---- Cascade.step: the call's time (Cascade._clock), then Cascade._step: the phase before
+            # the outer loop (Cascade._front: the stamp and the recovery's watch, the gate block, the
             # MPC's turn, the fusion block before the MPC and the MHE; the simulator's samples carry
             # no stamp)
+            ckp = unpack_clock(fp[FP_CK:FP_CK + N_CKP])
+            ck, cc = sf[SF_CK:SF_CK + N_CK], ev[EV_TIME_REJ:EV_TIME_REJ + N_CC]
+            tc = cascade_clock(ckp, ck, cc, t)
             fbs = sf[SF_FB:SF_FB + N_FB]
             gbp = GateBlockParams(gates, ip[IP_RECOV] != 0, fp[FP_REINIT], ip[IP_REPEAT] != 0)
             fst = FrontState(sf[SF_GS:SF_GS + N_GS], ev[EV_GATES:EV_GATES + N_GC], sf[SF_POSE:SF_POSE + N_PO],
-                             fbs, ivs, cur, sf[SF_CMD:SF_CMD + N_CM])
-            fo = cascade_front(FrontParams(gbp, fbp, n_in), fst, t, True, y[0], y[1], y[2], y[3], y[4],
+                             fbs, ivs, cur, sf[SF_CMD:SF_CMD + N_CM], ck, cc)
+            fo = cascade_front(FrontParams(gbp, fbp, n_in, ckp), fst, tc, False, y[0], y[1], y[2], y[3], y[4],
                                -math.inf, sf[SF_TOFF], ref_v, ref_w)
+            if not math.isnan(ck[CK_BLIND]):  # the blind stop: the Python loop's (the caller's fallback)
+                return BLINDED
             si[SI_FRESH] = 1 if fo.fresh else 0
             si[SI_SPOK] = 1 if fo.speeds_ok else 0
             si[SI_POSEOK] = 1 if fo.pose_ok else 0
             mpc_step, pose_ok = fo.mpc_step, fo.pose_ok
-            kr = math.floor((t - sf[SF_TOFF]) / Tc + 1e-6)
-            kw = kr if kr > 0 else 0
             phase = PH_MHE
             if mpc_step:
                 # the MPC step before the solve (Cascade._outer_block): the stiffness block, the errors
@@ -514,11 +542,14 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                                                          ref_w, th_tan, mv, mw)
                 wv, ww = sc[N_SC:N_SC + N + 1], sc[N_SC + N + 1:N_SC + 2 * (N + 1)]
                 has_prev = si[SI_HASPREV] != 0
+                v_last = sc[SC_EST] if sf[SF_CMD + CM_HASLAST] != 0.0 else math.nan  # (the last estimate's)
                 ost = OuterState(fbs, ivs, sf[SF_SA:SF_SA + N_SA], mp, prm, obs, ocnt, gate,
-                                 sf[SF_POSE:SF_POSE + N_PO], sf[SF_CMD:SF_CMD + N_CM])
-                opp = OuterParams(ip[IP_ANYCOURSE] != 0 and ip[IP_STIFF] != 0, cpar, op)
-                _give, governed = cascade_outer(opp, refs, ost, t, kw, pose_ok, has_prev, prevX[1, 1],
-                                                sf[SF_UPREV], e_meas, wv, ww, obuf)
+                                 sf[SF_POSE:SF_POSE + N_PO], sf[SF_CMD:SF_CMD + N_CM], ck,
+                                 sf[SF_UPREV:SF_UPREV + 2])
+                opp = OuterParams(ip[IP_ANYCOURSE] != 0 and ip[IP_STIFF] != 0, cpar, op, ckp)
+                _k, _restarted, _give, governed = cascade_outer(
+                    opp, refs, ost, tc, pose_ok, y[0], y[1], y[3], fo.omega, v_last, has_prev, prevX[1, 1],
+                    e_meas, wv, ww, obuf)
                 si[SI_GWIN] = 1 if governed else 0
                 # ---- TSMPC.step: its compiled step (checks, schedule, Riccati fast path); a
                 # declined step (a constraint active, a non-finite input) is the caller's
@@ -539,8 +570,9 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
                     return NEED_MPC
                 phase = PH_PLAN
         if phase == PH_PLAN:
-            # the plan of this MPC step (fast path or the caller's): u_prev, log; the outer block
-            # after it (Cascade._after_plan): its events, the speed governor's rate
+            # the plan of this MPC step (fast path or the caller's): TSMPC's previous plan, log; the
+            # plan's bookkeeping (Cascade._after_plan): its input kept, the outer block after it (its
+            # events, the speed governor's rate)
             _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp)
             op, refs, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v, ref_w,
                                                      th_tan, mv, mw)
@@ -548,8 +580,13 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             oracle = op.governor and govp.grip.oracle  # (the oracle row reads the road's μ)
             road_mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events) if oracle else math.nan
             dm = _delta_mass(sf, fp) if op.governor and govp.mass_estimate else 0.0
-            cascade_after_plan(op, govp, refs, AfterState(obs, ocnt, sf[SF_CMD:SF_CMD + N_CM]), si[SI_PSTAT],
-                               si[SI_PCLIP], t, si[SI_ESTSTAT], sc[SC_EST], sc[SC_ESTF], road_mu, dm, obuf)
+            ck = sf[SF_CK:SF_CK + N_CK]
+            ast = AfterState(obs, ocnt, sf[SF_CMD:SF_CMD + N_CM], ck, sf[SF_UPREV:SF_UPREV + 2])
+            v_acc = y[3] if si[SI_FRESH] != 0 and si[SI_SPOK] != 0 else math.nan  # (the speed accepted)
+            v_last = sc[SC_EST] if sf[SF_CMD + CM_HASLAST] != 0.0 else math.nan
+            cascade_after_plan(op, govp, unpack_clock(fp[FP_CK:FP_CK + N_CKP]), refs, ast, sc[SC_PU],
+                               sc[SC_PU + 1], v_acc, si[SI_PSTAT], si[SI_PCLIP], ck[CK_TLAST], si[SI_ESTSTAT],
+                               v_last, sc[SC_ESTF], road_mu, dm, obuf)
             phase = PH_MHE
         if phase == PH_MHE:
             # the MHE block (Cascade._estimate): its inputs, the window's update and solve, the estimate

@@ -35,6 +35,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 #: tests/test_blocks.py checks the list is complete).
 BLOCK_MODULES = (
     "tsmpc.control._back",
+    "tsmpc.control._clock",
     "tsmpc.control._front",
     "tsmpc.control._mid",
     "tsmpc.control.fusion_block",

@@ -316,6 +316,8 @@ def _run_group(kb: Any, ke: Any, method: Method, lanes: list[_Lane], exact_plant
                 elif code == ke.NEED_PLANT:
                     slow["plant"] += 1
                     lane.ended = r._plant()
+                elif code == ke.BLINDED:  # the blind stop: the lane is the Python loop's
+                    r.blinded()
                 else:  # pragma: no cover (a kernel/caller mismatch)
                     raise RuntimeError(f"batched runs: unknown code {code}")
             except eng.EngineFallback as err:

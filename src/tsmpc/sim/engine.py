@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
+from tsmpc.control._clock import N_CK, N_CKP, pack_clock
 from tsmpc.control.cascade import _MPC_STATUS_CODE, EVENT_NAMES, STATUS_CODE, Cascade, _Window
 from tsmpc.control.fusion_block import N_FB, N_FBP, pack_fusion
 from tsmpc.control.gates import N_PO
@@ -128,15 +129,10 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
 _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:simulate": "ba020e97f0f11213",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
-    "tsmpc.control.cascade:Cascade.__init__": "3ca6145a5fdd53f7",
-    "tsmpc.control.cascade:Cascade.reset": "97e29f530e71a377",
+    "tsmpc.control.cascade:Cascade.__init__": "672d7892722ea751",
+    "tsmpc.control.cascade:Cascade.reset": "de9b9026bf4fe89f",
     "tsmpc.control.cascade:Cascade.step": "153443d2b249fd93",
-    "tsmpc.control.cascade:Cascade._step": "14053a91095a8707",
-    "tsmpc.control.cascade:Cascade._start_from": "ec50854f219e3425",
-    "tsmpc.control.cascade:Cascade._outer": "e6836b06f13473bd",
-    "tsmpc.control.cascade:Cascade._watch_samples": "a2b6f37a111ff688",
-    "tsmpc.control.cascade:Cascade._clock": "95093b8df2ab5f52",
-    "tsmpc.control.cascade:Cascade._fresh": "3587fb8d88324fb6",
+    "tsmpc.control.cascade:Cascade._step": "9751068729abb75f",
     "tsmpc.estimation.mhe_uio:MHEUIO.reset": "18aee6b646c04a73",
     "tsmpc.control.ts_lqr:TSLQR.reset": "87b87f561a20499d",
     "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
@@ -247,11 +243,18 @@ def _replaced_code() -> str | None:
         if importlib.import_module("tsmpc.control.inner_block").inner_block is not importlib.import_module(
                 "tsmpc.control._back").inner_block:
             return "tsmpc.control.inner_block.inner_block was replaced"
+        ck = importlib.import_module("tsmpc.control._clock")  # the cascade's time
+        if (ke.cascade_clock is not ck.cascade_clock or cas.cascade_clock is not ck.cascade_clock
+                or cas.cascade_sample is not ck.cascade_sample):
+            return "tsmpc.control._clock's phase was replaced"
         fr = importlib.import_module("tsmpc.control._front")  # the phases before the outer loop and the solve
         if (fr.cascade_front, fr.cascade_outer) != (ke.cascade_front, ke.cascade_outer) or (
                 cas.cascade_front, cas.cascade_outer) != (fr.cascade_front, fr.cascade_outer) or (
                 fr.before_at is not importlib.import_module("tsmpc.control.fusion_block").before_at):
             return "tsmpc.control._front's phase was replaced"
+        if (fr.cascade_sample, fr.cascade_time, mid.plan_taken) != (ck.cascade_sample, ck.cascade_time,
+                                                                    ck.plan_taken):
+            return "tsmpc.control._clock's phase was replaced"
         if importlib.import_module("tsmpc.control.stiffness_block").stiffness_block is not fr.stiffness_block:
             return "tsmpc.control.stiffness_block's block was replaced"
         bk = importlib.import_module("tsmpc.control._back")  # the phase after the MHE
@@ -617,6 +620,7 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     # the outer block's records (Cascade._ob_p, _gov_p; the kernel rebuilds them from these slots)
     fp[ke.FP_OB:ke.FP_OB + N_OBP] = pack_outer(cascade._ob_p)
     fp[ke.FP_GB:ke.FP_GB + N_GBP] = pack_govern(cascade._gov_p)
+    fp[ke.FP_CK:ke.FP_CK + N_CKP] = pack_clock(cascade._clock_p)  # the cascade's time's (Cascade._clock_p)
     return fp, ip
 
 
@@ -629,9 +633,11 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     sf[ke.SF_IB:ke.SF_IB + ke.N_IB] = cascade._ib_state  # the inner block's (friction step, mass fit)
     sf[ke.SF_POSE:ke.SF_POSE + N_PO] = cascade._pose  # the gate block's pose record (gates.PO_*)
     # recovery: the run of poses rejected as jumps (the blind stop is not reproduced:
-    # applicability() keeps runs that can blind the cascade in Python)
+    # applicability() keeps runs that can blind the cascade in Python, and the kernel returns
+    # BLINDED, the run given up, when the blind stop begins all the same)
     sf[ke.SF_GS:ke.SF_GS + ke.N_GS] = cascade._gs  # the gate block's (the jump run, the repeat guard)
-    sf[ke.SF_UPREV:ke.SF_UPREV + 2] = cascade._u_prev
+    sf[ke.SF_UPREV:ke.SF_UPREV + 2] = cascade._up  # the MPC's previous input
+    sf[ke.SF_CK:ke.SF_CK + N_CK] = cascade._ck  # the cascade's time's (no call yet, not blind)
     sf[ke.SF_CMD:ke.SF_CMD + ke.N_CM] = cascade._cmd  # the command record (_back.CM_*)
     sf[ke.SF_SA:ke.SF_SA + ke.N_SA] = cascade._sa  # the stiffnesses given (a reset cascade: none)
     # the fusion block's (the yaw-rate, steering-offset and course fits, the servo)
@@ -789,6 +795,10 @@ class _Run:
         a.sf[ke.SF_PLANTU:ke.SF_PLANTU + 2] = self.plant.applied_input
         return None
 
+    def blinded(self) -> None:
+        """The blind stop began (recovery): the run is the Python loop's."""
+        raise EngineFallback("the cascade went blind (the blind stop and the restart run in the Python loop)")
+
     # -- the loop ----------------------------------------------------------------------------
     def diverged(self, m: int) -> tuple[str, int, int, int]:
         """(termination, outer steps done, inner rows logged, sensor samples taken) of a run the
@@ -835,6 +845,8 @@ class _Run:
                     return why, m // n_in + 1, m + 1, m + 1
             elif code == ke.DIVERGED:
                 return self.diverged(m)
+            elif code == ke.BLINDED:
+                self.blinded()
             else:  # pragma: no cover (a kernel/caller mismatch)
                 raise RuntimeError(f"run engine: unknown code {code}")
 
