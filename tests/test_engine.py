@@ -308,6 +308,27 @@ def test_a_run_that_blinds_the_cascade_runs_in_python(cfg: Config, monkeypatch) 
     _assert_same(le, lp)
 
 
+def test_the_engine_starts_only_from_a_reset_it_can_read(cfg: Config) -> None:
+    """The kernel takes its start state from the reset cascade and its blocks' arrays (no reset of
+    its own); what it cannot hold it refuses: a cascade without x0 (started by its first
+    measurement), a last command or plan before the first call."""
+    from tsmpc.control.cascade import Cascade, Measurement
+    from tsmpc.sim.start import _start_state
+
+    sc = load_scenario(cfg)
+    x0 = _start_state(sc.reference, sc.initial_error)
+    cas = Cascade(cfg, "REF", sc.reference)
+    assert "first measurement" in (eng._start_problem(cas) or "")
+    cas.reset(x0)
+    assert eng._start_problem(cas) is None
+    cas.step(0.0, Measurement((x0[0], x0[1], x0[2]), x0[3], x0[5]))
+    assert "last command" in (eng._start_problem(cas) or "")
+    cas.reset(x0)
+    assert eng._start_problem(cas) is None
+    cas.mpc._prev = object()  # (a plan the MPC kept over its reset)
+    assert "plan" in (eng._start_problem(cas) or "")
+
+
 def test_progress_is_reported_for_every_outer_step(cfg: Config) -> None:
     sc = load_scenario(cfg)
     seen: dict[bool, list[tuple[int, int]]] = {True: [], False: []}

@@ -168,6 +168,9 @@ def _set_up(index: int, cfg: Config, method: Method, scenario: Scenario, designs
     x0 = _start_state(ref, scenario.initial_error)
     plant.reset(x0)
     cascade.reset(x0)
+    why = eng._start_problem(cascade)
+    if why is not None:
+        return why
     eng._hypot_exact(ke)
     run = eng._Run(cfg, cascade, scenario, plant, K, x0, ke)
     if scenario.actuators is not None and not eng._actuator_data(plant, Td, run.a.fp, run.a.ip):

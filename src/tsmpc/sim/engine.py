@@ -43,7 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.config import Config, InnerLaw, Method, MHEForm
-from tsmpc.control._clock import N_CK, N_CKP, pack_clock
+from tsmpc.control._clock import N_CC, N_CK, N_CKP, pack_clock
 from tsmpc.control.cascade import _MPC_STATUS_CODE, EVENT_NAMES, STATUS_CODE, Cascade, _Window
 from tsmpc.control.fusion_block import N_FB, N_FBP, pack_fusion
 from tsmpc.control.gates import N_PO
@@ -130,12 +130,8 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:simulate": "ba020e97f0f11213",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
     "tsmpc.control.cascade:Cascade.__init__": "672d7892722ea751",
-    "tsmpc.control.cascade:Cascade.reset": "de9b9026bf4fe89f",
     "tsmpc.control.cascade:Cascade.step": "153443d2b249fd93",
     "tsmpc.control.cascade:Cascade._step": "9751068729abb75f",
-    "tsmpc.estimation.mhe_uio:MHEUIO.reset": "18aee6b646c04a73",
-    "tsmpc.control.ts_lqr:TSLQR.reset": "87b87f561a20499d",
-    "tsmpc.control.ts_mpc:TSMPC.reset": "20354a110bc1dc54",
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
 }
 
@@ -643,12 +639,37 @@ def _state(cascade: Cascade, ke: Any) -> tuple[NDArray[np.float64], NDArray[np.i
     # the fusion block's (the yaw-rate, steering-offset and course fits, the servo)
     sf[ke.SF_FB:ke.SF_FB + N_FB] = cascade._fb
     ivs, cur = cascade._ivs.copy(), cascade._cur.copy()
-    sf[ke.SF_MX:ke.SF_MX + 3] = mhe._x
-    sf[ke.SF_MF] = mhe._F
-    sf[ke.SF_ARR:ke.SF_ARR + 3] = mhe._arrival
-    sf[ke.SF_MX + ke.MS_MARGIN] = mhe._ms[ke.MS_MARGIN]  # the yaw-model margin's (estimation/mhe_margin.py)
+    # the MHE's records as its reset left them (kernels.mhe: [x̂, F̂, x̄_0, the yaw-model margin],
+    # [samples, rejected, failed])
+    sf[ke.SF_MX:ke.SF_MX + ke.N_MS] = mhe._ms
+    si[ke.SI_NY:ke.SI_NY + ke.N_MI] = mhe._mi
     sf[ke.SF_OB:ke.SF_OB + ke.N_OB] = cascade._ob  # the outer block's (held pose, offset, governor, …)
     return sf, si, ivs, cur
+
+
+def _counters(cascade: Cascade, ke: Any) -> NDArray[np.int64]:
+    """The kernel's event counters (``ev``): the cascade's after reset(x0) — its time's, its
+    step errors, the gate, inner and outer blocks' counters."""
+    ev = np.zeros(ke.N_EVENTS, dtype=np.int64)
+    ev[ke.EV_TIME_REJ:ke.EV_TIME_REJ + N_CC] = cascade._cc
+    ev[ke.EV_STEP_ERR] = cascade._events["step_errors"]
+    ev[ke.EV_GATES:ke.EV_INNER] = cascade._gate_count
+    ev[ke.EV_INNER:ke.EV_OUTER] = cascade._ib_count
+    ev[ke.EV_OUTER:ke.N_EVENTS] = cascade._oc
+    return ev
+
+
+def _start_problem(cascade: Cascade) -> str | None:
+    """Why the kernel cannot start from this reset cascade, None when it can. It reads every other
+    state from the cascade and its blocks (:func:`_state`, :func:`_counters`, :func:`_prepare`);
+    these it cannot hold: a start from the first measurement (no x0), a last command or plan
+    before the first call (the kernel's "no command yet" is the command record's, and it keeps the
+    cascade's last plan and the MPC's as one)."""
+    if cascade._x0 is None or cascade._pose is None:
+        return "the cascade starts from its first measurement"
+    if cascade._last is not None or cascade._plan is not None or cascade.mpc._prev is not None:
+        return "the reset cascade has a last command or plan"
+    return None
 
 
 def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: int,
@@ -676,7 +697,7 @@ def _prepare(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any, K: i
     n_sc = ke.N_SC + 2 * (N + 1) + scratch_size(N, cascade._gov_p.preview)
     return _Arrays(
         x=_f64(x0), fp=fp, ip=ip, sf=sf, si=si, sc=np.zeros(n_sc),
-        ev=np.zeros(ke.N_EVENTS, dtype=np.int64), noise=noise, u_drop=_f64(u_drop),
+        ev=_counters(cascade, ke), noise=noise, u_drop=_f64(u_drop),
         gnss=_f64(gnss), fifo=sr.model.fifo, frb=frb, patches=_f64(patches), events=_f64(events),
         ref_x=rx, ref_y=ry, ref_th=rth, ref_v=rv, ref_w=rw, th_tan=rtan, mv=mv, mw=mw,
         gate=cascade._gate_poses.copy(), cur=cur, ivs=ivs, mass_v=cascade._ib_ring.copy(),
@@ -877,6 +898,8 @@ def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_desi
     x0 = _start_state(ref, scenario.initial_error)
     plant.reset(x0)
     cascade.reset(x0)
+    if _start_problem(cascade) is not None:
+        return None
     _hypot_exact(ke)
     t_start = time.perf_counter()
     r = _Run(cfg, cascade, scenario, plant, K, x0, ke)
