@@ -60,6 +60,7 @@ from tsmpc.kernels.jit import exact_hypot, jitable
 __all__ = [
     "HEADING_DRIFT_RAD_PER_S",
     "HEADING_JUMP_RAD",
+    "N_GBK",
     "POSE_DRIFT_M_PER_S",
     "POSE_JUMP_M",
     "GateBlockParams",
@@ -69,12 +70,14 @@ __all__ = [
     "gate_block",
     "jump_run",
     "nearest_sample",
+    "pack_gate_block",
     "plausible_speeds",
     "pose_consistent",
     "pose_gate",
     "reckon_block",
     "speed_bounded_yaw_rate",
     "speed_gate",
+    "unpack_gate_block",
 ]
 
 #: Drift allowed between the dead-reckoned and a measured pose: metres plus metres per second
@@ -120,6 +123,22 @@ class GateBlockParams(NamedTuple):
     recovery: bool
     reinit_s: float
     repeat: bool
+
+
+#: Length of :func:`pack_gate_block`'s vector (GateParams' 6 fields, then recovery, reinit_s, repeat).
+N_GBK = 9
+
+
+def pack_gate_block(p: GateBlockParams) -> NDArray[np.float64]:
+    """The record as the float vector :func:`unpack_gate_block` reads (compiled callers rebuild it:
+    the run engine's parameter slots)."""
+    return np.array([*p.gates, p.recovery, p.reinit_s, p.repeat], dtype=np.float64)
+
+
+@jitable
+def unpack_gate_block(a: NDArray[np.float64]) -> GateBlockParams:
+    """The record of :func:`pack_gate_block`'s vector."""
+    return GateBlockParams(GateParams(a[0], a[1], a[2], a[3], a[4], a[5]), a[6] != 0.0, a[7], a[8] != 0.0)
 
 
 #: The gate block's state slots (a float vector): the pose gate owes the next pose (after a blind

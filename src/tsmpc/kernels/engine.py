@@ -109,12 +109,12 @@ from tsmpc.control.gates import (
     GC_REINIT,
     GC_REPEATED,
     GC_SPEED,
+    N_GBK,
     N_GC,
     N_GS,
     N_PO,
     PO_T,
-    GateBlockParams,
-    GateParams,
+    unpack_gate_block,
 )
 from tsmpc.control.inner_block import (
     EST_FAILED,
@@ -222,22 +222,23 @@ EVENT_SLOTS = (EV_OUTER + OC_SOFT, EV_OUTER + OC_FALLBACK, EV_OUTER + OC_CLIPPED
                EV_STALE_REJ, EV_STEP_ERR, EV_GATES + GC_REPEATED, EV_INNER + IC_FSTEPS)
 
 # ---------------------------------------------------------------------------- float parameters
-(FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_V_LO, FP_V_HI, FP_W_LIM, FP_POSE_NOISE, FP_HEAD_NOISE,
+(FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, _GFREE0, _GFREE1, _GFREE2, _GFREE3, _GFREE4,
  FP_COURSE_SIGMA, FP_CF0, FP_CR0, FP_VM, FP_VI, FP_VA, FP_VB, FP_TAU, FP_MHE_MASS,
  FP_BOUND,
  FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU, FP_VG,
- FP_A_GF, FP_A_GD, FP_A_RMAX, FP_A_DOFF, FP_FS_H, FP_REINIT) = range(35)
+ FP_A_GF, FP_A_GD, FP_A_RMAX, FP_A_DOFF, FP_FS_H, _GFREE5) = range(35)
 FP_FB = 35  # the fusion block's parameters (N_FBP values, tsmpc.control.fusion_block.pack_fusion)
 FP_SENS = FP_FB + N_FBP  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
 FP_OB = FP_SENS + N_SP  # the outer block's OuterBlockParams (N_OBP values, outer_block.pack_outer)
 FP_GB = FP_OB + N_OBP  # its GovernBlockParams (N_GBP values, outer_block.pack_govern)
 FP_CK = FP_GB + N_GBP  # the cascade's time's ClockParams (N_CKP values, _clock.pack_clock)
-N_FP = FP_CK + N_CKP
+FP_GBK = FP_CK + N_CKP  # the gate block's GateBlockParams (N_GBK values, gates.pack_gate_block)
+N_FP = FP_GBK + N_GBK
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
- IP_REPEAT, IP_ANYCOURSE, IP_CSPEED, IP_STIFF,
+ _IFREE2, IP_ANYCOURSE, IP_CSPEED, IP_STIFF,
  IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, _IFREE0,
- IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, IP_RECOV,
+ IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, _IFREE3,
  _IFREE0, IP_DEFER, _IFREE1) = range(26)
 N_IP = 26
 # ---------------------------------------------------------------------------- float state
@@ -493,7 +494,8 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     # scratch as views, not allocations: the batch calls run() for every lane at every step
     noX = prevX[:0]  # "no previous plan" for guarded_step
     noU = prevU[:0]
-    gates = GateParams(fp[FP_V_LO], fp[FP_V_HI], fp[FP_W_LIM], fp[FP_POSE_NOISE], fp[FP_HEAD_NOISE], Td)
+    gbp = unpack_gate_block(fp[FP_GBK:FP_GBK + N_GBK])  # the gate block's (Cascade._gate_p)
+    gates = gbp.gates
     cpar = course_params(Tc, fp[FP_COURSE_SIGMA], True, fp[FP_CF0], fp[FP_CR0], fp[FP_VM], fp[FP_VI],
                          fp[FP_VA], fp[FP_VB], fp[FP_VG], Td, n_in)
     fbp, sp0 = unpack_fusion(fp[FP_FB:FP_FB + N_FBP], cpar)  # the fusion block's (Cascade._fb_p, steer_p)
@@ -523,7 +525,6 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             ck, cc = sf[SF_CK:SF_CK + N_CK], ev[EV_TIME_REJ:EV_TIME_REJ + N_CC]
             tc = cascade_clock(ckp, ck, cc, t)
             fbs = sf[SF_FB:SF_FB + N_FB]
-            gbp = GateBlockParams(gates, ip[IP_RECOV] != 0, fp[FP_REINIT], ip[IP_REPEAT] != 0)
             fst = FrontState(sf[SF_GS:SF_GS + N_GS], ev[EV_GATES:EV_GATES + N_GC], sf[SF_POSE:SF_POSE + N_PO],
                              fbs, ivs, cur, sf[SF_CMD:SF_CMD + N_CM], ck, cc)
             fo = cascade_front(FrontParams(gbp, fbp, n_in, ckp), fst, tc, False, y[0], y[1], y[2], y[3], y[4],

@@ -150,6 +150,9 @@ def _set_up(index: int, cfg: Config, method: Method, scenario: Scenario, designs
 
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=designs[0],
                       dynamic_design=designs[1])
+    why = eng._blocks_problem(cascade)
+    if why is not None:
+        return why
     mhe, lqr, mpc = cascade.mhe, eng._static_lqr(cascade), cascade.mpc
     if mpc._kern is None or mhe._kern is None or not mhe._kargs[-1] or lqr._kern is None:
         return "a block's compiled kernel is off"

@@ -46,7 +46,7 @@ from tsmpc.config import Config, InnerLaw, Method, MHEForm
 from tsmpc.control._clock import N_CC, N_CK, N_CKP, pack_clock
 from tsmpc.control.cascade import _MPC_STATUS_CODE, EVENT_NAMES, STATUS_CODE, Cascade, _Window
 from tsmpc.control.fusion_block import N_FB, N_FBP, pack_fusion
-from tsmpc.control.gates import N_PO
+from tsmpc.control.gates import N_GBK, N_PO, pack_gate_block
 from tsmpc.control.outer_block import N_GBP, N_OBP, OC_GACT, OC_GSTEPS, pack_govern, pack_outer, scratch_size
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
@@ -129,7 +129,6 @@ def applicability(cfg: Config, method: Method | str, scenario: Scenario, *, orac
 _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:simulate": "ba020e97f0f11213",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
-    "tsmpc.control.cascade:Cascade.__init__": "672d7892722ea751",
     "tsmpc.control.cascade:Cascade.step": "153443d2b249fd93",
     "tsmpc.control.cascade:Cascade._step": "9751068729abb75f",
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
@@ -576,9 +575,7 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     veh, fs = cfg.vehicle, cfg.fusion
     fp[ke.FP_TD], fp[ke.FP_TC], fp[ke.FP_H] = cascade.Td, cascade.Tc, plant.model.h
     fp[ke.FP_MU_NOM], fp[ke.FP_MG] = plant.vehicle.mu_nominal, plant._mg
-    fp[ke.FP_V_LO], fp[ke.FP_V_HI] = cascade._v_range
-    fp[ke.FP_W_LIM], fp[ke.FP_POSE_NOISE] = cascade._w_limit, cascade._pose_noise
-    fp[ke.FP_HEAD_NOISE] = cascade._heading_noise
+    fp[ke.FP_GBK:ke.FP_GBK + N_GBK] = pack_gate_block(cascade._gate_p)  # the gate block's (Cascade._gate_p)
     fp[ke.FP_COURSE_SIGMA] = fu.course.sigma
     fp[ke.FP_CF0], fp[ke.FP_CR0] = veh.C_f, veh.C_r
     fp[ke.FP_VM], fp[ke.FP_VI], fp[ke.FP_VA], fp[ke.FP_VB] = veh.mass, veh.inertia, veh.a, veh.b
@@ -596,7 +593,6 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     ip[ke.IP_NIN], ip[ke.IP_N] = n_in, N
     ip[ke.IP_NSUB] = rk4_count(cascade.Td, plant.model.h) or 0  # (run() checked it)
     ip[ke.IP_NW], ip[ke.IP_REFLEN] = cfg.mhe.N, len(ref)
-    ip[ke.IP_REPEAT] = fs.reject_repeated_samples
     ip[ke.IP_ANYCOURSE] = fu.any_course
     ip[ke.IP_CSPEED] = fs.course_speed
     ip[ke.IP_STIFF], ip[ke.IP_MASSEST] = fs.stiffness_estimate, fs.mass_estimate
@@ -610,9 +606,6 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     ip[ke.IP_FSTEP] = ib.friction_step
     fp[ke.FP_FS_H] = ib.fstep.threshold
     ip[ke.IP_MFORCE], ip[ke.IP_MSTEER] = scenario.measured_force, scenario.measured_steering
-    rc = cascade._recovery
-    ip[ke.IP_RECOV] = rc is not None
-    fp[ke.FP_REINIT] = cascade._gate_p.reinit_s
     # the outer block's records (Cascade._ob_p, _gov_p; the kernel rebuilds them from these slots)
     fp[ke.FP_OB:ke.FP_OB + N_OBP] = pack_outer(cascade._ob_p)
     fp[ke.FP_GB:ke.FP_GB + N_GBP] = pack_govern(cascade._gov_p)
@@ -657,6 +650,19 @@ def _counters(cascade: Cascade, ke: Any) -> NDArray[np.int64]:
     ev[ke.EV_INNER:ke.EV_OUTER] = cascade._ib_count
     ev[ke.EV_OUTER:ke.N_EVENTS] = cascade._oc
     return ev
+
+
+def _blocks_problem(cascade: Cascade) -> str | None:
+    """Why the kernel does not run this cascade's blocks, None when it does: the TS-MPC, the MHE-UIO
+    and the TS-LQR as these classes (:func:`applicability` says which configurations build them;
+    the kernel reads their arrays)."""
+    from tsmpc.control.ts_lqr import TSLQR
+    from tsmpc.control.ts_mpc import TSMPC
+    from tsmpc.estimation.mhe_uio import MHEUIO
+
+    if (type(cascade.mpc), type(cascade.mhe), type(cascade.lqr)) != (TSMPC, MHEUIO, TSLQR):
+        return "the cascade's blocks are not the engine's (TSMPC, MHEUIO, TSLQR)"
+    return None
 
 
 def _start_problem(cascade: Cascade) -> str | None:
@@ -883,6 +889,8 @@ def run(cfg: Config, method: Method | str, scenario: Scenario, *, kinematic_desi
         return None
     cascade = Cascade(cfg, method, scenario.reference, kinematic_design=kinematic_design,
                       dynamic_design=dynamic_design)
+    if _blocks_problem(cascade) is not None:
+        return None
     mhe, lqr, mpc = cascade.mhe, _static_lqr(cascade), cascade.mpc
     if mpc._kern is None or mhe._kern is None or not mhe._kargs[-1] or lqr._kern is None:
         return None
