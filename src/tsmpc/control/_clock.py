@@ -200,12 +200,13 @@ def cascade_time(p: ClockParams, r: RefArrays, ck: NDArray[np.float64], ob: NDAr
 
 @jitable_inline
 def plan_taken(p: ClockParams, ck: NDArray[np.float64], up: NDArray[np.float64], u0: float, u1: float,
-               v: float, v_hat: float) -> None:
+               ok: bool, v: float, v_hat: float) -> None:
     """The plan's first input (u0, u1) as the MPC's previous input ``up``; during a restart (a
     re-anchoring due or the catch-up) its yaw rate within what the car can turn at the measured
-    speed ``v`` (NaN: not accepted), else at the last estimate's v̂ (gates.speed_bounded_yaw_rate)."""
+    speed ``v`` when the gates took it (``ok``) and it is finite, else at the last estimate's v̂
+    (gates.speed_bounded_yaw_rate)."""
     up[0], up[1] = u0, u1
     if p.bound and (ck[CK_REANCHOR] != 0.0 or ck[CK_CATCHUP] != 0.0):
-        w = speed_bounded_yaw_rate(u1, v if math.isfinite(v) else v_hat, p.curvature_max)
+        w = speed_bounded_yaw_rate(u1, v if ok and math.isfinite(v) else v_hat, p.curvature_max)
         if w != u1:
             up[1] = w

@@ -57,14 +57,15 @@ class AfterState(NamedTuple):
 
 @jitable_inline
 def cascade_after_plan(p: OuterBlockParams, g: GovernBlockParams, c: ClockParams, r: RefArrays, s: AfterState,
-                       u0: float, u1: float, v: float, status: int, n_clipped: int, t: float, est_status: int,
+                       u0: float, u1: float, ok: bool, v: float, status: int, n_clipped: int, t: float,
+                       est_status: int,
                        v_hat: float, F_fr: float, road_mu: float, dmass: float,
                        buf: NDArray[np.float64]) -> None:
     """The plan's bookkeeping after the MPC step at time ``t`` (see the module docstring): its first
-    input (u0, u1), the measured speed ``v`` (NaN: not accepted), its status code and clipped
+    input (u0, u1), the measured speed ``v`` (``ok``: the gates took it), its status code and clipped
     steps, the last estimate's status code, v̂ (NaN: none) and F̂ (read when a command was made),
     the road's μ (the oracle's grip), the mass fit's ΔM̂, the outer block's scratch."""
-    plan_taken(c, s.ck, s.up, u0, u1, v, v_hat)
+    plan_taken(c, s.ck, s.up, u0, u1, ok, v, v_hat)
     cmd = s.cmd
     outer_after(p, g, r, s.ob, s.oc, status, n_clipped, t, cmd[CM_HASLAST] != 0.0, est_status, v_hat, F_fr,
                 cmd[CM_SAT] != 0.0, cmd[CM_F], road_mu, dmass, buf)

@@ -606,7 +606,7 @@ class Cascade:
         # the gates, the MPC's turn, the fusion block before the MPC: ω less its bias from here on
         fresh, speeds_ok, pose_ok, mpc_step, om = self._front(t, m, X, Y, th, v, om)
         ok = fresh and speeds_ok
-        plan, e_meas, t_mpc = (self._outer(t, X, Y, th, v, om, fresh, speeds_ok, pose_ok) if mpc_step
+        plan, e_meas, t_mpc = (self._outer(t, X, Y, v, om, ok, pose_ok) if mpc_step
                                else (None, None, 0.0))
         up = self._up  # the MPC's previous input: the TS-LQR's references
         v_ref, w_ref = float(up[0]), float(up[1])
@@ -709,8 +709,8 @@ class Cascade:
             self.lqr.reset()
         return out[0], out[1], out[2], out[3], out[4]
 
-    def _outer(self, t: float, X: float, Y: float, th: float, v: float, om: float, fresh: bool,
-               speeds_ok: bool, pose_ok: bool) -> tuple[MPCResult, NDArray[np.float64], float]:
+    def _outer(self, t: float, X: float, Y: float, v: float, om: float, ok: bool,
+               pose_ok: bool) -> tuple[MPCResult, NDArray[np.float64], float]:
         """An MPC step: (the plan, the errors it saw, its wall time). The phase before the solve
         (_front.cascade_outer: the recovery's restart, the reference sample, the errors and the
         window) and the one after it (_mid.cascade_after_plan: the plan's input kept, the plan's
@@ -725,7 +725,7 @@ class Cascade:
             plan = shifted_plan(self._plan, e_meas, u_prev, self.cfg.mpc.N, t0, 0, 0, 0)
         t_mpc = time.perf_counter() - t0
         self._plan = plan
-        self._after_plan(t, plan, v if fresh and speeds_ok else math.nan)
+        self._after_plan(t, plan, ok, v)
         return plan, e_meas, t_mpc
 
     def _outer_block(self, t: float, X: float, Y: float, v: float, om: float,
@@ -760,19 +760,19 @@ class Cascade:
                        else self._mpc_reference.window(int(k), n))
         return e, _Window(wv, ww)
 
-    def _after_plan(self, t: float, plan: MPCResult, v: float) -> None:
+    def _after_plan(self, t: float, plan: MPCResult, ok: bool, v: float) -> None:
         """The plan's bookkeeping (_mid.cascade_after_plan, one compiled call; as Python with
         TSMPC_NO_JIT): the plan's first input kept as the MPC's previous input (within what the car
-        can turn at the measured speed ``v``, NaN: not accepted, during a restart), the outer block
-        after the solve (outer_block.outer_after: the plan's events and the governor's rate for the
-        next step from the last estimate's grip) on the command record."""
+        can turn at the measured speed ``v``, ``ok``: the gates took it, during a restart), the
+        outer block after the solve (outer_block.outer_after: the plan's events and the governor's
+        rate for the next step from the last estimate's grip) on the command record."""
         last, gov = self._last, self.governor
         est = last.estimate if last is not None else None
         dm = block_delta_mass(self._ib, self._ib_state) if gov is not None and gov.mass_estimate else 0.0
         code, v_hat, F_fr = ((STATUS_CODE[est.status], float(est.x[0]), float(est.F_fr)) if est is not None
                              else (0, math.nan, math.nan))
         u = plan.u
-        args = (float(u[0]), float(u[1]), v, _MPC_STATUS_CODE[plan.status], int(plan.n_clipped), t, code,
+        args = (float(u[0]), float(u[1]), ok, v, _MPC_STATUS_CODE[plan.status], int(plan.n_clipped), t, code,
                 v_hat, F_fr, self.road_mu, dm, self._ob_buf)
         call = self._after_call
         if call is not None:

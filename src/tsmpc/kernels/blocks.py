@@ -41,7 +41,15 @@ from tsmpc.control._front import (
 )
 from tsmpc.control._mid import AfterState, EstimateParams, EstimateState, cascade_after_plan, cascade_estimate
 from tsmpc.control.fusion_block import N_FB, N_FBP, unpack_fusion
-from tsmpc.control.gates import GateBlockParams, GateParams, gate_block, gate_state, reckon_block
+from tsmpc.control.gates import (
+    GateBlockParams,
+    GateParams,
+    gate_block,
+    gate_state,
+    pack_gate_block,
+    reckon_block,
+    unpack_gate_block,
+)
 from tsmpc.control.inner_block import InnerBlockParams, inner_block, start_state
 from tsmpc.control.mhe_block import MHEBlockParams, MHEWindow, mhe_block
 from tsmpc.control.outer_block import RefArrays, outer_after, outer_errors, unpack_govern, unpack_outer
@@ -98,8 +106,8 @@ def inner_call(bp, Kv, zlo, zhi, bits, prm, s, st, ring, cnt, v, alpha, omega, F
 
 def pack_gates(p: GateBlockParams) -> np.ndarray:
     """The gate block's record as the float vector :func:`gate_call` reads (GateParams' fields, then
-    recovery, reinit_s, repeat)."""
-    return np.array([*p.gates, p.recovery, p.reinit_s, p.repeat], dtype=np.float64)
+    recovery, reinit_s, repeat: :func:`~tsmpc.control.gates.pack_gate_block`)."""
+    return pack_gate_block(p)
 
 
 @njit(cache=True, fastmath=False)
@@ -112,8 +120,7 @@ def _gate_params(gbp):
 def gate_call(gbp, gs, cnt, pose, t, fresh, X, Y, theta, v, omega, stamp):
     """:func:`~tsmpc.control.gates.gate_block` of the packed record: (fresh, speeds plausible, pose
     accepted)."""
-    p = GateBlockParams(_gate_params(gbp), gbp[6] != 0.0, gbp[7], gbp[8] != 0.0)
-    return gate_block(p, gs, cnt, pose, t, fresh, X, Y, theta, v, omega, stamp)
+    return gate_block(unpack_gate_block(gbp), gs, cnt, pose, t, fresh, X, Y, theta, v, omega, stamp)
 
 
 @njit(cache=True, fastmath=False)
@@ -157,13 +164,13 @@ def mhe_call(mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, est, speeds_ok, v, omeg
 
 
 @njit(cache=True, fastmath=False)
-def after_plan_call(opk, gpk, ckp, refs, ob, cnt, cmd, ck, up, u0, u1, v, status, n_clipped, t, est_status,
-                    v_hat, F_fr, road_mu, dmass, buf):
+def after_plan_call(opk, gpk, ckp, refs, ob, cnt, cmd, ck, up, u0, u1, ok, v, status, n_clipped, t,
+                    est_status, v_hat, F_fr, road_mu, dmass, buf):
     """:func:`~tsmpc.control._mid.cascade_after_plan` of the packed records (the clock's:
     :func:`~tsmpc.control._clock.pack_clock`)."""
     cascade_after_plan(unpack_outer(opk), unpack_govern(gpk), unpack_clock(ckp), _refs(refs),
-                       AfterState(ob, cnt, cmd, ck, up), u0, u1, v, status, n_clipped, t, est_status, v_hat,
-                       F_fr, road_mu, dmass, buf)
+                       AfterState(ob, cnt, cmd, ck, up), u0, u1, ok, v, status, n_clipped, t, est_status,
+                       v_hat, F_fr, road_mu, dmass, buf)
 
 
 @njit(cache=True, fastmath=False)
@@ -260,7 +267,7 @@ def front_call(gbp, pk, ckp, n_inner, gs, gcnt, pose, fb, ivs, cur, cmd, ck, cc,
     :func:`~tsmpc.control._clock.pack_clock`): (fresh, speeds plausible, pose accepted, the MPC
     runs, ω less the bias, the blind stop ended)."""
     fbp, _sp = unpack_fusion(pk[BK_FUS:BK_FUS + N_FBP], _course_params(pk[BK_COURSE:BK_INNER]))
-    gp = GateBlockParams(_gate_params(gbp), gbp[6] != 0.0, gbp[7], gbp[8] != 0.0)
+    gp = unpack_gate_block(gbp)
     state = FrontState(gs, gcnt, pose, fb, ivs, cur, cmd, ck, cc)
     out = cascade_front(FrontParams(gp, fbp, n_inner, unpack_clock(ckp)), state, t, has_stamp, X, Y, th, v,
                         omega, stamp, t_off, v_d, w_d)

@@ -583,11 +583,11 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             dm = _delta_mass(sf, fp) if op.governor and govp.mass_estimate else 0.0
             ck = sf[SF_CK:SF_CK + N_CK]
             ast = AfterState(obs, ocnt, sf[SF_CMD:SF_CMD + N_CM], ck, sf[SF_UPREV:SF_UPREV + 2])
-            v_acc = y[3] if si[SI_FRESH] != 0 and si[SI_SPOK] != 0 else math.nan  # (the speed accepted)
             v_last = sc[SC_EST] if sf[SF_CMD + CM_HASLAST] != 0.0 else math.nan
+            took = si[SI_FRESH] != 0 and si[SI_SPOK] != 0  # (the speed accepted)
             cascade_after_plan(op, govp, unpack_clock(fp[FP_CK:FP_CK + N_CKP]), refs, ast, sc[SC_PU],
-                               sc[SC_PU + 1], v_acc, si[SI_PSTAT], si[SI_PCLIP], ck[CK_TLAST], si[SI_ESTSTAT],
-                               v_last, sc[SC_ESTF], road_mu, dm, obuf)
+                               sc[SC_PU + 1], took, y[3], si[SI_PSTAT], si[SI_PCLIP], ck[CK_TLAST],
+                               si[SI_ESTSTAT], v_last, sc[SC_ESTF], road_mu, dm, obuf)
             phase = PH_MHE
         if phase == PH_MHE:
             # the MHE block (Cascade._estimate): its inputs, the window's update and solve, the estimate

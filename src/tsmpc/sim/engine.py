@@ -130,7 +130,7 @@ _PORTED: dict[str, str] = {
     "tsmpc.sim.simulator:simulate": "ba020e97f0f11213",
     "tsmpc.sim.simulator:_measurement": "fe7e40fc59dbb6d6",
     "tsmpc.control.cascade:Cascade.step": "153443d2b249fd93",
-    "tsmpc.control.cascade:Cascade._step": "9751068729abb75f",
+    "tsmpc.control.cascade:Cascade._step": "e0337c96ff327101",
     "tsmpc.control.ts_mpc:TSMPC.step": "d89ccd1d7f4bcc57",
 }
 
