@@ -35,8 +35,10 @@ Python loop). What remains here is ported operation by operation (same order, sa
 Python's ``min``/``max``/``%`` and ``math.hypot``): the simulator's loop, the MPC's fast path and
 the plan's copy, the order of the phases in ``Cascade._step`` and the start state
 (``_PORTED`` in :mod:`tsmpc.sim.engine`), so the engine reproduces the Python loop to the last
-bit. (``run`` keeps its phases inline: split into inlined phase functions it ran 4-5 % slower,
-measured, issue 34.)
+bit. ``run`` strings a step's phases together: :func:`_start_phase`, :func:`_mpc_fast`,
+:func:`_plan_phase`, :func:`_mhe_phase`, the phase after the MHE and :func:`_plant_phase` (inlined
+into it; on arrays borrowed from the caller, :func:`run_borrowed`, they cost the engine's run
+about 3 % against the phases written out in ``run``).
 
 Where a block's compiled fast path does not decide a step (the MPC's condensed QP / SOCP path, the
 MHE's dense QP with an active state bound, a singular reference gain of the TS-LQR, a non-finite
@@ -404,11 +406,10 @@ def _delta_mass(sf, fp):
 
 # ============================================================================ outer block
 @njit(cache=True, fastmath=False, inline="always")
-def _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v, ref_w, th_tan, mv, mw):
-    """The outer block's records (Cascade._ob_p, _refs), state, counters and scratch (after the
-    MPC's window in ``sc``: v_d, ω_d, N + 1 each)."""
-    refs = RefArrays(ref_x, ref_y, ref_th, ref_v, ref_w, th_tan, mv, mw)
-    return (unpack_outer(fp[FP_OB:FP_OB + N_OBP]), refs, sf[SF_OB:SF_OB + N_OB], ev[EV_OUTER:EV_OUTER + N_OC],
+def _outer_views(fp, sf, ev, sc, N):
+    """The outer block's record (Cascade._ob_p), state, counters and scratch (after the MPC's
+    window in ``sc``: v_d, ω_d, N + 1 each)."""
+    return (unpack_outer(fp[FP_OB:FP_OB + N_OBP]), sf[SF_OB:SF_OB + N_OB], ev[EV_OUTER:EV_OUTER + N_OC],
             sc[N_SC + 2 * (N + 1):])
 
 
@@ -437,7 +438,7 @@ def _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp):
 
 
 @njit(cache=True, fastmath=False, inline="always")
-def _back_records(fp, ip, sf, ev, gates, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm, cur):
+def _back_records(fp, ip, sf, ev, gbp, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm, cur):
     """The phase after the MHE's records of the slots (Cascade._back_p; TSLQR._inner, TSLQR._law:
     the same values) and its state (the blocks' slots, the open interval ``cur``)."""
     lqr_p = InnerParams(ip[IP_COMP] != 0, ip[IP_UIO] != 0, ip[IP_LOWRES] != 0, zlo[1], prm[6] * prm[0])
@@ -449,7 +450,7 @@ def _back_records(fp, ip, sf, ev, gates, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bit
                            lqr_p)
     bs = BackState(sf[SF_POSE:SF_POSE + N_PO], sf[SF_FB:SF_FB + N_FB], cur, sf[SF_SA:SF_SA + N_SA],
                    sf[SF_CMD:SF_CMD + N_CM], ls, sf[SF_IB:SF_IB + N_IB], mass_v, ev[EV_INNER:EV_INNER + N_IC])
-    return BackParams(gates, fbp, sp0, ibp), law, bs
+    return BackParams(gbp.gates, fbp, sp0, ibp), law, bs
 
 
 @njit(cache=True, fastmath=False)
@@ -474,6 +475,148 @@ def _actuated(x, Fc, dc, mu, act, fp, ip, sf, si, cst):
 
 
 # ============================================================================ the run
+#: _start_phase's answers besides the next phase: the run diverged, the cascade went blind
+_PH_DIVERGED, _PH_BLINDED = -1, -2
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _start_phase(m, k, j, t, x, fp, ip, sf, si, sc, ev, noise, u_drop, gnss, fifo, refs, gate, cur, ivs, mp,
+                 prm, prevX, lo, gbp, fbp, cpar):
+    """A step's start (simulate: the sensor step, the outer-step log and its divergence test), then
+    Cascade.step's time (Cascade._clock: _clock.cascade_clock) and Cascade._step's phase before the
+    outer loop (Cascade._front: the stamp and the recovery's watch, the gate block, the MPC's turn,
+    the fusion block before the MPC and the MHE; the simulator's samples carry no stamp) and, at an
+    MPC step, its part before the solve (Cascade._outer_block: the stiffness block, the errors the
+    MPC sees, its window). Returns the phase that follows (PH_PLAN: the MPC's solve first, PH_MHE),
+    _PH_DIVERGED, or _PH_BLINDED (the blind stop: the Python loop's, the caller's fallback)."""
+    Td, Tc, n_in, N = fp[FP_TD], fp[FP_TC], ip[IP_NIN], ip[IP_N]
+    y = sc[SC_Y:SC_Y + 5]
+    _sensor(m, n_in, Tc, Td, x, noise, u_drop, gnss, unpack_params(fp[FP_SENS:FP_SENS + N_SP]),
+            sf[SF_SENS:SF_SENS + N_SS], fifo, y)
+    if j == 0:
+        op, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N)
+        if _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, fp, sc):
+            return _PH_DIVERGED
+    ckp = unpack_clock(fp[FP_CK:FP_CK + N_CKP])
+    ck, cc = sf[SF_CK:SF_CK + N_CK], ev[EV_TIME_REJ:EV_TIME_REJ + N_CC]
+    tc = cascade_clock(ckp, ck, cc, t)
+    fbs = sf[SF_FB:SF_FB + N_FB]
+    fst = FrontState(sf[SF_GS:SF_GS + N_GS], ev[EV_GATES:EV_GATES + N_GC], sf[SF_POSE:SF_POSE + N_PO], fbs,
+                     ivs, cur, sf[SF_CMD:SF_CMD + N_CM], ck, cc)
+    fo = cascade_front(FrontParams(gbp, fbp, n_in, ckp), fst, tc, False, y[0], y[1], y[2], y[3], y[4],
+                       -math.inf, sf[SF_TOFF], refs.v, refs.omega)
+    if not math.isnan(ck[CK_BLIND]):
+        return _PH_BLINDED
+    si[SI_FRESH] = 1 if fo.fresh else 0
+    si[SI_SPOK] = 1 if fo.speeds_ok else 0
+    si[SI_POSEOK] = 1 if fo.pose_ok else 0
+    if not fo.mpc_step:
+        return PH_MHE
+    op, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N)
+    wv, ww = sc[N_SC:N_SC + N + 1], sc[N_SC + N + 1:N_SC + 2 * (N + 1)]
+    v_last = sc[SC_EST] if sf[SF_CMD + CM_HASLAST] != 0.0 else math.nan  # (the last estimate's)
+    ost = OuterState(fbs, ivs, sf[SF_SA:SF_SA + N_SA], mp, prm, obs, ocnt, gate, sf[SF_POSE:SF_POSE + N_PO],
+                     sf[SF_CMD:SF_CMD + N_CM], ck, sf[SF_UPREV:SF_UPREV + 2])
+    opp = OuterParams(ip[IP_ANYCOURSE] != 0 and ip[IP_STIFF] != 0, cpar, op, ckp)
+    _k, _restarted, _give, governed = cascade_outer(
+        opp, refs, ost, tc, fo.pose_ok, y[0], y[1], y[3], fo.omega, v_last, si[SI_HASPREV] != 0, prevX[1, 1],
+        sc[SC_EMEAS:SC_EMEAS + 3], wv, ww, obuf)
+    si[SI_GWIN] = 1 if governed else 0
+    return PH_PLAN
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _mpc_fast(k, N, sf, si, sc, mints, mprm, mPS, prevX, prevU, pX, pU, lo):
+    """TSMPC.step: its compiled step (checks, schedule, Riccati fast path) on the errors and window
+    of the phase before; True when it decided the plan (else a constraint is active or an input is
+    not finite: the caller's)."""
+    has_prev = si[SI_HASPREV] != 0
+    wv, ww = sc[N_SC:N_SC + N + 1], sc[N_SC + N + 1:N_SC + 2 * (N + 1)]
+    tick = _ticks()
+    code, U, _du, Xp, _cost, n_clip, _up = guarded_step(
+        mints, mprm, mPS, sc[SC_EMEAS:SC_EMEAS + 3], sf[SF_UPREV:SF_UPREV + 2], wv, ww,
+        prevX if has_prev else prevX[:0], prevU if has_prev else prevU[:0])  # (no previous plan: empty)
+    if code == 0:
+        for i in range(N):
+            pU[i, 0], pU[i, 1] = U[i, 0], U[i, 1]
+        for i in range(N + 1):
+            pX[i, 0], pX[i, 1], pX[i, 2] = Xp[i, 0], Xp[i, 1], Xp[i, 2]
+        sc[SC_PU], sc[SC_PU + 1] = U[0, 0], U[0, 1]
+        si[SI_PSTAT], si[SI_PIT], si[SI_PQPIT], si[SI_PCLIP] = MPC_OPTIMAL, 0, 0, n_clip
+    lo[k, LO_TMPC] = float(_ticks() - tick)
+    return code == 0
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _plan_phase(k, t, N, pX, pU, prevX, prevU, fp, sf, si, sc, ev, refs, frb, patches, events, lo, loi, lxp):
+    """The plan of MPC step ``k`` (the fast path's or the caller's): TSMPC's previous plan, the log
+    (:func:`_plan_done`); the plan's bookkeeping (Cascade._after_plan: _mid.cascade_after_plan, its
+    input kept, the outer block after it: its events, the speed governor's rate)."""
+    _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp)
+    op, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N)
+    govp = unpack_govern(fp[FP_GB:FP_GB + N_GBP])
+    oracle = op.governor and govp.grip.oracle  # (the oracle row reads the road's μ)
+    road_mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events) if oracle else math.nan
+    dm = _delta_mass(sf, fp) if op.governor and govp.mass_estimate else 0.0
+    ck = sf[SF_CK:SF_CK + N_CK]
+    ast = AfterState(obs, ocnt, sf[SF_CMD:SF_CMD + N_CM], ck, sf[SF_UPREV:SF_UPREV + 2])
+    v_last = sc[SC_EST] if sf[SF_CMD + CM_HASLAST] != 0.0 else math.nan
+    took = si[SI_FRESH] != 0 and si[SI_SPOK] != 0  # (the speed accepted)
+    cascade_after_plan(op, govp, unpack_clock(fp[FP_CK:FP_CK + N_CKP]), refs, ast, sc[SC_PU], sc[SC_PU + 1],
+                       took, sc[SC_Y + 3], si[SI_PSTAT], si[SI_PCLIP], ck[CK_TLAST], si[SI_ESTSTAT], v_last,
+                       sc[SC_ESTF], road_mu, dm, obuf)
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _mhe_phase(m, fp, ip, sf, si, sc, mp, mY, mW, mU, mXS, mA, mB, mX, li):
+    """The MHE block (Cascade._estimate: _mid.cascade_estimate; its inputs, the window's update and
+    solve, the estimate); True when the estimator's dense QP must decide (the batch: its lanes'
+    solve)."""
+    sc[SC_VREF], sc[SC_WREF] = sf[SF_UPREV], sf[SF_UPREV + 1]
+    si[SI_TICK0] = _ticks()
+    ep = EstimateParams(MHEBlockParams(fp[FP_MHE_MASS], ip[IP_DEFER] != 0), ip[IP_CSPEED] != 0)
+    est = EstimateState(mp, sf[SF_MX:SF_MX + N_MS], si[SI_NY:SI_NY + N_MI], sc[SC_UK:SC_UK + 2],
+                        sc[SC_EST:SC_EST + N_EO], sf[SF_FB:SF_FB + N_FB], sf[SF_CMD:SF_CMD + N_CM])
+    mst = cascade_estimate(ep, MHEWindow(mY, mW, mU, mXS, mA, mB, mX), est,
+                           si[SI_FRESH] != 0 and si[SI_SPOK] != 0, sc[SC_Y + 3], ip[IP_MFORCE] != 0,
+                           sf[SF_PLANTU], ip[IP_MSTEER] != 0, sf[SF_PLANTU + 1])
+    sc[SC_UMHE], sc[SC_UMHE + 1] = mst.u0, mst.u1  # what the cascade gave (the course fusion's δ, F)
+    si[SI_MHEN], si[SI_MHEOK] = mst.n, 1 if mst.ok else 0
+    si[SI_MHEFULL] = 1 if mst.n == ip[IP_NW] else 0
+    if mst.status == MHE_DENSE:
+        return True
+    si[SI_ESTSTAT] = mst.status
+    li[m, LI_TMHE] = float(_ticks() - si[SI_TICK0])
+    return False
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _plant_phase(m, t, x, fp, ip, sf, si, sc, frb, patches, events, cst, li, lstat, lsat):
+    """The inner log (the recorder block; the true F_fr: VehiclePlant's), the plant over T_d
+    (simulate): True when ``x`` holds the next state (else the caller's: the batch integrates its
+    lanes at once, a non-finite step is worded by the plant's Python step)."""
+    mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events)
+    sc[SC_MU] = mu
+    record_inner(li, lstat, lsat, m, x, sc[SC_EST:SC_EST + 3], sc[SC_Y + 3], sc[SC_Y + 4], sc[SC_ESTF],
+                 sc[SC_ESTFR], friction_force(fp[FP_MU_NOM], fp[FP_MG], mu), mu, sc[SC_OF], sc[SC_OD],
+                 si[SI_ESTSTAT], sf[SF_CMD + CM_SAT] != 0)
+    if ip[IP_ACT] == 0:
+        if ip[IP_DEFER] != 0:  # the batch integrates its lanes at once (kernels.batch)
+            return False
+        xn, ok = rk4_block(x, sc[SC_OF], sc[SC_OD], mu, ip[IP_NSUB], fp[FP_H], cst)
+        if not ok:
+            return False
+        sf[SF_PLANTU], sf[SF_PLANTU + 1] = sc[SC_OF], sc[SC_OD]
+    else:
+        act = ActuatorParams(fp[FP_A_GF], fp[FP_A_GD], fp[FP_A_RMAX], fp[FP_A_DOFF], ip[IP_ACT_N])
+        xn, ok = _actuated(x, sc[SC_OF], sc[SC_OD], mu, act, fp, ip, sf, si, cst)
+        if not ok:
+            return False
+    for i in range(6):
+        x[i] = xn[i]
+    return True
+
+
 @njit(cache=True, fastmath=False)
 def run(m_end, x, fp, ip, sf, si, sc, ev,
         noise, u_drop, gnss, fifo, frb, patches, events,
@@ -484,136 +627,45 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
         mints, mprm, mPS, prevX, prevU, pX, pU,
         cst, lo, loi, lxp, li, lstat, lsat):
     """Run steps ``si[SI_M]`` … ``m_end − 1`` (see the module docstring). Returns DONE when
-    ``m_end`` is reached, else the code of the block the caller must run (NEED_*) or DIVERGED.
-    ``x`` (6,) is the plant state at the start of step ``si[SI_M]``."""
-    Td, Tc = fp[FP_TD], fp[FP_TC]
-    n_in = ip[IP_NIN]
-    N = ip[IP_N]
+    ``m_end`` is reached, else the code of the block the caller must run (NEED_*), DIVERGED or
+    BLINDED. ``x`` (6,) is the plant state at the start of step ``si[SI_M]``."""
+    Td, Tc, n_in, N = fp[FP_TD], fp[FP_TC], ip[IP_NIN], ip[IP_N]
     y = sc[SC_Y:SC_Y + 5]
-    e_meas = sc[SC_EMEAS:SC_EMEAS + 3]
-    # scratch as views, not allocations: the batch calls run() for every lane at every step
-    noX = prevX[:0]  # "no previous plan" for guarded_step
-    noU = prevU[:0]
+    refs = RefArrays(ref_x, ref_y, ref_th, ref_v, ref_w, th_tan, mv, mw)  # (Cascade._refs)
     gbp = unpack_gate_block(fp[FP_GBK:FP_GBK + N_GBK])  # the gate block's (Cascade._gate_p)
-    gates = gbp.gates
     cpar = course_params(Tc, fp[FP_COURSE_SIGMA], True, fp[FP_CF0], fp[FP_CR0], fp[FP_VM], fp[FP_VI],
                          fp[FP_VA], fp[FP_VB], fp[FP_VG], Td, n_in)
     fbp, sp0 = unpack_fusion(fp[FP_FB:FP_FB + N_FBP], cpar)  # the fusion block's (Cascade._fb_p, steer_p)
-    # (each phase's records and state views are made in the phase: the batch enters run() about
-    # three times a step, at its phases)
+    # (each phase makes its records and state views: the batch enters run() twice a step, at its phases)
     while si[SI_M] < m_end:
         m = si[SI_M]
         k = m // n_in
-        j = m - k * n_in
         t = m * Td
         phase = si[SI_PHASE]
-        if phase == PH_START:
-            sens_state = sf[SF_SENS:SF_SENS + N_SS]
-            sens = unpack_params(fp[FP_SENS:FP_SENS + N_SP])
-            # ---- sensors and the outer-step log (simulate)
-            _sensor(m, n_in, Tc, Td, x, noise, u_drop, gnss, sens, sens_state, fifo, y)
-            if j == 0:
-                op, refs, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v,
-                                                         ref_w, th_tan, mv, mw)
-                if _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, fp, sc):
-                    return DIVERGED
-            # ---- Cascade.step: the call's time (Cascade._clock), then Cascade._step: the phase before
-            # the outer loop (Cascade._front: the stamp and the recovery's watch, the gate block, the
-            # MPC's turn, the fusion block before the MPC and the MHE; the simulator's samples carry
-            # no stamp)
-            ckp = unpack_clock(fp[FP_CK:FP_CK + N_CKP])
-            ck, cc = sf[SF_CK:SF_CK + N_CK], ev[EV_TIME_REJ:EV_TIME_REJ + N_CC]
-            tc = cascade_clock(ckp, ck, cc, t)
-            fbs = sf[SF_FB:SF_FB + N_FB]
-            fst = FrontState(sf[SF_GS:SF_GS + N_GS], ev[EV_GATES:EV_GATES + N_GC], sf[SF_POSE:SF_POSE + N_PO],
-                             fbs, ivs, cur, sf[SF_CMD:SF_CMD + N_CM], ck, cc)
-            fo = cascade_front(FrontParams(gbp, fbp, n_in, ckp), fst, tc, False, y[0], y[1], y[2], y[3], y[4],
-                               -math.inf, sf[SF_TOFF], ref_v, ref_w)
-            if not math.isnan(ck[CK_BLIND]):  # the blind stop: the Python loop's (the caller's fallback)
-                return BLINDED
-            si[SI_FRESH] = 1 if fo.fresh else 0
-            si[SI_SPOK] = 1 if fo.speeds_ok else 0
-            si[SI_POSEOK] = 1 if fo.pose_ok else 0
-            mpc_step, pose_ok = fo.mpc_step, fo.pose_ok
+        if phase == PH_START:  # the sensors, the log, the time, the phase before the outer loop
+            phase = _start_phase(m, k, m - k * n_in, t, x, fp, ip, sf, si, sc, ev, noise, u_drop, gnss, fifo,
+                                 refs, gate, cur, ivs, mp, prm, prevX, lo, gbp, fbp, cpar)
+            if phase < 0:
+                return DIVERGED if phase == _PH_DIVERGED else BLINDED
+            if phase == PH_PLAN and not _mpc_fast(k, N, sf, si, sc, mints, mprm, mPS, prevX, prevU, pX, pU,
+                                                  lo):
+                si[SI_PHASE] = PH_PLAN
+                return NEED_MPC
+        if phase == PH_PLAN:  # the plan of this MPC step (the fast path's or the caller's), its bookkeeping
+            _plan_phase(k, t, N, pX, pU, prevX, prevU, fp, sf, si, sc, ev, refs, frb, patches, events, lo,
+                        loi, lxp)
             phase = PH_MHE
-            if mpc_step:
-                # the MPC step before the solve (Cascade._outer_block): the stiffness block, the errors
-                # the MPC sees, its window
-                op, refs, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v,
-                                                         ref_w, th_tan, mv, mw)
-                wv, ww = sc[N_SC:N_SC + N + 1], sc[N_SC + N + 1:N_SC + 2 * (N + 1)]
-                has_prev = si[SI_HASPREV] != 0
-                v_last = sc[SC_EST] if sf[SF_CMD + CM_HASLAST] != 0.0 else math.nan  # (the last estimate's)
-                ost = OuterState(fbs, ivs, sf[SF_SA:SF_SA + N_SA], mp, prm, obs, ocnt, gate,
-                                 sf[SF_POSE:SF_POSE + N_PO], sf[SF_CMD:SF_CMD + N_CM], ck,
-                                 sf[SF_UPREV:SF_UPREV + 2])
-                opp = OuterParams(ip[IP_ANYCOURSE] != 0 and ip[IP_STIFF] != 0, cpar, op, ckp)
-                _k, _restarted, _give, governed = cascade_outer(
-                    opp, refs, ost, tc, pose_ok, y[0], y[1], y[3], fo.omega, v_last, has_prev, prevX[1, 1],
-                    e_meas, wv, ww, obuf)
-                si[SI_GWIN] = 1 if governed else 0
-                # ---- TSMPC.step: its compiled step (checks, schedule, Riccati fast path); a
-                # declined step (a constraint active, a non-finite input) is the caller's
-                tick = _ticks()
-                code, U, _du, Xp, _cost, n_clip, _up = guarded_step(
-                    mints, mprm, mPS, e_meas, sf[SF_UPREV:SF_UPREV + 2], wv, ww, prevX if has_prev else noX,
-                    prevU if has_prev else noU)
-                if code == 0:
-                    for i in range(N):
-                        pU[i, 0], pU[i, 1] = U[i, 0], U[i, 1]
-                    for i in range(N + 1):
-                        pX[i, 0], pX[i, 1], pX[i, 2] = Xp[i, 0], Xp[i, 1], Xp[i, 2]
-                    sc[SC_PU], sc[SC_PU + 1] = U[0, 0], U[0, 1]
-                    si[SI_PSTAT], si[SI_PIT], si[SI_PQPIT], si[SI_PCLIP] = MPC_OPTIMAL, 0, 0, n_clip
-                lo[k, LO_TMPC] = float(_ticks() - tick)
-                if code != 0:
-                    si[SI_PHASE] = PH_PLAN
-                    return NEED_MPC
-                phase = PH_PLAN
-        if phase == PH_PLAN:
-            # the plan of this MPC step (fast path or the caller's): TSMPC's previous plan, log; the
-            # plan's bookkeeping (Cascade._after_plan): its input kept, the outer block after it (its
-            # events, the speed governor's rate)
-            _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp)
-            op, refs, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N, ref_x, ref_y, ref_th, ref_v, ref_w,
-                                                     th_tan, mv, mw)
-            govp = unpack_govern(fp[FP_GB:FP_GB + N_GBP])
-            oracle = op.governor and govp.grip.oracle  # (the oracle row reads the road's μ)
-            road_mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events) if oracle else math.nan
-            dm = _delta_mass(sf, fp) if op.governor and govp.mass_estimate else 0.0
-            ck = sf[SF_CK:SF_CK + N_CK]
-            ast = AfterState(obs, ocnt, sf[SF_CMD:SF_CMD + N_CM], ck, sf[SF_UPREV:SF_UPREV + 2])
-            v_last = sc[SC_EST] if sf[SF_CMD + CM_HASLAST] != 0.0 else math.nan
-            took = si[SI_FRESH] != 0 and si[SI_SPOK] != 0  # (the speed accepted)
-            cascade_after_plan(op, govp, unpack_clock(fp[FP_CK:FP_CK + N_CKP]), refs, ast, sc[SC_PU],
-                               sc[SC_PU + 1], took, y[3], si[SI_PSTAT], si[SI_PCLIP], ck[CK_TLAST],
-                               si[SI_ESTSTAT], v_last, sc[SC_ESTF], road_mu, dm, obuf)
-            phase = PH_MHE
-        if phase == PH_MHE:
-            # the MHE block (Cascade._estimate): its inputs, the window's update and solve, the estimate
-            sc[SC_VREF], sc[SC_WREF] = sf[SF_UPREV], sf[SF_UPREV + 1]
-            si[SI_TICK0] = _ticks()
-            ep = EstimateParams(MHEBlockParams(fp[FP_MHE_MASS], ip[IP_DEFER] != 0), ip[IP_CSPEED] != 0)
-            est = EstimateState(mp, sf[SF_MX:SF_MX + N_MS], si[SI_NY:SI_NY + N_MI], sc[SC_UK:SC_UK + 2],
-                                sc[SC_EST:SC_EST + N_EO], sf[SF_FB:SF_FB + N_FB], sf[SF_CMD:SF_CMD + N_CM])
-            mst = cascade_estimate(ep, MHEWindow(mY, mW, mU, mXS, mA, mB, mX), est,
-                                   si[SI_FRESH] != 0 and si[SI_SPOK] != 0, y[3], ip[IP_MFORCE] != 0,
-                                   sf[SF_PLANTU], ip[IP_MSTEER] != 0, sf[SF_PLANTU + 1])
-            sc[SC_UMHE], sc[SC_UMHE + 1] = mst.u0, mst.u1  # what the cascade gave (the course fusion's δ, F)
-            si[SI_MHEN], si[SI_MHEOK] = mst.n, 1 if mst.ok else 0
-            si[SI_MHEFULL] = 1 if mst.n == ip[IP_NW] else 0
-            if mst.status == MHE_DENSE:  # the estimator's dense QP decides (the batch: its lanes' solve)
+        if phase == PH_MHE:  # the MHE block; its dense QP is the caller's
+            if _mhe_phase(m, fp, ip, sf, si, sc, mp, mY, mW, mU, mXS, mA, mB, mX, li):
                 si[SI_PHASE] = PH_POST_MHE
                 return NEED_MHE
-            si[SI_ESTSTAT] = mst.status
-            li[m, LI_TMHE] = float(_ticks() - si[SI_TICK0])
             phase = PH_POST_MHE
         if phase == PH_POST_MHE:
             # the phase after the MHE (Cascade._back): dead reckoning, the fusion block after the
             # MHE, the inner block, the servo and the command record; the numpy law (a singular N̄)
             # is the caller's, with the block's compensation and residual
             tick = _ticks()
-            bp, law, bs = _back_records(fp, ip, sf, ev, gates, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm,
+            bp, law, bs = _back_records(fp, ip, sf, ev, gbp, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm,
                                         cur)
             out = cascade_back(bp, law, bs, si[SI_FRESH] != 0 and si[SI_SPOK] != 0, si[SI_POSEOK] != 0, y[2],
                                y[3], sc[SC_EST], sc[SC_EST + 1], sc[SC_EST + 2], sc[SC_ESTF], sc[SC_ESTFR],
@@ -626,35 +678,15 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             sc[SC_OF], sc[SC_OD] = out.F_xR, out.delta
             phase = PH_PLANT
         if phase == PH_POST_LQR:  # the numpy law decided (the caller's: F, δ, saturated, residual in sc)
-            bp, law, bs = _back_records(fp, ip, sf, ev, gates, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm,
+            bp, law, bs = _back_records(fp, ip, sf, ev, gbp, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm,
                                         cur)
             sc[SC_OD] = cascade_command(bp, bs, sc[SC_OF], sc[SC_OD], sc[SC_SAT] != 0.0, sc[SC_LOWF],
                                         sc[SC_EST + 1])
             phase = PH_PLANT
-        if phase == PH_PLANT:
-            # the inner log (the recorder block; the true F_fr: VehiclePlant's), the plant (simulate)
-            mu = friction_mu(t, sf[SF_STRAVEL], frb, patches, events)
-            sc[SC_MU] = mu
-            record_inner(li, lstat, lsat, m, x, sc[SC_EST:SC_EST + 3], y[3], y[4], sc[SC_ESTF], sc[SC_ESTFR],
-                         friction_force(fp[FP_MU_NOM], fp[FP_MG], mu), mu, sc[SC_OF], sc[SC_OD],
-                         si[SI_ESTSTAT], sf[SF_CMD + CM_SAT] != 0)
-            if ip[IP_ACT] == 0:
-                if ip[IP_DEFER] != 0:  # the batch integrates its lanes at once (kernels.batch)
-                    xn, ok = x, False
-                else:
-                    xn, ok = rk4_block(x, sc[SC_OF], sc[SC_OD], mu, ip[IP_NSUB], fp[FP_H], cst)
-                if not ok:
-                    si[SI_PHASE] = PH_POST_PLANT
-                    return NEED_PLANT
-                sf[SF_PLANTU], sf[SF_PLANTU + 1] = sc[SC_OF], sc[SC_OD]
-            else:
-                act = ActuatorParams(fp[FP_A_GF], fp[FP_A_GD], fp[FP_A_RMAX], fp[FP_A_DOFF], ip[IP_ACT_N])
-                xn, ok = _actuated(x, sc[SC_OF], sc[SC_OD], mu, act, fp, ip, sf, si, cst)
-                if not ok:
-                    si[SI_PHASE] = PH_POST_PLANT
-                    return NEED_PLANT
-            for i in range(6):
-                x[i] = xn[i]
+        if phase == PH_PLANT:  # the inner log, the plant
+            if not _plant_phase(m, t, x, fp, ip, sf, si, sc, frb, patches, events, cst, li, lstat, lsat):
+                si[SI_PHASE] = PH_POST_PLANT
+                return NEED_PLANT
             phase = PH_POST_PLANT
         # PH_POST_PLANT: the travelled distance, next step
         sf[SF_STRAVEL] = travelled(sf[SF_STRAVEL], x[3], Td)
