@@ -36,8 +36,9 @@ from tsmpc.estimation.fusion import MassParams, MassState, delta_mass, inertia_f
 from tsmpc.kernels.jit import jitable, jitable_inline
 
 __all__ = ["EST_FAILED", "EST_OK", "EST_REJECTED", "EST_WARMUP", "IC_FAILED", "IC_FSTEPS", "IC_REJECTED",
-           "IC_SATURATED", "N_IB", "N_IC", "InnerBlockParams", "block_delta_mass", "compensated_force",
-           "count_step", "fstep_load", "inner_block", "mass_load", "start_state"]
+           "IC_SATURATED", "N_IB", "N_IBK", "N_IC", "InnerBlockParams", "block_delta_mass",
+           "compensated_force", "count_step", "fstep_load", "inner_block", "mass_load", "pack_inner_block",
+           "start_state", "unpack_inner_block"]
 
 #: The estimator's status codes (tsmpc.kernels.mhe's MHE_OK … MHE_WARMUP).
 EST_OK, EST_REJECTED, EST_FAILED, EST_WARMUP = 1, 2, 3, 4
@@ -68,6 +69,29 @@ class InnerBlockParams(NamedTuple):
     mass_estimate: bool
     mass: MassParams
     inner: InnerParams
+
+
+#: Length of :func:`pack_inner_block`'s vector: friction_step, FrictionStepParams' 2 fields,
+#: mass_estimate, MassParams' 5, InnerParams' 5.
+N_IBK = 14
+
+
+def pack_inner_block(p: InnerBlockParams) -> NDArray[np.float64]:
+    """The record as the float vector :func:`unpack_inner_block` reads (compiled callers rebuild it:
+    the cascade's compiled calls, the run engine's parameter slots)."""
+    fs, m, q = p.fstep, p.mass, p.inner
+    return np.array([p.friction_step, fs.window, fs.threshold, p.mass_estimate, m.mass, m.Td, m.window,
+                     m.tau, m.speed_feedback, q.compensation, q.raw_estimate, q.low_speed, q.v_min,
+                     q.resistance], dtype=np.float64)
+
+
+@jitable
+def unpack_inner_block(a: NDArray[np.float64]) -> InnerBlockParams:
+    """The record of :func:`pack_inner_block`'s vector."""
+    return InnerBlockParams(
+        a[0] != 0.0, FrictionStepParams(int(a[1]), a[2]), a[3] != 0.0,
+        MassParams(a[4], a[5], int(a[6]), a[7], a[8] != 0.0),
+        InnerParams(a[9] != 0.0, a[10] != 0.0, a[11] != 0.0, a[12], a[13]))
 
 
 def start_state(window: int) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:

@@ -68,8 +68,9 @@ lqr_step: Any = None  # no compiled law: inner_step leaves every step to the num
 if _numba_ready():  # the compiled law, called by inner_step (compiled into the engine with it)
     from tsmpc.kernels.lqr import lqr_step
 
-__all__ = ["LQR_HELD", "LQR_NUMPY", "LQR_OK", "TSLQR", "InnerCommand", "InnerParams", "InnerStep", "LQRLaw",
-           "compensated_friction", "equilibrium", "inner_step", "low_speed_force", "steady_states"]
+__all__ = ["LQR_HELD", "LQR_NUMPY", "LQR_OK", "N_LAW", "TSLQR", "InnerCommand", "InnerParams", "InnerStep",
+           "LQRLaw", "compensated_friction", "equilibrium", "inner_step", "low_speed_force", "pack_law",
+           "steady_states", "unpack_law"]
 
 
 @quick_init
@@ -147,6 +148,25 @@ class LQRLaw(NamedTuple):
     d_max: float
     speed_feedback: bool
     tau: float
+
+
+#: Length of :func:`pack_law`'s vector: LQRLaw's scalars (lam … tau, in its order).
+N_LAW = 9
+
+
+def pack_law(law: LQRLaw) -> NDArray[np.float64]:
+    """The law's scalars as the float vector :func:`unpack_law` reads (its arrays are passed as
+    they are: ``prm`` is written in place by the stiffness fit; compiled callers rebuild it: the
+    cascade's compiled calls, the run engine's parameter slots)."""
+    return np.array([law.lam, law.afilt, law.Td, law.F_min, law.F_max, law.d_min, law.d_max,
+                     law.speed_feedback, law.tau], dtype=np.float64)
+
+
+@jitable
+def unpack_law(a: NDArray[np.float64], Kv: NDArray[np.float64], zlo: NDArray[np.float64],
+               zhi: NDArray[np.float64], bits: NDArray[np.bool_], prm: NDArray[np.float64]) -> LQRLaw:
+    """The law of :func:`pack_law`'s vector and the law's arrays."""
+    return LQRLaw(Kv, zlo, zhi, bits, prm, a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7] != 0.0, a[8])
 
 
 class InnerStep(NamedTuple):
@@ -257,8 +277,8 @@ class TSLQR:
         # Controller state [f_F, f_δ, ζ, started, applied_F, applied_δ], shared by both paths.
         self._s = np.zeros(6)
         p = vehicle
-        # The step's glue (inner_step): the same record in the engine (kernels/engine.py builds it
-        # from the same values: μ_o g from the law's prm times M, v_min = zlo[1]).
+        # The step's glue (inner_step): the inner block's record carries it (the cascade's
+        # compiled calls and the run engine read it packed: inner_block.pack_inner_block).
         self._inner = InnerParams(
             compensation=bool(settings.friction_compensation),
             raw_estimate=settings.friction_estimate != FrictionEstimate.WINDOW,

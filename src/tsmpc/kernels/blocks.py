@@ -11,7 +11,7 @@ the blocks' records rebuilt from arrays inside the compiled code, because numba'
 a record argument field by field (≈ 0.15 µs a field, more than the block's work), an array at once.
 
 :func:`pack` writes :class:`~tsmpc.control.inner_block.InnerBlockParams` and the TS-LQR's
-:class:`~tsmpc.control.ts_lqr.LQRLaw` scalars into one float vector (slots ``BP_*``); :func:`inner_call`
+:class:`~tsmpc.control.ts_lqr.LQRLaw` scalars into one float vector (their own packings); :func:`inner_call`
 rebuilds both records from it (and the law's arrays, passed as they are: ``prm`` is written in place
 by the stiffness fit) and runs the block. :func:`pack_gates`, :func:`gate_call` and
 :func:`reckon_call` do the same for the gate block's :class:`~tsmpc.control.gates.GateBlockParams`;
@@ -50,10 +50,17 @@ from tsmpc.control.gates import (
     reckon_block,
     unpack_gate_block,
 )
-from tsmpc.control.inner_block import InnerBlockParams, inner_block, start_state
+from tsmpc.control.inner_block import (
+    N_IBK,
+    InnerBlockParams,
+    inner_block,
+    pack_inner_block,
+    start_state,
+    unpack_inner_block,
+)
 from tsmpc.control.mhe_block import MHEBlockParams, MHEWindow, mhe_block
 from tsmpc.control.outer_block import RefArrays, outer_after, outer_errors, unpack_govern, unpack_outer
-from tsmpc.control.ts_lqr import InnerParams, LQRLaw
+from tsmpc.control.ts_lqr import N_LAW, InnerParams, LQRLaw, pack_law, unpack_law
 from tsmpc.estimation.friction_step import FrictionStepParams
 from tsmpc.estimation.fusion import CourseParams, MassParams
 from tsmpc.kernels.jit import BLOCK_MODULES
@@ -67,31 +74,21 @@ __all__ = ["after_call", "after_plan_call", "back_call", "clock_call", "command_
 kernels.forget_stale(kernels._tree_folder(kernels.numba_cache_dir()), "blocks", ("blocks", "lqr", "mhe"),
                      "blocks.blocks-sha256", BLOCK_MODULES)
 
-(BP_FSTEP, BP_FS_WINDOW, BP_FS_H, BP_MASSEST, BP_M_MASS, BP_M_TD, BP_M_WINDOW, BP_M_TAU, BP_M_SFB,
- BP_COMP, BP_RAW, BP_LOW, BP_VMIN, BP_RES,
- BP_LAM, BP_AF, BP_TD, BP_FMIN, BP_FMAX, BP_DMIN, BP_DMAX, BP_SFB, BP_TAU) = range(23)
-N_BP = 23
+#: :func:`pack`'s vector: the inner block's record (inner_block.pack_inner_block), the law's scalars
+#: (ts_lqr.pack_law)
+N_BP = N_IBK + N_LAW
 
 
 def pack(p: InnerBlockParams, law: LQRLaw) -> np.ndarray:
-    """The scalars of the block's records as the float vector :func:`inner_call` reads."""
-    fs, m, q = p.fstep, p.mass, p.inner
-    return np.array([p.friction_step, fs.window, fs.threshold, p.mass_estimate, m.mass, m.Td, m.window,
-                     m.tau, m.speed_feedback, q.compensation, q.raw_estimate, q.low_speed, q.v_min,
-                     q.resistance, law.lam, law.afilt, law.Td, law.F_min, law.F_max, law.d_min, law.d_max,
-                     law.speed_feedback, law.tau], dtype=np.float64)
+    """The scalars of the block's records as the float vector :func:`inner_call` reads
+    (:func:`~tsmpc.control.inner_block.pack_inner_block`, then :func:`~tsmpc.control.ts_lqr.pack_law`)."""
+    return np.concatenate([pack_inner_block(p), pack_law(law)])
 
 
 @njit(cache=True, fastmath=False)
 def _records(bp, Kv, zlo, zhi, bits, prm):
     """(InnerBlockParams, LQRLaw) of the packed vector and the law's arrays."""
-    p = InnerBlockParams(
-        bp[BP_FSTEP] != 0.0, FrictionStepParams(int(bp[BP_FS_WINDOW]), bp[BP_FS_H]), bp[BP_MASSEST] != 0.0,
-        MassParams(bp[BP_M_MASS], bp[BP_M_TD], int(bp[BP_M_WINDOW]), bp[BP_M_TAU], bp[BP_M_SFB] != 0.0),
-        InnerParams(bp[BP_COMP] != 0.0, bp[BP_RAW] != 0.0, bp[BP_LOW] != 0.0, bp[BP_VMIN], bp[BP_RES]))
-    law = LQRLaw(Kv, zlo, zhi, bits, prm, bp[BP_LAM], bp[BP_AF], bp[BP_TD], bp[BP_FMIN], bp[BP_FMAX],
-                 bp[BP_DMIN], bp[BP_DMAX], bp[BP_SFB] != 0.0, bp[BP_TAU])
-    return p, law
+    return unpack_inner_block(bp[:N_IBK]), unpack_law(bp[N_IBK:], Kv, zlo, zhi, bits, prm)
 
 
 @njit(cache=True, fastmath=False)
@@ -223,12 +220,7 @@ def _course_params(a):
 def _back_params(pk):
     """BackParams of the packed vector (the inner block's record without the law)."""
     fbp, sp = unpack_fusion(pk[BK_FUS:BK_FUS + N_FBP], _course_params(pk[BK_COURSE:BK_INNER]))
-    bp = pk[BK_INNER:]
-    ib = InnerBlockParams(
-        bp[BP_FSTEP] != 0.0, FrictionStepParams(int(bp[BP_FS_WINDOW]), bp[BP_FS_H]), bp[BP_MASSEST] != 0.0,
-        MassParams(bp[BP_M_MASS], bp[BP_M_TD], int(bp[BP_M_WINDOW]), bp[BP_M_TAU], bp[BP_M_SFB] != 0.0),
-        InnerParams(bp[BP_COMP] != 0.0, bp[BP_RAW] != 0.0, bp[BP_LOW] != 0.0, bp[BP_VMIN], bp[BP_RES]))
-    return BackParams(_gate_params(pk), fbp, sp, ib)
+    return BackParams(_gate_params(pk), fbp, sp, unpack_inner_block(pk[BK_INNER:BK_INNER + N_IBK]))
 
 
 @njit(cache=True, fastmath=False)

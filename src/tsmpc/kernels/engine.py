@@ -128,9 +128,10 @@ from tsmpc.control.inner_block import (
     IC_REJECTED,
     IC_SATURATED,
     N_IB,
+    N_IBK,
     N_IC,
-    InnerBlockParams,
-    mass_load,
+    block_delta_mass,
+    unpack_inner_block,
 )
 from tsmpc.control.mhe_block import MHE_DENSE, N_EO, MHEBlockParams, MHEWindow
 from tsmpc.control.outer_block import (
@@ -149,13 +150,8 @@ from tsmpc.control.outer_block import (
     unpack_outer,
 )
 from tsmpc.control.stiffness_block import N_SA
-from tsmpc.control.ts_lqr import LQR_NUMPY, InnerParams, LQRLaw
-from tsmpc.estimation.friction_step import FrictionStepParams
-from tsmpc.estimation.fusion import (
-    MassParams,
-    course_params,
-    delta_mass,
-)
+from tsmpc.control.ts_lqr import LQR_NUMPY, N_LAW, unpack_law
+from tsmpc.estimation.fusion import course_params
 from tsmpc.kernels.jit import cpython_hypot
 from tsmpc.kernels.mhe import (  # the MHE's records
     MHE_FAILED,
@@ -224,25 +220,21 @@ EVENT_SLOTS = (EV_OUTER + OC_SOFT, EV_OUTER + OC_FALLBACK, EV_OUTER + OC_CLIPPED
                EV_STALE_REJ, EV_STEP_ERR, EV_GATES + GC_REPEATED, EV_INNER + IC_FSTEPS)
 
 # ---------------------------------------------------------------------------- float parameters
-(FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, _GFREE0, _GFREE1, _GFREE2, _GFREE3, _GFREE4,
- FP_COURSE_SIGMA, FP_CF0, FP_CR0, FP_VM, FP_VI, FP_VA, FP_VB, FP_TAU, FP_MHE_MASS,
- FP_BOUND,
- FP_L_LAM, FP_L_AF, FP_L_TD, FP_L_FMIN, FP_L_FMAX, FP_L_DMIN, FP_L_DMAX, FP_L_TAU, FP_VG,
- FP_A_GF, FP_A_GD, FP_A_RMAX, FP_A_DOFF, FP_FS_H, _GFREE5) = range(35)
-FP_FB = 35  # the fusion block's parameters (N_FBP values, tsmpc.control.fusion_block.pack_fusion)
+(FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_COURSE_SIGMA, FP_CF0, FP_CR0, FP_VM, FP_VI, FP_VA, FP_VB,
+ FP_MHE_MASS, FP_BOUND, FP_VG, FP_A_GF, FP_A_GD, FP_A_RMAX, FP_A_DOFF) = range(19)
+FP_FB = 19  # the fusion block's parameters (N_FBP values, tsmpc.control.fusion_block.pack_fusion)
 FP_SENS = FP_FB + N_FBP  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
 FP_OB = FP_SENS + N_SP  # the outer block's OuterBlockParams (N_OBP values, outer_block.pack_outer)
 FP_GB = FP_OB + N_OBP  # its GovernBlockParams (N_GBP values, outer_block.pack_govern)
 FP_CK = FP_GB + N_GBP  # the cascade's time's ClockParams (N_CKP values, _clock.pack_clock)
 FP_GBK = FP_CK + N_CKP  # the gate block's GateBlockParams (N_GBK values, gates.pack_gate_block)
-N_FP = FP_GBK + N_GBK
+FP_IBK = FP_GBK + N_GBK  # the inner block's InnerBlockParams (N_IBK values, inner_block.pack_inner_block)
+FP_LAW = FP_IBK + N_IBK  # the TS-LQR's LQRLaw's scalars (N_LAW values, ts_lqr.pack_law)
+N_FP = FP_LAW + N_LAW
 # ---------------------------------------------------------------------------- integer parameters
-(IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN,
- _IFREE2, IP_ANYCOURSE, IP_CSPEED, IP_STIFF,
- IP_MASSEST, IP_SPEEDFB, IP_LQR_SFB, IP_COMP, IP_UIO, IP_MFORCE, IP_MSTEER, _IFREE0,
- IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_LOWRES, IP_FSTEP, _IFREE3,
- _IFREE0, IP_DEFER, _IFREE1) = range(26)
-N_IP = 26
+(IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN, IP_ANYCOURSE, IP_CSPEED, IP_STIFF, IP_MFORCE, IP_MSTEER,
+ IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_DEFER) = range(14)
+N_IP = 14
 # ---------------------------------------------------------------------------- float state
 (SF_STRAVEL, SF_POSE, _P1, _P2, SF_POSET, _FREE15, _FREE16, _FREE17, SF_UPREV, _U1, _FREE38, _FREE39,
  SF_PLANTU, _PU1, _FREE40, _FREE12, _G1, _G2, _G3, _G4, _CFREE1, _CFREE2, _CFREE3,
@@ -399,9 +391,8 @@ def _sensor(m, n_in, Tc, Td, x, noise, u_drop, draws, sp, ss, fifo, y):
 # cur: tsmpc.control.fusion_block's FB_* and IV_* slots, its course_load / course_store).
 @njit(cache=True, fastmath=False)
 def _delta_mass(sf, fp):
-    """ΔM̂ of the inner block's mass fit (:func:`delta_mass`)."""
-    return delta_mass(MassParams(fp[FP_VM], fp[FP_TD], 0, fp[FP_TAU], False),
-                      mass_load(sf[SF_IB:SF_IB + N_IB]))
+    """ΔM̂ of the inner block's mass fit (:func:`block_delta_mass` of its record, Cascade._ib)."""
+    return block_delta_mass(unpack_inner_block(fp[FP_IBK:FP_IBK + N_IBK]), sf[SF_IB:SF_IB + N_IB])
 
 
 # ============================================================================ outer block
@@ -438,16 +429,12 @@ def _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp):
 
 
 @njit(cache=True, fastmath=False, inline="always")
-def _back_records(fp, ip, sf, ev, gbp, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm, cur):
-    """The phase after the MHE's records of the slots (Cascade._back_p; TSLQR._inner, TSLQR._law:
-    the same values) and its state (the blocks' slots, the open interval ``cur``)."""
-    lqr_p = InnerParams(ip[IP_COMP] != 0, ip[IP_UIO] != 0, ip[IP_LOWRES] != 0, zlo[1], prm[6] * prm[0])
-    law = LQRLaw(Kv, zlo, zhi, bits, prm, fp[FP_L_LAM], fp[FP_L_AF], fp[FP_L_TD], fp[FP_L_FMIN],
-                 fp[FP_L_FMAX], fp[FP_L_DMIN], fp[FP_L_DMAX], ip[IP_LQR_SFB] != 0, fp[FP_L_TAU])
-    ibp = InnerBlockParams(ip[IP_FSTEP] != 0, FrictionStepParams(ip[IP_NW], fp[FP_FS_H]),
-                           ip[IP_MASSEST] != 0,
-                           MassParams(fp[FP_VM], fp[FP_TD], ip[IP_NW], fp[FP_TAU], ip[IP_SPEEDFB] != 0),
-                           lqr_p)
+def _back_records(fp, sf, ev, gbp, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm, cur):
+    """The phase after the MHE's records (Cascade._back_p's inner block record Cascade._ib and the
+    TS-LQR's law TSLQR._law, packed by their own: :func:`unpack_inner_block`, :func:`unpack_law`) and
+    its state (the blocks' slots, the open interval ``cur``)."""
+    ibp = unpack_inner_block(fp[FP_IBK:FP_IBK + N_IBK])
+    law = unpack_law(fp[FP_LAW:FP_LAW + N_LAW], Kv, zlo, zhi, bits, prm)
     bs = BackState(sf[SF_POSE:SF_POSE + N_PO], sf[SF_FB:SF_FB + N_FB], cur, sf[SF_SA:SF_SA + N_SA],
                    sf[SF_CMD:SF_CMD + N_CM], ls, sf[SF_IB:SF_IB + N_IB], mass_v, ev[EV_INNER:EV_INNER + N_IC])
     return BackParams(gbp.gates, fbp, sp0, ibp), law, bs
@@ -665,7 +652,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             # MHE, the inner block, the servo and the command record; the numpy law (a singular N̄)
             # is the caller's, with the block's compensation and residual
             tick = _ticks()
-            bp, law, bs = _back_records(fp, ip, sf, ev, gbp, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm,
+            bp, law, bs = _back_records(fp, sf, ev, gbp, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm,
                                         cur)
             out = cascade_back(bp, law, bs, si[SI_FRESH] != 0 and si[SI_SPOK] != 0, si[SI_POSEOK] != 0, y[2],
                                y[3], sc[SC_EST], sc[SC_EST + 1], sc[SC_EST + 2], sc[SC_ESTF], sc[SC_ESTFR],
@@ -678,7 +665,7 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
             sc[SC_OF], sc[SC_OD] = out.F_xR, out.delta
             phase = PH_PLANT
         if phase == PH_POST_LQR:  # the numpy law decided (the caller's: F, δ, saturated, residual in sc)
-            bp, law, bs = _back_records(fp, ip, sf, ev, gbp, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm,
+            bp, law, bs = _back_records(fp, sf, ev, gbp, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm,
                                         cur)
             sc[SC_OD] = cascade_command(bp, bs, sc[SC_OF], sc[SC_OD], sc[SC_SAT] != 0.0, sc[SC_LOWF],
                                         sc[SC_EST + 1])

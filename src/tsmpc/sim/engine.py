@@ -47,7 +47,9 @@ from tsmpc.control._clock import N_CC, N_CK, N_CKP, pack_clock
 from tsmpc.control.cascade import _MPC_STATUS_CODE, EVENT_NAMES, STATUS_CODE, Cascade, _Window
 from tsmpc.control.fusion_block import N_FB, N_FBP, pack_fusion
 from tsmpc.control.gates import N_GBK, N_PO, pack_gate_block
+from tsmpc.control.inner_block import N_IBK, pack_inner_block
 from tsmpc.control.outer_block import N_GBP, N_OBP, OC_GACT, OC_GSTEPS, pack_govern, pack_outer, scratch_size
+from tsmpc.control.ts_lqr import N_LAW, pack_law
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
 from tsmpc.scenarios import Scenario
@@ -580,31 +582,24 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     fp[ke.FP_CF0], fp[ke.FP_CR0] = veh.C_f, veh.C_r
     fp[ke.FP_VM], fp[ke.FP_VI], fp[ke.FP_VA], fp[ke.FP_VB] = veh.mass, veh.inertia, veh.a, veh.b
     fp[ke.FP_VG] = veh.g
-    fp[ke.FP_TAU] = cascade._ib.mass.tau  # the inner block's mass fit's
     fp[ke.FP_MHE_MASS] = mhe.vehicle.mass
     bound = scenario.divergence_bound_m or cfg.divergence_bound_m
     fp[ke.FP_BOUND] = math.inf if bound is None else float(bound)
-    law = lqr._law  # the TS-LQR's records: the kernel rebuilds them from these slots
+    law = lqr._law  # the TS-LQR's law (its arrays are passed as they are: _prepare)
     assert law is not None  # run() checked lqr._kern
-    fp[ke.FP_L_LAM], fp[ke.FP_L_AF], fp[ke.FP_L_TD] = law.lam, law.afilt, law.Td
-    fp[ke.FP_L_FMIN], fp[ke.FP_L_FMAX], fp[ke.FP_L_DMIN], fp[ke.FP_L_DMAX] = (law.F_min, law.F_max,
-                                                                              law.d_min, law.d_max)
-    fp[ke.FP_L_TAU] = law.tau
+    # the inner block's record (Cascade._ib, whose TS-LQR part is TSLQR._inner: _blocks_problem)
+    # and the law's scalars (TSLQR._law), packed by their own
+    fp[ke.FP_IBK:ke.FP_IBK + N_IBK] = pack_inner_block(cascade._ib)
+    fp[ke.FP_LAW:ke.FP_LAW + N_LAW] = pack_law(law)
     ip[ke.IP_NIN], ip[ke.IP_N] = n_in, N
     ip[ke.IP_NSUB] = rk4_count(cascade.Td, plant.model.h) or 0  # (run() checked it)
     ip[ke.IP_NW], ip[ke.IP_REFLEN] = cfg.mhe.N, len(ref)
     ip[ke.IP_ANYCOURSE] = fu.any_course
     ip[ke.IP_CSPEED] = fs.course_speed
-    ip[ke.IP_STIFF], ip[ke.IP_MASSEST] = fs.stiffness_estimate, fs.mass_estimate
+    ip[ke.IP_STIFF] = fs.stiffness_estimate
     # the fusion block's records (Cascade._fb_p, the steering-offset fit's parameters as the config
     # gives them; the kernel rebuilds them from these slots)
     fp[ke.FP_FB:ke.FP_FB + N_FBP] = pack_fusion(cascade._fb_p, fu.steer_p)
-    ip[ke.IP_SPEEDFB], ip[ke.IP_LQR_SFB] = cascade._ib.mass.speed_feedback, law.speed_feedback
-    inner = lqr._inner
-    ip[ke.IP_COMP], ip[ke.IP_UIO], ip[ke.IP_LOWRES] = inner.compensation, inner.raw_estimate, inner.low_speed
-    ib = cascade._ib  # the inner block's records (the kernel rebuilds them from these slots)
-    ip[ke.IP_FSTEP] = ib.friction_step
-    fp[ke.FP_FS_H] = ib.fstep.threshold
     ip[ke.IP_MFORCE], ip[ke.IP_MSTEER] = scenario.measured_force, scenario.measured_steering
     # the outer block's records (Cascade._ob_p, _gov_p; the kernel rebuilds them from these slots)
     fp[ke.FP_OB:ke.FP_OB + N_OBP] = pack_outer(cascade._ob_p)
