@@ -147,15 +147,15 @@ from tsmpc.config import Config, FusionSettings, VehicleParams
 from tsmpc.kernels.jit import exact_hypot, jitable
 
 __all__ = [
-    "BASELINE", "MASS_START", "NO_INTERVAL", "REPEAT_START", "RING", "CourseFusion", "CourseParams",
+    "BASELINE", "MASS_START", "NO_INTERVAL", "N_CP", "REPEAT_START", "RING", "CourseFusion", "CourseParams",
     "CourseState", "Fusion", "GyroFit", "GyroParams", "GyroState", "Interval", "MassEstimator", "MassParams",
     "MassState", "RepeatGuard", "RepeatState", "SlipFit", "SpeedFit", "SteerParams", "SteerState", "StiffFit",
     "course_chord", "course_close", "course_ends", "course_params", "course_sample", "course_start",
     "delta_mass", "gyro_bias", "gyro_params", "gyro_sample", "gyro_start", "inertia_force", "mass_update",
     "model_changed",
-    "noise_scale", "repeat_check", "slip_correction", "speed_offset", "steer_command", "steer_correction",
-    "steer_gain", "steer_offset", "steer_params", "steer_sample", "steer_sigma", "steer_start",
-    "steer_stiffness", "stiffness", "stiffness_update",
+    "noise_scale", "pack_course", "repeat_check", "slip_correction", "speed_offset", "steer_command",
+    "steer_correction", "steer_gain", "steer_offset", "steer_params", "steer_sample", "steer_sigma",
+    "steer_start", "steer_stiffness", "stiffness", "stiffness_update", "unpack_course",
 ]
 
 #: Shortest chord of the course fusion, in MPC periods T_c (0.5 s at the default rates): at the
@@ -415,6 +415,23 @@ class CourseParams(NamedTuple):
     chord_min: int
     chord_max: int
     stiff_max: int
+
+
+#: Length of :func:`pack_course`'s vector (CourseParams' 19 fields, in its order).
+N_CP = 19
+
+
+def pack_course(p: CourseParams) -> NDArray[np.float64]:
+    """The record as the float vector :func:`unpack_course` reads (compiled callers rebuild it:
+    the cascade's compiled calls, the run engine's parameter slots)."""
+    return np.array(p, dtype=np.float64)
+
+
+@jitable
+def unpack_course(a: NDArray[np.float64]) -> CourseParams:
+    """The record of :func:`pack_course`'s vector."""
+    return CourseParams(a[0], a[1], a[2] != 0.0, a[3], a[4], a[5], a[6], a[7], a[8], a[9], a[10], a[11],
+                        a[12], a[13], a[14], int(a[15]), int(a[16]), int(a[17]), int(a[18]))
 
 
 class SlipFit(NamedTuple):

@@ -62,7 +62,7 @@ from tsmpc.control.mhe_block import MHEBlockParams, MHEWindow, mhe_block
 from tsmpc.control.outer_block import RefArrays, outer_after, outer_errors, unpack_govern, unpack_outer
 from tsmpc.control.ts_lqr import N_LAW, InnerParams, LQRLaw, pack_law, unpack_law
 from tsmpc.estimation.friction_step import FrictionStepParams
-from tsmpc.estimation.fusion import CourseParams, MassParams
+from tsmpc.estimation.fusion import N_CP, MassParams, pack_course, unpack_course
 from tsmpc.kernels.jit import BLOCK_MODULES
 
 __all__ = ["after_call", "after_plan_call", "back_call", "clock_call", "command_call", "estimate_call",
@@ -189,11 +189,11 @@ def estimate_call(mass, Y, W, U, XS, A, B, X, mp, ms, mi, uk, est, fb, cmd, cour
 
 # ---------------------------------------------------------------------------- the phase after the MHE
 #: The packed vector of :func:`pack_back`: GateParams' 6 fields, the fusion block's record
-#: (fusion_block.pack_fusion), the course fusion's CourseParams (19 fields), the inner block's
-#: (:func:`pack`).
+#: (fusion_block.pack_fusion), the course fusion's CourseParams (N_CP fields, fusion.pack_course),
+#: the inner block's (:func:`pack`).
 BK_GATE, BK_FUS = 0, 6
 BK_COURSE = BK_FUS + N_FBP
-BK_INNER = BK_COURSE + 19
+BK_INNER = BK_COURSE + N_CP
 N_BK = BK_INNER + N_BP
 
 
@@ -204,16 +204,15 @@ def pack_back(p: BackParams, law: LQRLaw | None) -> np.ndarray:
 
     inner = pack(p.inner, law) if law is not None else np.zeros(N_BP)
     out = np.concatenate([np.array(p.gates, dtype=np.float64), pack_fusion(p.fusion, p.steer),
-                          np.array(p.fusion.cp, dtype=np.float64), inner])
+                          pack_course(p.fusion.cp), inner])
     assert out.size == N_BK
     return out
 
 
 @njit(cache=True, fastmath=False)
 def _course_params(a):
-    """CourseParams of its packed fields."""
-    return CourseParams(a[0], a[1], a[2] != 0.0, a[3], a[4], a[5], a[6], a[7], a[8], a[9], a[10], a[11],
-                        a[12], a[13], a[14], int(a[15]), int(a[16]), int(a[17]), int(a[18]))
+    """CourseParams of its packed fields (:func:`~tsmpc.estimation.fusion.unpack_course`)."""
+    return unpack_course(a)
 
 
 @njit(cache=True, fastmath=False)

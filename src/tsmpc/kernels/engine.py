@@ -151,7 +151,7 @@ from tsmpc.control.outer_block import (
 )
 from tsmpc.control.stiffness_block import N_SA
 from tsmpc.control.ts_lqr import LQR_NUMPY, N_LAW, unpack_law
-from tsmpc.estimation.fusion import course_params
+from tsmpc.estimation.fusion import N_CP, unpack_course
 from tsmpc.kernels.jit import cpython_hypot
 from tsmpc.kernels.mhe import (  # the MHE's records
     MHE_FAILED,
@@ -220,9 +220,9 @@ EVENT_SLOTS = (EV_OUTER + OC_SOFT, EV_OUTER + OC_FALLBACK, EV_OUTER + OC_CLIPPED
                EV_STALE_REJ, EV_STEP_ERR, EV_GATES + GC_REPEATED, EV_INNER + IC_FSTEPS)
 
 # ---------------------------------------------------------------------------- float parameters
-(FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_COURSE_SIGMA, FP_CF0, FP_CR0, FP_VM, FP_VI, FP_VA, FP_VB,
- FP_MHE_MASS, FP_BOUND, FP_VG, FP_A_GF, FP_A_GD, FP_A_RMAX, FP_A_DOFF) = range(19)
-FP_FB = 19  # the fusion block's parameters (N_FBP values, tsmpc.control.fusion_block.pack_fusion)
+(FP_TD, FP_TC, FP_H, FP_MU_NOM, FP_MG, FP_MHE_MASS, FP_BOUND, FP_A_GF, FP_A_GD, FP_A_RMAX,
+ FP_A_DOFF) = range(11)
+FP_FB = 11  # the fusion block's parameters (N_FBP values, tsmpc.control.fusion_block.pack_fusion)
 FP_SENS = FP_FB + N_FBP  # the sensor block's parameters (N_SP of them, tsmpc.sensors.pack_params)
 FP_OB = FP_SENS + N_SP  # the outer block's OuterBlockParams (N_OBP values, outer_block.pack_outer)
 FP_GB = FP_OB + N_OBP  # its GovernBlockParams (N_GBP values, outer_block.pack_govern)
@@ -230,7 +230,8 @@ FP_CK = FP_GB + N_GBP  # the cascade's time's ClockParams (N_CKP values, _clock.
 FP_GBK = FP_CK + N_CKP  # the gate block's GateBlockParams (N_GBK values, gates.pack_gate_block)
 FP_IBK = FP_GBK + N_GBK  # the inner block's InnerBlockParams (N_IBK values, inner_block.pack_inner_block)
 FP_LAW = FP_IBK + N_IBK  # the TS-LQR's LQRLaw's scalars (N_LAW values, ts_lqr.pack_law)
-N_FP = FP_LAW + N_LAW
+FP_CP = FP_LAW + N_LAW  # the course fusion's CourseParams (N_CP values, fusion.pack_course)
+N_FP = FP_CP + N_CP
 # ---------------------------------------------------------------------------- integer parameters
 (IP_NIN, IP_NSUB, IP_N, IP_NW, IP_REFLEN, IP_ANYCOURSE, IP_CSPEED, IP_STIFF, IP_MFORCE, IP_MSTEER,
  IP_ACT, IP_ACT_N, IP_ACT_NRK, IP_DEFER) = range(14)
@@ -616,12 +617,11 @@ def run(m_end, x, fp, ip, sf, si, sc, ev,
     """Run steps ``si[SI_M]`` … ``m_end − 1`` (see the module docstring). Returns DONE when
     ``m_end`` is reached, else the code of the block the caller must run (NEED_*), DIVERGED or
     BLINDED. ``x`` (6,) is the plant state at the start of step ``si[SI_M]``."""
-    Td, Tc, n_in, N = fp[FP_TD], fp[FP_TC], ip[IP_NIN], ip[IP_N]
+    Td, n_in, N = fp[FP_TD], ip[IP_NIN], ip[IP_N]
     y = sc[SC_Y:SC_Y + 5]
     refs = RefArrays(ref_x, ref_y, ref_th, ref_v, ref_w, th_tan, mv, mw)  # (Cascade._refs)
     gbp = unpack_gate_block(fp[FP_GBK:FP_GBK + N_GBK])  # the gate block's (Cascade._gate_p)
-    cpar = course_params(Tc, fp[FP_COURSE_SIGMA], True, fp[FP_CF0], fp[FP_CR0], fp[FP_VM], fp[FP_VI],
-                         fp[FP_VA], fp[FP_VB], fp[FP_VG], Td, n_in)
+    cpar = unpack_course(fp[FP_CP:FP_CP + N_CP])  # the course fusion's (Cascade._fb_p.cp)
     fbp, sp0 = unpack_fusion(fp[FP_FB:FP_FB + N_FBP], cpar)  # the fusion block's (Cascade._fb_p, steer_p)
     # (each phase makes its records and state views: the batch enters run() twice a step, at its phases)
     while si[SI_M] < m_end:

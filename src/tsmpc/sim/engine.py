@@ -52,6 +52,7 @@ from tsmpc.control.outer_block import N_GBP, N_OBP, OC_GACT, OC_GSTEPS, pack_gov
 from tsmpc.control.ts_lqr import N_LAW, pack_law
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
+from tsmpc.estimation.fusion import N_CP, pack_course
 from tsmpc.scenarios import Scenario
 from tsmpc.sim.log import RunLog
 from tsmpc.sim.record_block import LI_TLQR, LI_TMHE, LO_TMPC, Records, new_records, run_log
@@ -574,14 +575,11 @@ def _parameters(cfg: Config, cascade: Cascade, scenario: Scenario, plant: Any,
     fp, ip = np.zeros(ke.N_FP), np.zeros(ke.N_IP, dtype=np.int64)
     ref, n_in, N = cascade.reference, cascade.n_inner, cfg.mpc.N
     mhe, lqr, fu = cascade.mhe, _static_lqr(cascade), cascade._fusion
-    veh, fs = cfg.vehicle, cfg.fusion
+    fs = cfg.fusion
     fp[ke.FP_TD], fp[ke.FP_TC], fp[ke.FP_H] = cascade.Td, cascade.Tc, plant.model.h
     fp[ke.FP_MU_NOM], fp[ke.FP_MG] = plant.vehicle.mu_nominal, plant._mg
     fp[ke.FP_GBK:ke.FP_GBK + N_GBK] = pack_gate_block(cascade._gate_p)  # the gate block's (Cascade._gate_p)
-    fp[ke.FP_COURSE_SIGMA] = fu.course.sigma
-    fp[ke.FP_CF0], fp[ke.FP_CR0] = veh.C_f, veh.C_r
-    fp[ke.FP_VM], fp[ke.FP_VI], fp[ke.FP_VA], fp[ke.FP_VB] = veh.mass, veh.inertia, veh.a, veh.b
-    fp[ke.FP_VG] = veh.g
+    fp[ke.FP_CP:ke.FP_CP + N_CP] = pack_course(cascade._fb_p.cp)  # the course fusion's (Cascade._fb_p.cp)
     fp[ke.FP_MHE_MASS] = mhe.vehicle.mass
     bound = scenario.divergence_bound_m or cfg.divergence_bound_m
     fp[ke.FP_BOUND] = math.inf if bound is None else float(bound)
