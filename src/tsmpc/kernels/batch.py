@@ -806,7 +806,7 @@ def margin_lanes(s, n):
 
 
 @njit(**_NJ)
-def _mhe_finish(s, slot, n, mXS, mA, mB, mU, mp, sf, si, sc):
+def _mhe_finish(s, slot, n, mXS, mA, mB, mp, sf, si, sc):
     """window_step's and the MHE block's ends for one lane from its solved slot: True when the
     estimate is in (the window's minimiser within the state bounds), False when the dense QP must
     decide (the model matrices then in mA, mB as window_step leaves them)."""
@@ -951,7 +951,7 @@ def _mhe_groups(state, need, tally, mws, lanes, akey, asin, acos, sf, si, sc, li
         margin_lanes(mws, n)
         for j in range(n_sel):
             b = lanes[j]
-            if _mhe_finish(mws, j, n, mXS[b], mA[b], mB[b], mU[b], mp[b], sf[b], si[b], sc[b]):
+            if _mhe_finish(mws, j, n, mXS[b], mA[b], mB[b], mp[b], sf[b], si[b], sc[b]):
                 state[b] = READY
             else:
                 state[b], need[b] = NEEDS_PYTHON, ke.NEED_MHE

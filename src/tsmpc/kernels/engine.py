@@ -417,19 +417,6 @@ def _outer_log(k, t, x, op, refs, obs, ocnt, obuf, lo, fp, sc):
 
 
 @njit(cache=True, fastmath=False, inline="always")
-def _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp):
-    """The plan of MPC step ``k`` (the fast path's or the caller's): the plan for the next step
-    (TSMPC's), the outer log's record of it."""
-    for i in range(N):
-        prevU[i, 0], prevU[i, 1] = pU[i, 0], pU[i, 1]
-    for i in range(N + 1):
-        prevX[i, 0], prevX[i, 1], prevX[i, 2] = pX[i, 0], pX[i, 1], pX[i, 2]
-    si[SI_HASPREV] = 1
-    record_plan(lo, loi, lxp, k, sc[SC_EMEAS:SC_EMEAS + 3], sc[SC_PU], sc[SC_PU + 1], pX, si[SI_PSTAT],
-                si[SI_PIT], si[SI_PQPIT], si[SI_PCLIP])  # (the recorder block)
-
-
-@njit(cache=True, fastmath=False, inline="always")
 def _back_records(fp, sf, ev, gbp, fbp, sp0, ls, mass_v, Kv, zlo, zhi, bits, prm, cur):
     """The phase after the MHE's records (Cascade._back_p's inner block record Cascade._ib and the
     TS-LQR's law TSLQR._law, packed by their own: :func:`unpack_inner_block`, :func:`unpack_law`) and
@@ -538,9 +525,15 @@ def _mpc_fast(k, N, sf, si, sc, mints, mprm, mPS, prevX, prevU, pX, pU, lo):
 @njit(cache=True, fastmath=False, inline="always")
 def _plan_phase(k, t, N, pX, pU, prevX, prevU, fp, sf, si, sc, ev, refs, frb, patches, events, lo, loi, lxp):
     """The plan of MPC step ``k`` (the fast path's or the caller's): TSMPC's previous plan, the log
-    (:func:`_plan_done`); the plan's bookkeeping (Cascade._after_plan: _mid.cascade_after_plan, its
+    (the recorder block); the plan's bookkeeping (Cascade._after_plan: _mid.cascade_after_plan, its
     input kept, the outer block after it: its events, the speed governor's rate)."""
-    _plan_done(k, N, pX, pU, prevX, prevU, sf, si, sc, lo, loi, lxp)
+    for i in range(N):
+        prevU[i, 0], prevU[i, 1] = pU[i, 0], pU[i, 1]
+    for i in range(N + 1):
+        prevX[i, 0], prevX[i, 1], prevX[i, 2] = pX[i, 0], pX[i, 1], pX[i, 2]
+    si[SI_HASPREV] = 1
+    record_plan(lo, loi, lxp, k, sc[SC_EMEAS:SC_EMEAS + 3], sc[SC_PU], sc[SC_PU + 1], pX, si[SI_PSTAT],
+                si[SI_PIT], si[SI_PQPIT], si[SI_PCLIP])  # (the recorder block)
     op, obs, ocnt, obuf = _outer_views(fp, sf, ev, sc, N)
     govp = unpack_govern(fp[FP_GB:FP_GB + N_GBP])
     oracle = op.governor and govp.grip.oracle  # (the oracle row reads the road's μ)
