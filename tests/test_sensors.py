@@ -329,3 +329,18 @@ def test_the_records_cross_into_the_engine_unchanged() -> None:
     bs2, ms2 = unpack_state(a, fifo)
     assert bs2 == bs and ms2[1:] == ms[1:] and ms2.fifo is fifo
     assert np.array_equal(pack_state(bs, ms), a)
+
+
+def test_noise_draws_are_the_sensor_noise_sequence() -> None:
+    """The engine's pre-drawn noise (one draw of whole blocks) is the sequence SensorNoise draws
+    block by block: the run engine and the Python loop see the same noise."""
+    from tsmpc.config import Config
+    from tsmpc.sensors import SensorNoise, noise_draws
+
+    cfg = Config()
+    n = 9000  # three blocks, the last one partly used
+    pre = noise_draws(cfg.noise, 7, n)
+    live = SensorNoise(cfg.noise, 7)
+    seq = np.array([live.sample().copy() for _ in range(n)])
+    assert pre.shape[0] >= n and pre.shape[0] % 4096 == 0
+    np.testing.assert_array_equal(pre[:n], seq)

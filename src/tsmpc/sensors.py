@@ -95,8 +95,8 @@ def noise_draws(settings: NoiseSettings, seed: int, n: int) -> NDArray[np.float6
     """The first ``n`` (at least) samples :class:`SensorNoise` draws, (whole blocks × 5)."""
     sigma = _sigma(settings)
     rng = np.random.default_rng(seed)
-    return np.concatenate([rng.standard_normal((_NOISE_BLOCK, 5)) * sigma
-                           for _ in range(max(-(-n // _NOISE_BLOCK), 1))])
+    # one draw of the whole blocks: the generator fills in order, so it is SensorNoise's blocks
+    return rng.standard_normal((max(-(-n // _NOISE_BLOCK), 1) * _NOISE_BLOCK, 5)) * sigma
 
 
 class SensorNoise:
