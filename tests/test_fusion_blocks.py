@@ -361,6 +361,13 @@ def test_stiffness_bounds_prior_and_application(b: _Blocks) -> None:
     assert give and (cf, cr) == pytest.approx((40000.0, 60000.0)) and s1.slip == slip
     give, _, _, s1 = b.stiffness_update(p, s, True, 40000.0 * 1.0099, 60000.0 / 1.0099)
     assert not give and s1.slip == slip  # within 1 %
+    # a move of exactly 1 % is not "over 1 %" (|40400 − 40000| = 0.01 × 40000 = 400 in doubles)
+    p_move = _params(b, C=(40400.0, 60000.0))
+    s_move = s._replace(stiff=fu.course_start(p_move).stiff)  # (the fit at its prior: Ĉ_f = 40400)
+    cf_move, cr_move = b.stiffness(p_move, s_move.stiff)
+    assert cf_move == 40400.0
+    give, _, _, s1 = b.stiffness_update(p_move, s_move, True, 40000.0, cr_move)
+    assert not give and s1.slip == slip
     give, _, _, s1 = b.stiffness_update(p, s, True, 40000.0, 60000.0 * 1.0102)
     assert give and s1.slip == b.model_changed(slip)
     assert tuple(s1.slip) == (0.0, 0.002, SLIP_PRIOR[0] ** 2, 0.0, 0.0, 3e-4, 12.0, 11.0)
