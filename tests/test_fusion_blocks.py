@@ -368,6 +368,12 @@ def test_stiffness_bounds_prior_and_application(b: _Blocks) -> None:
     assert cf_move == 40400.0
     give, _, _, s1 = b.stiffness_update(p_move, s_move, True, 40000.0, cr_move)
     assert not give and s1.slip == slip
+    p_move = _params(b, C=(40000.0, 64640.0))  # the same on the rear axle (1 % above 64000)
+    s_move = s._replace(stiff=fu.course_start(p_move).stiff)
+    cf_move, cr_move = b.stiffness(p_move, s_move.stiff)
+    assert cr_move == 64640.0
+    give, _, _, s1 = b.stiffness_update(p_move, s_move, True, cf_move, 64000.0)
+    assert not give and s1.slip == slip
     give, _, _, s1 = b.stiffness_update(p, s, True, 40000.0, 60000.0 * 1.0102)
     assert give and s1.slip == b.model_changed(slip)
     assert tuple(s1.slip) == (0.0, 0.002, SLIP_PRIOR[0] ** 2, 0.0, 0.0, 3e-4, 12.0, 11.0)
