@@ -1098,12 +1098,13 @@ class GripSource(StrEnum):
 class GovernorSettings(_Frozen):
     """The speed governor (issue 36; beyond the paper: on by default, off in the ``paper`` presets):
     the reference is re-timed online so that the speed and curvature ahead need at most ``margin``
-    x the estimated grip (tsmpc.control.governor). Its grip model is the road the run declares (the
+    x the estimated grip, and its acceleration at most what the drive force leaves after the road's
+    resistance (tsmpc.control.governor). Its grip model is the road the run declares (the
     plan check's reading): read from the road's resistance when the tyres' grip follows the road
     (``tyre.scale_grip_with_road`` or ``scenario.plant.grip_scales_with_road``), else the tyre's own
     grip, lowered only by a spin of the rear wheel."""
 
-    enabled: _Flag = Field(default=True, description="re-time the reference online to the estimated grip")
+    enabled: _Flag = Field(default=True, description="re-time the reference online to the estimated grip and to the drive force's budget")
     margin: PositiveFloat = Field(
         default=0.8, le=1.0, description="share of the estimated grip mu g the reference ahead may use "
         "(lateral and driven-axle longitudinal acceleration combined) [-], (0, 1]")
