@@ -1104,7 +1104,8 @@ class GovernorSettings(_Frozen):
     (``tyre.scale_grip_with_road`` or ``scenario.plant.grip_scales_with_road``), else the tyre's own
     grip, lowered only by a spin of the rear wheel."""
 
-    enabled: _Flag = Field(default=True, description="re-time the reference online to the estimated grip and to the drive force's budget")
+    enabled: _Flag = Field(default=True, description="re-time the reference online to the estimated grip "
+                           "and to the drive force's budget")
     margin: PositiveFloat = Field(
         default=0.8, le=1.0, description="share of the estimated grip mu g the reference ahead may use "
         "(lateral and driven-axle longitudinal acceleration combined) [-], (0, 1]")
