@@ -44,7 +44,8 @@ MECHANISMS = {
     "no-steering-offset": ("fusion.steering_offset", "steering-angle offset from the yaw balance"),
     "no-stiffness": ("fusion.stiffness_estimate", "cornering stiffness fit"),
     "no-mass": ("fusion.mass_estimate", "mass-error inertia out of the friction estimate"),
-    "no-governor": ("governor.enabled", "speed governor (the plan re-timed to the grip)"),
+    "no-governor": ("governor.enabled",
+                    "speed governor (the plan re-timed to the grip and the force budget)"),
     "no-yaw-margin": ("mhe.margin_slip_rate",
                       "the MHE's yaw-model margin (Q_ω grows with the slip residual)"),
 }
