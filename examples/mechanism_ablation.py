@@ -39,7 +39,7 @@ MECHANISMS = {
     "no-repeat-guard": ("fusion.reject_repeated_samples", "repeated samples treated as missing"),
     "no-predict-pose": ("fusion.predict_pose", "dead-reckoned pose for a missing one"),
     "no-course-slip": ("fusion.course_slip", "slip corrected by the course over ground"),
-    "no-course-speed": ("fusion.course_speed", "speed offset from the speed over ground"),
+    "no-course-speed": ("fusion.course_speed", "speed sensor offset and scale from the speed over ground"),
     "no-gyro-bias": ("fusion.gyro_bias", "yaw-rate sensor bias from the measured heading"),
     "no-steering-offset": ("fusion.steering_offset", "steering-angle offset from the yaw balance"),
     "no-stiffness": ("fusion.stiffness_estimate", "cornering stiffness fit"),

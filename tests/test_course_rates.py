@@ -73,7 +73,7 @@ def test_slip_and_speed_offset_are_fitted_at_a_low_pose_rate(hz: float) -> None:
     _drive(f, SEGMENTS * 2, pose_hz=hz, kappa=0.004, beta=-0.002, v_offset=0.2)
     k, b = f.slip_params
     assert k == pytest.approx(0.004, abs=3e-4) and b == pytest.approx(-0.002, abs=3e-4)
-    assert f.speed_offset == pytest.approx(0.2, abs=0.01)
+    assert f.speed_offset(10.0) == pytest.approx(0.2, abs=0.01)
 
 
 @pytest.mark.parametrize("hz", [1.0, 3.0, 5.0])

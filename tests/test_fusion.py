@@ -12,7 +12,7 @@ import pytest
 from _motion import arc_step
 from tsmpc.config import Config, replace
 from tsmpc.control.ts_lqr import equilibrium
-from tsmpc.estimation.fusion import CourseFusion, MassEstimator, RepeatGuard
+from tsmpc.estimation.fusion import SPEED_PRIOR, CourseFusion, MassEstimator, RepeatGuard
 
 
 def test_repeated_samples_are_recognised_and_nan_is_not_a_repeat() -> None:
@@ -30,9 +30,9 @@ def test_repeated_samples_are_recognised_and_nan_is_not_a_repeat() -> None:
 
 def _drive(fusion: CourseFusion, segments, *, kappa: float, beta: float, v_offset: float,
            true_vehicle=None, model_vehicle=None, Tc: float = 0.1, Td: float = 0.01,
-           pos_noise: float = 0.0) -> None:
+           pos_noise: float = 0.0, v_scale: float = 1.0) -> None:
     """Drive arcs of constant (v, ω) [segment = (v, ω, seconds)] with the true slip α and the
-    model's α̂ = α − (κ v ω + β); the speed sensor reads v + v_offset, the positions carry
+    model's α̂ = α − (κ v ω + β); the speed sensor reads v_scale v + v_offset, the positions carry
     Gaussian noise of σ ``pos_noise`` (seed 0). With vehicles given, α and δ are the linear
     single-track's steady state of the true vehicle (SPEC §5)."""
     rng = np.random.default_rng(0)
@@ -48,9 +48,9 @@ def _drive(fusion: CourseFusion, segments, *, kappa: float, beta: float, v_offse
         for k in range(round(secs / Td)):
             if k % n_in == 0:  # the reference turns as the car does (its v_d ω_d)
                 fusion.close(np.array([X, Y, th]) + np.r_[pos_noise * rng.standard_normal(2), 0.0],
-                             v + v_offset, w, v * w)
+                             v_scale * v + v_offset, w, v * w)
                 first = False
-            fusion.sample(True, th, v + v_offset, alpha_hat, v * w, w, delta, 0.0)
+            fusion.sample(True, th, v_scale * v + v_offset, alpha_hat, v * w, w, delta, 0.0)
             X, Y, th = arc_step(X, Y, th, v, w, alpha, Td)  # exact motion over T_d
     assert not first
 
@@ -67,13 +67,42 @@ def test_course_fusion_recovers_a_slip_bias_linear_in_the_lateral_acceleration()
     assert f.n_chords > 200
 
 
-def test_course_fusion_recovers_the_speed_sensor_offset() -> None:
+@pytest.mark.parametrize(("offset", "scale"), [(0.2, 1.0), (0.0, 1.0), (-0.3, 1.03), (0.45, 0.97)])
+def test_course_fusion_recovers_the_speed_sensors_offset_and_scale(offset: float, scale: float) -> None:
+    """The segments' 8–12 m/s make the scale observable: offset and scale are found apart, and the
+    speed over ground at every speed. (The drive's speed steps between two samples: the interval
+    before each step reads Δv / 20 too fast, the trapezoid's half sample, +15 mm/s and −0.0015 of
+    scale in all four cases; a true scale is 30 times that.)"""
     f = CourseFusion(0.1, 0.0)
-    _drive(f, SEGMENTS, kappa=0.0, beta=0.0, v_offset=0.2)
-    assert f.speed_offset == pytest.approx(0.2, abs=0.005)
-    g = CourseFusion(0.1, 0.0)
-    _drive(g, SEGMENTS, kappa=0.0, beta=0.0, v_offset=0.0)
-    assert abs(g.speed_offset) < 0.005
+    _drive(f, SEGMENTS, kappa=0.0, beta=0.0, v_offset=offset, v_scale=scale)
+    o, e = f.speed_sensor
+    assert o == pytest.approx(offset, abs=0.02) and e == pytest.approx(scale - 1.0, abs=2e-3)
+    for v in (2.0, 10.0, 20.0):
+        assert f.speed_offset(scale * v + offset) == pytest.approx((scale - 1.0) * v + offset, abs=0.02)
+
+
+def test_the_speed_sensors_scale_holds_its_prior_at_a_constant_speed() -> None:
+    """At one speed only the sum o + e v is observable: it is found, and the split stays the
+    priors' (it does not drift with the time spent at that speed)."""
+    fits = []
+    for seconds in (20.0, 300.0):
+        f = CourseFusion(0.1, 0.0)
+        _drive(f, [(10.0, 0.0, seconds)], kappa=0.0, beta=0.0, v_offset=0.0, v_scale=1.03)
+        assert f.speed_offset(10.3) == pytest.approx(0.3, abs=0.001)
+        fits.append(f.speed_sensor)
+    assert fits[1] == pytest.approx(fits[0], abs=1e-6)
+    so, se = SPEED_PRIOR
+    assert fits[1][1] == pytest.approx(0.3 * 10.0 * se**2 / (so**2 + 100.0 * se**2), rel=1e-3)
+
+
+def test_the_speed_sensors_offset_is_read_at_rest() -> None:
+    """A car that has not moved: the first interval between two poses reads the offset."""
+    f = CourseFusion(0.1, 0.0)
+    for _ in range(3):
+        f.close(np.zeros(3), 0.25, 0.0, 0.0)
+        for _ in range(10):
+            f.sample(True, 0.0, 0.25, 0.0, 0.0, 0.0, 0.0, 0.0)
+    assert f.speed_offset(0.25) == pytest.approx(0.25, abs=1e-3)
 
 
 def test_course_fusion_fits_the_axle_stiffnesses_of_the_true_vehicle(cfg: Config) -> None:
@@ -102,7 +131,7 @@ def test_a_speed_sensor_offset_does_not_bias_the_stiffness_fit(cfg: Config, v_of
     _drive(f, SEGMENTS * 2, kappa=0.0, beta=0.0, v_offset=v_offset, true_vehicle=true)
     g = CourseFusion(0.1, 0.0, model)
     _drive(g, SEGMENTS * 2, kappa=0.0, beta=0.0, v_offset=0.0, true_vehicle=true)
-    assert f.speed_offset == pytest.approx(v_offset, abs=0.005)
+    assert f.speed_offset(10.0) == pytest.approx(v_offset, abs=0.005)
     assert f.stiffness == pytest.approx(g.stiffness, rel=1e-3)
 
 

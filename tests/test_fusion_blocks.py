@@ -37,7 +37,7 @@ from tsmpc.estimation.fusion import (
 
 #: The blocks the tests call (their names in tsmpc.estimation.fusion).
 BLOCKS = ("repeat_check", "course_params", "course_sample", "course_close", "course_chord",
-          "slip_correction", "noise_scale", "speed_offset", "stiffness", "model_changed",
+          "slip_correction", "noise_scale", "speed_offset", "speed_sensor", "stiffness", "model_changed",
           "stiffness_update", "mass_update", "delta_mass", "inertia_force")
 _Blocks = Blocks
 
@@ -148,22 +148,30 @@ def test_between_poses_the_heading_is_the_gyros_integral(b: _Blocks) -> None:
 
 
 def test_the_speed_over_ground_is_the_arc_not_the_chord(b: _Blocks) -> None:
-    """On an exact arc (10 m/s, 0.5 rad/s: 0.25 rad of turn per chord of 5 T_c) the arc's length
-    over the chord's time is the speed itself: the fitted sensor offset is 0, or the sensor's
-    0.3 m/s. The chord alone is shorter by v Δθ²/24 (0.026 m/s here)."""
+    """On an exact arc (10 m/s, 2 rad/s: 0.2 rad of turn per interval of T_c) the arc's length
+    over the interval's time is the speed itself: the fitted sensor offset is 0, or the sensor's
+    0.3 m/s at that speed. The chord alone is shorter by v Δθ²/24 (0.017 m/s here)."""
     p = _params(b)
-    s, _ = _drive_arc(b, p, 10.0, 0.5, 3.0)
+    s, _ = _drive_arc(b, p, 10.0, 2.0, 3.0)
     assert s.n_chords == 30 - BASELINE + 1
-    assert abs(b.speed_offset(s.speed)) < 1e-9
-    s, _ = _drive_arc(b, p, 10.0, 0.5, 3.0, v_sensor=0.3)
-    assert b.speed_offset(s.speed) == pytest.approx(0.3, abs=1e-9)
-    # the speed fit's weights: (chord / 2σ)² per chord, forgetting 1 − T_c / SPEED_MEMORY_S
-    chord = 2.0 * (10.0 / 0.5) * math.sin(0.125)
+    assert abs(b.speed_offset(s.speed, 10.0)) < 1e-9
+    s, _ = _drive_arc(b, p, 10.0, 2.0, 3.0, v_sensor=0.3)
+    # (3 s of 1 cm positions over 0.1 s intervals: 0.2 % of the 0.3 m/s is still the prior's)
+    assert b.speed_offset(s.speed, 10.3) == pytest.approx(0.3, rel=0.005)
+    # at one speed the pair (o, e) explains 0.3 m/s as the priors split it: o/σ_o² = e/(v σ_e²)
+    o, e = b.speed_sensor(s.speed)
+    so, se = fu.SPEED_PRIOR
+    assert o + 10.0 * e == pytest.approx(0.3, rel=0.005)
+    assert o / so**2 == pytest.approx(e / (10.0 * se**2), rel=0.01)
+    # the fit's information: per interval 1 / (2 (σ/T_c)² + SPEED_MODEL_SIGMA²), forgetting
+    # 1 − T_c / SPEED_MEMORY_S towards the prior, one interval per T_c (30 of them)
+    w = 1.0 / (2.0 * (0.01 / 0.1) ** 2 + fu.SPEED_MODEL_SIGMA**2)
     g = 1.0 - 0.1 / fu.SPEED_MEMORY_S
-    weights = (chord / 0.02) ** 2 * sum(g ** k for k in range(s.n_chords))
-    assert s.speed.sw == pytest.approx(weights, rel=1e-12)
-    assert b.speed_offset(fu.SpeedFit(5.0, 1.0)) == fu.SPEED_OFFSET_MAX  # bounded
-    assert b.speed_offset(fu.SpeedFit(5.0, 0.0)) == 0.0  # no weight: no offset
+    assert s.speed.l00 == pytest.approx(1.0 / so**2 + w * sum(g**k for k in range(30)), rel=1e-9)
+    assert s.speed.l11 == pytest.approx(1.0 / se**2 + 100.0 * w * sum(g**k for k in range(30)), rel=1e-9)
+    big = fu.SpeedFit(1.0, 0.0, 1.0, 5.0, -0.5)
+    assert b.speed_sensor(big) == (fu.SPEED_OFFSET_MAX, -fu.SPEED_SCALE_MAX)  # bounded
+    assert b.speed_sensor(fu.SpeedFit(0.0, 0.0, 0.0, 1.0, 1.0)) == (0.0, 0.0)  # no information
 
 
 def _corner_ring(p, alpha_hat: float = -0.01, ay_ref: float = 5.0, v_first: float = 10.0) -> CourseState:
@@ -292,7 +300,7 @@ def test_the_lateral_fits_wait_out_the_start_transient(b: _Blocks) -> None:
     sig = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4
     assert s.slip.P00 == pytest.approx(P00, rel=1e-12)  # κ's variance: forgetting only
     assert s.slip.beta == pytest.approx(P11 / (sig ** 2 + P11) * 0.02, rel=1e-12)  # z = 0.02, all β
-    assert s.speed.sw > young.speed.sw  # the speed fit took the chord
+    assert s.speed == young.speed  # (the speed fit takes intervals, as course_close closes them)
     settled = b.course_chord(p, young._replace(age=fu.FIT_SETTLE_S), K0, 5.0, 0.0, 0.0)
     assert settled.slip.kappa > 0.0 and settled.stiff != young.stiff
     assert settled.speed == s.speed  # the speed fit does not wait

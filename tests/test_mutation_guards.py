@@ -234,9 +234,11 @@ def test_course_fusion_finds_no_slip_and_no_speed_offset_on_an_exact_arc(omega: 
     assert abs(0.5 * phi) > 1e6 * 1e-9
     assert cf.slip_correction(v * omega) == pytest.approx(0.0, abs=1e-9)
     # the car drove the arc R φ, the chord is 2R sin(φ/2): the speed over ground is the arc's; the
-    # chord's would read a speed-sensor offset of v (1 − sin(φ/2)/(φ/2)) (26 mm/s at ω = 0.5)
-    assert abs(cf.speed_offset) < 1e-9, cf.speed_offset
-    assert v * (1.0 - math.sin(0.5 * abs(phi)) / (0.5 * abs(phi))) > 1e6 * 1e-9
+    # chord of one interval (T_c) would read a speed-sensor offset of v (1 − sin(φ/2)/(φ/2)),
+    # φ = ω T_c (1–2.7 mm/s here)
+    assert abs(cf.speed_offset(v)) < 1e-9, cf.speed_offset(v)
+    phi_iv = omega * Tc
+    assert v * (1.0 - math.sin(0.5 * abs(phi_iv)) / (0.5 * abs(phi_iv))) > 1e6 * 1e-9
 
 
 # ============================================================================ 4. pose gate after an outage

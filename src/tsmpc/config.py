@@ -1039,8 +1039,8 @@ class FusionSettings(_Frozen):
         "alpha_hat + kappa a_y + beta, fitted online (least squares) to the measured course minus "
         "heading over a chord of the last MPC poses")
     course_speed: _Flag = Field(
-        default=True, description="the speed sensor's offset is estimated from the speed over ground "
-        "(chord of the measured positions) and removed before the MHE and the inner loop")
+        default=True, description="the speed sensor's offset and scale factor are estimated from the "
+        "speed over ground (each interval between two measured poses) and removed before the MHE")
     gyro_bias: _Flag = Field(
         default=True, description="the yaw-rate sensor's bias is estimated as a slowly varying state "
         "(the integrated measured yaw rate against the measured heading's change over chords of 1 s; "

@@ -11,7 +11,7 @@ the last call's command as the command record of :mod:`tsmpc.control._back` keep
 was made, it saturated, the drive force applied) and the last estimate (its status code, v̂, F̂).
 
 :func:`cascade_estimate`: the MHE block (:func:`~tsmpc.control.mhe_block.mhe_block`) on its inputs
-as the blocks' records hold them: the course fit's speed-sensor offset
+as the blocks' records hold them: the speed less the course fit's speed-sensor errors at it
 (:func:`~tsmpc.estimation.fusion.speed_offset`, with ``fusion.course_speed``) and ω less the gyro's
 bias of the fusion block's state (``fusion_block.FB_*``), the input applied over the last T_d, its
 low-speed part and the steering offset in force (the command record and the fusion block's state).
@@ -28,10 +28,10 @@ from numpy.typing import NDArray
 
 from tsmpc.control._back import CM_D, CM_F, CM_HASLAST, CM_LOW, CM_SAT
 from tsmpc.control._clock import ClockParams, plan_taken
-from tsmpc.control.fusion_block import FB_OFF, FB_OMEGA, FB_SV, FB_SW
+from tsmpc.control.fusion_block import FB_OFF, FB_OMEGA, speed_load
 from tsmpc.control.mhe_block import MHEBlockParams, MHEStep, MHEWindow, mhe_block
 from tsmpc.control.outer_block import GovernBlockParams, OuterBlockParams, RefArrays, outer_after
-from tsmpc.estimation.fusion import SpeedFit, speed_offset
+from tsmpc.estimation.fusion import speed_offset
 from tsmpc.kernels.jit import jitable_inline
 
 __all__ = ["AfterState", "EstimateParams", "EstimateState", "cascade_after_plan", "cascade_estimate"]
@@ -111,6 +111,6 @@ def cascade_estimate(p: EstimateParams, w: MHEWindow, s: EstimateState, speeds_o
     """The MHE block on the measured speed ``v`` (``speeds_ok``: the gates took the sample) and the
     platform's measured force / steering when it has them (see the module docstring)."""
     fb, cmd = s.fb, s.cmd
-    off = speed_offset(SpeedFit(fb[FB_SV], fb[FB_SW])) if p.course_speed else 0.0
+    off = speed_offset(speed_load(fb), v) if p.course_speed else 0.0
     return mhe_block(p.mhe, w, s.mp, s.ms, s.mi, s.uk, s.est, speeds_ok, v, fb[FB_OMEGA], off, cmd[CM_F],
                      cmd[CM_D], has_force, force, has_steering, steering, fb[FB_OFF], cmd[CM_LOW])

@@ -89,10 +89,9 @@ from tsmpc.control._mid import AfterState, cascade_after_plan
 from tsmpc.control.fusion_block import (
     FB_OFF,
     FB_SENT,
-    FB_SV,
-    FB_SW,
     FusionParams,
     fusion_state,
+    speed_load,
 )
 from tsmpc.control.gates import (
     GC_JUMP,
@@ -150,7 +149,7 @@ from tsmpc.control.stiffness_block import MP_CR, N_SA, PRM_CR, SA_CF, SA_CR, SA_
 from tsmpc.control.ts_lqr import LQR_NUMPY, TSLQR, InnerParams
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep, FrictionStepParams
-from tsmpc.estimation.fusion import MassParams, SpeedFit, speed_offset
+from tsmpc.estimation.fusion import MassParams, speed_offset
 from tsmpc.estimation.mhe_uio import Estimate, EstimatorStatus
 from tsmpc.planning.reference import Reference
 
@@ -882,7 +881,7 @@ class Cascade:
         """The MHE block's inputs (mhe_block.mhe_inputs) in Python, as _mid.cascade_estimate gives
         them: the sample less the course fit's speed offset, the input applied or measured."""
         fb = self._fb
-        off = speed_offset(SpeedFit(fb[FB_SV], fb[FB_SW])) if self._course_speed else 0.0
+        off = speed_offset(speed_load(fb), v) if self._course_speed else 0.0
         Fa, da = self._u_applied
         return mhe_inputs(speeds_ok, v, om, off, Fa, da, hf, F, hs, S, self._steer_offset, self._low_applied)
 

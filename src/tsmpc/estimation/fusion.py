@@ -49,8 +49,15 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     the MHE new stiffnesses, κ restarts from its prior (β stays). Kept, it went on correcting
     the old model's bias for its memory on top of the new model's correct α̂ (issue 21: with
     C_f 30 % below the model's, RMSE y 0.0095 → 0.0062 m, the oracle-tuned controller's 0.0043);
-  - the speed sensor's offset: v̄_measured − v_ground, removed from v before the MHE and the inner
-    loop.
+  - the speed sensor's offset o and scale error e, v_measured = (1 + e) v + o: the chord's
+    v̄_measured − v_ground = o + e v_ground (least squares in information form, with a prior on
+    each, σ = ``SPEED_PRIOR``, forgetting towards it over ``SPEED_MEMORY_S``). Every chord from
+    ``BASELINE`` T_c on is used, however short: the ground speed of a chord is its length over its
+    time, whose error is the positions' √2 σ / D (and ``SPEED_MODEL_SIGMA``), whatever the speed.
+    The offset is observable on any chord, at rest too (the car has not moved: the sensor reads
+    o); the scale only while the speed varies (the launch, braking). At a constant speed the pair
+    explains the one offset that speed shows, split by the priors, and the scale stays near its
+    prior. The ground speed (v − ô) / (1 + ê) goes to the MHE and the inner loop.
 
   - the axle cornering stiffnesses (``stiffness_estimate``): with the chord's slip ᾱ from the
     course, the axle forces from the measured lateral and yaw accelerations and the slips of the
@@ -125,7 +132,7 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
 Each estimator's per-step logic is a block's one definition (:mod:`tsmpc.kernels.jit`): pure
 ``@jitable`` functions over ``NamedTuple`` records, the new state returned — :func:`repeat_check`;
 :func:`course_sample`, :func:`course_close` (with :func:`course_chord`'s fits) and the outputs
-:func:`slip_correction`, :func:`speed_offset`, :func:`noise_scale`, :func:`stiffness`,
+:func:`slip_correction`, :func:`speed_update`, :func:`speed_offset`, :func:`noise_scale`, :func:`stiffness`,
 :func:`stiffness_update`; :func:`gyro_sample` and :func:`gyro_bias`; :func:`mass_update`,
 :func:`delta_mass`, :func:`inertia_force`; :func:`steer_sample`, :func:`steer_correction` and
 :func:`steer_command`. The
@@ -149,11 +156,11 @@ from tsmpc.kernels.jit import exact_hypot, jitable
 __all__ = [
     "BASELINE", "MASS_START", "NO_INTERVAL", "N_CP", "REPEAT_START", "RING", "CourseFusion", "CourseParams",
     "CourseState", "Fusion", "GyroFit", "GyroParams", "GyroState", "Interval", "MassEstimator", "MassParams",
-    "MassState", "RepeatGuard", "RepeatState", "SlipFit", "SpeedFit", "SteerParams", "SteerState", "StiffFit",
-    "course_chord", "course_close", "course_ends", "course_params", "course_sample", "course_start",
-    "delta_mass", "gyro_bias", "gyro_params", "gyro_sample", "gyro_start", "inertia_force", "mass_update",
-    "model_changed",
-    "noise_scale", "pack_course", "repeat_check", "slip_correction", "speed_offset", "steer_command",
+    "MassState", "RepeatGuard", "RepeatState", "SlipFit", "SpeedFit", "SteerParams", "SteerState",
+    "StiffFit", "course_chord", "course_close", "course_ends", "course_params", "course_sample",
+    "course_start", "delta_mass", "ground_speed", "gyro_bias", "gyro_params", "gyro_sample", "gyro_start",
+    "inertia_force", "interval_speed", "mass_update", "model_changed", "noise_scale", "pack_course",
+    "repeat_check", "slip_correction", "speed_offset", "speed_sensor", "speed_update", "steer_command",
     "steer_correction", "steer_gain", "steer_offset", "steer_params", "steer_sample", "steer_sigma",
     "steer_start", "steer_stiffness", "stiffness", "stiffness_update", "unpack_course",
 ]
@@ -175,8 +182,16 @@ CHORD_MAX_S = 1.5
 MIN_CHORD_M = 2.0
 #: Memory of the slip fit [s] (forgetting factor 1 − T_c / memory per MPC step).
 SLIP_MEMORY_S = 30.0
-#: Memory of the speed-offset fit [s].
+#: Memory of the speed sensor's fit [s].
 SPEED_MEMORY_S = 10.0
+#: Prior standard deviations of the speed sensor's offset [m/s] and scale-factor error [-]. A
+#: wheel-speed sensor's scale is the tyre's rolling radius, a few per cent over its pressure, load
+#: and wear; the class the generalisation benchmark draws from is ±0.5 m/s and ±3 %.
+SPEED_PRIOR = (0.5, 0.03)
+#: The speed over ground's error beyond the positions' noise [m/s]: the chord's mean speed is the
+#: CoG's path speed, the sensor's the longitudinal one (a β of 0.05 rad differs by 0.1 %), and the
+#: arc's correction assumes a constant curvature along the chord.
+SPEED_MODEL_SIGMA = 0.01
 #: Prior standard deviations of the slip fit: κ [rad per m/s²] and β [rad].
 SLIP_PRIOR = (0.005, 0.02)
 #: Lag [s] between the model's α̂ and the car's slip the slip fit allows for, as error: a chord
@@ -202,6 +217,8 @@ FIT_SETTLE_S = 2.0
 SLIP_CORRECTION_MAX = 0.05
 #: Largest speed offset removed [m/s].
 SPEED_OFFSET_MAX = 2.0
+#: Largest speed scale-factor error removed (the config's sensor scale range is 0.8–1.2).
+SPEED_SCALE_MAX = 0.2
 #: Speed above which the mass is learnt [m/s] (the dynamic box's floor is 2 m/s).
 MASS_MIN_SPEED = 3.0
 #: High-pass time constant of F̂ and ā in the mass fit [s].
@@ -262,8 +279,8 @@ GYRO_MAX_GAP_S = 0.5
 GYRO_HEADING_FLOOR = 1e-5
 #: Longest chord [s] the stiffness fit takes. The fit is quasi-steady: α̇ comes from consecutive
 #: chords and the forces from chord means, so a long chord through a corner's entry or exit mixes
-#: the transient into the means (the slip and speed fits are linear in their means and take chords
-#: up to ``CHORD_MAX_S``). 1.0 s admits the chords of a 1 Hz pose.
+#: the transient into the means (the slip fit is linear in its means and takes chords up to
+#: ``CHORD_MAX_S``). 1.0 s admits the chords of a 1 Hz pose.
 STIFF_MAX_SPAN_S = 1.0
 #: Largest longitudinal acceleration of the car over a chord [g] for it to count in the stiffness
 #: fit. The fit is a pure-slip, constant-speed single-track fit; under traction or braking the
@@ -449,10 +466,19 @@ class SlipFit(NamedTuple):
 
 
 class SpeedFit(NamedTuple):
-    """The speed-offset fit: Σ w (v̄_measured − v_ground), Σ w (with forgetting)."""
+    """The speed sensor's fit of (o, e) in information form: Λ = [[l00, l01], [l01, l11]] and
+    η = (h0, h1), the prior's included (Λ θ̂ = η)."""
 
-    sv: float
-    sw: float
+    l00: float
+    l01: float
+    l11: float
+    h0: float
+    h1: float
+
+
+#: The speed fit at its prior (offset and scale error 0).
+SPEED_START = SpeedFit(1.0 / (SPEED_PRIOR[0] * SPEED_PRIOR[0]), 0.0, 1.0 / (SPEED_PRIOR[1] * SPEED_PRIOR[1]),
+                       0.0, 0.0)
 
 
 class StiffFit(NamedTuple):
@@ -477,7 +503,7 @@ class CourseState(NamedTuple):
         v_now: measured speed at the last interval's end [m/s].
         n_chords: chords fitted.
         slip: the slip fit.
-        speed: the speed-offset fit.
+        speed: the speed sensor's fit.
         stiff: the stiffness fit.
         since: calls since the last interval ended (a measured pose that ends no interval counts).
         age: seconds of chords since the reset (each adds its last interval's time); the lateral
@@ -515,7 +541,7 @@ def course_start(p: CourseParams) -> CourseState:
     slip = SlipFit(0.0, 0.0, SLIP_PRIOR[0] * SLIP_PRIOR[0], 0.0, 0.0, SLIP_PRIOR[1] * SLIP_PRIOR[1],
                    NOISE_PRIOR_CHORDS, NOISE_PRIOR_CHORDS)
     stiff = StiffFit(p.prior_num_f, p.prior_num_r, p.prior_den_f, p.prior_den_r, 0.0, False)
-    return CourseState((NO_INTERVAL,) * RING, 0, 0.0, math.nan, 0, slip, SpeedFit(0.0, 0.0), stiff,
+    return CourseState((NO_INTERVAL,) * RING, 0, 0.0, math.nan, 0, slip, SPEED_START, stiff,
                        p.n_inner, 0.0)
 
 
@@ -572,7 +598,8 @@ def course_close(p: CourseParams, s: CourseState, cur: Interval, mpc_step: bool,
     every interval is one MPC period) and, between MPC steps, once the interval has lasted a T_c
     (``n_inner`` calls: a pose at any rate ends intervals at its own pace, at most one per T_c).
     The interval is closed on the pose and the speed ``v`` (the closing sample, counted half;
-    NaN: missing — the interval is spoilt and none opens until the next end), a chord is fitted
+    NaN: missing — the interval is spoilt and none opens until the next end), a measured one goes
+    into the speed sensor's fit (:func:`interval_speed`), a chord is fitted
     (:func:`course_chord`) over the shortest run of the latest closed intervals that lasts
     ``BASELINE`` T_c, when they are all measured and it lasts at most ``CHORD_MAX_S``, and the
     next interval opens. ``omega``: measured yaw rate now, ``ay_ref``: the reference's lateral
@@ -585,6 +612,7 @@ def course_close(p: CourseParams, s: CourseState, cur: Interval, mpc_step: bool,
     good = math.isfinite(v)
     ring, n_iv = s.ring, s.n_iv
     k0 = -1  # the chord's first interval in the ring (-1: no chord)
+    speed = s.speed
     if cur.open:
         sv, sv_dth, ok = cur.sv, cur.sv_dth, cur.ok
         if good and cur.n > 0 and ok:  # the closing sample, counted half
@@ -598,9 +626,11 @@ def course_close(p: CourseParams, s: CourseState, cur: Interval, mpc_step: bool,
                           min(cur.ay_ref, ay), cur.v_first, cur.th_last, cur.w_last)
         ring = ring[1:] + (closed,)  # noqa: RUF005 (numba has no starred tuples) the oldest drops out
         n_iv = min(n_iv + 1, RING)
+        if ok:
+            speed = interval_speed(p, speed, closed, X, Y, theta, noise_scale(s.slip))
         if good:
             k0 = _chord_start(p, ring, n_iv)
-    s = CourseState(ring, n_iv, omega, v, s.n_chords, s.slip, s.speed, s.stiff, 0, s.age)
+    s = CourseState(ring, n_iv, omega, v, s.n_chords, s.slip, speed, s.stiff, 0, s.age)
     if k0 >= 0:
         s = course_chord(p, s, k0, X, Y, theta)
     if not good:
@@ -629,7 +659,7 @@ def _chord_start(p: CourseParams, ring: tuple[Interval, ...], n_iv: int) -> int:
 
 @jitable
 def course_chord(p: CourseParams, s: CourseState, k0: int, ex: float, ey: float, eth: float) -> CourseState:
-    """The slip, speed-offset and stiffness fits on the chord of the closed intervals ``k0`` … of
+    """The slip and stiffness fits on the chord of the closed intervals ``k0`` … of
     ``s.ring`` ending at the measured pose (ex, ey, eth) (see the module docstring); a chord
     shorter than ``MIN_CHORD_M`` or without speed changes nothing. The chord lasts its calls
     D = (n / ``n_inner``) T_c (``BASELINE`` T_c at the nominal sensors); each chord adds the time of
@@ -685,14 +715,6 @@ def course_chord(p: CourseParams, s: CourseState, k0: int, ex: float, ey: float,
     settled = s.age >= FIT_SETTLE_S
     slip, noise_sig = _slip_fit(s.slip, dt, a_course - alpha_hat, a_y if settled else 0.0, chord, p.sigma,
                                 ay_min >= CORNER_ACCEL, SLIP_TRANSIENT_S * abs(al_rate))
-    # speed over ground: the arc of the chord (turn Δχ ≈ Δθ) over its time span
-    turn = abs(_wrap(eth - first.sth))
-    arc = chord * ((0.5 * turn) / math.sin(0.5 * turn) if turn > 1e-6 else 1.0)
-    v_ground = arc / D
-    v_meas = sv / n  # the trapezoid mean of the measured speed over the chord's time
-    w = (chord / (2.0 * p.sigma)) ** 2
-    g = 1.0 - dt / SPEED_MEMORY_S
-    speed = SpeedFit(g * s.speed.sv + w * (v_meas - v_ground), g * s.speed.sw + w)
     stiff = s.stiff
     # axle stiffnesses from the course's slip (quasi-steady single track), only where the reference
     # turns (a straight carries no information on C, only the traces of a lightly damped yaw motion),
@@ -704,15 +726,16 @@ def course_chord(p: CourseParams, s: CourseState, k0: int, ex: float, ey: float,
         # α̇ from the model's α̂ over consecutive chords (smooth; the course's own α would put its
         # noise through a 1/dt difference into the force)
         al_dot = (alpha_hat - stiff.alpha_prev) / dt if stiff.has_prev else 0.0
-        # the speed terms at the ground speed: the measured speed less the speed fit's offset (a
+        # the speed terms at the ground speed: the measured speed corrected by the speed fit (a
         # speed sensor's offset ô is a force error M ô ω and a slip error b ω ô / v² on every
         # chord: −0.5 m/s at 8–12 m/s set Ĉ_r 12 % low)
-        v_g = v_meas - speed_offset(speed)
+        v_meas = sv / n  # the trapezoid mean of the measured speed over the chord's time
+        v_g = ground_speed(s.speed, v_meas)
         r = v_g / v_meas if v_meas > 0.0 and v_g > 0.0 else 1.0
         stiff = _stiffness_fit(p, stiff, a_course, alpha_hat, al_dot, r * (s_vw / n), r * v_meas, s_F / n,
                                s.omega_now - first.w_first, (s_wv / n) / r, s_d / n, noise_sig, D, last.n,
                                0.0 if stiff.has_prev else abs(al_rate))  # (no α̇ of its own)
-    return CourseState(ring, s.n_iv, s.omega_now, s.v_now, s.n_chords + 1, slip, speed, stiff, s.since,
+    return CourseState(ring, s.n_iv, s.omega_now, s.v_now, s.n_chords + 1, slip, s.speed, stiff, s.since,
                        s.age + dt)
 
 
@@ -822,11 +845,64 @@ def noise_scale(f: SlipFit) -> float:
 
 
 @jitable
-def speed_offset(f: SpeedFit) -> float:
-    """Estimated speed-sensor offset [m/s] (measured − true), bounded by ``SPEED_OFFSET_MAX``."""
-    if f.sw <= 0.0:
-        return 0.0
-    return min(max(f.sv / f.sw, -SPEED_OFFSET_MAX), SPEED_OFFSET_MAX)
+def interval_speed(p: CourseParams, f: SpeedFit, iv: Interval, ex: float, ey: float, eth: float,
+                   noise: float) -> SpeedFit:
+    """The closed measured interval ``iv`` ending at the pose (ex, ey, eth) in the speed sensor's fit
+    (:func:`speed_update`): its ground speed, the arc of its chord (turn Δχ ≈ Δθ) over its time,
+    against its trapezoid mean of the measured speed; the positions' σ scaled by the ``noise``
+    level the slip fit measures on straights. Every interval counts once, however short (the
+    chord's error is the positions', not the distance's): the fit has the sensor's offset from the
+    first interval on, at rest too (the car has not moved: the sensor reads its offset)."""
+    D = (iv.n / p.n_inner) * p.Tc
+    chord = exact_hypot(ex - iv.sx, ey - iv.sy)
+    turn = abs(_wrap(eth - iv.sth))
+    arc = chord * ((0.5 * turn) / math.sin(0.5 * turn) if turn > 1e-6 else 1.0)
+    return speed_update(f, D, D, p.sigma * noise, iv.sv / iv.n if iv.n > 0 else math.nan, arc / D)
+
+
+@jitable
+def speed_update(f: SpeedFit, dt: float, D: float, sigma: float, v_meas: float, v_ground: float) -> SpeedFit:
+    """One chord of ``D`` seconds, ``dt`` of them new, in the speed sensor's fit: v̄_measured −
+    v_ground = o + e v_ground (φ = [1, v_ground]), weighted by the new share of the chord over its
+    ground speed's variance (the positions' σ at both ends over D, and ``SPEED_MODEL_SIGMA``). The
+    information forgets towards the prior (1 − dt / ``SPEED_MEMORY_S`` per chord): what the chords do
+    not inform, the scale at a constant speed, returns to its prior instead of drifting."""
+    if not (math.isfinite(v_meas) and math.isfinite(v_ground)) or D <= 0.0:
+        return f
+    g = max(1.0 - dt / SPEED_MEMORY_S, 0.0)
+    q0 = 1.0 / (SPEED_PRIOR[0] * SPEED_PRIOR[0])
+    q1 = 1.0 / (SPEED_PRIOR[1] * SPEED_PRIOR[1])
+    w = min(dt / D, 1.0) / (2.0 * (sigma / D) ** 2 + SPEED_MODEL_SIGMA * SPEED_MODEL_SIGMA)
+    y = v_meas - v_ground
+    return SpeedFit(g * f.l00 + (1.0 - g) * q0 + w, g * f.l01 + w * v_ground,
+                    g * f.l11 + (1.0 - g) * q1 + w * v_ground * v_ground, g * f.h0 + w * y,
+                    g * f.h1 + w * y * v_ground)
+
+
+@jitable
+def speed_sensor(f: SpeedFit) -> tuple[float, float]:
+    """The speed sensor's estimated (offset ô [m/s], scale error ê) of v_measured = (1 + e) v + o,
+    bounded by ``SPEED_OFFSET_MAX`` and ``SPEED_SCALE_MAX``."""
+    det = f.l00 * f.l11 - f.l01 * f.l01
+    if not det > 0.0:
+        return 0.0, 0.0
+    o = (f.l11 * f.h0 - f.l01 * f.h1) / det
+    e = (f.l00 * f.h1 - f.l01 * f.h0) / det
+    return min(max(o, -SPEED_OFFSET_MAX), SPEED_OFFSET_MAX), min(max(e, -SPEED_SCALE_MAX), SPEED_SCALE_MAX)
+
+
+@jitable
+def ground_speed(f: SpeedFit, v: float) -> float:
+    """The speed over ground of the measured speed ``v`` [m/s]: (v − ô) / (1 + ê)."""
+    o, e = speed_sensor(f)
+    return (v - o) / (1.0 + e)
+
+
+@jitable
+def speed_offset(f: SpeedFit, v: float) -> float:
+    """What the speed sensor's errors add to the measured speed ``v`` [m/s] (measured − true):
+    v − :func:`ground_speed`."""
+    return v - ground_speed(f, v)
 
 
 @jitable
@@ -918,9 +994,13 @@ class CourseFusion:
         return noise_scale(self.state.slip)
 
     @property
-    def speed_offset(self) -> float:
-        """Estimated speed-sensor offset [m/s] (measured − true)."""
-        return speed_offset(self.state.speed)
+    def speed_sensor(self) -> tuple[float, float]:
+        """The speed sensor's estimated (offset [m/s], scale error) of v_measured = (1 + e) v + o."""
+        return speed_sensor(self.state.speed)
+
+    def speed_offset(self, v: float) -> float:
+        """What the speed sensor's errors add to the measured speed ``v`` [m/s] (measured − true)."""
+        return speed_offset(self.state.speed, float(v))
 
     @property
     def stiffness(self) -> tuple[float, float] | None:
@@ -1483,9 +1563,9 @@ class Fusion:
         s = self.settings
         return s.course_slip or s.course_speed or s.stiffness_estimate
 
-    def speed_offset(self) -> float:
-        """The speed-sensor offset to remove (0 with ``course_speed`` off)."""
-        return speed_offset(self.course.state.speed) if self.settings.course_speed else 0.0
+    def speed_offset(self, v: float) -> float:
+        """What to remove from the measured speed ``v`` [m/s] (0 with ``course_speed`` off)."""
+        return speed_offset(self.course.state.speed, float(v)) if self.settings.course_speed else 0.0
 
     def set_stiffness(self, C_f: float, C_r: float) -> None:
         """The stiffness fit gave the MHE (C_f, C_r): the steering-offset fit's balance uses them."""
