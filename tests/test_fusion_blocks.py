@@ -158,20 +158,23 @@ def test_the_speed_over_ground_is_the_arc_not_the_chord(b: _Blocks) -> None:
     s, _ = _drive_arc(b, p, 10.0, 2.0, 3.0, v_sensor=0.3)
     # (3 s of 1 cm positions over 0.1 s intervals: 0.2 % of the 0.3 m/s is still the prior's)
     assert b.speed_offset(s.speed, 10.3) == pytest.approx(0.3, rel=0.005)
-    # at one speed the pair (o, e) explains 0.3 m/s as the priors split it: o/σ_o² = e/(v σ_e²)
+    # at one speed the fit's (c, k) of v_measured − v = c + k v_measured (c = o / (1 + e),
+    # k = e / (1 + e)) explain 0.3 m/s as the priors split it: c/σ_o² = k/(v_measured σ_e²)
     o, e = b.speed_sensor(s.speed)
+    c, k = o / (1.0 + e), e / (1.0 + e)
     so, se = fu.SPEED_PRIOR
-    assert o + 10.0 * e == pytest.approx(0.3, rel=0.005)
-    assert o / so**2 == pytest.approx(e / (10.0 * se**2), rel=0.01)
+    assert c + 10.3 * k == pytest.approx(0.3, rel=0.005)
+    assert c / so**2 == pytest.approx(k / (10.3 * se**2), rel=0.01)
     # the fit's information: per interval 1 / (2 (σ/T_c)² + SPEED_MODEL_SIGMA²), forgetting
     # 1 − T_c / SPEED_MEMORY_S towards the prior, one interval per T_c (30 of them)
     w = 1.0 / (2.0 * (0.01 / 0.1) ** 2 + fu.SPEED_MODEL_SIGMA**2)
     g = 1.0 - 0.1 / fu.SPEED_MEMORY_S
     assert s.speed.l00 == pytest.approx(1.0 / so**2 + w * sum(g**k for k in range(30)), rel=1e-9)
-    assert s.speed.l11 == pytest.approx(1.0 / se**2 + 100.0 * w * sum(g**k for k in range(30)), rel=1e-9)
-    big = fu.SpeedFit(1.0, 0.0, 1.0, 5.0, -0.5)
-    assert b.speed_sensor(big) == (fu.SPEED_OFFSET_MAX, -fu.SPEED_SCALE_MAX)  # bounded
-    assert b.speed_sensor(fu.SpeedFit(0.0, 0.0, 0.0, 1.0, 1.0)) == (0.0, 0.0)  # no information
+    assert s.speed.l11 == pytest.approx(1.0 / se**2 + 10.3**2 * w * sum(g**k for k in range(30)), rel=1e-9)
+    big = fu.SpeedFit(1.0, 0.0, 1.0, 5.0, -0.5, 1.0, 1.0)  # (c, k) = (5, −0.5): bounded
+    assert b.speed_offset(big, 0.0) == fu.SPEED_OFFSET_MAX
+    assert b.speed_offset(big, 1.0) == pytest.approx(fu.SPEED_OFFSET_MAX - fu.SPEED_SCALE_MAX, rel=1e-12)
+    assert b.speed_sensor(fu.SpeedFit(0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0)) == (0.0, 0.0)  # no information
 
 
 def _corner_ring(p, alpha_hat: float = -0.01, ay_ref: float = 5.0, v_first: float = 10.0) -> CourseState:

@@ -78,15 +78,14 @@ __all__ = [
     "FB_AHPREV", "FB_BETA", "FB_DENF", "FB_DENR", "FB_GYCHORDS", "FB_GYGAP", "FB_GYINT", "FB_GYN",
     "FB_GYOPEN", "FB_GYSB", "FB_GYSW", "FB_GYTH0", "FB_GYWLAST", "FB_HASAH", "FB_KAPPA", "FB_N1", "FB_N2",
     "FB_NCHORDS", "FB_NIV", "FB_NUMF", "FB_NUMR", "FB_OFF", "FB_OMEGA", "FB_OMNOW", "FB_P00", "FB_P01",
-    "FB_P10", "FB_P11", "FB_SENT", "FB_SH0", "FB_SH1", "FB_SINCE", "FB_SL00", "FB_SL01", "FB_SL11",
-    "FB_STB1", "FB_STB2", "FB_STDDF", "FB_STDEF", "FB_STINIT", "FB_STN", "FB_STOMF", "FB_STS11", "FB_STS12",
-    "FB_STS22", "FB_VNOW", "IV_AYREF",
-    "IV_N", "IV_OK", "IV_OPEN", "IV_SDELTA", "IV_SF", "IV_STH", "IV_SV", "IV_SVALPHA", "IV_SVAY",
-    "IV_SVDTH", "IV_SVFULL", "IV_SVW", "IV_SWV", "IV_SX", "IV_SY", "IV_THLAST", "IV_VFIRST", "IV_WFIRST",
-    "IV_WLAST", "N_FB", "N_FBP", "N_IV", "FusionParams", "after_at", "ay_ref_at", "before_at",
-    "course_load", "course_store", "fusion_after", "fusion_before", "fusion_state", "given_steer",
-    "gyro_load", "gyro_store", "iv_load", "iv_store", "pack_fusion", "servo", "servo_at", "slip_load",
-    "speed_load", "steer_load", "steer_store", "steer_usable", "unpack_fusion",
+    "FB_P10", "FB_P11", "FB_SENT", "FB_SH0", "FB_SH1", "FB_SINCE", "FB_SL00", "FB_SL01", "FB_SL11", "FB_SN1",
+    "FB_SN2", "FB_STB1", "FB_STB2", "FB_STDDF", "FB_STDEF", "FB_STINIT", "FB_STN", "FB_STOMF", "FB_STS11",
+    "FB_STS12", "FB_STS22", "FB_VNOW", "IV_AYREF", "IV_N", "IV_OK", "IV_OPEN", "IV_SDELTA", "IV_SF",
+    "IV_STH", "IV_SV", "IV_SVALPHA", "IV_SVAY", "IV_SVDTH", "IV_SVFULL", "IV_SVW", "IV_SWV", "IV_SX",
+    "IV_SY", "IV_THLAST", "IV_VFIRST", "IV_WFIRST", "IV_WLAST", "N_FB", "N_FBP", "N_IV", "FusionParams",
+    "after_at", "ay_ref_at", "before_at", "course_load", "course_store", "fusion_after", "fusion_before",
+    "fusion_state", "given_steer", "gyro_load", "gyro_store", "iv_load", "iv_store", "pack_fusion", "servo",
+    "servo_at", "slip_load", "speed_load", "steer_load", "steer_store", "steer_usable", "unpack_fusion",
 ]
 
 #: The block's state vector (floats; flags 1.0 / 0.0, counts whole numbers): the yaw-rate bias
@@ -100,9 +99,9 @@ __all__ = [
 #: fit, the stiffness fit, the measured ω and v at the last interval's end, the intervals held,
 #: the chords fitted, the calls since the last interval ended, the seconds of chords (the age).
 (FB_KAPPA, FB_BETA, FB_P00, FB_P01, FB_P10, FB_P11, FB_N2, FB_N1, FB_SL00, FB_SL01, FB_SL11, FB_SH0,
- FB_SH1, FB_NUMF, FB_NUMR, FB_DENF, FB_DENR, FB_AHPREV, FB_HASAH, FB_OMNOW, FB_VNOW, FB_NIV, FB_NCHORDS,
- FB_SINCE, FB_AGE) = range(22, 47)
-N_FB = 47
+ FB_SH1, FB_SN2, FB_SN1, FB_NUMF, FB_NUMR, FB_DENF, FB_DENR, FB_AHPREV, FB_HASAH, FB_OMNOW, FB_VNOW, FB_NIV,
+ FB_NCHORDS, FB_SINCE, FB_AGE) = range(22, 49)
+N_FB = 49
 #: An :class:`~tsmpc.estimation.fusion.Interval`'s fields in a row (the ring's, the open interval's).
 (IV_OPEN, IV_OK, IV_SX, IV_SY, IV_STH, IV_N, IV_SV, IV_SVDTH, IV_SVALPHA, IV_SVAY, IV_SVFULL,
  IV_SDELTA, IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST, IV_THLAST, IV_WLAST) = range(20)
@@ -278,7 +277,7 @@ def slip_load(fb: NDArray[np.float64]) -> SlipFit:
 @jitable
 def speed_load(fb: NDArray[np.float64]) -> SpeedFit:
     """The speed sensor's fit of the state vector (the MHE's input reads it)."""
-    return SpeedFit(fb[FB_SL00], fb[FB_SL01], fb[FB_SL11], fb[FB_SH0], fb[FB_SH1])
+    return SpeedFit(fb[FB_SL00], fb[FB_SL01], fb[FB_SL11], fb[FB_SH0], fb[FB_SH1], fb[FB_SN2], fb[FB_SN1])
 
 
 @jitable
@@ -304,6 +303,7 @@ def course_store(s: CourseState, fb: NDArray[np.float64], ivs: NDArray[np.float6
     fb[FB_N2], fb[FB_N1] = f.n2, f.n1
     q = s.speed
     fb[FB_SL00], fb[FB_SL01], fb[FB_SL11], fb[FB_SH0], fb[FB_SH1] = q.l00, q.l01, q.l11, q.h0, q.h1
+    fb[FB_SN2], fb[FB_SN1] = q.n2, q.n1
     c = s.stiff
     fb[FB_NUMF], fb[FB_NUMR], fb[FB_DENF], fb[FB_DENR] = c.num_f, c.num_r, c.den_f, c.den_r
     fb[FB_AHPREV], fb[FB_HASAH] = c.alpha_prev, 1.0 if c.has_prev else 0.0

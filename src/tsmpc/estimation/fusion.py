@@ -49,15 +49,17 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     the MHE new stiffnesses, κ restarts from its prior (β stays). Kept, it went on correcting
     the old model's bias for its memory on top of the new model's correct α̂ (issue 21: with
     C_f 30 % below the model's, RMSE y 0.0095 → 0.0062 m, the oracle-tuned controller's 0.0043);
-  - the speed sensor's offset o and scale error e, v_measured = (1 + e) v + o: the chord's
-    v̄_measured − v_ground = o + e v_ground (least squares in information form, with a prior on
-    each, σ = ``SPEED_PRIOR``, forgetting towards it over ``SPEED_MEMORY_S``). Every chord from
-    ``BASELINE`` T_c on is used, however short: the ground speed of a chord is its length over its
-    time, whose error is the positions' √2 σ / D (and ``SPEED_MODEL_SIGMA``), whatever the speed.
-    The offset is observable on any chord, at rest too (the car has not moved: the sensor reads
+  - the speed sensor's offset o and scale error e, v_measured = (1 + e) v + o: each interval's
+    v̄_measured − v_ground = c + k v̄_measured, c = o / (1 + e), k = e / (1 + e) (least squares in
+    information form, with a prior on each, σ = ``SPEED_PRIOR``, forgetting towards it over
+    ``SPEED_MEMORY_S``, weighted by the intervals' measured noise level). Every interval between
+    two poses is used, however short: its ground speed is its length over its time, whose error is
+    the positions' √2 σ / D (and ``SPEED_MODEL_SIGMA``), whatever the speed.
+    The offset is observable on any interval, at rest too (the car has not moved: the sensor reads
     o); the scale only while the speed varies (the launch, braking). At a constant speed the pair
     explains the one offset that speed shows, split by the priors, and the scale stays near its
-    prior. The ground speed (v − ô) / (1 + ê) goes to the MHE and the inner loop.
+    prior. The ground speed v − ĉ − k̂ v = (v − ô) / (1 + ê) goes to the MHE (and from its estimate
+    to the inner loop).
 
   - the axle cornering stiffnesses (``stiffness_estimate``): with the chord's slip ᾱ from the
     course, the axle forces from the measured lateral and yaw accelerations and the slips of the
@@ -466,19 +468,22 @@ class SlipFit(NamedTuple):
 
 
 class SpeedFit(NamedTuple):
-    """The speed sensor's fit of (o, e) in information form: Λ = [[l00, l01], [l01, l11]] and
-    η = (h0, h1), the prior's included (Λ θ̂ = η)."""
+    """The speed sensor's fit of (c, k) (:func:`speed_update`) in information form:
+    Λ = [[l00, l01], [l01, l11]] and η = (h0, h1), the prior's included (Λ θ̂ = η), and the
+    measured noise level's sums (n2 / n1: the intervals' variance over the assumed one)."""
 
     l00: float
     l01: float
     l11: float
     h0: float
     h1: float
+    n2: float
+    n1: float
 
 
-#: The speed fit at its prior (offset and scale error 0).
+#: The speed fit at its prior (offset and scale error 0; :func:`speed_update`'s c and k).
 SPEED_START = SpeedFit(1.0 / (SPEED_PRIOR[0] * SPEED_PRIOR[0]), 0.0, 1.0 / (SPEED_PRIOR[1] * SPEED_PRIOR[1]),
-                       0.0, 0.0)
+                       0.0, 0.0, NOISE_PRIOR_CHORDS, NOISE_PRIOR_CHORDS)
 
 
 class StiffFit(NamedTuple):
@@ -627,7 +632,7 @@ def course_close(p: CourseParams, s: CourseState, cur: Interval, mpc_step: bool,
         ring = ring[1:] + (closed,)  # noqa: RUF005 (numba has no starred tuples) the oldest drops out
         n_iv = min(n_iv + 1, RING)
         if ok:
-            speed = interval_speed(p, speed, closed, X, Y, theta, noise_scale(s.slip))
+            speed = interval_speed(p, speed, closed, X, Y, theta)
         if good:
             k0 = _chord_start(p, ring, n_iv)
     s = CourseState(ring, n_iv, omega, v, s.n_chords, s.slip, speed, s.stiff, 0, s.age)
@@ -845,64 +850,88 @@ def noise_scale(f: SlipFit) -> float:
 
 
 @jitable
-def interval_speed(p: CourseParams, f: SpeedFit, iv: Interval, ex: float, ey: float, eth: float,
-                   noise: float) -> SpeedFit:
+def interval_speed(p: CourseParams, f: SpeedFit, iv: Interval, ex: float, ey: float, eth: float) -> SpeedFit:
     """The closed measured interval ``iv`` ending at the pose (ex, ey, eth) in the speed sensor's fit
     (:func:`speed_update`): its ground speed, the arc of its chord (turn Δχ ≈ Δθ) over its time,
-    against its trapezoid mean of the measured speed; the positions' σ scaled by the ``noise``
-    level the slip fit measures on straights. Every interval counts once, however short (the
+    against its trapezoid mean of the measured speed. Every interval counts once, however short (the
     chord's error is the positions', not the distance's): the fit has the sensor's offset from the
     first interval on, at rest too (the car has not moved: the sensor reads its offset)."""
     D = (iv.n / p.n_inner) * p.Tc
     chord = exact_hypot(ex - iv.sx, ey - iv.sy)
     turn = abs(_wrap(eth - iv.sth))
     arc = chord * ((0.5 * turn) / math.sin(0.5 * turn) if turn > 1e-6 else 1.0)
-    return speed_update(f, D, D, p.sigma * noise, iv.sv / iv.n if iv.n > 0 else math.nan, arc / D)
+    return speed_update(f, D, D, p.sigma, iv.sv / iv.n if iv.n > 0 else math.nan, arc / D)
 
 
 @jitable
 def speed_update(f: SpeedFit, dt: float, D: float, sigma: float, v_meas: float, v_ground: float) -> SpeedFit:
-    """One chord of ``D`` seconds, ``dt`` of them new, in the speed sensor's fit: v̄_measured −
-    v_ground = o + e v_ground (φ = [1, v_ground]), weighted by the new share of the chord over its
-    ground speed's variance (the positions' σ at both ends over D, and ``SPEED_MODEL_SIGMA``). The
-    information forgets towards the prior (1 − dt / ``SPEED_MEMORY_S`` per chord): what the chords do
-    not inform, the scale at a constant speed, returns to its prior instead of drifting."""
+    """One chord of ``D`` seconds, ``dt`` of them new, in the speed sensor's fit. The sensor's
+    v_measured = (1 + e) v + o is, exactly, v̄_measured − v_ground = c + k v̄_measured with
+    c = o / (1 + e), k = e / (1 + e): the regressor is the measured speed (φ = [1, v̄_measured]),
+    precise, not the ground speed, whose noise in a regressor would bias k by −σ² / (σ² + the
+    speed's spread) at a nearly constant speed (on a race track with 1 cm positions that was
+    −0.2, the bound). Weighted by the new share of the chord over its ground speed's variance (the
+    positions' σ at both ends over D, and ``SPEED_MODEL_SIGMA``), that variance scaled by the noise
+    level the fit measures (covariance matching: the mean of (innovation² − its share from the
+    estimate's own variance) over the assumed variance, at least 1, forgotten over
+    ``NOISE_MEMORY_S``). Without it, positions noisier than configured (a GNSS at 10 × σ) made the
+    data outweigh the prior 100-fold and the split of o and e wander with the noise at one speed.
+    The information forgets towards the prior (1 − dt / ``SPEED_MEMORY_S`` per chord): what the
+    chords do not inform, the scale at a constant speed, returns to its prior instead of drifting."""
     if not (math.isfinite(v_meas) and math.isfinite(v_ground)) or D <= 0.0:
         return f
     g = max(1.0 - dt / SPEED_MEMORY_S, 0.0)
     q0 = 1.0 / (SPEED_PRIOR[0] * SPEED_PRIOR[0])
     q1 = 1.0 / (SPEED_PRIOR[1] * SPEED_PRIOR[1])
-    w = min(dt / D, 1.0) / (2.0 * (sigma / D) ** 2 + SPEED_MODEL_SIGMA * SPEED_MODEL_SIGMA)
+    var0 = (2.0 * (sigma / D) ** 2 + SPEED_MODEL_SIGMA * SPEED_MODEL_SIGMA) / min(dt / D, 1.0)
     y = v_meas - v_ground
-    return SpeedFit(g * f.l00 + (1.0 - g) * q0 + w, g * f.l01 + w * v_ground,
-                    g * f.l11 + (1.0 - g) * q1 + w * v_ground * v_ground, g * f.h0 + w * y,
-                    g * f.h1 + w * y * v_ground)
+    # the innovation against the estimate's own variance φᵀ Λ⁻¹ φ
+    det = f.l00 * f.l11 - f.l01 * f.l01
+    c = (f.l11 * f.h0 - f.l01 * f.h1) / det
+    k = (f.l00 * f.h1 - f.l01 * f.h0) / det
+    p_var = (f.l11 - 2.0 * f.l01 * v_meas + f.l00 * v_meas * v_meas) / det
+    innov = y - c - k * v_meas
+    g_n = max(1.0 - dt / NOISE_MEMORY_S, 0.0)
+    n2 = g_n * f.n2 + max(innov * innov - p_var, 0.0) / var0
+    n1 = g_n * f.n1 + 1.0
+    w = 1.0 / (var0 * max(1.0, n2 / n1))
+    return SpeedFit(g * f.l00 + (1.0 - g) * q0 + w, g * f.l01 + w * v_meas,
+                    g * f.l11 + (1.0 - g) * q1 + w * v_meas * v_meas, g * f.h0 + w * y,
+                    g * f.h1 + w * y * v_meas, n2, n1)
+
+
+@jitable
+def _speed_ck(f: SpeedFit) -> tuple[float, float]:
+    """The fit's (ĉ [m/s], k̂) of v_measured − v = c + k v_measured, bounded by ``SPEED_OFFSET_MAX``
+    and ``SPEED_SCALE_MAX``."""
+    det = f.l00 * f.l11 - f.l01 * f.l01
+    if not det > 0.0:
+        return 0.0, 0.0
+    c = (f.l11 * f.h0 - f.l01 * f.h1) / det
+    k = (f.l00 * f.h1 - f.l01 * f.h0) / det
+    return min(max(c, -SPEED_OFFSET_MAX), SPEED_OFFSET_MAX), min(max(k, -SPEED_SCALE_MAX), SPEED_SCALE_MAX)
 
 
 @jitable
 def speed_sensor(f: SpeedFit) -> tuple[float, float]:
-    """The speed sensor's estimated (offset ô [m/s], scale error ê) of v_measured = (1 + e) v + o,
-    bounded by ``SPEED_OFFSET_MAX`` and ``SPEED_SCALE_MAX``."""
-    det = f.l00 * f.l11 - f.l01 * f.l01
-    if not det > 0.0:
-        return 0.0, 0.0
-    o = (f.l11 * f.h0 - f.l01 * f.h1) / det
-    e = (f.l00 * f.h1 - f.l01 * f.h0) / det
-    return min(max(o, -SPEED_OFFSET_MAX), SPEED_OFFSET_MAX), min(max(e, -SPEED_SCALE_MAX), SPEED_SCALE_MAX)
-
-
-@jitable
-def ground_speed(f: SpeedFit, v: float) -> float:
-    """The speed over ground of the measured speed ``v`` [m/s]: (v − ô) / (1 + ê)."""
-    o, e = speed_sensor(f)
-    return (v - o) / (1.0 + e)
+    """The speed sensor's estimated (offset ô [m/s], scale error ê) of v_measured = (1 + e) v + o:
+    ô = ĉ / (1 − k̂), ê = k̂ / (1 − k̂)."""
+    c, k = _speed_ck(f)
+    return c / (1.0 - k), k / (1.0 - k)
 
 
 @jitable
 def speed_offset(f: SpeedFit, v: float) -> float:
     """What the speed sensor's errors add to the measured speed ``v`` [m/s] (measured − true):
-    v − :func:`ground_speed`."""
-    return v - ground_speed(f, v)
+    ĉ + k̂ v."""
+    c, k = _speed_ck(f)
+    return c + k * v
+
+
+@jitable
+def ground_speed(f: SpeedFit, v: float) -> float:
+    """The speed over ground of the measured speed ``v`` [m/s]: v − :func:`speed_offset`."""
+    return v - speed_offset(f, v)
 
 
 @jitable
