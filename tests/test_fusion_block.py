@@ -117,8 +117,8 @@ def test_the_course_interval_closes_at_an_accepted_pose_with_the_reference_a_y()
 def test_the_angle_sent_takes_the_offset_off_within_the_limits(way) -> None:
     servo = way(fb.servo)
     p, sp = _params(), _steer_p()
-    st = _offset_state(0.02)  # δ₀ 0.02 rad: 0.0197 taken off (the dead band 3e-4 kept)
-    corr = 0.02 - fu.STEER_DEADBAND
+    st = _offset_state(0.02)  # δ₀ 0.02 rad: d³ / (d² + b²), 0.019999955 taken off (dead band b 3e-4)
+    corr = 0.02 ** 3 / (0.02 ** 2 + fu.STEER_DEADBAND ** 2)
     sent, wheels, off = servo(p, sp, st, 0.1)
     assert off == pytest.approx(corr, abs=1e-15) and sent == 0.1 - off and wheels == 0.1
     sent, wheels, off = servo(p, sp, st, -0.39)  # −0.39 − 0.0197 beyond −0.4: clipped

@@ -125,7 +125,7 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
   in their linear range (|a_y| ≤ ``STEER_AY_MAX``), straights included (there r = −δ_f directly).
   **Frozen** — the state held, nothing forgotten — on a missing or rejected sample, a failed
   MHE, a saturated or blind inner loop, below ``STEER_V_MIN`` or above ``STEER_AY_MAX``. The
-  estimate less ``STEER_DEADBAND`` is subtracted from the servo command (clipped to the servo's
+  estimate shrunk by ``STEER_DEADBAND`` is subtracted from the servo command (clipped to the servo's
   limits) and added to the steering the MHE's model gets: a bias correction without feedback
   into its own data (the fit reads the angle sent, whatever was subtracted). It holds during a
   blind stop (the wheels' offset does not go away). When the stiffness fit gives the MHE new
@@ -1372,8 +1372,12 @@ STEER_V_MIN = 2.0
 STEER_AY_MAX = 4.0
 #: Bound of the estimate [rad] (3 σ of the prior).
 STEER_MAX = math.radians(3.0)
-#: Dead band of the applied correction [rad]: the fit's wander on a run without offset (±2e-4 rad
-#: on the paper reference) is not applied, only what exceeds it.
+#: Dead band b of the applied correction [rad]: the estimate d is applied as d³ / (d² + b²), so the
+#: fit's wander on a run without offset (±2e-4 rad on the paper reference) mostly is not (31 % of
+#: 2e-4 is) and a real offset is in full (99.98 % of 1°). A hard dead band, |d| − b, left b of
+#: every offset in the command: on the generalisation benchmark's draws (offsets up to ±1°) that
+#: 0.3 mrad made the largest lateral error up to 1.3 × larger (main set: median worst-column
+#: ratio 1.53 → 1.41, 90th percentile 2.33 → 2.04 with the shrinkage).
 STEER_DEADBAND = 3e-4
 
 
@@ -1545,9 +1549,10 @@ def steer_sigma(s: SteerState) -> float:
 
 @jitable
 def steer_correction(p: SteerParams, s: SteerState) -> float:
-    """The offset removed from the steering command [rad]: the estimate less the dead band."""
+    """The offset removed from the steering command [rad]: the estimate d shrunk by the dead band
+    b, d³ / (d² + b²)."""
     d = steer_offset(p, s)
-    return math.copysign(max(abs(d) - p.deadband, 0.0), d)
+    return d * d * d / (d * d + p.deadband * p.deadband) if d != 0.0 else 0.0
 
 
 @jitable
