@@ -106,10 +106,12 @@ def test_the_engine_runs_it_as_the_python_loop(d06_runs) -> None:
 
 
 def test_the_steady_lateral_offset_is_removed(d06_runs) -> None:
-    """d06's default holds e_y a cm or more to one side for tens of seconds (mean over 30–70 s
-    measured +0.014 m with the MHE's yaw-model margin, +0.024 m before it; the oracle-tuned
-    controller's +0.001 m); the offset-free loop takes most of it out (measured +0.005 m) and cuts
-    the RMS e_y over the first 70 s by a third (0.018 → 0.012 m)."""
+    """d06's default holds e_y to one side for tens of seconds (mean over 30–70 s measured
+    +0.0068 m; +0.014 m before the steering-offset correction applied the whole estimate instead of
+    the estimate less its 0.3 mrad dead band, +0.024 m before the MHE's yaw-model margin; the
+    oracle-tuned controller's +0.001 m); the offset-free loop takes most of it out (measured
+    +0.0028 m) and cuts the RMS e_y over the first 70 s by a fifth (0.0153 → 0.0122 m; a third,
+    0.018 → 0.012 m, before the steering correction took its share)."""
     logs = {}
     for tau, (c, s) in d06_runs.items():
         eng.LAST_RUN.clear()
@@ -118,5 +120,5 @@ def test_the_steady_lateral_offset_is_removed(d06_runs) -> None:
     w = (t >= 30.0) & (t < 70.0)
     mean = {tau: float(np.mean(lg.errors[w, 1])) for tau, lg in logs.items()}
     rms = {tau: float(np.sqrt(np.mean(lg.errors[:, 1] ** 2))) for tau, lg in logs.items()}
-    assert mean[0.0] > 0.01 and abs(mean[10.0]) < 0.4 * mean[0.0], mean
-    assert rms[10.0] < 0.75 * rms[0.0], rms
+    assert mean[0.0] > 0.005 and abs(mean[10.0]) < 0.5 * mean[0.0], mean
+    assert rms[10.0] < 0.85 * rms[0.0], rms
