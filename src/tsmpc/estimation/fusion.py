@@ -885,10 +885,8 @@ def speed_update(f: SpeedFit, dt: float, D: float, sigma: float, v_meas: float, 
     q1 = 1.0 / (SPEED_PRIOR[1] * SPEED_PRIOR[1])
     var0 = (2.0 * (sigma / D) ** 2 + SPEED_MODEL_SIGMA * SPEED_MODEL_SIGMA) / min(dt / D, 1.0)
     y = v_meas - v_ground
-    # the innovation against the estimate's own variance φᵀ Λ⁻¹ φ
-    det = f.l00 * f.l11 - f.l01 * f.l01
-    c = (f.l11 * f.h0 - f.l01 * f.h1) / det
-    k = (f.l00 * f.h1 - f.l01 * f.h0) / det
+    # the innovation against the estimate's own variance φᵀ Λ⁻¹ φ (Λ > 0: the prior is in it)
+    c, k, det = _speed_solve(f)
     p_var = (f.l11 - 2.0 * f.l01 * v_meas + f.l00 * v_meas * v_meas) / det
     innov = y - c - k * v_meas
     g_n = max(1.0 - dt / NOISE_MEMORY_S, 0.0)
@@ -901,14 +899,19 @@ def speed_update(f: SpeedFit, dt: float, D: float, sigma: float, v_meas: float, 
 
 
 @jitable
+def _speed_solve(f: SpeedFit) -> tuple[float, float, float]:
+    """Λ θ̂ = η of the fit: (ĉ, k̂, det Λ), unbounded; (0, 0, det) without information (det ≤ 0)."""
+    det = f.l00 * f.l11 - f.l01 * f.l01
+    if not det > 0.0:
+        return 0.0, 0.0, det
+    return (f.l11 * f.h0 - f.l01 * f.h1) / det, (f.l00 * f.h1 - f.l01 * f.h0) / det, det
+
+
+@jitable
 def _speed_ck(f: SpeedFit) -> tuple[float, float]:
     """The fit's (ĉ [m/s], k̂) of v_measured − v = c + k v_measured, bounded by ``SPEED_OFFSET_MAX``
     and ``SPEED_SCALE_MAX``."""
-    det = f.l00 * f.l11 - f.l01 * f.l01
-    if not det > 0.0:
-        return 0.0, 0.0
-    c = (f.l11 * f.h0 - f.l01 * f.h1) / det
-    k = (f.l00 * f.h1 - f.l01 * f.h0) / det
+    c, k, _det = _speed_solve(f)
     return min(max(c, -SPEED_OFFSET_MAX), SPEED_OFFSET_MAX), min(max(k, -SPEED_SCALE_MAX), SPEED_SCALE_MAX)
 
 
