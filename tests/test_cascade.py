@@ -188,3 +188,33 @@ def test_default_plant_is_tsmpc_vehicle_plant_and_identical_when_passed(cfg: Con
     np.testing.assert_array_equal(a.F_fr_true, b.F_fr_true)
     c = simulate(cfg, Method.REF, dc_replace(sc, initial_error=(0.2, 0.0)), max_steps=20)
     assert not np.array_equal(a.state, c.state)
+
+
+@pytest.mark.parametrize("course_slip", [True, False])
+def test_dead_reckoning_drives_the_slip_fits_velocity_heading(cfg: Config, ref, course_slip: bool) -> None:
+    """Between poses the pose record moves one T_d along θ + α̂ + κ̂ v̂ ω̂ + β̂ (the slip fit's
+    correction at the car's own lateral acceleration, with ``fusion.course_slip``), else along
+    θ + α̂: a fitted model error of 20 mrad at 1.5 m/s² is 4 mm per second of a missing pose at 10
+    m/s, beyond the 1e-9 m this test resolves."""
+    from tsmpc.config import replace
+    from tsmpc.control.fusion_block import FB_BETA, FB_KAPPA
+    from tsmpc.control.gates import PO_TH, PO_X, PO_Y
+
+    c = replace(cfg, fusion=replace(cfg.fusion, course_slip=course_slip))
+    cas = Cascade(c, Method.REF, ref, x0=_start(ref))
+    plant = VehiclePlant(c.vehicle, c.tyre, c.rates.h)
+    x = _start(ref)
+    plant.reset(x)
+    Td = c.rates.Td
+    n = 3400  # into the circuit's first corner (a_y,d > 1 m/s² from 33.2 s)
+    for m in range(n):
+        x = plant.step(cas.step(m * Td, _meas(x)).u, Td, 0.9)
+    cas._fb[FB_KAPPA], cas._fb[FB_BETA] = 0.01, 0.005
+    before = cas._pose.copy()
+    cmd = cas.step(n * Td, Measurement((np.nan, np.nan, np.nan), x[3], x[5]))  # the pose missing
+    v_hat, a_hat, w_hat = cmd.estimate.x
+    assert abs(v_hat * w_hat) > 0.5  # cornering: the correction is not its β̂ alone
+    heading = before[PO_TH] + a_hat + ((0.01 * v_hat * w_hat + 0.005) if course_slip else 0.0)
+    assert cas._pose[PO_X] == pytest.approx(before[PO_X] + v_hat * np.cos(heading) * Td, abs=1e-9)
+    assert cas._pose[PO_Y] == pytest.approx(before[PO_Y] + v_hat * np.sin(heading) * Td, abs=1e-9)
+    assert cas._pose[PO_TH] == pytest.approx(before[PO_TH] + w_hat * Td, abs=1e-12)

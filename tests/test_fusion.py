@@ -199,10 +199,10 @@ def test_positions_noisier_than_configured_are_measured_on_straights(cfg: Config
     # 2 √2 σ / chord + 0.2 mrad = 0.77 mrad on 5 m chords: 3.7
     assert 2.5 < noisy.noise_scale < 5.0
     # the exact chords take the fit to the true rear grip; the noisy ones, weighed as noisy, take
-    # it part of the way (trusted as precise, they took it to 0.73× the model, almost as far as
-    # exact chords do)
+    # it part of the way, 0.749× the model (trusted as precise, in the weights and in the band's
+    # noise allowance, they took it to 0.727×, almost as far as exact chords do)
     assert exact.stiffness[1] == pytest.approx(true.C_r, rel=0.05)
-    assert 0.75 * model.C_r < noisy.stiffness[1] < 0.9 * model.C_r
+    assert 0.74 * model.C_r < noisy.stiffness[1] < 0.9 * model.C_r
 
 
 def test_the_stiffness_fit_ignores_a_car_weaving_on_a_straight(cfg: Config) -> None:

@@ -44,7 +44,7 @@ def _params(gyro: bool = True, course: bool = True, steer: bool = True) -> Fusio
     """Gyro noise σ_θ 1 mrad, σ_ω 0.01 rad/s; the course fusion of a round car; limits ±0.4 rad."""
     gp = fu.gyro_params(TD, 1e-3, 1e-2)
     cp = fu.course_params(TC, 0.01, True, 50000.0, 50000.0, 1000.0, 1500.0, 1.0, 1.5, 10.0, TD, 10)
-    return FusionParams(gyro, course, steer, -0.4, 0.4, gp, cp)
+    return FusionParams(gyro, course, steer, course, -0.4, 0.4, gp, cp)
 
 
 def _steer_p() -> fu.SteerParams:

@@ -245,8 +245,9 @@ def test_a_chord_after_a_long_step_weighs_its_lagging_alpha_dot_as_noise(b: _Blo
     chord's own slip noise (correlated over STIFF_CORRELATION T_c: 2.5 chords of 0.2 s). The
     chord of :func:`_corner_ring` after the first, its last interval lasting 20 calls (the sums
     unchanged: 60 calls in all): ā_y's means over 60 calls, α̇ = −0.01 / 0.2 = −0.05 rad/s,
-    S = M (v ω + v α̇) = 3750 N, F_yF = b S / L = 2250 N on α_F = 0.05 rad (45000 N/rad; the
-    rear's 1500 N on 0.0625 rad, 24000 N/rad, is out of range)."""
+    S = M (v ω + v α̇) = 3750 N, F_yF = b S / L = 2250 N on α_F = 0.05 rad (45000 N/rad) and the
+    rear's 1500 N on 0.0625 rad (24000 N/rad: 0.48× the model's, below the band of 0.5–2×, but its
+    slip within one σ of the band's 0.06 rad, STIFF_BAND_SIGMAS, so it counts)."""
     p = _params(b)
     s = b.course_chord(p, _corner_ring(p), K0, 5.0, 0.0, 0.0)
     r = _corner_ring(p, -0.02)
@@ -263,7 +264,12 @@ def test_a_chord_after_a_long_step_weighs_its_lagging_alpha_dot_as_noise(b: _Blo
                                            rel=1e-12)
     assert s2.stiff.num_f == pytest.approx(g2 * s.stiff.num_f + (1.0 - g2) * prior / 50000.0
                                            + w_f * 2250.0 * 0.05, rel=1e-12)
-    assert s2.stiff.den_r == pytest.approx(g2 * s.stiff.den_r + (1.0 - g2) * prior, rel=1e-12)
+    e_r = (1.0 / 2.5) * (1000.0 * v * 0.05 * 0.5) / 50000.0
+    w_r = 1.0 / (2.5 * sig * sig + 2.5 * e_r * e_r)
+    assert s2.stiff.den_r == pytest.approx(g2 * s.stiff.den_r + (1.0 - g2) * prior + w_r * 1500.0 ** 2,
+                                           rel=1e-12)
+    assert s2.stiff.num_r == pytest.approx(g2 * s.stiff.num_r + (1.0 - g2) * prior / 50000.0
+                                           + w_r * 1500.0 * 0.0625, rel=1e-12)
 
 
 def test_a_chord_through_a_transient_counts_its_alpha_rate_as_slip_error(b: _Blocks) -> None:
@@ -502,3 +508,16 @@ def test_compiled_blocks_equal_python_to_the_bit_on_a_random_drive() -> None:
         X += v * math.cos(th + alpha) * 0.01
         Y += v * math.sin(th + alpha) * 0.01
     assert states[0].n_chords > 150 and applied[0][0] and ms[0].sxx > 0.0
+
+
+def test_the_band_of_plausible_stiffnesses_allows_for_the_slips_noise() -> None:
+    """A chord counts when its slip is one a stiffness within STIFF_RANGE × the model's gives its
+    force, up to STIFF_BAND_SIGMAS of the slip's noise (a hard cut at the band's edges would censor
+    the noisy response and bias the fit into the band): 1000 N on a 50000 N/rad model, band
+    slips 0.01–0.04 rad, σ = 2 mrad: 0.009 and 0.041 count, 0.0075 and 0.043 do not; a slip of the
+    other sign (a transient, noise at a tiny slip beyond its σ) does not; a negative force mirrors."""
+    assert fu.STIFF_RANGE == (0.5, 2.0) and fu.STIFF_BAND_SIGMAS == 1.0
+    for slip, counts in ((0.009, True), (0.041, True), (0.02, True), (0.0075, False), (0.043, False),
+                         (-0.02, False)):
+        assert fu._axle_pair(50000.0, 1000.0, slip, 0.002) == ((1000.0, slip) if counts else (0.0, 0.0))
+        assert fu._axle_pair(50000.0, -1000.0, -slip, 0.002) == ((-1000.0, -slip) if counts else (0.0, 0.0))

@@ -28,11 +28,11 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from tsmpc.control.fusion_block import FusionParams, after_at, given_steer, servo_at
+from tsmpc.control.fusion_block import FusionParams, after_at, given_steer, servo_at, slip_load
 from tsmpc.control.gates import GateParams, reckon_block
 from tsmpc.control.inner_block import InnerBlockParams, inner_block
 from tsmpc.control.ts_lqr import LQR_NUMPY, LQRLaw
-from tsmpc.estimation.fusion import SteerParams
+from tsmpc.estimation.fusion import SteerParams, slip_correction
 from tsmpc.kernels.jit import jitable_inline
 
 __all__ = ["CM_ALPHA", "CM_CALLS", "CM_D", "CM_F", "CM_HASLAST", "CM_LOW", "CM_SAT", "N_CM", "BackOut",
@@ -119,7 +119,11 @@ def back_start(p: BackParams, s: BackState, ok: bool, pose_ok: bool, th: float, 
     """The pose dead-reckoned one T_d on the estimate (v̂, α̂, ω̂), then the fusion block after the
     MHE on the sample (``ok``: speeds accepted and fresh; ``pose_ok``; the measured θ and v), the
     estimate and its status code, the input [``force``, ``delta``] the MHE's model saw."""
-    reckon_block(p.gates, s.pose, v_hat, a_hat, w_hat)
+    # the velocity heading of the dead reckoning: α̂ with the slip fit's correction at the car's own
+    # lateral acceleration (the outer loop takes the reference's, against a fast loop through ω; the
+    # pose integrates it, and between poses at 1-2 Hz the uncorrected α̂ is the pose's drift)
+    a_dr = a_hat + slip_correction(slip_load(s.fb), v_hat * w_hat) if p.fusion.slip else a_hat
+    reckon_block(p.gates, s.pose, v_hat, a_dr, w_hat)
     cmd = s.cmd
     after_at(p.fusion, s.fb, given_steer(p.steer, s.sa), s.cur, ok, pose_ok, th, v, v_hat, a_hat, w_hat,
              delta, force, est_status, blind, cmd[CM_HASLAST] != 0.0 and cmd[CM_SAT] != 0.0)

@@ -378,7 +378,8 @@ class Cascade:
         # the fusion block's record (fusion_block.py): the parts the config selects (the step has
         # no feature switch), the steering limits of the servo
         self._fb_p = FusionParams(bool(cfg.fusion.gyro_bias), self._fusion.any_course,
-                                  bool(cfg.fusion.steering_offset), -cfg.lqr.delta_max, cfg.lqr.delta_max,
+                                  bool(cfg.fusion.steering_offset), bool(cfg.fusion.course_slip),
+                                  -cfg.lqr.delta_max, cfg.lqr.delta_max,
                                   self._fusion.gyro.params, self._fusion.course.params)
         self._build_inner_block(cfg)
         self._build_mhe_block()

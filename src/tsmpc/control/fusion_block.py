@@ -117,6 +117,8 @@ class FusionParams(NamedTuple):
         course: the course fusion runs (``course_slip``, ``course_speed`` or ``stiffness_estimate``).
         steer: the steering-offset fit runs and the servo takes its offset off
             (``fusion.steering_offset``).
+        slip: the slip fit's course correction κ̂ a_y + β̂ is used (``fusion.course_slip``): the
+            dead reckoning's velocity heading takes it too.
         d_min: the servo's lower steering limit [rad] (the inner loop's).
         d_max: its upper limit [rad].
         gp: the yaw-rate bias fit's parameters.
@@ -126,6 +128,7 @@ class FusionParams(NamedTuple):
     gyro: bool
     course: bool
     steer: bool
+    slip: bool
     d_min: float
     d_max: float
     gp: GyroParams
@@ -134,7 +137,7 @@ class FusionParams(NamedTuple):
 
 #: Values of :func:`pack_fusion`'s vector: the switches, the limits, GyroParams' 4 fields, the
 #: steering-offset fit's SteerParams (18 fields) as the config gives them.
-N_FBP = 27
+N_FBP = 28
 
 
 @jitable
@@ -374,13 +377,13 @@ def pack_fusion(p: FusionParams, sp: SteerParams) -> NDArray[np.float64]:
     """The record (but its course parameters, which the compiled caller builds) and the
     steering-offset fit's parameters as the config gives them, as the float vector
     :func:`unpack_fusion` reads."""
-    return np.array([p.gyro, p.course, p.steer, p.d_min, p.d_max, *p.gp, *sp], dtype=np.float64)
+    return np.array([p.gyro, p.course, p.steer, p.slip, p.d_min, p.d_max, *p.gp, *sp], dtype=np.float64)
 
 
 @jitable
 def unpack_fusion(a: NDArray[np.float64], cp: CourseParams) -> tuple[FusionParams, SteerParams]:
     """The records of :func:`pack_fusion`'s vector, with the course parameters ``cp``."""
-    gp = GyroParams(a[5], a[6], a[7], a[8])
-    sp = SteerParams(a[9], a[10], a[11], a[12], a[13], a[14], a[15], a[16], a[17], a[18], a[19], a[20], a[21],
-                     a[22], a[23], a[24], a[25], a[26])
-    return FusionParams(a[0] != 0.0, a[1] != 0.0, a[2] != 0.0, a[3], a[4], gp, cp), sp
+    gp = GyroParams(a[6], a[7], a[8], a[9])
+    sp = SteerParams(a[10], a[11], a[12], a[13], a[14], a[15], a[16], a[17], a[18], a[19], a[20], a[21],
+                     a[22], a[23], a[24], a[25], a[26], a[27])
+    return FusionParams(a[0] != 0.0, a[1] != 0.0, a[2] != 0.0, a[3] != 0.0, a[4], a[5], gp, cp), sp

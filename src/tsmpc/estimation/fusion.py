@@ -253,6 +253,8 @@ NOISE_PRIOR_CHORDS = 10.0
 STIFF_MEMORY_S = 100.0
 #: Bounds of the fitted stiffnesses, as multiples of the model's.
 STIFF_RANGE = (0.5, 2.0)
+#: Noise σ's of a chord's slip by which the band of plausible stiffnesses is widened.
+STIFF_BAND_SIGMAS = 1.0
 #: Smallest lateral acceleration of the *reference* v_d ω_d [m/s²] all along a chord for it to count
 #: in the stiffness fit (the reference, not the car: a car weaving on a straight is no corner).
 CORNER_ACCEL = 0.2
@@ -776,13 +778,16 @@ def _slip_fit(f: SlipFit, dt: float, z: float, a_y: float, chord: float, sigma: 
 
 
 @jitable
-def _axle_pair(C0: float, force: float, slip: float) -> tuple[float, float]:
-    """(F, α) of one axle when the chord's own stiffness F / α is a plausible one (same sign,
-    within ``STIFF_RANGE`` × the model's ``C0``), else (0, 0): anything else is no quasi-steady
-    pure-slip chord (a transient, a lag between forces and slips, a saturated tyre) and would drag
-    the fit to its bounds (on Spa at 22 m/s one corner took it to 2× and doubled the largest e_y)."""
-    fa, sa = abs(force), abs(slip)
-    if force * slip > 0.0 and sa * STIFF_RANGE[1] * C0 >= fa and sa * STIFF_RANGE[0] * C0 <= fa:
+def _axle_pair(C0: float, force: float, slip: float, sig: float) -> tuple[float, float]:
+    """(F, α) of one axle when the chord's slip is one a plausible stiffness gives its force, up to
+    ``STIFF_BAND_SIGMAS`` of its noise ``sig`` (F / α within ``STIFF_RANGE`` × the model's ``C0``),
+    else (0, 0): anything else is no quasi-steady pure-slip chord (a transient, a lag between forces
+    and slips, a saturated tyre) and would drag the fit to its bounds (on Spa at 22 m/s one corner
+    took it to 2× and doubled the largest e_y). The noise widens the band: cut at the band's
+    edges, a noisy slip (the response) would be censored and the fit biased into the band."""
+    s = slip if force >= 0.0 else -slip
+    fa, e = abs(force), STIFF_BAND_SIGMAS * sig
+    if fa / (STIFF_RANGE[1] * C0) - e <= s <= fa / (STIFF_RANGE[0] * C0) + e:
         return force, slip
     return 0.0, 0.0
 
@@ -814,9 +819,9 @@ def _stiffness_fit(p: CourseParams, f: StiffFit, a_course: float, alpha_hat: flo
     S = p.mass * (vw + v_meas * al_dot) + F_x * a_course
     T = p.inertia * d_omega / span
     L = p.a + p.b
-    F_f, a_f = _axle_pair(p.C_f, (p.b * S + T) / L, delta - a_course - p.a * w_v)
-    F_r, a_r = _axle_pair(p.C_r, (p.a * S - T) / L, p.b * w_v - a_course)
     s_slip = max(sig, STIFF_SLIP_FLOOR)
+    F_f, a_f = _axle_pair(p.C_f, (p.b * S + T) / L, delta - a_course - p.a * w_v, s_slip)
+    F_r, a_r = _axle_pair(p.C_r, (p.a * S - T) / L, p.b * w_v - a_course, s_slip)
     corr = max(1.0, STIFF_CORRELATION * p.n_inner / n_last)  # chords per independent one
     # the α̇ term's error: the part of the step beyond T_c of M v α̇ (or, without a previous chord,
     # α̂'s change within the chord), per axle as slip (F / C)

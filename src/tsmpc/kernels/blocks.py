@@ -315,7 +315,8 @@ def _warm_phases(gp: GateBlockParams, p: InnerBlockParams, law: LQRLaw, pose: np
     cp = fu.course_params(0.1, 0.05, True, 25000.0, 25000.0, 683.0, 560.0, 0.758, 1.036, 9.81, 0.01, 10)
     gyro = fu.gyro_params(0.01, 0.01, 0.01)
     sp = fu.steer_params(0.01, 25000.0, 25000.0, 0.758, 1.036, 683.0, 560.0)
-    bpk = pack_back(BackParams(gp.gates, FusionParams(True, True, True, -0.4, 0.4, gyro, cp), sp, p), law)
+    fusion = FusionParams(True, True, True, True, -0.4, 0.4, gyro, cp)
+    bpk = pack_back(BackParams(gp.gates, fusion, sp, p), law)
     fb, ivs, cur = fusion_state(fu.gyro_start(gyro), fu.steer_start(sp), 0.0, 0.0, fu.course_start(cp),
                                 fu.NO_INTERVAL)
     cmd, sa, ref = np.zeros(7), np.zeros(3), np.ones((2, 20)) * 10.0
