@@ -12,7 +12,9 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
   predicts instead of fitting a frozen speed (which it would explain as a friction jump).
 * ``predict_pose`` — a missing pose is replaced by the last good pose dead-reckoned with the
   estimate (v̂, α̂, ω̂) over each T_d (the cascade's own dead reckoning, which its pose-jump gate
-  uses in any case). The paper-faithful alternative (hold the last pose) makes the reference run
+  uses in any case; with ``course_slip`` along the slip fit's velocity heading θ + α̂ + κ̂ v̂ ω̂ + β̂,
+  at the car's own lateral acceleration: between poses at 1–2 Hz an α̂ a few mrad off is the pose's
+  drift, centimetres per pose). The paper-faithful alternative (hold the last pose) makes the reference run
   ahead of a frozen car: one lost MPC sample at 13 m/s is a 1.3 m jump of e_x, which the MPC
   answers with a full-throttle v_ref (issue 21: 795 saturated inner steps at 5 % random dropouts).
 * :class:`CourseFusion` (``course_slip``, ``course_speed``) — the measured positions give the
@@ -69,7 +71,11 @@ MHE's estimate; nothing reads the plant (docs/mismatch.md lists the sources).
     noise, forgetting over ``STIFF_MEMORY_S``), from chords where the reference turns
     (``CORNER_ACCEL``) and the car neither accelerates nor brakes (``STIFF_MAX_ACCEL``) over at most
     ``STIFF_MAX_SPAN_S``, per axle
-    only where the chord's own F / slip is a plausible stiffness (``STIFF_RANGE``). The
+    only where the chord's own F / slip is a plausible stiffness (``STIFF_RANGE``, widened by
+    ``STIFF_BAND_SIGMAS`` of the chord's slip noise: the slip is the fit's noisy response, and a
+    hard cut at the band's edges censored it — with an effective stiffness near the band's edge, a
+    mass, CoG and stiffness error together, half the chords or all of them were cut and the fit
+    stayed at the model's). The
     fitted C_f, C_r replace the model's in the MHE and in the inner loop's reference gain N̄ (the
     LMI gains stay): with them α̂ and the steering feed-forward are right (issue 21: the stiffness
     error was worth 0.08 m of RMSE y; with the true C in both blocks the loss disappears, in the
