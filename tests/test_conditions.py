@@ -163,6 +163,56 @@ def test_oracle_tuned_gives_the_controllers_the_plant_and_calibrated_sensors(cfg
     assert c3.vehicle == c2.vehicle and (sc3.plant_vehicle or c3.vehicle) == sc.plant_vehicle
 
 
+_PLANT = {"mass_scale": 1.2, "inertia_scale": 0.8, "cornering_front_scale": 0.7, "cornering_rear_scale": 1.3,
+          "cog_to_front_scale": 1.05, "steering_offset_rad": 0.01}
+
+
+@pytest.mark.parametrize("part", ["mass", "inertia", "cornering_stiffness", "cog"])
+def test_known_tells_the_controllers_one_part_of_the_plant_and_leaves_the_plant_alone(
+        cfg: Config, part: str) -> None:
+    c = _cfg(plant=_PLANT, known=[part], sensors={"v_bias": 0.2})
+    plant = plant_vehicle(c)
+    c2, sc = apply_conditions(c, Scenario("s", _ref()))
+    fields = {"mass": ("mass",), "inertia": ("inertia",), "cornering_stiffness": ("C_f", "C_r"),
+              "cog": ("a", "b")}[part]
+    for f in ("mass", "inertia", "C_f", "C_r", "a", "b"):  # the told part the plant's, the rest the config's
+        assert getattr(c2.vehicle, f) == pytest.approx(getattr(plant if f in fields else cfg.vehicle, f)), f
+    assert sc.plant_vehicle == plant
+    assert sc.sensor_fault.faults.v_bias == 0.2  # the sensors are not calibrated
+    assert sc.actuators.steering_offset_rad == 0.01  # nor the steering
+    # the car's engine: the force limits stay the config vehicle's, in newtons
+    assert c2.lqr.force_limits(c2.vehicle) == pytest.approx(cfg.lqr.force_limits(cfg.vehicle))
+    c3, sc3 = apply_conditions(c2, Scenario("s", _ref()))  # the config it returns runs alike
+    assert c3.vehicle == c2.vehicle and sc3.plant_vehicle == plant
+
+
+def test_known_sensor_biases_and_steering_offset_calibrate_only_those(cfg: Config) -> None:
+    c = _cfg(plant=_PLANT, known=["sensor_biases"], sensors={"v_bias": 0.2, "omega_scale": 1.1})
+    c2, sc = apply_conditions(c, Scenario("s", _ref()))
+    assert c2.vehicle == cfg.vehicle and sc.actuators.steering_offset_rad == 0.01
+    assert sc.sensor_fault is None or (sc.sensor_fault.faults.v_bias == 0.0
+                                       and sc.sensor_fault.faults.omega_scale == 1.0)
+    _, sc = apply_conditions(_cfg(plant=_PLANT, known=["steering_offset"], sensors={"v_bias": 0.2}),
+                             Scenario("s", _ref()))
+    assert sc.sensor_fault.faults.v_bias == 0.2
+    assert sc.actuators is None or sc.actuators.steering_offset_rad == 0.0
+
+
+def test_every_part_known_is_the_oracle_tuned_run() -> None:
+    over = {"plant": _PLANT, "sensors": {"v_bias": 0.2, "omega_bias": 0.01, "dropout_probability": 0.05}}
+    every = ["mass", "inertia", "cornering_stiffness", "cog", "sensor_biases", "steering_offset"]
+    a_cfg, a = apply_conditions(_cfg(**over, known=every), Scenario("s", _ref()))
+    b_cfg, b = apply_conditions(_cfg(**over, oracle_tuned=True), Scenario("s", _ref()))
+    assert a_cfg.vehicle == b_cfg.vehicle and a_cfg.lqr == b_cfg.lqr
+    assert a.plant_vehicle == b.plant_vehicle and a.sensor_fault.faults == b.sensor_fault.faults
+    assert (a.actuators is None) == (b.actuators is None)
+
+
+def test_an_unknown_part_is_refused_naming_the_field() -> None:
+    with pytest.raises(ConfigError, match=r"scenario\.known"):
+        _cfg(known=["weight"])
+
+
 # -- sensor faults ----------------------------------------------------------------------------
 def _truth(k: int) -> np.ndarray:
     return np.array([1.0 * k, 2.0 * k, 0.01 * k, 10.0 + 0.1 * k, 0.001 * k])
@@ -238,3 +288,14 @@ def test_cli_set_exits_2_naming_the_field(tmp_path) -> None:
     assert res.exit_code == 2
     assert "scenario.sensors.dropout_probability" in res.output
     assert not (tmp_path / "o").exists()  # refused before any work
+
+
+def test_a_sweep_solves_the_designs_of_a_controller_told_part_of_the_plant_once(cfg: Config) -> None:
+    from tsmpc.sweep import RunParams, RunTask, _solve_run_designs
+
+    told = _cfg(plant=_PLANT, known=["mass"]).model_dump()
+    tasks = [RunTask(f"r{i}", RunParams(), told, None, 5.0, ".") for i in range(2)]
+    made: list[Config] = []
+    _solve_run_designs(tasks, cfg, made.append)  # type: ignore[arg-type]
+    assert len(made) == 1 and made[0].vehicle.mass == pytest.approx(1.2 * cfg.vehicle.mass)
+    assert made[0].vehicle.inertia == cfg.vehicle.inertia

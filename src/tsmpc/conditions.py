@@ -29,6 +29,7 @@ import numpy as np
 from tsmpc.config import (
     Config,
     FrictionEvent,
+    KnownPart,
     ScenarioSettings,
     SensorFaults,
     TyreParams,
@@ -45,10 +46,12 @@ __all__ = [
     "ResolvedEvent",
     "SensorModel",
     "apply_conditions",
+    "controller_vehicle",
     "corner_apexes",
     "plant_tyre",
     "plant_vehicle",
     "resolve_events",
+    "told",
 ]
 
 
@@ -65,6 +68,41 @@ def plant_vehicle(cfg: Config, base: VehicleParams | None = None) -> VehiclePara
     return replace(v, mass=v.mass * p.mass_scale, inertia=v.inertia * p.inertia_scale, a=a, b=b,
                    cornering_stiffness_front=v.C_f * p.cornering_front_scale,
                    cornering_stiffness_rear=v.C_r * p.cornering_rear_scale)
+
+
+#: The plant scales of each part of the vehicle the controllers can be told (``scenario.known``).
+_SCALES: dict[KnownPart, tuple[str, ...]] = {
+    KnownPart.MASS: ("mass_scale",), KnownPart.INERTIA: ("inertia_scale",),
+    KnownPart.CORNERING_STIFFNESS: ("cornering_front_scale", "cornering_rear_scale"),
+    KnownPart.COG: ("cog_to_front_scale",)}
+
+
+def told(sc: ScenarioSettings) -> frozenset[KnownPart]:
+    """What the controllers are told of the plant: ``sc.known``, everything with ``oracle_tuned``."""
+    return frozenset(KnownPart) if sc.oracle_tuned else frozenset(sc.known)
+
+
+def controller_vehicle(cfg: Config, plant: VehicleParams | None = None) -> VehicleParams:
+    """The controllers' vehicle: the config's, with the parts ``cfg.scenario`` tells them
+    (:func:`told`) taken from the ``plant``'s (default: :func:`plant_vehicle`); the plant's whole
+    with ``oracle_tuned``."""
+    known = told(cfg.scenario)
+    v = cfg.vehicle
+    if not known & _SCALES.keys():
+        return v
+    p = plant or plant_vehicle(cfg)
+    if cfg.scenario.oracle_tuned:
+        return p
+    changes: dict[str, float] = {}
+    if KnownPart.MASS in known:
+        changes["mass"] = p.mass
+    if KnownPart.INERTIA in known:
+        changes["inertia"] = p.inertia
+    if KnownPart.CORNERING_STIFFNESS in known:
+        changes["cornering_stiffness_front"], changes["cornering_stiffness_rear"] = p.C_f, p.C_r
+    if KnownPart.COG in known:
+        changes["a"], changes["b"] = p.a, p.b
+    return replace(v, **changes)
 
 
 def plant_tyre(cfg: Config, base: TyreParams | None = None) -> TyreParams:
@@ -168,7 +206,8 @@ def apply_conditions(cfg: Config, scenario: Scenario) -> RobustnessCase:
     if friction is not scenario.friction:
         changes["friction"] = friction
     faults = sc.sensors
-    if sc.oracle_tuned:  # the oracle's sensors are calibrated: known offsets and drifts removed
+    known = told(sc)
+    if KnownPart.SENSOR_BIASES in known:  # calibrated sensors: known offsets and drifts removed
         faults = replace(faults, v_bias=0.0, omega_bias=0.0, theta_bias=0.0, v_drift=0.0,
                          omega_drift=0.0, theta_drift=0.0, x_bias=0.0, y_bias=0.0, position_scale=1.0,
                          v_scale=1.0, omega_scale=1.0)
@@ -178,7 +217,7 @@ def apply_conditions(cfg: Config, scenario: Scenario) -> RobustnessCase:
                                               inner=scenario.sensor_fault)
     act = sc.actuators
     # the oracle's steering is calibrated: it commands the offset away (the wheels steer as commanded)
-    offset = 0.0 if sc.oracle_tuned else sc.plant.steering_offset_rad
+    offset = 0.0 if KnownPart.STEERING_OFFSET in known else sc.plant.steering_offset_rad
     if act.active or offset != 0.0:
         from tsmpc.vehicle.actuators import Actuators, ForceLag, SteeringServo
 
@@ -190,13 +229,15 @@ def apply_conditions(cfg: Config, scenario: Scenario) -> RobustnessCase:
         changes["actuators"] = Actuators(steer, force, steering_offset_rad=offset)
     if act.measured_steering:
         changes["measured_steering"] = True
-    if sc.oracle_tuned:  # the scales are now in the vehicle: reset, so the config re-runs alike
-        unit = {"mass_scale": 1.0, "inertia_scale": 1.0, "cornering_front_scale": 1.0,
-                "cornering_rear_scale": 1.0, "cog_to_front_scale": 1.0}
+    told_vehicle = controller_vehicle(cfg, veh)
+    if sc.oracle_tuned or told_vehicle != cfg.vehicle:
+        # the scales told are now in the vehicle: reset, so the config re-runs alike
+        unit = {f: 1.0 for part, fields in _SCALES.items() if part in known for f in fields}
         # the actuators are the car's: knowing its true mass does not give it another engine, so
         # the force limits stay those of the config's vehicle (absolute; per kg they would follow)
         lo, hi = cfg.lqr.force_limits(cfg.vehicle)
         lqr = replace(cfg.lqr, force_min=lo, force_max=hi, force_min_per_kg=None, force_max_per_kg=None)
-        cfg = replace(cfg, vehicle=veh, lqr=lqr, scenario=replace(sc, plant=replace(sc.plant, **unit)))
+        cfg = replace(cfg, vehicle=told_vehicle, lqr=lqr,
+                      scenario=replace(sc, plant=replace(sc.plant, **unit)))
     meta = {**scenario.meta, "conditions": sc.model_dump(mode="json", exclude_defaults=True)}
     return RobustnessCase(cfg, dc_replace(scenario, meta=meta, **changes))  # type: ignore[arg-type]

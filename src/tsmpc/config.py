@@ -38,6 +38,7 @@ __all__ = [
     "InnerLaw",
     "KinematicBox",
     "KinematicLMISettings",
+    "KnownPart",
     "LQRSettings",
     "MHEForm",
     "MHESettings",
@@ -998,6 +999,18 @@ class ScenarioActuators(_Frozen):
                 or self.force_time_constant_s > 0)
 
 
+class KnownPart(StrEnum):
+    """What of the plant a run tells the controllers (``scenario.known``; all of it:
+    ``scenario.oracle_tuned``)."""
+
+    MASS = "mass"  #: the plant's mass in the models and designs
+    INERTIA = "inertia"  #: its yaw inertia
+    CORNERING_STIFFNESS = "cornering_stiffness"  #: its front and rear cornering stiffness
+    COG = "cog"  #: its CoG position (a, b)
+    SENSOR_BIASES = "sensor_biases"  #: calibrated sensors: biases, drifts and scale factors removed
+    STEERING_OFFSET = "steering_offset"  #: calibrated steering: the wheels' offset commanded away
+
+
 class ScenarioSettings(_Frozen):
     """The conditions a run meets beyond the reference (issue 21), written without Python:
     the plant's parameters, μ(road) events, sensor faults and actuators. Applied by
@@ -1017,6 +1030,12 @@ class ScenarioSettings(_Frozen):
         "LMI designs built from the true parameters, and the sensors calibrated (biases and drifts "
         "removed); dropouts, delay and noise stay (the oracle-tuned comparison row, issue 21; "
         "never a deployable setting)")
+    known: tuple[KnownPart, ...] = Field(
+        default=(), description="what the controllers are told of the plant, part by part: 'mass', "
+        "'inertia', 'cornering_stiffness', 'cog' (the plant's value in the models and LMI designs), "
+        "'sensor_biases', 'steering_offset' (calibrated); all of them is oracle_tuned. A diagnostic "
+        "that prices one error of a draw at a time against the oracle-tuned row; never a deployable "
+        "setting")
     replan_for_force_budget: _Flag = Field(
         default=False, description="the reference is re-timed along its path so that it never asks for "
         "more acceleration than the plant vehicle's force budget allows ((F_max - mu M g - drag)/M "

@@ -1145,15 +1145,14 @@ def _solve_run_designs(tasks: list[RunTask], base: Config,
                        design_fn: Callable[[Config], tuple[Any, Any]] | None) -> None:
     """Solve (or load) once, into the design cache, the designs of every controller the runs use
     beyond the base config's (other presets, oracle-tuned vehicles), so workers only load them."""
-    from tsmpc.conditions import plant_vehicle
+    from tsmpc.conditions import controller_vehicle
     from tsmpc.config import replace
     from tsmpc.synthesis.cache import dynamic_key, kinematic_key
 
     seen = {(kinematic_key(base), dynamic_key(base))}
     for t in tasks:
         cfg = validate(Config, t.config, source="sweep run")
-        if cfg.scenario.oracle_tuned:
-            cfg = replace(cfg, vehicle=plant_vehicle(cfg))
+        cfg = replace(cfg, vehicle=controller_vehicle(cfg))  # (oracle-tuned or told parts of the plant)
         key = (kinematic_key(cfg), dynamic_key(cfg))
         if key not in seen:
             seen.add(key)
