@@ -1,7 +1,8 @@
 """The generalisation benchmark (issue 35): runs the sweeps of examples/generalisation.toml (50 draws
 of the class) and examples/generalisation_heldback.toml (50 held-back draws) — or finishes them:
 runs already on disk are kept — and prints the distribution of the worst-column ratio default /
-oracle-tuned, its check against issue 35's bounds and the five worst draws (docs/mismatch.md shows
+oracle-tuned, its check against issue 35's bounds, the five worst draws and what each of their
+errors costs (the default controller told one part of the plant at a time; docs/mismatch.md shows
 this script's output).
 
     python examples/generalisation_table.py [--out results/generalisation] [--workers 2]
@@ -24,7 +25,10 @@ from pathlib import Path
 
 from tsmpc.config import Config
 from tsmpc.report.generalisation import (
+    ATTRIBUTION,
     Draw,
+    attribution_controllers,
+    attribution_table,
     distribution,
     draw_results,
     draws,
@@ -57,7 +61,9 @@ def generalisation_blocks(out: Path, *, workers: int = 2, steps: int | None = No
                           sets: tuple[tuple[str, str, str], ...] = SETS) -> dict[str, str]:
     """Run (or finish) the sweeps into ``out/<set>``; return the blocks of docs/mismatch.md
     (``table``: the distributions, ``worst`` / ``worst-heldback``: the five worst draws of each set,
-    ``drivers``: which quantity drives the ratio on the main set, ``time``: how long it took).
+    ``drivers``: which quantity drives the ratio on the main set, ``attribution`` /
+    ``attribution-heldback``: the five worst draws of each set re-run with the default controller
+    told one part of the plant at a time, ``scenario.known``, ``time``: how long it took).
     ``steps`` shortens every run to that many MPC steps and runs the first two draws of each set
     only (the CI smoke run)."""
     rows, blocks, took = [], {}, []
@@ -86,6 +92,21 @@ def generalisation_blocks(out: Path, *, workers: int = 2, steps: int | None = No
         blocks["worst" if sub == "main" else f"worst-{sub}"] = worst_table(results, ds)
         if sub == "main":  # what drives the ratio: tuned on nothing, read on the main set only
             blocks["drivers"] = drivers_table(results, ds)
+        # what each error of the worst draws costs: the default told one part of the plant at a time
+        k = 1 if steps is not None else 5
+        worst = [r.case for r in sorted(results, key=lambda r: -r.worst_ratio)][:k]
+        grid = spec.grid.model_copy(update={
+            "case": worst, "controller": ["default", "oracle-tuned", *(n for n, _, _ in ATTRIBUTION)]})
+        told = spec.model_copy(update={"name": f"{spec.name}-attribution", "grid": grid,
+                                       "controllers": {**spec.controllers, **attribution_controllers()}})
+        t0 = time.perf_counter()
+        res = run_sweep(told, out / f"attribution-{sub}", workers=workers, resume=True, plots=False)
+        wall = time.perf_counter() - t0
+        took.append(f"{label}, told one part: {res.n_runs} runs ({res.executed} run in this call, "
+                    f"{wall:.0f} s wall)")
+        print(took[-1], file=sys.stderr)
+        blocks["attribution" if sub == "main" else f"attribution-{sub}"] = attribution_table(
+            aggregate(out / f"attribution-{sub}", [t.id for t in expand(told)]), worst)
     blocks["table"] = summary_table(rows)
     blocks["time"] = "; ".join(took) + f" (load average {os.getloadavg()[0]:.1f})"
     return blocks

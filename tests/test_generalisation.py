@@ -18,11 +18,14 @@ import pytest
 
 from tsmpc.config import Config, validate
 from tsmpc.report.generalisation import (
+    ATTRIBUTION,
     CLASS,
     P90_BOUND,
     WORST_BOUND,
     DrawResult,
     acceptance,
+    attribution_controllers,
+    attribution_table,
     distribution,
     draw_results,
     draws,
@@ -169,6 +172,27 @@ def test_a_default_run_that_does_not_complete_is_an_infinite_ratio_and_fails() -
     d = ds[0]  # a row names the draw's parameters in the table's units
     assert (f"| d01 | 1.20 | y [m] | {d.omega_bias:+.4f} | {d.v_bias:+.3f} | {d.v_scale:.4f} | "
             f"{math.degrees(d.steering_offset_rad):+.2f} |") in lines[3]
+
+
+def test_the_attribution_table_prices_each_part_told_against_the_same_oracle_row() -> None:
+    rows = _rows("d07", 2.4)  # the default at 2.4 × the oracle-tuned row in y
+    told = {"told-mass": 2.0, "told-inertia": 1.5, "told-stiffness": 2.4, "told-cog": 3.1,
+            "told-vehicle": 1.2, "told-sensors": 2.3}  # (no told-steering run: a dash)
+    for name, ratio in told.items():
+        row = _rows("d07", ratio)[0]
+        rows.append({**row, "controller": name})
+    rows.append({**_rows("d07", 1.0)[0], "controller": "told-mass", "case": "d08"})  # another draw
+    rows[-2]["status"] = "diverged"  # told-sensors left the road: ∞
+    controllers = attribution_controllers()
+    assert [n for n, _, _ in ATTRIBUTION] == list(controllers)
+    assert controllers["told-vehicle"] == {"scenario": {"known": ["mass", "inertia", "cornering_stiffness",
+                                                                  "cog"]}}
+    for table in controllers.values():  # each a valid controller of a sweep
+        validate(Config, table)
+    lines = attribution_table(pd.DataFrame(rows), ["d07"]).splitlines()
+    assert lines[0] == ("| draw | default | told mass | told I_z | told C_f, C_r | told CoG | "
+                        "told all four | told sensor biases | told steering offset |")
+    assert lines[2] == "| d07 | 2.40 | 2.00 | 1.50 | 2.40 | 3.10 | 1.20 | ∞ | — |"
 
 
 def test_drivers_rank_the_quantity_that_makes_the_ratio() -> None:

@@ -47,6 +47,7 @@ import numpy as np
 from tsmpc.report.mismatch import COLUMNS, RATIO_COLUMNS
 
 __all__ = [
+    "ATTRIBUTION",
     "CLASS",
     "DIGITS",
     "P90_BOUND",
@@ -56,6 +57,8 @@ __all__ = [
     "Param",
     "Summary",
     "acceptance",
+    "attribution_controllers",
+    "attribution_table",
     "case_table",
     "distribution",
     "draw_results",
@@ -295,6 +298,39 @@ def worst_table(results: list[DrawResult], ds: list[Draw], k: int = 5) -> str:
             f"{d.v_bias:+.3f} | {d.v_scale:.4f} | {math.degrees(d.steering_offset_rad):+.2f} | "
             f"{d.cornering_front_scale:.2f} | {d.cornering_rear_scale:.2f} | {d.mass_scale:.2f} | "
             f"{d.inertia_scale:.2f} | {100.0 * d.cog_shift:+.1f} | {d.pose_rate_hz:.1f} | {status} |")
+    return "\n".join(lines)
+
+
+#: The attribution's controllers: the default told one part of the plant (``scenario.known``), the
+#: plant unchanged — (controller name, column label, the parts told).
+ATTRIBUTION: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    ("told-mass", "mass", ("mass",)),
+    ("told-inertia", "I_z", ("inertia",)),
+    ("told-stiffness", "C_f, C_r", ("cornering_stiffness",)),
+    ("told-cog", "CoG", ("cog",)),
+    ("told-vehicle", "all four", ("mass", "inertia", "cornering_stiffness", "cog")),
+    ("told-sensors", "sensor biases", ("sensor_biases",)),
+    ("told-steering", "steering offset", ("steering_offset",)),
+)
+
+
+def attribution_controllers() -> dict[str, dict[str, Any]]:
+    """The ``[controllers]`` tables of :data:`ATTRIBUTION` for a sweep."""
+    return {name: {"scenario": {"known": list(parts)}} for name, _, parts in ATTRIBUTION}
+
+
+def attribution_table(table: Any, cases: list[str]) -> str:
+    """Markdown: for each draw of ``cases``, the worst-column ratio against the oracle-tuned row of
+    the default controller and of the default told each part of :data:`ATTRIBUTION` (a sweep's
+    aggregate holding all those controllers; ∞: the run did not complete, —: no run)."""
+    head = ["draw", "default", *(f"told {label}" for _, label, _ in ATTRIBUTION)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for case in cases:
+        cells = []
+        for name in ("default", *(n for n, _, _ in ATTRIBUTION)):
+            r = draw_results(table, [case], default=name)
+            cells.append(_x(r[0].worst_ratio) if r else "—")
+        lines.append(f"| {case} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
