@@ -33,6 +33,7 @@ from tsmpc.report.generalisation import (
     draw_results,
     draws,
     drivers_table,
+    levels_table,
     summary_table,
     worst_table,
 )
@@ -60,13 +61,14 @@ def _draws_of(spec_path: Path) -> list[Draw]:
 def generalisation_blocks(out: Path, *, workers: int = 2, steps: int | None = None,
                           sets: tuple[tuple[str, str, str], ...] = SETS) -> dict[str, str]:
     """Run (or finish) the sweeps into ``out/<set>``; return the blocks of docs/mismatch.md
-    (``table``: the distributions, ``worst`` / ``worst-heldback``: the five worst draws of each set,
-    ``drivers``: which quantity drives the ratio on the main set, ``attribution`` /
+    (``table``: the distributions, ``levels``: the two rows' own medians, ``worst`` /
+    ``worst-heldback``: the five worst draws of each set, ``drivers``: which quantity drives the
+    ratio on the main set, ``attribution`` /
     ``attribution-heldback``: the five worst draws of each set re-run with the default controller
     told one part of the plant at a time, ``scenario.known``, ``time``: how long it took).
     ``steps`` shortens every run to that many MPC steps and runs the first two draws of each set
     only (the CI smoke run)."""
-    rows, blocks, took = [], {}, []
+    rows, blocks, took, levels = [], {}, [], []
     for label, file, sub in sets:
         spec_path = ROOT / "examples" / file
         spec = load_sweep(spec_path)
@@ -88,6 +90,7 @@ def generalisation_blocks(out: Path, *, workers: int = 2, steps: int | None = No
         print(took[-1], file=sys.stderr)
         results = draw_results(table, list(spec.grid.case or []))
         rows.append((label, distribution(results)))
+        levels.append((label, table))
         ds = _draws_of(spec_path)
         blocks["worst" if sub == "main" else f"worst-{sub}"] = worst_table(results, ds)
         if sub == "main":  # what drives the ratio: tuned on nothing, read on the main set only
@@ -108,6 +111,7 @@ def generalisation_blocks(out: Path, *, workers: int = 2, steps: int | None = No
         blocks["attribution" if sub == "main" else f"attribution-{sub}"] = attribution_table(
             aggregate(out / f"attribution-{sub}", [t.id for t in expand(told)]), worst)
     blocks["table"] = summary_table(rows)
+    blocks["levels"] = levels_table(levels)
     blocks["time"] = "; ".join(took) + f" (load average {os.getloadavg()[0]:.1f})"
     return blocks
 

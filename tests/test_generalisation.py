@@ -31,6 +31,7 @@ from tsmpc.report.generalisation import (
     draws,
     drivers,
     drivers_table,
+    levels_table,
     summary_table,
     worst_table,
 )
@@ -172,6 +173,17 @@ def test_a_default_run_that_does_not_complete_is_an_infinite_ratio_and_fails() -
     d = ds[0]  # a row names the draw's parameters in the table's units
     assert (f"| d01 | 1.20 | y [m] | {d.omega_bias:+.4f} | {d.v_bias:+.3f} | {d.v_scale:.4f} | "
             f"{math.degrees(d.steering_offset_rad):+.2f} |") in lines[3]
+
+
+def test_the_levels_table_shows_both_rows_medians() -> None:
+    rows = [r for i, x in enumerate([1.2, 1.4, 3.0]) for r in _rows(f"d{i}", x)]
+    rows[4]["status"] = "diverged"  # a default run that did not complete is not in the median
+    lines = levels_table([("main", pd.DataFrame(rows))]).splitlines()
+    assert lines[0] == ("| draws | controller | median RMSE y [m] | median max abs e_y [m] | "
+                        "median RMSE v [m/s] |")
+    # default y: 0.005 × 1.2 and × 1.4 (the third diverged): 0.0065; e_y and v 1.1 × the oracle's
+    assert lines[2] == "| main | default | 0.0065 | 0.022 | 0.055 |"
+    assert lines[3] == "| main | oracle-tuned | 0.0050 | 0.020 | 0.050 |"
 
 
 def test_the_attribution_table_prices_each_part_told_against_the_same_oracle_row() -> None:

@@ -50,6 +50,7 @@ __all__ = [
     "ATTRIBUTION",
     "CLASS",
     "DIGITS",
+    "LEVEL_COLUMNS",
     "P90_BOUND",
     "WORST_BOUND",
     "Draw",
@@ -65,6 +66,7 @@ __all__ = [
     "draws",
     "drivers",
     "drivers_table",
+    "levels_table",
     "summary_table",
     "sweep_toml",
     "worst_table",
@@ -267,6 +269,26 @@ def _label(col: str) -> str:
 
 def _x(v: float) -> str:
     return "∞" if math.isinf(v) else f"{v:.2f}"
+
+
+#: The rows' own levels beside the ratio: (aggregate column, label, digits).
+LEVEL_COLUMNS = (("rmse_y", "RMSE y [m]", 4), ("max_abs_lateral_m", "max abs e_y [m]", 3),
+                 ("rmse_v", "RMSE v [m/s]", 3))
+
+
+def levels_table(rows: list[tuple[str, Any]],
+                 controllers: tuple[str, ...] = ("default", "oracle-tuned")) -> str:
+    """Markdown: per set of draws (name, its sweep's aggregate) and controller, the median over the
+    draws of each of :data:`LEVEL_COLUMNS` (completed runs). The ratio's denominator in the open: a
+    change that makes the oracle-tuned row worse shrinks every ratio without helping the default."""
+    head = ["draws", "controller", *(f"median {label}" for _, label, _ in LEVEL_COLUMNS)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, table in rows:
+        for c in controllers:
+            t = table[(table["controller"] == c) & (table["status"] == "completed")]
+            cells = [f"{float(t[col].median()):.{d}f}" if len(t) else "—" for col, _, d in LEVEL_COLUMNS]
+            lines.append(f"| {name} | {c} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
 def summary_table(rows: list[tuple[str, Summary]]) -> str:
