@@ -70,11 +70,14 @@ def plant_vehicle(cfg: Config, base: VehicleParams | None = None) -> VehiclePara
                    cornering_stiffness_rear=v.C_r * p.cornering_rear_scale)
 
 
-#: The plant scales of each part of the vehicle the controllers can be told (``scenario.known``).
-_SCALES: dict[KnownPart, tuple[str, ...]] = {
-    KnownPart.MASS: ("mass_scale",), KnownPart.INERTIA: ("inertia_scale",),
-    KnownPart.CORNERING_STIFFNESS: ("cornering_front_scale", "cornering_rear_scale"),
-    KnownPart.COG: ("cog_to_front_scale",)}
+#: Each part of the vehicle the controllers can be told (``scenario.known``): (its plant scales,
+#: its vehicle fields).
+_PARTS: dict[KnownPart, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    KnownPart.MASS: (("mass_scale",), ("mass",)),
+    KnownPart.INERTIA: (("inertia_scale",), ("inertia",)),
+    KnownPart.CORNERING_STIFFNESS: (("cornering_front_scale", "cornering_rear_scale"),
+                                    ("cornering_stiffness_front", "cornering_stiffness_rear")),
+    KnownPart.COG: (("cog_to_front_scale",), ("a", "b"))}
 
 
 def told(sc: ScenarioSettings) -> frozenset[KnownPart]:
@@ -87,22 +90,13 @@ def controller_vehicle(cfg: Config, plant: VehicleParams | None = None) -> Vehic
     (:func:`told`) taken from the ``plant``'s (default: :func:`plant_vehicle`); the plant's whole
     with ``oracle_tuned``."""
     known = told(cfg.scenario)
-    v = cfg.vehicle
-    if not known & _SCALES.keys():
-        return v
+    if not known & _PARTS.keys():
+        return cfg.vehicle
     p = plant or plant_vehicle(cfg)
     if cfg.scenario.oracle_tuned:
         return p
-    changes: dict[str, float] = {}
-    if KnownPart.MASS in known:
-        changes["mass"] = p.mass
-    if KnownPart.INERTIA in known:
-        changes["inertia"] = p.inertia
-    if KnownPart.CORNERING_STIFFNESS in known:
-        changes["cornering_stiffness_front"], changes["cornering_stiffness_rear"] = p.C_f, p.C_r
-    if KnownPart.COG in known:
-        changes["a"], changes["b"] = p.a, p.b
-    return replace(v, **changes)
+    return replace(cfg.vehicle, **{f: getattr(p, f) for part, (_, fields) in _PARTS.items() if part in known
+                                   for f in fields})
 
 
 def plant_tyre(cfg: Config, base: TyreParams | None = None) -> TyreParams:
@@ -232,7 +226,7 @@ def apply_conditions(cfg: Config, scenario: Scenario) -> RobustnessCase:
     told_vehicle = controller_vehicle(cfg, veh)
     if sc.oracle_tuned or told_vehicle != cfg.vehicle:
         # the scales told are now in the vehicle: reset, so the config re-runs alike
-        unit = {f: 1.0 for part, fields in _SCALES.items() if part in known for f in fields}
+        unit = {f: 1.0 for part, (scales, _) in _PARTS.items() if part in known for f in scales}
         # the actuators are the car's: knowing its true mass does not give it another engine, so
         # the force limits stay those of the config's vehicle (absolute; per kg they would follow)
         lo, hi = cfg.lqr.force_limits(cfg.vehicle)

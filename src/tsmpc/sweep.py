@@ -1144,7 +1144,7 @@ def _same_designs(a: dict[str, Any] | None, cfg: Config) -> bool:
 def _solve_run_designs(tasks: list[RunTask], base: Config,
                        design_fn: Callable[[Config], tuple[Any, Any]] | None) -> None:
     """Solve (or load) once, into the design cache, the designs of every controller the runs use
-    beyond the base config's (other presets, oracle-tuned vehicles), so workers only load them."""
+    beyond the base config's (other presets, oracle-tuned or told vehicles), so workers only load them."""
     from tsmpc.conditions import controller_vehicle
     from tsmpc.config import replace
     from tsmpc.synthesis.cache import dynamic_key, kinematic_key
