@@ -26,6 +26,7 @@ from pathlib import Path
 from tsmpc.config import Config
 from tsmpc.report.generalisation import (
     ATTRIBUTION,
+    WORST_K,
     Draw,
     attribution_controllers,
     attribution_table,
@@ -35,6 +36,7 @@ from tsmpc.report.generalisation import (
     drivers_table,
     levels_table,
     summary_table,
+    worst_draws,
     worst_table,
 )
 from tsmpc.sweep import aggregate, expand, load_sweep, run_sweep
@@ -96,8 +98,7 @@ def generalisation_blocks(out: Path, *, workers: int = 2, steps: int | None = No
         if sub == "main":  # what drives the ratio: tuned on nothing, read on the main set only
             blocks["drivers"] = drivers_table(results, ds)
         # what each error of the worst draws costs: the default told one part of the plant at a time
-        k = 1 if steps is not None else 5
-        worst = [r.case for r in sorted(results, key=lambda r: -r.worst_ratio)][:k]
+        worst = [r.case for r in worst_draws(results, 1 if steps is not None else WORST_K)]
         grid = spec.grid.model_copy(update={
             "case": worst, "controller": ["default", "oracle-tuned", *(n for n, _, _ in ATTRIBUTION)]})
         told = spec.model_copy(update={"name": f"{spec.name}-attribution", "grid": grid,

@@ -53,6 +53,7 @@ __all__ = [
     "LEVEL_COLUMNS",
     "P90_BOUND",
     "WORST_BOUND",
+    "WORST_K",
     "Draw",
     "DrawResult",
     "Param",
@@ -69,6 +70,7 @@ __all__ = [
     "levels_table",
     "summary_table",
     "sweep_toml",
+    "worst_draws",
     "worst_table",
 ]
 
@@ -303,10 +305,19 @@ def summary_table(rows: list[tuple[str, Summary]]) -> str:
     return "\n".join(lines)
 
 
-def worst_table(results: list[DrawResult], ds: list[Draw], k: int = 5) -> str:
+#: Draws the worst-draw tables show (and the attribution re-runs).
+WORST_K = 5
+
+
+def worst_draws(results: list[DrawResult], k: int = WORST_K) -> list[DrawResult]:
+    """The ``k`` draws of largest worst-column ratio, largest first (ties in the given order)."""
+    return sorted(results, key=lambda x: -x.worst_ratio)[:k]
+
+
+def worst_table(results: list[DrawResult], ds: list[Draw], k: int = WORST_K) -> str:
     """Markdown: the ``k`` draws of largest worst-column ratio with their parameters."""
     by_name = {d.name: d for d in ds}
-    top = sorted(results, key=lambda x: -x.worst_ratio)[:k]
+    top = worst_draws(results, k)
     head = ["draw", "worst ratio", "column", "yaw-rate bias [rad/s]", "speed bias [m/s]", "speed scale",
             "steering offset [°]", "C_f ×", "C_r ×", "mass ×", "I_z ×", "CoG shift [% of L]",
             "pose rate [Hz]", "default run"]
