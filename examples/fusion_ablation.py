@@ -25,7 +25,7 @@ from tsmpc.sim import experiment
 
 ROOT = Path(__file__).resolve().parents[1]
 SWITCHES = ("reject_repeated_samples", "predict_pose", "course_slip", "course_speed", "gyro_bias",
-            "steering_offset", "stiffness_estimate", "mass_estimate")
+            "steering_offset", "stiffness_estimate", "lateral_fit", "mass_estimate")
 #: (label, config assignments, robustness scenario) — the conditions of the issue.
 CASES = (
     ("nominal", [], "nominal"),

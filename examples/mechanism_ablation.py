@@ -8,7 +8,7 @@ and the cases that complete only with it (docs/mismatch.md shows this script's o
 
 The rule: a switch stays when some case is better by 5 % or more with it in some column (RMSE x, y,
 θ, v, ω or max |e_y|), or completes only with it; else it is removed, not switched off.
-:func:`mechanism_blocks` is the docs generator's section ``mechanisms``. 918 whole runs: ≈ 55 min
+:func:`mechanism_blocks` is the docs generator's section ``mechanisms``. 1026 whole runs: ≈ 61 min
 with one worker on two shared cores.
 """
 
@@ -43,6 +43,7 @@ MECHANISMS = {
     "no-gyro-bias": ("fusion.gyro_bias", "yaw-rate sensor bias from the measured heading"),
     "no-steering-offset": ("fusion.steering_offset", "steering-angle offset from the yaw balance"),
     "no-stiffness": ("fusion.stiffness_estimate", "cornering stiffness fit"),
+    "no-lateral-fit": ("fusion.lateral_fit", "joint lateral fit (stiffnesses, inertia, CoG)"),
     "no-mass": ("fusion.mass_estimate", "mass-error inertia out of the friction estimate"),
     "no-governor": ("governor.enabled",
                     "speed governor (the plan re-timed to the grip and the force budget)"),

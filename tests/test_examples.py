@@ -62,3 +62,24 @@ def test_example_script_runs(script: Path, tmp_path: Path) -> None:
                          text=True, env=env, timeout=600, cwd=tmp_path)
     assert res.returncode == 0, res.stderr[-2000:]
     assert res.stdout.strip(), "the example printed nothing"
+
+
+def test_every_default_on_fusion_switch_is_a_row_of_the_mechanism_ablation() -> None:
+    """Issue 34's rule (a mechanism stays only where it pays) needs every default-on switch measured:
+    each bool of ``[fusion]`` that is on by default is one controller of examples/mechanisms.toml
+    and one row of examples/mechanism_ablation.py."""
+    import tomllib
+
+    from tsmpc.config import FusionSettings
+
+    spec = importlib.util.spec_from_file_location("mechanism_ablation",
+                                                  ROOT / "examples" / "mechanism_ablation.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rows = {path for path, _ in mod.MECHANISMS.values()}
+    sweep = tomllib.loads((ROOT / "examples" / "mechanisms.toml").read_text(encoding="utf-8"))
+    off = {f"{g}.{k}" for name, c in sweep["controllers"].items() if name in sweep["grid"]["controller"]
+           for g, tab in c.items() for k, v in tab.items() if v is False}
+    on = {f"fusion.{k}" for k, f in FusionSettings.model_fields.items() if f.default is True}
+    assert on and on <= rows and on <= off, (on - rows, on - off)

@@ -329,12 +329,14 @@ def test_set_cornering_stiffness_changes_numpy_and_kernel_alike(cfg: Config) -> 
     lq = [TSLQR(K, dyn, cfg.vehicle, cfg.lqr, Td, jit=j) for j in (True, False)]
     mh = [MHEUIO(cfg.mhe, dyn, cfg.vehicle, Td, np.array([10.0, 0.0, 0.1]), jit=j) for j in (True, False)]
     assert lq[0]._kern is not None and mh[0]._kern is not None
-    Cf, Cr = 0.7 * cfg.vehicle.C_f, 1.3 * cfg.vehicle.C_r
+    veh = cfg.vehicle
+    Cf, Cr = 0.7 * veh.C_f, 1.3 * veh.C_r
+    I2, a2 = 1.2 * veh.inertia, 1.1 * veh.a  # the joint lateral fit's model: inertia and CoG too
     before = []
     for k in range(300):
         if k == 100:
             for b in (*lq, *mh):
-                b.set_cornering_stiffness(Cf, Cr)
+                b.set_cornering_stiffness(Cf, Cr, I2, a2, veh.a + veh.b - a2)
         y = np.array([10.0 + 0.01 * np.sin(0.1 * k), 0.1 + 0.01 * np.cos(0.07 * k)])
         u = np.array([3000.0, 0.02 + 0.01 * np.sin(0.05 * k)])
         ea, eb = mh[0].step(y, u), mh[1].step(y, u)
@@ -348,7 +350,7 @@ def test_set_cornering_stiffness_changes_numpy_and_kernel_alike(cfg: Config) -> 
     # and the change is real: the reference gain (the steering feed-forward) moved
     after = lq[1].reference_gain(0.02, 10.0, K[0])
     assert not np.allclose(before[0], after, rtol=1e-3)
-    assert mh[1].vehicle.C_f == Cf and mh[1].model.params.C_r == Cr
+    assert mh[1].vehicle.C_f == Cf and mh[1].model.params.C_r == Cr and mh[1].vehicle.inertia == I2
 
 
 def test_the_paper_presets_have_every_fusion_switch_off(cfg: Config) -> None:

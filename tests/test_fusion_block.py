@@ -194,8 +194,8 @@ def test_the_state_vector_forms_are_the_record_forms() -> None:
     assert len(pk) == fb.N_FBP and fb.unpack_fusion(pk, p.cp) == (p, sp)
     sa = np.zeros(N_SA)
     assert fb.given_steer(sp, sa) is sp
-    sa[:] = 1.0, 40000.0, 60000.0
-    assert fb.given_steer(sp, sa) == fu.steer_stiffness(sp, 40000.0, 60000.0)
+    sa[:] = 1.0, 40000.0, 60000.0, 600.0, 0.8, 1.0
+    assert fb.given_steer(sp, sa) == fu.steer_stiffness(sp, 40000.0, 60000.0, 600.0, 0.8, 1.0)
 
 
 def test_the_cascade_composes_the_block_from_its_config() -> None:

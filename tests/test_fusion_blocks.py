@@ -38,7 +38,7 @@ from tsmpc.estimation.fusion import (
 #: The blocks the tests call (their names in tsmpc.estimation.fusion).
 BLOCKS = ("repeat_check", "course_params", "course_sample", "course_close", "course_chord",
           "slip_correction", "noise_scale", "speed_offset", "speed_sensor", "stiffness", "model_changed",
-          "stiffness_update", "mass_update", "delta_mass", "inertia_force")
+          "stiffness_update", "mass_update", "delta_mass", "inertia_force", "_lateral_fit", "lateral_model")
 _Blocks = Blocks
 
 
@@ -187,7 +187,7 @@ def _corner_ring(p, alpha_hat: float = -0.01, ay_ref: float = 5.0, v_first: floa
     s = fu.course_start(p)
     slip = s.slip._replace(n2=0.25 * fu.NOISE_PRIOR_CHORDS)
     return CourseState((NO_INTERVAL,) * (RING - BASELINE) + (iv,) * BASELINE, BASELINE, 0.5, 10.0, 0, slip,
-                       s.speed, s.stiff, 0, fu.FIT_SETTLE_S)
+                       s.speed, s.stiff, 0, fu.FIT_SETTLE_S, s.lat)
 
 
 K0 = RING - BASELINE  #: the ring index of :func:`_corner_ring`'s first interval
@@ -228,7 +228,7 @@ def test_one_cornering_chord_in_the_slip_and_stiffness_fits(b: _Blocks) -> None:
     assert s.stiff.has_prev and s.stiff.alpha_prev == pytest.approx(-0.01)
     # the next chord: α̇ from the α̂ of consecutive chords, forgetting towards the prior
     s2 = b.course_chord(p, CourseState(_corner_ring(p, -0.02).ring, BASELINE, 0.5, 10.0, 1, s.slip, s.speed,
-                                       s.stiff, 0, s.age), K0, 5.0, 0.0, 0.0)
+                                       s.stiff, 0, s.age, s.lat), K0, 5.0, 0.0, 0.0)
     g2 = 1.0 - 0.1 / STIFF_MEMORY_S
     S = 1000.0 * (5.0 + 10.0 * (-0.01 / 0.1))  # M (v ω + v α̇), α̇ = −0.01 rad / T_c: 4000 N
     F_f = 1.5 * S / 2.5  # 2400 N on α_F = 0.06: 40000 N/rad, plausible; the rear's 1600 N on
@@ -252,8 +252,8 @@ def test_a_chord_after_a_long_step_weighs_its_lagging_alpha_dot_as_noise(b: _Blo
     s = b.course_chord(p, _corner_ring(p), K0, 5.0, 0.0, 0.0)
     r = _corner_ring(p, -0.02)
     ring = (*r.ring[:-1], r.ring[-1]._replace(n=20))
-    s2 = b.course_chord(p, CourseState(ring, BASELINE, 0.5, 10.0, 1, s.slip, s.speed, s.stiff, 0, s.age), K0,
-                        5.0, 0.0, 0.0)
+    s2 = b.course_chord(p, CourseState(ring, BASELINE, 0.5, 10.0, 1, s.slip, s.speed, s.stiff, 0, s.age,
+                                       s.lat), K0, 5.0, 0.0, 0.0)
     sig = 2.0 * math.sqrt(2.0) * 0.01 / 5.0 + 2e-4
     v = 500.0 / 60.0
     e_f = (1.5 / 2.5) * (1000.0 * v * 0.05 * 0.5) / 50000.0  # 2.5 mrad
@@ -373,27 +373,187 @@ def test_stiffness_bounds_prior_and_application(b: _Blocks) -> None:
     assert b.stiffness(p, far) == (2.0 * 40000.0, 2.0 * 60000.0)
     assert b.stiffness(p, fu.StiffFit(1.0, 1.0, 1.0, 1.0, 0.0, False)) == (0.5 * 40000.0, 0.5 * 60000.0)
     slip = SlipFit(0.003, 0.002, 1e-5, 2e-6, 2e-6, 3e-4, 12.0, 11.0)
-    s = CourseState(s0.ring, 0, 0.0, math.nan, 0, slip, s0.speed, s0.stiff, 0, 0.0)
-    give, cf, cr, s1 = b.stiffness_update(p, s, False, 0.0, 0.0)  # none given yet: give, κ kept
+    s = CourseState(s0.ring, 0, 0.0, math.nan, 0, slip, s0.speed, s0.stiff, 0, 0.0, s0.lat)
+    give, cf, cr, ii, aa, bb, s1 = b.stiffness_update(p, s, False, 0.0, 0.0, 0.0, 0.0)  # none given: κ kept
     assert give and (cf, cr) == pytest.approx((40000.0, 60000.0)) and s1.slip == slip
-    give, _, _, s1 = b.stiffness_update(p, s, True, 40000.0 * 1.0099, 60000.0 / 1.0099)
+    assert (ii, aa, bb) == (1500.0, 1.0, 1.5)  # the joint fit not ready: the model's I_z and CoG
+    give, *_, s1 = b.stiffness_update(p, s, True, 40000.0 * 1.0099, 60000.0 / 1.0099, 1500.0, 1.0)
     assert not give and s1.slip == slip  # within 1 %
     # a move of exactly 1 % is not "over 1 %" (|40400 − 40000| = 0.01 × 40000 = 400 in doubles)
     p_move = _params(b, C=(40400.0, 60000.0))
     s_move = s._replace(stiff=fu.course_start(p_move).stiff)  # (the fit at its prior: Ĉ_f = 40400)
     cf_move, cr_move = b.stiffness(p_move, s_move.stiff)
     assert cf_move == 40400.0
-    give, _, _, s1 = b.stiffness_update(p_move, s_move, True, 40000.0, cr_move)
+    give, *_, s1 = b.stiffness_update(p_move, s_move, True, 40000.0, cr_move, 1500.0, 1.0)
     assert not give and s1.slip == slip
     p_move = _params(b, C=(40000.0, 64640.0))  # the same on the rear axle (1 % above 64000)
     s_move = s._replace(stiff=fu.course_start(p_move).stiff)
     cf_move, cr_move = b.stiffness(p_move, s_move.stiff)
     assert cr_move == 64640.0
-    give, _, _, s1 = b.stiffness_update(p_move, s_move, True, cf_move, 64000.0)
+    give, *_, s1 = b.stiffness_update(p_move, s_move, True, cf_move, 64000.0, 1500.0, 1.0)
     assert not give and s1.slip == slip
-    give, _, _, s1 = b.stiffness_update(p, s, True, 40000.0, 60000.0 * 1.0102)
+    give, *_, s1 = b.stiffness_update(p, s, True, 40000.0, 60000.0, 1500.0 * 1.0102, 1.0)  # I_z moved
+    assert give and s1.slip == b.model_changed(slip)
+    give, *_, s1 = b.stiffness_update(p, s, True, 40000.0, 60000.0 * 1.0102, 1500.0, 1.0)
     assert give and s1.slip == b.model_changed(slip)
     assert tuple(s1.slip) == (0.0, 0.002, SLIP_PRIOR[0] ** 2, 0.0, 0.0, 3e-4, 12.0, 11.0)
+
+
+def test_the_joint_fit_takes_over_on_a_straight_and_keeps_its_model_in_corners(b: _Blocks) -> None:
+    """stiffness_update with the joint lateral fit: on a straight (the last interval's |v_d ω_d|
+    below CORNER_ACCEL) once the fit has a chord, its (C_f, C_r, I_z, a, b) are given (κ restarts)
+    and the fit is in force; in a corner then nothing is given, whatever the compliance fit says;
+    before the fit has a chord (or in a corner before it took over) the compliance fit gives, with
+    the model's I_z and CoG."""
+    p = _params(b, C=(40000.0, 60000.0))
+    s0 = fu.course_start(p)
+    slip = SlipFit(0.003, 0.002, 1e-5, 2e-6, 2e-6, 3e-4, 12.0, 11.0)
+    sd2 = 0.01 ** 2  # a fit of σ 1 % in each parameter
+    lat = s0.lat._replace(x=(0.44, 0.8, 0.8, 1.25, 0.001), fitted=True,
+                          P=(sd2, 0.0, 0.0, 0.0, 0.0, sd2, 0.0, 0.0, 0.0, sd2, 0.0, 0.0, sd2, 0.0, sd2))
+    model = (40000.0, 60000.0, 1500.0, 1.0)  # the model, given at the first MPC step
+
+    def at(ay_ref: float, lat=lat, stiff=s0.stiff):
+        ring = (*s0.ring[:-1], NO_INTERVAL._replace(ay_ref=ay_ref))
+        return CourseState(ring, 1, 0.0, 10.0, 0, slip, s0.speed, stiff, 0, 10.0, lat)
+
+    give, cf, cr, ii, aa, bb, s1 = b.stiffness_update(p, at(0.1), True, *model)
+    assert give and (cf, cr, ii, aa, bb) == pytest.approx((50000.0, 48000.0, 1200.0, 1.1, 1.4), rel=1e-12)
+    assert s1.lat.given and s1.slip == b.model_changed(slip) and s1.lat.x == lat.x
+    # the same estimate at the prior's σ departs from the model by under LATERAL_SIGNIFICANCE σ in
+    # every parameter (0.8, 0.67, 0.67, 0.83): not given (the compliance fit, asked instead, is at
+    # its prior: the model's own stiffnesses)
+    give, *out, s1p = b.stiffness_update(p, at(0.1, lat._replace(P=s0.lat.P)), True, *model)
+    assert not give and not s1p.lat.given
+    # fusion.lateral_fit off: never the joint fit's, the compliance fit's (here the model's own)
+    p_off = b.course_params(0.1, 0.01, True, 40000.0, 60000.0, 1000.0, 1500.0, 1.0, 1.5, 10.0, 0.01, 10,
+                            False)
+    give, *out, s1o = b.stiffness_update(p_off, at(0.1), True, *model)
+    assert not give and not s1o.lat.given
+    # one parameter beyond it (a / L 0.46: 1.2 σ) is enough
+    beyond = lat._replace(P=s0.lat.P, x=(0.46, *lat.x[1:]))
+    give, *out, _ = b.stiffness_update(p, at(0.1, beyond), True, *model)
+    assert give and out[3] == pytest.approx(1.15, rel=1e-12)
+    given = (cf, cr, ii, aa)
+    soft = fu.StiffFit(1.0, 1.0, 0.7 * 40000.0, 0.7 * 60000.0, 0.0, False)  # the compliance fit: 0.7×
+    for ay in (fu.CORNER_ACCEL, 3.0):  # a corner: the joint fit's model stays, nothing given
+        give, *out, s2 = b.stiffness_update(p, at(ay, s1.lat, soft), True, *given)
+        assert not give and s2 is not None and tuple(out) == pytest.approx((*given, 1.4), rel=1e-12)
+    give, *_ = b.stiffness_update(p, at(0.1, s1.lat), True, cf * 1.009, cr, ii, aa)  # within 1 %
+    assert not give
+    # not taken over yet: in a corner, or before its first chord, the compliance fit gives
+    give, *out, s3 = b.stiffness_update(p, at(3.0, stiff=soft), True, *model)
+    assert give and tuple(out) == pytest.approx((0.7 * 40000.0, 0.7 * 60000.0, 1500.0, 1.0, 1.5), rel=1e-12)
+    assert not s3.lat.given
+    give, *out, _ = b.stiffness_update(p, at(0.1, s0.lat, soft), True, *model)
+    assert give and tuple(out)[2:] == (1500.0, 1.0, 1.5)
+
+
+def _pacejka_slip(F: float, C_x: float, D: float) -> float:
+    """The slip [rad] at which a magic-formula tyre (shape C 1.3, curvature E −0.5, the plant's
+    defaults; small-slip stiffness ``C_x``, peak ``D``) carries the force F (bisection)."""
+    c, e = 1.3, -0.5
+    B = C_x / (c * D)
+    lo, hi = 0.0, 1.0 / B
+    while math.sin(c * math.atan(B * hi - e * (B * hi - math.atan(B * hi)))) < abs(F) / D:
+        hi *= 2.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        if math.sin(c * math.atan(B * mid - e * (B * mid - math.atan(B * mid)))) < abs(F) / D:
+            lo = mid
+        else:
+            hi = mid
+    return math.copysign(0.5 * (lo + hi), F)
+
+
+def _lateral_chords(rng: np.random.Generator, n: int, car: tuple[float, float, float, float],
+                    yaw_accel: bool = True, slip_rate: float = 0.0, mu: float = 0.0,
+                    a_y: tuple[float, float] = (1.0, 3.0)) -> list[tuple[float, ...]]:
+    """``n`` cornering chords of :func:`_params`' single track (M 1000 kg, L 2.5 m, g 10 m/s²) with
+    the true (a, I_z, C_f, C_r) = ``car``, no steering residual, no force: (α, v ω, v, ω̇ D, ω / v,
+    δ, α̇) for a chord of D = 0.5 s, |v ω| within ``a_y``, α̇ within ±``slip_rate``. Slips from the
+    forces (S = M v (ω + α̇)): linear tyres, or with ``mu`` > 0 magic-formula ones of peak
+    μ F_z: α = b ω / v − α_R(F_yR), δ = α + a ω / v + α_F(F_yF)."""
+    a, inertia, C_f, C_r = car
+    L = 2.5
+    out = []
+    for _ in range(n):
+        v = rng.uniform(8.0, 20.0)
+        w = rng.choice([-1.0, 1.0]) * rng.uniform(*a_y) / v
+        wd = rng.uniform(-0.5, 0.5) if yaw_accel else 0.0
+        ald = rng.uniform(-slip_rate, slip_rate)
+        S = 1000.0 * v * (w + ald)
+        F_f, F_r = ((L - a) * S + inertia * wd) / L, (a * S - inertia * wd) / L
+        if mu > 0.0:
+            s_f = _pacejka_slip(F_f, C_f, mu * 1000.0 * 10.0 * (L - a) / L)
+            s_r = _pacejka_slip(F_r, C_r, mu * 1000.0 * 10.0 * a / L)
+        else:
+            s_f, s_r = F_f / C_f, F_r / C_r
+        alpha = (L - a) * w / v - s_r
+        out.append((alpha, v * w, v, wd * 0.5, w / v, alpha + a * w / v + s_f, ald))
+    return out
+
+
+def _feed(b: _Blocks, p, f, chords):
+    for alpha, vw, v, d_omega, w_v, delta, ald in chords:
+        f = b._lateral_fit(p, f, alpha, vw, v, 0.0, d_omega, w_v, delta, 1e-3, 0.5, 50, ald)
+    return f
+
+
+def test_the_joint_lateral_fit_recovers_the_car_from_its_chords(b: _Blocks) -> None:
+    """The joint fit (fu._lateral_fit, an extended Kalman filter over x = (a / L, I_z / I_z,0,
+    C_f,0 / C_f, C_r,0 / C_r, δ_r)) on 200 noiseless chords of a car far from the model (CoG 10 %
+    of L backward, I_z −20 %, C_f −20 %, C_r +30 %) finds it: the data (σ 1 mrad a chord) outweigh
+    the prior, whose pull is the error left (below 1 %), and its standard deviations shrink far
+    below the prior's (a / L 0.05, I_z 0.3)."""
+    p = _params(b)
+    car = (1.25, 1200.0, 40000.0, 65000.0)
+    f0 = fu.lateral_start(p)
+    assert f0.x == (0.4, 1.0, 1.0, 1.0, 0.0) and not f0.fitted and not f0.given
+    f = _feed(b, p, f0, _lateral_chords(np.random.default_rng(3), 200, car))
+    assert math.sqrt(f.P[0]) < 0.005 and math.sqrt(f.P[5]) < 0.03  # a tenth of the prior's
+    cf, cr, inertia, a, b_ = b.lateral_model(p, f)
+    assert (a, inertia, cf, cr) == pytest.approx(car, rel=0.01)
+    assert a + b_ == pytest.approx(2.5, rel=1e-15) and abs(f.x[4]) < 1e-4
+    # the covariance stays a covariance: symmetric by construction, positive on its diagonal
+    assert all(f.P[i] > 0.0 for i in (0, 5, 9, 12, 14))
+    assert f.fitted
+
+
+def test_the_joint_lateral_fit_takes_the_slip_rate_into_the_lateral_force(b: _Blocks) -> None:
+    """Chords through transients (α̇ up to ±0.01 rad/s, S = M v (ω + α̇)) with their α̂ rate:
+    the car is found as from steady chords (within 1 %); without the term in S its M v α̇ (up to
+    5 % of the force) would be unexplained slip."""
+    p = _params(b)
+    car = (1.25, 1200.0, 40000.0, 65000.0)
+    f = _feed(b, p, fu.lateral_start(p), _lateral_chords(np.random.default_rng(5), 400, car, slip_rate=0.01))
+    cf, cr, inertia, a, _ = b.lateral_model(p, f)
+    assert (a, inertia, cf, cr) == pytest.approx(car, rel=0.01)
+
+
+def test_the_joint_lateral_fit_discounts_the_tyres_nonlinearity(b: _Blocks) -> None:
+    """Magic-formula tyres (μ 0.9, the plant's shape) at 1–4 m/s²: a fit linear in the slip reads
+    the high-load chords' extra slip as compliance. With the chords at every load weighted alike
+    (``LATERAL_NONLINEAR`` = 0, checked once) C_f came out 3.7 % below the small-slip stiffness;
+    with the nonlinearity as the chord's noise 1.8 % (the low-load chords' own secant share)."""
+    p = _params(b)
+    car = (1.0, 1500.0, 50000.0, 50000.0)
+    chords = _lateral_chords(np.random.default_rng(6), 400, car, mu=0.9, a_y=(1.0, 4.0))
+    cf, cr, _, a, _ = b.lateral_model(p, _feed(b, p, fu.lateral_start(p), chords))
+    assert a == pytest.approx(1.0, rel=0.01)
+    assert (cf, cr) == pytest.approx((50000.0, 50000.0), rel=0.025)
+
+
+def test_the_joint_lateral_fit_holds_what_its_chords_do_not_inform(b: _Blocks) -> None:
+    """Steady corners (ω̇ = 0) carry no information on I_z: its estimate and variance stay exactly at
+    the prior (no drift), however many chords; the compliances and the CoG are still learnt."""
+    p = _params(b)
+    car = (1.25, 1200.0, 40000.0, 65000.0)
+    f = _feed(b, p, fu.lateral_start(p), _lateral_chords(np.random.default_rng(4), 200, car, yaw_accel=False))
+    assert f.x[1] == 1.0 and f.P[5] == fu.LATERAL_PRIOR[1] ** 2
+    assert (f.P[1], f.P[6], f.P[7], f.P[8]) == (0.0, 0.0, 0.0, 0.0)  # I_z's row of P untouched
+    assert f.x[0] * 2.5 == pytest.approx(1.25, rel=0.01)
+    assert (50000.0 / f.x[2], 50000.0 / f.x[3]) == pytest.approx((40000.0, 65000.0), rel=0.01)
 
 
 def test_slip_correction_by_hand(b: _Blocks) -> None:
@@ -473,7 +633,7 @@ def test_compiled_blocks_equal_python_to_the_bit_on_a_random_drive() -> None:
     ms = [fu.MASS_START] * 2
     rings = [np.zeros(31), np.zeros(31)]
     gs = [REPEAT_START] * 2
-    applied = [(False, 0.0, 0.0)] * 2
+    applied = [(False, 0.0, 0.0, 0.0, 0.0)] * 2
     X = Y = th = 0.0
     v = 6.0
     for k in range(3000):
@@ -492,9 +652,9 @@ def test_compiled_blocks_equal_python_to_the_bit_on_a_random_drive() -> None:
             states[i], curs[i] = blk.course_close(p, states[i], curs[i], k % 10 == 0, has_pose,
                                                   sample[0], sample[1], th, v, w, v * w)
             if k % 10 == 0:
-                give, cf, cr, states[i] = blk.stiffness_update(p, states[i], *applied[i])
+                give, cf, cr, ii, aa, _bb, states[i] = blk.stiffness_update(p, states[i], *applied[i])
                 if give:
-                    applied[i] = (True, cf, cr)
+                    applied[i] = (True, cf, cr, ii, aa)
             curs[i] = blk.course_sample(p, curs[i], k % 397 != 0, has_pose, th, v, alpha, v * w, w, 0.05 * w,
                                         300.0)
             ms[i] = blk.mass_update(mp, ms[i], rings[i], v if k % 53 else math.nan, 800.0 + 90.0 * v)

@@ -193,7 +193,7 @@ def test_the_gain_is_the_models_steady_state(way, stiff) -> None:
 
         veh = cfg_replace(veh, cornering_stiffness_front=veh.C_f * stiff[0],
                           cornering_stiffness_rear=veh.C_r * stiff[1])
-        p = way(fu.steer_stiffness)(p, veh.C_f, veh.C_r)
+        p = way(fu.steer_stiffness)(p, veh.C_f, veh.C_r, veh.inertia, veh.a, veh.b)
         assert (p.C_f, p.C_r) == (veh.C_f, veh.C_r) and p.lam == _params().lam
     for v in (3.0, 8.0, 15.0, 30.0):
         omega = 5e-4 * v / (veh.a + veh.b)

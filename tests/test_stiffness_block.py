@@ -12,11 +12,17 @@ from tsmpc.config import Config, Method
 from tsmpc.control.cascade import Cascade
 from tsmpc.control.fusion_block import course_store, slip_load
 from tsmpc.control.stiffness_block import (
+    MP_A,
+    MP_B,
     MP_CF,
     MP_CR,
+    MP_I,
     N_SA,
+    PRM_A,
+    PRM_B,
     PRM_CF,
     PRM_CR,
+    PRM_I,
     SA_CF,
     SA_CR,
     SA_HAS,
@@ -48,11 +54,14 @@ def test_the_hand_over_by_hand() -> None:
     assert (cf, cr) == pytest.approx((0.9 * veh.C_f, 1.2 * veh.C_r), rel=1e-12)
     assert give and s.slip == c.state.slip
     assert (mp[MP_CF], mp[MP_CR], prm[PRM_CF], prm[PRM_CR]) == (cf, cr, cf, cr)
-    assert list(sa) == [1.0, cf, cr] and (sa[SA_HAS], sa[SA_CF], sa[SA_CR]) == (1.0, cf, cr)
+    # the joint lateral fit is not ready: the model's I_z and CoG go with them
+    model = (veh.inertia, veh.a, veh.b)
+    assert (mp[MP_I], mp[MP_A], mp[MP_B]) == model and (prm[PRM_I], prm[PRM_A], prm[PRM_B]) == model
+    assert list(sa) == [1.0, cf, cr, *model] and (sa[SA_HAS], sa[SA_CF], sa[SA_CR]) == (1.0, cf, cr)
     rest = np.ones(30, dtype=bool)
-    rest[[MP_CF, MP_CR]] = False
+    rest[[MP_I, MP_CF, MP_CR, MP_A, MP_B]] = False
     np.testing.assert_array_equal(mp[rest], mp0[rest])
-    np.testing.assert_array_equal(prm[[0, 1, 4, 5, 6, 7]], prm0[[0, 1, 4, 5, 6, 7]])
+    np.testing.assert_array_equal(prm[[0, 6, 7]], prm0[[0, 6, 7]])
     # the same fit again (within 1 %): nothing given, nothing written
     c.state = c.state._replace(stiff=StiffFit(1.0, 1.0, 0.905 * veh.C_f, 1.205 * veh.C_r, 0.0, False))
     before = (sa.copy(), mp.copy(), prm.copy())
@@ -67,7 +76,7 @@ def test_the_hand_over_by_hand() -> None:
     cf, cr = stiffness(c.params, c.state.stiff)
     assert give and cr == pytest.approx(1.3 * veh.C_r, rel=1e-12)
     assert (mp[MP_CF], mp[MP_CR], prm[PRM_CF], prm[PRM_CR]) == (cf, cr, cf, cr)
-    assert list(sa) == [1.0, cf, cr]
+    assert list(sa) == [1.0, cf, cr, *model]
     f = s.slip
     assert (f.kappa, f.P00, f.P01, f.P10) == (0.0, SLIP_PRIOR[0] ** 2, 0.0, 0.0)
     assert (f.beta, f.P11) == (0.01, 3e-6)
@@ -83,7 +92,7 @@ def test_the_cascade_hands_over_through_the_block_and_reset_takes_them_back() ->
     cas._outer_block(0.0, 0.0, 0.0, 10.0, 0.0, True)  # an MPC step's phase before the solve: the stiffness
     # block in it
     cf, cr = 0.8 * veh.C_f, 1.1 * veh.C_r
-    assert cas._sa == pytest.approx([1.0, cf, cr], rel=1e-12)
+    assert cas._sa == pytest.approx([1.0, cf, cr, veh.inertia, veh.a, veh.b], rel=1e-12)
     C = (cas._sa[SA_CF], cas._sa[SA_CR])
     mhe, lqr = cas.mhe, cas.lqr
     assert (mhe.vehicle.C_f, mhe.vehicle.C_r) == C and (lqr.vehicle.C_f, lqr.vehicle.C_r) == C
@@ -107,9 +116,9 @@ def test_the_cascade_hands_over_through_the_block_and_reset_takes_them_back() ->
 
 
 def test_the_slots_are_the_mhe_kernels() -> None:
-    """The block's C_f, C_r slots are those of the MHE kernel's parameters (written in the block,
+    """The block's I_z, C_f, C_r, a, b slots are those of the MHE kernel's parameters (written in the block,
     not imported: the kernels would bring numba in with the estimator, which imports the block)."""
     pytest.importorskip("numba")
     from tsmpc.kernels import mhe as km
 
-    assert (km.MP_CF, km.MP_CR) == (MP_CF, MP_CR)
+    assert (km.MP_I, km.MP_CF, km.MP_CR, km.MP_A, km.MP_B) == (MP_I, MP_CF, MP_CR, MP_A, MP_B)

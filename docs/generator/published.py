@@ -1307,7 +1307,7 @@ def fusion_ablation(ctx: Context) -> Produced:
 
 
 def mechanisms(ctx: Context) -> Produced:
-    """Which default-on mechanisms pay (examples/mechanisms.toml, 972 runs; docs/mismatch.md)."""
+    """Which default-on mechanisms pay (examples/mechanisms.toml, 1026 runs; docs/mismatch.md)."""
     p = Produced()
     ctx.progress("examples/mechanism_ablation.py (the sweep of examples/mechanisms.toml)")
     for name, body in _example(ctx, "mechanism_ablation").mechanism_blocks(
@@ -1487,7 +1487,7 @@ PRODUCERS: tuple[Producer, ...] = (
     Producer("generalisation", generalisation, "the generalisation benchmark: 100 draws × 2 "
              "controllers, 100 oracle-tuned designs"),
     Producer("fusion-ablation", fusion_ablation, "the fusion switches' ablation (108 runs)"),
-    Producer("mechanisms", mechanisms, "which default-on mechanisms pay (972 runs, ≈ 58 min)"),
+    Producer("mechanisms", mechanisms, "which default-on mechanisms pay (1026 runs, ≈ 61 min)"),
     Producer("race-speeds", race_speeds, "the public tracks at 22 and 25 m/s, S-bends"),
     Producer("baselines", baselines, "the baselines against the TS-MPC on five cases (6 compares)"),
     Producer("baseline-tuning", baseline_tuning, "the baselines' tuning search (≈ 700 runs)"),

@@ -1073,9 +1073,15 @@ class FusionSettings(_Frozen):
         "inner loop is unusable), and subtracted from the steering command: a bias correction without "
         "feedback into its own fit")
     stiffness_estimate: _Flag = Field(
-        default=True, description="the axle cornering stiffnesses of the MHE's and the inner loop's models "
-        "are fitted online (least squares F_y = C alpha per axle, the slip from the course over "
-        "ground, the forces from the measured lateral and yaw accelerations); the LMI gains stay")
+        default=True, description="the lateral model of the MHE's and the inner loop's models is fitted "
+        "online from the course over ground and the measured lateral and yaw accelerations: the axle "
+        "cornering stiffnesses per axle (least squares F_y = C alpha; with lateral_fit, until the joint "
+        "fit takes over); the LMI gains stay")
+    lateral_fit: _Flag = Field(
+        default=True, description="with stiffness_estimate: the lateral model fitted jointly (the axle "
+        "stiffnesses, the yaw inertia and the CoG, an extended Kalman filter on the same cornering "
+        "chords) and handed to the MHE and the inner loop where the reference runs straight, once it "
+        "departs from the model in force by over one sigma")
     mass_estimate: _Flag = Field(
         default=True, description="the part of the friction estimate that follows the acceleration is the "
         "inertia of a mass error: estimated online (high-passed least squares), removed from the "
@@ -1241,7 +1247,7 @@ T = TypeVar("T", bound=BaseModel)
 #: Every switch of :class:`FusionSettings` off (the paper has none of them).
 _FUSION_OFF = {"reject_repeated_samples": False, "predict_pose": False, "course_slip": False,
                "course_speed": False, "gyro_bias": False, "steering_offset": False,
-               "stiffness_estimate": False,
+               "stiffness_estimate": False, "lateral_fit": False,
                "mass_estimate": False}
 
 #: Named configurations: overrides of ``Config()`` (beyond the paper). Select with ``Config.preset(name)``,

@@ -145,7 +145,7 @@ from tsmpc.control.outer_block import (
     scratch_size,
 )
 from tsmpc.control.slip_aware import BASELINE
-from tsmpc.control.stiffness_block import MP_CR, N_SA, PRM_CR, SA_CF, SA_CR, SA_HAS
+from tsmpc.control.stiffness_block import MP_B, N_SA, PRM_B, SA_A, SA_B, SA_CF, SA_CR, SA_HAS, SA_I
 from tsmpc.control.ts_lqr import LQR_NUMPY, TSLQR, InnerParams
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus, shifted_plan
 from tsmpc.estimation.friction_step import FrictionStep, FrictionStepParams
@@ -412,11 +412,12 @@ class Cascade:
         self._cmd = command_state()
         self._ib_state, self._ib_ring, self._ib_count = start_state(self.cfg.mhe.N)
         sa: NDArray[np.float64] | None = getattr(self, "_sa", None)
-        if sa is not None and sa[SA_HAS]:  # back to the config's stiffnesses
+        if sa is not None and sa[SA_HAS]:  # back to the config's lateral model
+            veh = self.cfg.vehicle
             for b in (self.mhe, self.lqr):
                 setter = getattr(b, "set_cornering_stiffness", None)
                 if setter is not None:
-                    setter(self.cfg.vehicle.C_f, self.cfg.vehicle.C_r)
+                    setter(veh.C_f, veh.C_r, veh.inertia, veh.a, veh.b)
         self._sa = np.zeros(N_SA)  # the stiffness block's record of those given (stiffness_block.py)
         self.mpc.reset()
         # the gate block's pose record (gates.PO_*): the accepted or dead-reckoned pose, the time of
@@ -583,16 +584,16 @@ class Cascade:
 
     def _stiffness_given(self) -> None:
         """fusion.stiffness_estimate: the stiffness block (stiffness_block.py, in the outer phase:
-        _front.cascade_outer) gave the fitted axle stiffnesses (they moved by over 1 %; the slip
-        fit's gain κ restarted when they replaced given ones) to the MHE's and the TS-LQR's
-        parameter arrays: the Python models around those arrays and the steering-offset fit's
-        balance follow."""
-        C_f, C_r = float(self._sa[SA_CF]), float(self._sa[SA_CR])
+        _front.cascade_outer) gave the fitted lateral model (C_f, C_r, I_z, a, b: any moved by over
+        1 %; the slip fit's gain κ restarted when it replaced a given one) to the MHE's and the
+        TS-LQR's parameter arrays: the Python models around those arrays and the steering-offset
+        fit's balance follow."""
+        model = [float(self._sa[i]) for i in (SA_CF, SA_CR, SA_I, SA_A, SA_B)]
         for b in (self.mhe, self.lqr):
             follow = getattr(b, "model_stiffness", None) or getattr(b, "set_cornering_stiffness", None)
             if follow is not None:
-                follow(C_f, C_r)
-        self._fusion.set_stiffness(C_f, C_r)  # the steering-offset fit's balance too
+                follow(*model)
+        self._fusion.set_stiffness(*model)  # the steering-offset fit's balance too
 
     def _step(self, t: float, m: Measurement) -> Command:
         """One call: the block diagram of paper Fig. 1 (gates → outer MPC every T_c/T_d calls →
@@ -898,8 +899,8 @@ class Cascade:
         # the stiffness block's parameter arrays: the MHE's and the TS-LQR law's (scratch where a
         # block has none: its model_stiffness / set_cornering_stiffness holds its stiffnesses)
         mp, law = getattr(mhe, "_mp", None), getattr(self.lqr, "_law", None)
-        self._stiff_mp = mp if isinstance(mp, np.ndarray) else np.zeros(MP_CR + 1)
-        self._stiff_prm = law.prm if law is not None else np.zeros(PRM_CR + 1)
+        self._stiff_mp = mp if isinstance(mp, np.ndarray) else np.zeros(MP_B + 1)
+        self._stiff_prm = law.prm if law is not None else np.zeros(PRM_B + 1)
         self._mhe_arrays = (None, None)  # the call's leading arguments (made at the first)
         self._mhe_call: Any = None
         if (kern is not None and mhe._kern is not None and mhe._kargs[-1] and type(mhe).step is MHEUIO.step

@@ -49,7 +49,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tsmpc.control.inner_block import EST_OK
-from tsmpc.control.stiffness_block import SA_CF, SA_CR, SA_HAS
+from tsmpc.control.stiffness_block import SA_A, SA_B, SA_CF, SA_CR, SA_HAS, SA_I
 from tsmpc.estimation.fusion import (
     RING,
     CourseParams,
@@ -57,6 +57,7 @@ from tsmpc.estimation.fusion import (
     GyroParams,
     GyroState,
     Interval,
+    LateralFit,
     SlipFit,
     SpeedFit,
     SteerParams,
@@ -76,16 +77,17 @@ from tsmpc.kernels.jit import jitable, jitable_inline
 
 __all__ = [
     "FB_AHPREV", "FB_BETA", "FB_DENF", "FB_DENR", "FB_GYCHORDS", "FB_GYGAP", "FB_GYINT", "FB_GYN",
-    "FB_GYOPEN", "FB_GYSB", "FB_GYSW", "FB_GYTH0", "FB_GYWLAST", "FB_HASAH", "FB_KAPPA", "FB_N1", "FB_N2",
-    "FB_NCHORDS", "FB_NIV", "FB_NUMF", "FB_NUMR", "FB_OFF", "FB_OMEGA", "FB_OMNOW", "FB_P00", "FB_P01",
-    "FB_P10", "FB_P11", "FB_SENT", "FB_SH0", "FB_SH1", "FB_SINCE", "FB_SL00", "FB_SL01", "FB_SL11", "FB_SN1",
-    "FB_SN2", "FB_STB1", "FB_STB2", "FB_STDDF", "FB_STDEF", "FB_STINIT", "FB_STN", "FB_STOMF", "FB_STS11",
-    "FB_STS12", "FB_STS22", "FB_VNOW", "IV_AYREF", "IV_N", "IV_OK", "IV_OPEN", "IV_SDELTA", "IV_SF",
-    "IV_STH", "IV_SV", "IV_SVALPHA", "IV_SVAY", "IV_SVDTH", "IV_SVFULL", "IV_SVW", "IV_SWV", "IV_SX",
-    "IV_SY", "IV_THLAST", "IV_VFIRST", "IV_WFIRST", "IV_WLAST", "N_FB", "N_FBP", "N_IV", "FusionParams",
-    "after_at", "ay_ref_at", "before_at", "course_load", "course_store", "fusion_after", "fusion_before",
-    "fusion_state", "given_steer", "gyro_load", "gyro_store", "iv_load", "iv_store", "pack_fusion", "servo",
-    "servo_at", "slip_load", "speed_load", "steer_load", "steer_store", "steer_usable", "unpack_fusion",
+    "FB_GYOPEN", "FB_GYSB", "FB_GYSW", "FB_GYTH0", "FB_GYWLAST", "FB_HASAH", "FB_KAPPA", "FB_LFIT",
+    "FB_LGIVEN", "FB_LP", "FB_LX", "FB_N1", "FB_N2", "FB_NCHORDS", "FB_NIV", "FB_NUMF", "FB_NUMR", "FB_OFF",
+    "FB_OMEGA", "FB_OMNOW", "FB_P00", "FB_P01", "FB_P10", "FB_P11", "FB_SENT", "FB_SH0", "FB_SH1", "FB_SINCE",
+    "FB_SL00", "FB_SL01", "FB_SL11", "FB_SN1", "FB_SN2", "FB_STB1", "FB_STB2", "FB_STDDF", "FB_STDEF",
+    "FB_STINIT", "FB_STN", "FB_STOMF", "FB_STS11", "FB_STS12", "FB_STS22", "FB_VNOW", "IV_AYREF", "IV_N",
+    "IV_OK", "IV_OPEN", "IV_SDELTA", "IV_SF", "IV_STH", "IV_SV", "IV_SVALPHA", "IV_SVAY", "IV_SVDTH",
+    "IV_SVFULL", "IV_SVW", "IV_SWV", "IV_SX", "IV_SY", "IV_THLAST", "IV_VFIRST", "IV_WFIRST", "IV_WLAST",
+    "N_FB", "N_FBP", "N_IV", "FusionParams", "after_at", "ay_ref_at", "before_at", "course_load",
+    "course_store", "fusion_after", "fusion_before", "fusion_state", "given_steer", "gyro_load", "gyro_store",
+    "iv_load", "iv_store", "lateral_load", "pack_fusion", "servo", "servo_at", "slip_load", "speed_load",
+    "steer_load", "steer_store", "steer_usable", "unpack_fusion",
 ]
 
 #: The block's state vector (floats; flags 1.0 / 0.0, counts whole numbers): the yaw-rate bias
@@ -101,7 +103,10 @@ __all__ = [
 (FB_KAPPA, FB_BETA, FB_P00, FB_P01, FB_P10, FB_P11, FB_N2, FB_N1, FB_SL00, FB_SL01, FB_SL11, FB_SH0,
  FB_SH1, FB_SN2, FB_SN1, FB_NUMF, FB_NUMR, FB_DENF, FB_DENR, FB_AHPREV, FB_HASAH, FB_OMNOW, FB_VNOW, FB_NIV,
  FB_NCHORDS, FB_SINCE, FB_AGE) = range(22, 49)
-N_FB = 49
+#: Then the joint lateral fit (fusion.LateralFit): its x (5), the upper triangle of P (15), the
+#: flags "a chord was fitted" and "its model is in force".
+FB_LX, FB_LP, FB_LFIT, FB_LGIVEN = 49, 54, 69, 70
+N_FB = 71
 #: An :class:`~tsmpc.estimation.fusion.Interval`'s fields in a row (the ring's, the open interval's).
 (IV_OPEN, IV_OK, IV_SX, IV_SY, IV_STH, IV_N, IV_SV, IV_SVDTH, IV_SVALPHA, IV_SVAY, IV_SVFULL,
  IV_SDELTA, IV_SWV, IV_SVW, IV_SF, IV_WFIRST, IV_AYREF, IV_VFIRST, IV_THLAST, IV_WLAST) = range(20)
@@ -212,10 +217,10 @@ def servo(p: FusionParams, sp: SteerParams, st: SteerState, delta: float) -> tup
 
 @jitable
 def given_steer(sp: SteerParams, sa: NDArray[np.float64] | list[float]) -> SteerParams:
-    """The steering-offset fit's parameters ``sp`` (the config's) with the stiffnesses the stiffness
+    """The steering-offset fit's parameters ``sp`` (the config's) with the lateral model the stiffness
     block gave the MHE, once it has (its record ``sa``: tsmpc.control.stiffness_block's SA_*)."""
     if sa[SA_HAS] != 0.0:
-        return steer_stiffness(sp, sa[SA_CF], sa[SA_CR])
+        return steer_stiffness(sp, sa[SA_CF], sa[SA_CR], sa[SA_I], sa[SA_A], sa[SA_B])
     return sp
 
 
@@ -290,7 +295,17 @@ def course_load(fb: NDArray[np.float64], ivs: NDArray[np.float64]) -> CourseStat
             iv_load(ivs[5]), iv_load(ivs[6]), iv_load(ivs[7]))
     stiff = StiffFit(fb[FB_NUMF], fb[FB_NUMR], fb[FB_DENF], fb[FB_DENR], fb[FB_AHPREV], fb[FB_HASAH] != 0.0)
     return CourseState(ring, int(fb[FB_NIV]), fb[FB_OMNOW], fb[FB_VNOW], int(fb[FB_NCHORDS]), slip_load(fb),
-                       speed_load(fb), stiff, int(fb[FB_SINCE]), fb[FB_AGE])
+                       speed_load(fb), stiff, int(fb[FB_SINCE]), fb[FB_AGE], lateral_load(fb))
+
+
+@jitable
+def lateral_load(fb: NDArray[np.float64]) -> LateralFit:
+    """The joint lateral fit's record of the state vector."""
+    x, q = FB_LX, FB_LP
+    return LateralFit((fb[x], fb[x + 1], fb[x + 2], fb[x + 3], fb[x + 4]),
+                      (fb[q], fb[q + 1], fb[q + 2], fb[q + 3], fb[q + 4], fb[q + 5], fb[q + 6], fb[q + 7],
+                       fb[q + 8], fb[q + 9], fb[q + 10], fb[q + 11], fb[q + 12], fb[q + 13], fb[q + 14]),
+                      fb[FB_LFIT] != 0.0, fb[FB_LGIVEN] != 0.0)
 
 
 @jitable
@@ -310,6 +325,12 @@ def course_store(s: CourseState, fb: NDArray[np.float64], ivs: NDArray[np.float6
     c = s.stiff
     fb[FB_NUMF], fb[FB_NUMR], fb[FB_DENF], fb[FB_DENR] = c.num_f, c.num_r, c.den_f, c.den_r
     fb[FB_AHPREV], fb[FB_HASAH] = c.alpha_prev, 1.0 if c.has_prev else 0.0
+    lat = s.lat
+    for i in range(5):
+        fb[FB_LX + i] = lat.x[i]
+    for i in range(15):
+        fb[FB_LP + i] = lat.P[i]
+    fb[FB_LFIT], fb[FB_LGIVEN] = 1.0 if lat.fitted else 0.0, 1.0 if lat.given else 0.0
 
 
 def fusion_state(g: GyroState, st: SteerState, offset: float, sent: float, cs: CourseState,

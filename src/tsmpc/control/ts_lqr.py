@@ -59,7 +59,7 @@ from numpy.typing import NDArray
 
 from tsmpc._records import StateField, quick_init
 from tsmpc.config import FrictionEstimate, LQRSettings, VehicleParams
-from tsmpc.control.stiffness_block import PRM_CF, PRM_CR, give_stiffness
+from tsmpc.control.stiffness_block import PRM_A, PRM_B, PRM_CF, PRM_CR, PRM_I, give_model
 from tsmpc.errors import ConfigError
 from tsmpc.kernels.jit import _numba_ready, jitable
 from tsmpc.models.dynamic import DynamicTS, continuous_matrices, equilibrium, steady_states
@@ -337,21 +337,29 @@ class TSLQR:
         """Sample time T_d [s] (the runtime protocol's name)."""
         return self.Td
 
-    def set_cornering_stiffness(self, C_f: float, C_r: float) -> None:
-        """Use axle stiffnesses C_f, C_r [N/rad] in the reference gain N̄ (the model of the
-        feed-forward) from the next step on (an online estimate, ``fusion.stiffness_estimate``);
-        the LMI gains K_i and the controller state are kept."""
-        self.model_stiffness(C_f, C_r)
+    def set_cornering_stiffness(self, C_f: float, C_r: float, inertia: float | None = None,
+                                a: float | None = None, b: float | None = None) -> None:
+        """Use axle stiffnesses C_f, C_r [N/rad] (and, given, the yaw inertia and the CoG's distances
+        a, b) in the reference gain N̄ (the model of the feed-forward) from the next step on (an
+        online estimate, ``fusion.stiffness_estimate``); the LMI gains K_i and the controller state
+        are kept."""
+        self.model_stiffness(C_f, C_r, inertia, a, b)
         if self._law is not None:  # [M, I, C_f, C_r, a, b, μ_o g, d], read by every kernel step
-            give_stiffness(self._law.prm, PRM_CF, PRM_CR, float(C_f), float(C_r))
+            v = self.vehicle
+            give_model(self._law.prm, PRM_I, PRM_CF, PRM_CR, PRM_A, PRM_B, float(C_f), float(C_r),
+                       float(v.inertia), float(v.a), float(v.b))
 
-    def model_stiffness(self, C_f: float, C_r: float) -> None:
-        """The stiffnesses of the numpy law (its vehicle), the compiled law's ``prm`` left as it
-        is: the cascade's stiffness block (control/stiffness_block.py) writes it."""
+    def model_stiffness(self, C_f: float, C_r: float, inertia: float | None = None, a: float | None = None,
+                        b: float | None = None) -> None:
+        """The lateral model of the numpy law (its vehicle): C_f, C_r and, given, I_z, a, b; the
+        compiled law's ``prm`` left as it is: the cascade's stiffness block
+        (control/stiffness_block.py) writes it."""
         from tsmpc.config import replace
 
-        self.vehicle = replace(self.vehicle, cornering_stiffness_front=float(C_f),
-                               cornering_stiffness_rear=float(C_r))
+        v = self.vehicle
+        self.vehicle = replace(v, cornering_stiffness_front=float(C_f), cornering_stiffness_rear=float(C_r),
+                               inertia=float(v.inertia if inertia is None else inertia),
+                               a=float(v.a if a is None else a), b=float(v.b if b is None else b))
 
     def reset(self) -> None:
         """Filter states at rest, integrator cleared."""

@@ -229,31 +229,39 @@ class MHEUIO:
         """Sample time T_d [s] (the runtime protocol's name)."""
         return self.Td
 
-    def set_cornering_stiffness(self, C_f: float, C_r: float) -> None:
-        """Use axle stiffnesses C_f, C_r [N/rad] in the window model from the next step on (an
-        online estimate, ``fusion.stiffness_estimate``): the numpy model and the kernel's
-        parameters alike; the window and the estimate are kept."""
-        self.model_stiffness(C_f, C_r)
+    def set_cornering_stiffness(self, C_f: float, C_r: float, inertia: float | None = None,
+                                a: float | None = None, b: float | None = None) -> None:
+        """Use axle stiffnesses C_f, C_r [N/rad] (and, given, the yaw inertia I_z [kg m²] and the
+        CoG's distances a, b [m]) in the window model from the next step on (an online estimate,
+        ``fusion.stiffness_estimate``): the numpy model and the kernel's parameters alike; the
+        window and the estimate are kept."""
+        self.model_stiffness(C_f, C_r, inertia, a, b)
         if self._kern is not None:  # the kernel's parameters (the cascade's stiffness block writes them)
             # (imported here: the block module brings numba, which the estimator alone does not need)
-            from tsmpc.control.stiffness_block import MP_CF, MP_CR, give_stiffness
+            from tsmpc.control.stiffness_block import MP_A, MP_B, MP_CF, MP_CR, MP_I, give_model
 
-            give_stiffness(self._mp, MP_CF, MP_CR, float(C_f), float(C_r))
+            v = self.vehicle
+            give_model(self._mp, MP_I, MP_CF, MP_CR, MP_A, MP_B, float(C_f), float(C_r), float(v.inertia),
+                       float(v.a), float(v.b))
 
-    def model_stiffness(self, C_f: float, C_r: float) -> None:
-        """The stiffnesses of the Python side (the vehicle, the numpy model, the kernel's argument
-        tuple), the kernel's parameters ``_mp`` left as they are: the cascade's stiffness block
-        (control/stiffness_block.py) writes those."""
+    def model_stiffness(self, C_f: float, C_r: float, inertia: float | None = None, a: float | None = None,
+                        b: float | None = None) -> None:
+        """The lateral model of the Python side (the vehicle, the numpy model, the kernel's argument
+        tuple): C_f, C_r and, given, I_z, a, b; the kernel's parameters ``_mp`` left as they are:
+        the cascade's stiffness block (control/stiffness_block.py) writes those."""
         from tsmpc.config import replace
 
-        veh = replace(self.vehicle, cornering_stiffness_front=float(C_f),
-                      cornering_stiffness_rear=float(C_r))
+        v = self.vehicle
+        veh = replace(v, cornering_stiffness_front=float(C_f), cornering_stiffness_rear=float(C_r),
+                      inertia=float(v.inertia if inertia is None else inertia),
+                      a=float(v.a if a is None else a), b=float(v.b if b is None else b))
         m = self.model
         self.model = DynamicTS(m.box, veh, m.Td, m.method)
         self.vehicle = veh
         if self._kern is not None:
             k = list(self._kargs)
-            k[10], k[11] = float(C_f), float(C_r)  # phys = (M, I, C_f, C_r, a, b, μ_o g, d) from 8
+            # phys = (M, I, C_f, C_r, a, b, μ_o g, d) from 8
+            k[9], k[10], k[11], k[12], k[13] = veh.inertia, veh.C_f, veh.C_r, veh.a, veh.b
             self._kargs = tuple(k)
 
     def reset(self, x0: NDArray[np.float64] | None = None) -> None:

@@ -49,6 +49,7 @@ from tsmpc.control.fusion_block import N_FB, N_FBP, pack_fusion
 from tsmpc.control.gates import N_GBK, N_PO, pack_gate_block
 from tsmpc.control.inner_block import N_IBK, pack_inner_block
 from tsmpc.control.outer_block import N_GBP, N_OBP, OC_GACT, OC_GSTEPS, pack_govern, pack_outer, scratch_size
+from tsmpc.control.stiffness_block import N_SA, SA_A, SA_B, SA_CF, SA_CR, SA_HAS, SA_I
 from tsmpc.control.ts_lqr import N_LAW, pack_law
 from tsmpc.control.ts_mpc import MPCResult, MPCStatus
 from tsmpc.errors import NonFiniteError
@@ -777,8 +778,9 @@ class _Run:
         from tsmpc.control.inner_block import count_step
 
         a, ke, lqr = self.a, self.ke, _static_lqr(self.cascade)
-        if a.sf[ke.SF_SA + ke.SA_HAS]:  # the numpy law reads the stiffnesses from its vehicle
-            lqr.model_stiffness(float(a.sf[ke.SF_SA + ke.SA_CF]), float(a.sf[ke.SF_SA + ke.SA_CR]))
+        sa = a.sf[ke.SF_SA:ke.SF_SA + N_SA].tolist()
+        if sa[SA_HAS]:  # the numpy law reads the lateral model from its vehicle
+            lqr.model_stiffness(sa[SA_CF], sa[SA_CR], sa[SA_I], sa[SA_A], sa[SA_B])
         v, al, om = a.sc[ke.SC_EST:ke.SC_EST + 3].tolist()
         t0 = time.perf_counter()
         try:  # as Cascade._back: the block's compensation and residual, the numpy law, the events
