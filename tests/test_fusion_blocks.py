@@ -544,6 +544,24 @@ def test_the_joint_lateral_fit_discounts_the_tyres_nonlinearity(b: _Blocks) -> N
     assert (cf, cr) == pytest.approx((50000.0, 50000.0), rel=0.025)
 
 
+def test_the_joint_lateral_fit_skips_an_axle_outside_the_compliance_band(b: _Blocks) -> None:
+    """A chord whose rear slip is three times what the model's stiffness gives its force (a
+    saturated tyre, beyond STIFF_RANGE's 2× and the noise) updates the front equation only: the
+    rear compliance's estimate and variance stay at the prior; the same chord with a plausible rear
+    slip moves them."""
+    p = _params(b)
+    f0 = fu.lateral_start(p)
+    v, w = 12.0, 2.0 / 12.0
+    S = 1000.0 * v * w
+    F_f, F_r = 1.5 * S / 2.5, 1.0 * S / 2.5
+    for scale, moved in ((3.0, False), (1.2, True)):
+        alpha = 1.5 * w / v - scale * F_r / 50000.0
+        delta = alpha + 1.0 * w / v + F_f / 50000.0
+        f = b._lateral_fit(p, f0, alpha, v * w, v, 0.0, 0.0, w / v, delta, 1e-3, 0.5, 50, 0.0)
+        assert bool(f.x[3] != 1.0 and f.P[12] < f0.P[12]) is moved
+        assert f.P[9] < f0.P[9]  # the front equation counted either way
+
+
 def test_the_joint_lateral_fit_holds_what_its_chords_do_not_inform(b: _Blocks) -> None:
     """Steady corners (ω̇ = 0) carry no information on I_z: its estimate and variance stay exactly at
     the prior (no drift), however many chords; the compliances and the CoG are still learnt."""

@@ -936,8 +936,9 @@ def _lateral_fit(p: CourseParams, f: LateralFit, a_course: float, vw: float, v_m
     biased a / L 2–4 % low and C_r 3–8 % high, corner entries and exits at other speeds; the change
     of the course slip between chords put the positions' noise into S and, at 10 × the GNSS
     noise, doubled RMSE y.) Each axle's slip noise adds the tyre's nonlinearity
-    (``LATERAL_NONLINEAR``). The yaw inertia and the CoG are observable only through ω̇ and the
-    split of S between the axles: a steady corner informs the compliances and a — at several speeds:
+    (``LATERAL_NONLINEAR``); an axle whose chord is outside the compliance fit's band
+    (:func:`_axle_pair`) is not counted. The yaw inertia and the CoG are observable only through ω̇
+    and the split of S between the axles: a steady corner informs the compliances and a — at several speeds:
     in one, a and C_r trade off along a ridge — a corner's entry and exit I_z; where nothing informs
     a parameter it holds its prior (no process noise, no forgetting)."""
     L = p.a + p.b
@@ -974,6 +975,12 @@ def _lateral_fit(p: CourseParams, f: LateralFit, a_course: float, vw: float, v_m
         fz = p.mass * p.g * (1.0 - u if axle == 0 else u)  # the axle's static load
         e_nl = LATERAL_NONLINEAR * (F / fz) ** 2 * abs(F) * (qf / p.C_f if axle == 0 else qr / p.C_r)
         den = corr * (s_slip * s_slip + e_r * e_r + e_nl * e_nl)
+        # the compliance fit's band (_axle_pair): a chord whose own F / slip no plausible stiffness
+        # gives is no pure-slip chord of this axle (a saturated tyre on a road that lost its grip:
+        # Monza's μ step, max |e_y| +8 % without it)
+        slip = (delta + d_r - a_course - u * L * w_v) if axle == 0 else ((1.0 - u) * L * w_v - a_course)
+        if _axle_pair(p.C_f if axle == 0 else p.C_r, F, slip, s_slip)[0] == 0.0:
+            continue
         for i in range(5):
             acc = 0.0
             for j in range(5):
