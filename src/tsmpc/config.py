@@ -284,6 +284,14 @@ class VehicleParams(_Frozen):
                        cornering_stiffness_front=sc(self.cornering_stiffness_front),
                        cornering_stiffness_rear=sc(self.cornering_stiffness_rear))
 
+    def with_lateral_model(self, C_f: float, C_r: float, inertia: float | None = None,
+                           a: float | None = None, b: float | None = None) -> VehicleParams:
+        """A copy with the axle stiffnesses C_f, C_r [N/rad] and, given, the yaw inertia [kg m²] and
+        the CoG's distances a, b [m] (the lateral model an online fit hands the estimators)."""
+        return replace(self, cornering_stiffness_front=float(C_f), cornering_stiffness_rear=float(C_r),
+                       inertia=float(self.inertia if inertia is None else inertia),
+                       a=float(self.a if a is None else a), b=float(self.b if b is None else b))
+
     @classmethod
     def from_commonroad(cls, params: Any, *, mu_nominal: float = 0.5) -> VehicleParams:
         """The single-track equivalent of a CommonRoad parameter set (``vehiclemodels``'

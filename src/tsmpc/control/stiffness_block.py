@@ -7,7 +7,7 @@ give them when any moved by over 1 % against those given, or none was given yet;
 replace given ones, the slip fit's gain κ restarts) and, when it gives them, (Ĉ_f, Ĉ_r, Î_z, â, b̂)
 into the MHE's parameters (``mp``: :data:`MP_CF` … :data:`MP_B`), the TS-LQR law's (``prm``:
 :data:`PRM_I` … :data:`PRM_B`) and the record of those given (``sa``: slots ``SA_*``).
-:func:`give_stiffness` writes a pair of parameter slots (the estimators' own
+:func:`give_model` writes the five parameter slots (the estimators' own
 ``set_cornering_stiffness`` use it too).
 
 One definition, three callers: :class:`~tsmpc.control.cascade.Cascade` calls it as Python (it is
@@ -28,7 +28,7 @@ from tsmpc.kernels.jit import jitable
 
 __all__ = [
     "MP_A", "MP_B", "MP_CF", "MP_CR", "MP_I", "N_SA", "PRM_A", "PRM_B", "PRM_CF", "PRM_CR", "PRM_I", "SA_A",
-    "SA_B", "SA_CF", "SA_CR", "SA_HAS", "SA_I", "give_model", "give_stiffness", "stiffness_block",
+    "SA_B", "SA_CF", "SA_CR", "SA_HAS", "SA_I", "give_model", "stiffness_block",
 ]
 
 #: The record of the lateral model given: [given (1.0) or not (0.0), C_f, C_r, I_z, a, b].
@@ -39,12 +39,6 @@ N_SA = 6
 #: the TS-LQR law's ``prm`` = [M, I, C_f, C_r, a, b, μ_o g, d].
 MP_I, MP_CF, MP_CR, MP_A, MP_B = 22, 23, 24, 25, 26
 PRM_I, PRM_CF, PRM_CR, PRM_A, PRM_B = 1, 2, 3, 4, 5
-
-
-@jitable
-def give_stiffness(prm: NDArray[np.float64], i_f: int, i_r: int, C_f: float, C_r: float) -> None:
-    """(C_f, C_r) into the parameter slots ``i_f``, ``i_r`` of ``prm``."""
-    prm[i_f], prm[i_r] = C_f, C_r
 
 
 @jitable

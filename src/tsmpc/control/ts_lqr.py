@@ -354,12 +354,7 @@ class TSLQR:
         """The lateral model of the numpy law (its vehicle): C_f, C_r and, given, I_z, a, b; the
         compiled law's ``prm`` left as it is: the cascade's stiffness block
         (control/stiffness_block.py) writes it."""
-        from tsmpc.config import replace
-
-        v = self.vehicle
-        self.vehicle = replace(v, cornering_stiffness_front=float(C_f), cornering_stiffness_rear=float(C_r),
-                               inertia=float(v.inertia if inertia is None else inertia),
-                               a=float(v.a if a is None else a), b=float(v.b if b is None else b))
+        self.vehicle = self.vehicle.with_lateral_model(C_f, C_r, inertia, a, b)
 
     def reset(self) -> None:
         """Filter states at rest, integrator cleared."""

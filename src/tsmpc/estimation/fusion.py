@@ -961,26 +961,26 @@ def _lateral_fit(p: CourseParams, f: LateralFit, a_course: float, vw: float, v_m
     for axle in range(2):
         u, iz, qf, qr, d_r = x[0], x[1], x[2], x[3], x[4]
         yaw = iz * p.inertia * wd / L  # I_z ω̇ / L
-        if axle == 0:
-            F = (1.0 - u) * S + yaw
-            r = delta + d_r - a_course - u * L * w_v - (qf / p.C_f) * F
-            H[0], H[1], H[2] = -L * w_v + (qf / p.C_f) * S, -(qf / p.C_f) * yaw / iz, -F / p.C_f
+        if axle == 0:  # the axle's force, its share of S, compliance, model stiffness and slip
+            F, share, comp, C0 = (1.0 - u) * S + yaw, 1.0 - u, qf / p.C_f, p.C_f
+            slip = delta + d_r - a_course - u * L * w_v
+            H[0], H[1], H[2] = -L * w_v + comp * S, -comp * yaw / iz, -F / p.C_f
             H[3], H[4] = 0.0, 1.0
         else:
-            F = u * S - yaw
-            r = (1.0 - u) * L * w_v - a_course - (qr / p.C_r) * F
-            H[0], H[1], H[2] = -L * w_v - (qr / p.C_r) * S, (qr / p.C_r) * yaw / iz, 0.0
+            F, share, comp, C0 = u * S - yaw, u, qr / p.C_r, p.C_r
+            slip = (1.0 - u) * L * w_v - a_course
+            H[0], H[1], H[2] = -L * w_v - comp * S, comp * yaw / iz, 0.0
             H[3], H[4] = -F / p.C_r, 0.0
-        e_r = (1.0 - u if axle == 0 else u) * e_S * (qf / p.C_f if axle == 0 else qr / p.C_r)
-        fz = p.mass * p.g * (1.0 - u if axle == 0 else u)  # the axle's static load
-        e_nl = LATERAL_NONLINEAR * (F / fz) ** 2 * abs(F) * (qf / p.C_f if axle == 0 else qr / p.C_r)
-        den = corr * (s_slip * s_slip + e_r * e_r + e_nl * e_nl)
         # the compliance fit's band (_axle_pair): a chord whose own F / slip no plausible stiffness
         # gives is no pure-slip chord of this axle (a saturated tyre on a road that lost its grip:
         # Monza's μ step, max |e_y| +8 % without it)
-        slip = (delta + d_r - a_course - u * L * w_v) if axle == 0 else ((1.0 - u) * L * w_v - a_course)
-        if _axle_pair(p.C_f if axle == 0 else p.C_r, F, slip, s_slip)[0] == 0.0:
+        if _axle_pair(C0, F, slip, s_slip)[0] == 0.0:
             continue
+        r = slip - comp * F
+        e_r = share * e_S * comp
+        fz = p.mass * p.g * share  # the axle's static load
+        e_nl = LATERAL_NONLINEAR * (F / fz) ** 2 * abs(F) * comp
+        den = corr * (s_slip * s_slip + e_r * e_r + e_nl * e_nl)
         for i in range(5):
             acc = 0.0
             for j in range(5):

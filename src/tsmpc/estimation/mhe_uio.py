@@ -249,12 +249,7 @@ class MHEUIO:
         """The lateral model of the Python side (the vehicle, the numpy model, the kernel's argument
         tuple): C_f, C_r and, given, I_z, a, b; the kernel's parameters ``_mp`` left as they are:
         the cascade's stiffness block (control/stiffness_block.py) writes those."""
-        from tsmpc.config import replace
-
-        v = self.vehicle
-        veh = replace(v, cornering_stiffness_front=float(C_f), cornering_stiffness_rear=float(C_r),
-                      inertia=float(v.inertia if inertia is None else inertia),
-                      a=float(v.a if a is None else a), b=float(v.b if b is None else b))
+        veh = self.vehicle.with_lateral_model(C_f, C_r, inertia, a, b)
         m = self.model
         self.model = DynamicTS(m.box, veh, m.Td, m.method)
         self.vehicle = veh
